@@ -1,0 +1,4 @@
+//! The analysis back-end: network bounds, closed-loop propagators, simulation.
+
+pub mod crown;
+pub mod relax;

@@ -1,0 +1,7 @@
+//! ravel: a Reach-Avoid Verification Language and its compiler.
+#![forbid(unsafe_code)]
+
+pub mod analysis;
+pub mod nn;
+pub mod num;
+pub mod sets;

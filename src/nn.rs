@@ -1,0 +1,188 @@
+//! Feed-forward networks as ravel analyses them: a chain of affine maps and
+//! element-wise activations.
+//!
+//! The network that is verified is the real-arithmetic function defined by the
+//! weights stored here (ONNX `float` weights are converted to `f64` exactly).
+//! [`Network::forward`] evaluates it in `f64` for simulation.
+
+use nalgebra::{DMatrix, DVector};
+
+/// An element-wise activation function.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Activation {
+    /// `max(0, z)`
+    Relu,
+    /// `tanh(z)`
+    Tanh,
+    /// `1 / (1 + e^{-z})`
+    Sigmoid,
+}
+
+impl Activation {
+    /// Evaluate the activation in `f64`.
+    pub fn eval(self, z: f64) -> f64 {
+        match self {
+            Activation::Relu => z.max(0.0),
+            Activation::Tanh => z.tanh(),
+            Activation::Sigmoid => sigmoid(z),
+        }
+    }
+
+    /// A bound on the absolute error of [`Activation::eval`] at `z` against the exact function.
+    ///
+    /// `relu` is exact. For `tanh` (libm) and the sigmoid formula used here the
+    /// error is a few units in the last place; 16 ulps plus an absolute
+    /// subnormal-range term is a safe over-estimate.
+    pub fn eval_error(self, value: f64) -> f64 {
+        match self {
+            Activation::Relu => 0.0,
+            Activation::Tanh | Activation::Sigmoid => 16.0 * f64::EPSILON * value.abs() + 1e-300,
+        }
+    }
+
+    /// The lowercase name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Activation::Relu => "relu",
+            Activation::Tanh => "tanh",
+            Activation::Sigmoid => "sigmoid",
+        }
+    }
+}
+
+/// The logistic sigmoid, evaluated without overflow for large |z|.
+pub fn sigmoid(z: f64) -> f64 {
+    if z >= 0.0 {
+        1.0 / (1.0 + (-z).exp())
+    } else {
+        let e = z.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// One step of a network.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Layer {
+    /// `z = W h + b`, `W` is `out × in`.
+    Affine {
+        /// Weight matrix (`out × in`).
+        w: DMatrix<f64>,
+        /// Bias vector (`out`).
+        b: DVector<f64>,
+    },
+    /// `h = σ(z)` element-wise.
+    Act(Activation),
+}
+
+/// A feed-forward network `R^inputs → R^outputs`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Network {
+    /// The layers, applied in order.
+    pub layers: Vec<Layer>,
+    /// Input dimension.
+    pub inputs: usize,
+}
+
+impl Network {
+    /// A network with the given input size and layers. Dimensions must chain;
+    /// the ONNX loader and the generators guarantee it.
+    pub fn new(inputs: usize, layers: Vec<Layer>) -> Network {
+        Network { layers, inputs }
+    }
+
+    /// The width of the value after layer `i` (`i = 0` is the input).
+    pub fn width_at(&self, position: usize) -> usize {
+        let mut n = self.inputs;
+        for layer in self.layers.iter().take(position) {
+            if let Layer::Affine { w, .. } = layer {
+                n = w.nrows();
+            }
+        }
+        n
+    }
+
+    /// Output dimension.
+    pub fn outputs(&self) -> usize {
+        self.width_at(self.layers.len())
+    }
+
+    /// Evaluate the network in `f64`.
+    pub fn forward(&self, x: &[f64]) -> Vec<f64> {
+        let mut h = DVector::from_column_slice(x);
+        for layer in &self.layers {
+            match layer {
+                Layer::Affine { w, b } => h = w * h + b,
+                Layer::Act(a) => h.apply(|z| *z = a.eval(*z)),
+            }
+        }
+        h.as_slice().to_vec()
+    }
+
+    /// The hidden activations used, in order of first appearance (for reports).
+    pub fn activations(&self) -> Vec<Activation> {
+        let mut out = Vec::new();
+        for layer in &self.layers {
+            if let Layer::Act(a) = layer {
+                if !out.contains(a) {
+                    out.push(*a);
+                }
+            }
+        }
+        out
+    }
+
+    /// Append control saturation `u ↦ min(hi, max(lo, u))` as two ReLU layers
+    /// (`lo + relu(u − lo)`, then `hi − relu(hi − ·)`), the construction of Hu et al.
+    /// Every bound in `lo`/`hi` must be finite and `lo ≤ hi`.
+    pub fn with_saturation(&self, lo: &[f64], hi: &[f64]) -> Network {
+        let m = lo.len();
+        let eye = DMatrix::<f64>::identity(m, m);
+        let mut layers = self.layers.clone();
+        // z1 = u - lo; a1 = relu(z1) = max(u, lo) - lo
+        layers.push(Layer::Affine {
+            w: eye.clone(),
+            b: DVector::from_iterator(m, lo.iter().map(|l| -l)),
+        });
+        layers.push(Layer::Act(Activation::Relu));
+        // z2 = (hi - lo) - a1 = hi - max(u, lo); a2 = relu(z2)
+        // The bias hi - lo is rounded in f64; to keep the saturated network exactly
+        // `clip(u, lo, hi)` we shift in two exact steps instead: z2 = hi - (a1 + lo).
+        layers.push(Layer::Affine {
+            w: eye.clone(),
+            b: DVector::from_column_slice(lo),
+        });
+        layers.push(Layer::Affine {
+            w: -eye.clone(),
+            b: DVector::from_column_slice(hi),
+        });
+        layers.push(Layer::Act(Activation::Relu));
+        // out = hi - a2 = min(hi, max(u, lo))
+        layers.push(Layer::Affine {
+            w: -eye,
+            b: DVector::from_column_slice(hi),
+        });
+        Network::new(self.inputs, layers)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn saturation_clips() {
+        let net = Network::new(
+            1,
+            vec![Layer::Affine {
+                w: DMatrix::from_row_slice(2, 1, &[1.0, -2.0]),
+                b: DVector::from_column_slice(&[0.0, 0.5]),
+            }],
+        );
+        let sat = net.with_saturation(&[-1.0, 0.0], &[1.0, 2.0]);
+        let y = sat.forward(&[0.3]);
+        assert!((y[0] - 0.3).abs() < 1e-15 && y[1] == 0.0);
+        assert_eq!(sat.forward(&[5.0]), vec![1.0, 0.0]);
+        assert_eq!(sat.forward(&[-5.0]), vec![-1.0, 2.0]);
+        assert_eq!(sat.outputs(), 2);
+    }
+}

@@ -5,3 +5,5 @@ pub mod analysis;
 pub mod nn;
 pub mod num;
 pub mod sets;
+pub mod onnx;
+pub mod rng;

@@ -1,4 +1,5 @@
 //! The analysis back-end: network bounds, closed-loop propagators, simulation.
 
+pub mod closed_loop;
 pub mod crown;
 pub mod relax;

@@ -1,0 +1,511 @@
+//! ONNX controllers: decoding (prost, no code generation), lowering the graph
+//! to a [`Network`], and a small writer used by the model generator and tests.
+//!
+//! Supported graphs are chains on one vector input: `Gemm` (alpha, beta,
+//! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `Tanh`, `Sigmoid`,
+//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
+//! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
+//! `Dropout` (inference), plus `Constant`. Weights may be float32 or float64,
+//! stored in `raw_data`, in the typed fields, or in external data files.
+//!
+//! Semantics: the network ravel verifies is the real-arithmetic function of
+//! the stored weights (float32 values are widened to f64 exactly). `Div` by a
+//! constant `c` is read as multiplication by the f64 nearest to `1/c`, and a
+//! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64.
+
+pub mod build;
+pub mod proto;
+
+use std::collections::{BTreeMap, HashMap};
+
+use nalgebra::{DMatrix, DVector};
+use prost::Message;
+
+use crate::nn::{Activation, Layer, Network};
+use proto::{dtype, AttributeProto, ModelProto, NodeProto, TensorProto};
+
+/// Contents of external-data files, by the `location` written in the model.
+/// A read failure is kept as its message so the checker can report it.
+pub type ExternalFiles = BTreeMap<String, Result<Vec<u8>, String>>;
+
+/// What went wrong while loading a controller.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OnnxErrorKind {
+    /// Not a decodable ONNX protobuf.
+    Decode,
+    /// An operator, attribute value or data type ravel does not support.
+    Unsupported,
+    /// A NaN or infinite weight (or a division by zero).
+    NonFinite,
+    /// A graph that is not a chain on one input, or inconsistent shapes.
+    Malformed,
+    /// An external-data file that is missing or too short.
+    ExternalData,
+}
+
+/// A problem with an ONNX file, with a message and a hint for the user.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OnnxError {
+    /// The category (mapped to a diagnostic code by `check`).
+    pub kind: OnnxErrorKind,
+    /// What is wrong, naming the node, tensor or attribute.
+    pub message: String,
+    /// How to fix it.
+    pub hint: String,
+}
+
+fn err(kind: OnnxErrorKind, message: impl Into<String>, hint: impl Into<String>) -> OnnxError {
+    OnnxError { kind, message: message.into(), hint: hint.into() }
+}
+
+/// A controller loaded from ONNX: the network and the declared input and output sizes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Controller {
+    /// The network as a chain of layers.
+    pub net: Network,
+    /// Number of inputs.
+    pub inputs: usize,
+    /// Number of outputs.
+    pub outputs: usize,
+}
+
+/// The `location`s of external-data files referenced by the model, so the caller can read them.
+/// Undecodable bytes give an empty list (the error is reported by [`load`]).
+pub fn external_locations(bytes: &[u8]) -> Vec<String> {
+    let Ok(model) = ModelProto::decode(bytes) else { return Vec::new() };
+    let mut out = Vec::new();
+    let mut visit = |t: &TensorProto| {
+        if t.data_location == Some(1) {
+            for e in &t.external_data {
+                if e.key.as_deref() == Some("location") {
+                    if let Some(v) = &e.value {
+                        if !out.contains(v) {
+                            out.push(v.clone());
+                        }
+                    }
+                }
+            }
+        }
+    };
+    if let Some(g) = &model.graph {
+        g.initializer.iter().for_each(&mut visit);
+        for n in &g.node {
+            for a in &n.attribute {
+                if let Some(t) = &a.t {
+                    visit(t);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A constant tensor.
+#[derive(Clone, Debug)]
+struct Tensor {
+    dims: Vec<usize>,
+    data: Vec<f64>,
+}
+
+fn node_label(n: &NodeProto) -> String {
+    let op = n.op_type.clone().unwrap_or_default();
+    match n.name.as_deref() {
+        Some(name) if !name.is_empty() => format!("node '{name}' ({op})"),
+        _ => format!("the {op} node producing '{}'", n.output.first().cloned().unwrap_or_default()),
+    }
+}
+
+fn tensor_name(t: &TensorProto) -> String {
+    t.name.clone().unwrap_or_else(|| "<unnamed>".into())
+}
+
+/// Decode a tensor's values to f64 (integers are converted too).
+fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, OnnxError> {
+    let name = tensor_name(t);
+    let mut dims = Vec::with_capacity(t.dims.len());
+    for &d in &t.dims {
+        if d < 0 {
+            return Err(err(OnnxErrorKind::Malformed, format!("tensor '{name}' has a negative dimension {d}"), "re-export the model"));
+        }
+        dims.push(d as usize);
+    }
+    let numel: usize = dims.iter().product();
+    let dt = t.data_type.unwrap_or(0);
+    let width = match dt {
+        dtype::FLOAT | dtype::INT32 => 4,
+        dtype::DOUBLE | dtype::INT64 => 8,
+        other => {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("tensor '{name}' has ONNX data type {other} ({}), which ravel does not read", dtype_name(other)),
+                "export the weights as float32 or float64",
+            ))
+        }
+    };
+    let raw: Option<Vec<u8>> = if t.data_location == Some(1) {
+        Some(read_external(t, &name, external)?)
+    } else {
+        t.raw_data.clone()
+    };
+    let data: Vec<f64> = match raw {
+        Some(bytes) => {
+            if bytes.len() != numel * width {
+                return Err(err(
+                    OnnxErrorKind::Malformed,
+                    format!("tensor '{name}' has {} bytes of data but its shape {:?} needs {}", bytes.len(), dims, numel * width),
+                    "re-export the model",
+                ));
+            }
+            bytes
+                .chunks_exact(width)
+                .map(|c| match dt {
+                    dtype::FLOAT => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+                    dtype::INT32 => i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+                    dtype::DOUBLE => f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]),
+                    _ => i64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f64,
+                })
+                .collect()
+        }
+        None => match dt {
+            dtype::FLOAT => t.float_data.iter().map(|v| *v as f64).collect(),
+            dtype::DOUBLE => t.double_data.clone(),
+            dtype::INT32 => t.int32_data.iter().map(|v| *v as f64).collect(),
+            _ => t.int64_data.iter().map(|v| *v as f64).collect(),
+        },
+    };
+    if data.len() != numel {
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            format!("tensor '{name}' has {} values but its shape {:?} needs {numel}", data.len(), dims),
+            "re-export the model",
+        ));
+    }
+    Ok(Tensor { dims, data })
+}
+
+fn dtype_name(d: i32) -> &'static str {
+    match d {
+        2 => "uint8",
+        3 => "int8",
+        9 => "bool",
+        10 => "float16",
+        16 => "bfloat16",
+        _ => "unsupported",
+    }
+}
+
+fn read_external(t: &TensorProto, name: &str, external: &ExternalFiles) -> Result<Vec<u8>, OnnxError> {
+    let mut location = None;
+    let (mut offset, mut length) = (0usize, None);
+    for e in &t.external_data {
+        let v = e.value.clone().unwrap_or_default();
+        match e.key.as_deref() {
+            Some("location") => location = Some(v),
+            Some("offset") => offset = v.parse().unwrap_or(usize::MAX),
+            Some("length") => length = Some(v.parse().unwrap_or(usize::MAX)),
+            _ => {}
+        }
+    }
+    let Some(location) = location else {
+        return Err(err(OnnxErrorKind::ExternalData, format!("tensor '{name}' is external but has no location"), "re-export the model with its data file"));
+    };
+    let bytes = match external.get(&location) {
+        Some(Ok(b)) => b,
+        Some(Err(msg)) => {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!("cannot read external data file '{location}' of tensor '{name}': {msg}"),
+                "keep the .data file next to the .onnx file",
+            ))
+        }
+        None => {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!("external data file '{location}' of tensor '{name}' was not provided"),
+                "keep the .data file next to the .onnx file",
+            ))
+        }
+    };
+    let end = match length {
+        Some(l) => offset.checked_add(l),
+        None => Some(bytes.len()),
+    };
+    match end {
+        Some(end) if offset <= end && end <= bytes.len() => Ok(bytes[offset..end].to_vec()),
+        _ => Err(err(
+            OnnxErrorKind::ExternalData,
+            format!("external data of tensor '{name}' (offset {offset}) runs past the end of '{location}' ({} bytes)", bytes.len()),
+            "the .data file does not belong to this model: re-export both together",
+        )),
+    }
+}
+
+fn attr<'a>(n: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
+    n.attribute.iter().find(|a| a.name.as_deref() == Some(name))
+}
+
+fn attr_i(n: &NodeProto, name: &str, default: i64) -> i64 {
+    attr(n, name).and_then(|a| a.i).unwrap_or(default)
+}
+
+fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
+    attr(n, name).and_then(|a| a.f).map(|f| f as f64).unwrap_or(default)
+}
+
+/// The ops ravel accepts, for hints.
+pub const SUPPORTED_OPS: &str =
+    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, Tanh, Sigmoid, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout, Constant";
+
+struct Lowering {
+    consts: HashMap<String, Tensor>,
+    current: String,
+    width: Option<usize>,
+    layers: Vec<Layer>,
+}
+
+impl Lowering {
+    /// Split a binary node's inputs into (const, is_const_first).
+    fn const_operand(&self, n: &NodeProto) -> Result<(Tensor, bool), OnnxError> {
+        if n.input.len() != 2 {
+            return Err(err(OnnxErrorKind::Malformed, format!("{} needs two inputs", node_label(n)), "re-export the model"));
+        }
+        let (a, b) = (&n.input[0], &n.input[1]);
+        if a == &self.current {
+            self.consts.get(b).cloned().map(|t| (t, false))
+        } else if b == &self.current {
+            self.consts.get(a).cloned().map(|t| (t, true))
+        } else {
+            None
+        }
+        .ok_or_else(|| {
+            err(
+                OnnxErrorKind::Unsupported,
+                format!("{} combines two computed values; ravel supports only chains with constant operands", node_label(n)),
+                "export a plain feed-forward network (no skip connections)",
+            )
+        })
+    }
+
+    fn width(&self) -> Result<usize, OnnxError> {
+        self.width.ok_or_else(|| {
+            err(OnnxErrorKind::Malformed, "the input size is unknown before the first element-wise op", "give the graph input a static shape")
+        })
+    }
+
+    /// A per-element vector from a constant of 1 or `width` elements.
+    fn broadcast(&self, n: &NodeProto, t: &Tensor) -> Result<DVector<f64>, OnnxError> {
+        let w = self.width()?;
+        if t.data.len() == 1 {
+            Ok(DVector::from_element(w, t.data[0]))
+        } else if t.data.len() == w {
+            Ok(DVector::from_column_slice(&t.data))
+        } else {
+            Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} uses a constant of {} elements on a value of width {w}", node_label(n), t.data.len()),
+                "the constant must be a scalar or have one entry per element",
+            ))
+        }
+    }
+
+    fn push_affine(&mut self, w: DMatrix<f64>, b: DVector<f64>) {
+        self.width = Some(w.nrows());
+        self.layers.push(Layer::Affine { w, b });
+    }
+
+    fn add_bias(&mut self, bias: DVector<f64>) {
+        if let Some(Layer::Affine { b, .. }) = self.layers.last_mut() {
+            if b.iter().all(|v| *v == 0.0) && b.len() == bias.len() {
+                *b = bias; // exact: the previous bias is zero
+                return;
+            }
+        }
+        let n = bias.len();
+        self.push_affine(DMatrix::identity(n, n), bias);
+    }
+
+    fn node(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let op = n.op_type.clone().unwrap_or_default();
+        if n.domain.as_deref().is_some_and(|d| !d.is_empty() && d != "ai.onnx") {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("{} is in operator domain '{}'", node_label(n), n.domain.clone().unwrap_or_default()),
+                format!("ravel supports the default ONNX domain: {SUPPORTED_OPS}"),
+            ));
+        }
+        let out = n.output.first().cloned().unwrap_or_default();
+        if op == "Constant" {
+            let t = attr(n, "value").and_then(|a| a.t.as_ref()).ok_or_else(|| {
+                err(OnnxErrorKind::Unsupported, format!("{} has no tensor 'value'", node_label(n)), "use a tensor-valued Constant")
+            })?;
+            let t = tensor_values(t, &ExternalFiles::new())?;
+            check_finite(&format!("constant '{out}'"), &t)?;
+            self.consts.insert(out, t);
+            return Ok(());
+        }
+        let first = n.input.first().cloned().unwrap_or_default();
+        let uses_current = n.input.iter().any(|i| i == &self.current);
+        if !uses_current {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("{} does not consume the running value '{}'", node_label(n), self.current),
+                "export a plain feed-forward network on one input (constant folding on)",
+            ));
+        }
+        match op.as_str() {
+            "Gemm" => {
+                if first != self.current || attr_i(n, "transA", 0) != 0 {
+                    return Err(err(OnnxErrorKind::Unsupported, format!("{} must have the data as its first input and transA = 0", node_label(n)), "re-export with the input as A"));
+                }
+                let bname = n.input.get(1).cloned().unwrap_or_default();
+                let bt = self.consts.get(&bname).cloned().ok_or_else(|| {
+                    err(OnnxErrorKind::Unsupported, format!("{} has a non-constant weight '{bname}'", node_label(n)), "weights must be initializers")
+                })?;
+                if bt.dims.len() != 2 {
+                    return Err(err(OnnxErrorKind::Malformed, format!("{} has weight of shape {:?}, expected 2-D", node_label(n), bt.dims), "re-export the model"));
+                }
+                let (r, c) = (bt.dims[0], bt.dims[1]);
+                let m = DMatrix::from_row_slice(r, c, &bt.data);
+                let alpha = attr_f(n, "alpha", 1.0);
+                let beta = attr_f(n, "beta", 1.0);
+                let mut w = if attr_i(n, "transB", 0) != 0 { m } else { m.transpose() };
+                if alpha != 1.0 {
+                    w *= alpha;
+                }
+                self.expect_width(n, w.ncols())?;
+                let outputs = w.nrows();
+                let mut b = DVector::zeros(outputs);
+                if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
+                    let ct = self.consts.get(cname).cloned().ok_or_else(|| {
+                        err(OnnxErrorKind::Unsupported, format!("{} has a non-constant bias '{cname}'", node_label(n)), "biases must be initializers")
+                    })?;
+                    self.width = Some(outputs);
+                    b = self.broadcast(n, &ct)? * beta;
+                }
+                self.push_affine(w, b);
+            }
+            "MatMul" => {
+                let (t, const_first) = self.const_operand(n)?;
+                if const_first || t.dims.len() != 2 {
+                    return Err(err(OnnxErrorKind::Unsupported, format!("{} must multiply the data (left) by a 2-D constant (right)", node_label(n)), "export Linear layers as x @ W"));
+                }
+                let w = DMatrix::from_row_slice(t.dims[0], t.dims[1], &t.data).transpose();
+                self.expect_width(n, w.ncols())?;
+                let outputs = w.nrows();
+                self.push_affine(w, DVector::zeros(outputs));
+            }
+            "Add" | "Sub" | "Mul" | "Div" => {
+                let (t, const_first) = self.const_operand(n)?;
+                let v = self.broadcast(n, &t)?;
+                let w = v.len();
+                match (op.as_str(), const_first) {
+                    ("Add", _) => self.add_bias(v),
+                    ("Sub", false) => self.add_bias(-v),
+                    ("Sub", true) => self.push_affine(-DMatrix::<f64>::identity(w, w), v),
+                    ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
+                    (_, false) => {
+                        if v.iter().any(|x| *x == 0.0) {
+                            return Err(err(OnnxErrorKind::NonFinite, format!("{} divides by zero", node_label(n)), "fix the normalisation constants"));
+                        }
+                        self.push_affine(DMatrix::from_diagonal(&v.map(|x| 1.0 / x)), DVector::zeros(w));
+                    }
+                    (_, true) => {
+                        return Err(err(OnnxErrorKind::Unsupported, format!("{} divides a constant by the data, which is not affine", node_label(n)), "only division by constants is supported"));
+                    }
+                }
+            }
+            "Relu" => self.layers.push(Layer::Act(Activation::Relu)),
+            "Tanh" => self.layers.push(Layer::Act(Activation::Tanh)),
+            "Sigmoid" => self.layers.push(Layer::Act(Activation::Sigmoid)),
+            "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" | "Dropout" => {
+                if first != self.current {
+                    return Err(err(OnnxErrorKind::Unsupported, format!("{} reshapes a constant", node_label(n)), "export with constant folding on"));
+                }
+            }
+            other => {
+                return Err(err(
+                    OnnxErrorKind::Unsupported,
+                    format!("{} uses operator '{other}', which ravel does not support", node_label(n)),
+                    format!("supported operators: {SUPPORTED_OPS}"),
+                ))
+            }
+        }
+        self.current = out;
+        Ok(())
+    }
+
+    fn expect_width(&mut self, n: &NodeProto, k: usize) -> Result<(), OnnxError> {
+        match self.width {
+            Some(w) if w != k => Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} expects {k} inputs but receives a value of width {w}", node_label(n)),
+                "the model's shapes are inconsistent: re-export it",
+            )),
+            _ => {
+                self.width = Some(k);
+                Ok(())
+            }
+        }
+    }
+}
+
+fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
+    if let Some(i) = t.data.iter().position(|v| !v.is_finite()) {
+        return Err(err(
+            OnnxErrorKind::NonFinite,
+            format!("{what} holds a non-finite value ({}) at flat index {i}", t.data[i]),
+            "the training diverged or the export is corrupt; retrain or re-export",
+        ));
+    }
+    Ok(())
+}
+
+/// Decode an ONNX model and lower it to a network.
+pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxError> {
+    let model = ModelProto::decode(bytes).map_err(|e| {
+        err(OnnxErrorKind::Decode, format!("the file is not a valid ONNX model ({e})"), "check that the path points to an .onnx file exported by PyTorch, Keras or similar")
+    })?;
+    let graph = model.graph.as_ref().ok_or_else(|| err(OnnxErrorKind::Decode, "the file is not an ONNX model (it has no graph)", "check that the path points to an .onnx file"))?;
+    let mut consts = HashMap::new();
+    for t in &graph.initializer {
+        let name = tensor_name(t);
+        let v = tensor_values(t, external)?;
+        check_finite(&format!("initializer '{name}'"), &v)?;
+        consts.insert(name, v);
+    }
+    let data_inputs: Vec<_> = graph.input.iter().filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or(""))).collect();
+    if data_inputs.len() != 1 {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the graph has {} data inputs; ravel needs exactly one (the observation vector)", data_inputs.len()),
+            "export the controller with a single input tensor",
+        ));
+    }
+    let input = data_inputs[0];
+    let declared = input.r#type.as_ref().and_then(|t| t.tensor_type.as_ref()).and_then(|t| t.shape.as_ref()).map(|s| {
+        // the product of the fixed dimensions; symbolic ones (batch) count as 1
+        s.dim.iter().map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as usize).product::<usize>()
+    });
+    let mut low = Lowering { consts, current: input.name.clone().unwrap_or_default(), width: declared, layers: Vec::new() };
+    for n in &graph.node {
+        low.node(n)?;
+    }
+    let output = graph.output.first().and_then(|o| o.name.clone()).unwrap_or_default();
+    if graph.output.len() != 1 || output != low.current {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the graph output '{output}' is not the end of the layer chain ('{}')", low.current),
+            "export the controller with a single output",
+        ));
+    }
+    let inputs = declared.or(match low.layers.first() {
+        Some(Layer::Affine { w, .. }) => Some(w.ncols()),
+        _ => None,
+    });
+    let Some(inputs) = inputs else {
+        return Err(err(OnnxErrorKind::Malformed, "cannot determine the input size", "give the graph input a static shape"));
+    };
+    let net = Network::new(inputs, low.layers);
+    let outputs = net.outputs();
+    Ok(Controller { net, inputs, outputs })
+}

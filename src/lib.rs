@@ -2,8 +2,10 @@
 #![forbid(unsafe_code)]
 
 pub mod analysis;
+pub mod diag;
 pub mod nn;
 pub mod num;
-pub mod sets;
 pub mod onnx;
 pub mod rng;
+pub mod sets;
+pub mod syntax;

@@ -1,0 +1,268 @@
+//! Diagnostics: plain data produced by the phases, rendered (with miette) only
+//! at the edge. Every diagnostic has a stable code documented in
+//! `docs/diagnostics.md`.
+
+use std::fmt;
+
+use miette::{GraphicalReportHandler, GraphicalTheme, LabeledSpan, NamedSource, SourceCode};
+
+use crate::syntax::ast::Span;
+
+/// A stable diagnostic code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Code {
+    /// E0001: the text does not follow the grammar.
+    Syntax,
+    /// E0002: an integer literal does not fit in 64 bits.
+    IntegerTooLarge,
+    /// E0101: a name that is not defined.
+    UnknownName,
+    /// E0102: something defined twice.
+    Duplicate,
+    /// E0103: a required item is missing.
+    Missing,
+    /// E0104: a component index outside the vector.
+    IndexOutOfRange,
+    /// E0105: a value of the wrong kind (a matrix where a vector is expected, …).
+    WrongKind,
+    /// E0201: a matrix or vector of the wrong shape.
+    Shape,
+    /// E0202: matrix rows of different lengths.
+    Ragged,
+    /// E0203: an interval whose lower end exceeds its upper end.
+    EmptyInterval,
+    /// E0204: a horizon below 1.
+    Horizon,
+    /// E0205: a number that is not finite (overflow such as `1e400`).
+    NonFinite,
+    /// E0206: an avoid step range that is inverted or beyond the horizon.
+    StepRange,
+    /// E0207: a partition grid that does not fit the state.
+    Partition,
+    /// E0208: a dimension or count that must be positive is zero.
+    Zero,
+    /// E0209: a set of a kind this role does not accept.
+    SetKind,
+    /// E0301: the controller file cannot be read.
+    ControllerUnreadable,
+    /// E0302: the controller file is not an ONNX model.
+    NotOnnx,
+    /// E0303: an ONNX operator or data type ravel does not support.
+    UnsupportedOnnx,
+    /// E0304: the controller's input size differs from the observation size.
+    ControllerInputs,
+    /// E0305: the controller's output size differs from the control size.
+    ControllerOutputs,
+    /// E0306: a NaN or infinite weight.
+    NonFiniteWeights,
+    /// E0307: an ONNX graph that is not a chain or has inconsistent shapes.
+    MalformedOnnx,
+    /// E0308: an external-data file that is missing or too short.
+    ExternalData,
+}
+
+impl Code {
+    /// Every code, in order (the documentation test walks this list).
+    pub const ALL: [Code; 24] = [
+        Code::Syntax,
+        Code::IntegerTooLarge,
+        Code::UnknownName,
+        Code::Duplicate,
+        Code::Missing,
+        Code::IndexOutOfRange,
+        Code::WrongKind,
+        Code::Shape,
+        Code::Ragged,
+        Code::EmptyInterval,
+        Code::Horizon,
+        Code::NonFinite,
+        Code::StepRange,
+        Code::Partition,
+        Code::Zero,
+        Code::SetKind,
+        Code::ControllerUnreadable,
+        Code::NotOnnx,
+        Code::UnsupportedOnnx,
+        Code::ControllerInputs,
+        Code::ControllerOutputs,
+        Code::NonFiniteWeights,
+        Code::MalformedOnnx,
+        Code::ExternalData,
+    ];
+
+    /// The code as written in messages, e.g. `E0201`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Code::Syntax => "E0001",
+            Code::IntegerTooLarge => "E0002",
+            Code::UnknownName => "E0101",
+            Code::Duplicate => "E0102",
+            Code::Missing => "E0103",
+            Code::IndexOutOfRange => "E0104",
+            Code::WrongKind => "E0105",
+            Code::Shape => "E0201",
+            Code::Ragged => "E0202",
+            Code::EmptyInterval => "E0203",
+            Code::Horizon => "E0204",
+            Code::NonFinite => "E0205",
+            Code::StepRange => "E0206",
+            Code::Partition => "E0207",
+            Code::Zero => "E0208",
+            Code::SetKind => "E0209",
+            Code::ControllerUnreadable => "E0301",
+            Code::NotOnnx => "E0302",
+            Code::UnsupportedOnnx => "E0303",
+            Code::ControllerInputs => "E0304",
+            Code::ControllerOutputs => "E0305",
+            Code::NonFiniteWeights => "E0306",
+            Code::MalformedOnnx => "E0307",
+            Code::ExternalData => "E0308",
+        }
+    }
+}
+
+/// One problem in a spec, as data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnostic {
+    /// The stable code.
+    pub code: Code,
+    /// What is wrong.
+    pub message: String,
+    /// Where (absent only for problems without a location, e.g. an unreadable spec).
+    pub span: Option<Span>,
+    /// The label at the span.
+    pub label: String,
+    /// How to fix it.
+    pub hint: Option<String>,
+    /// Further locations that explain the problem (e.g. the first definition of a duplicate).
+    pub related: Vec<(Span, String)>,
+}
+
+impl Diagnostic {
+    /// A diagnostic at `span`.
+    pub fn new(code: Code, span: Span, message: impl Into<String>) -> Diagnostic {
+        Diagnostic { code, message: message.into(), span: Some(span), label: String::new(), hint: None, related: Vec::new() }
+    }
+
+    /// Set the label shown at the span.
+    pub fn label(mut self, label: impl Into<String>) -> Diagnostic {
+        self.label = label.into();
+        self
+    }
+
+    /// Set the hint.
+    pub fn hint(mut self, hint: impl Into<String>) -> Diagnostic {
+        self.hint = Some(hint.into());
+        self
+    }
+
+    /// Add a related location.
+    pub fn related(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
+        self.related.push((span, label.into()));
+        self
+    }
+}
+
+/// Adapter that lets miette render a [`Diagnostic`] against its source.
+struct Report<'a> {
+    d: &'a Diagnostic,
+    src: NamedSource<String>,
+}
+
+impl fmt::Display for Report<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.d.message)
+    }
+}
+
+impl fmt::Debug for Report<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.d.message)
+    }
+}
+
+impl std::error::Error for Report<'_> {}
+
+impl miette::Diagnostic for Report<'_> {
+    fn code<'b>(&'b self) -> Option<Box<dyn fmt::Display + 'b>> {
+        Some(Box::new(self.d.code.as_str()))
+    }
+
+    fn help<'b>(&'b self) -> Option<Box<dyn fmt::Display + 'b>> {
+        self.d.hint.as_ref().map(|h| Box::new(h.as_str()) as Box<dyn fmt::Display>)
+    }
+
+    fn source_code(&self) -> Option<&dyn SourceCode> {
+        self.d.span.map(|_| &self.src as &dyn SourceCode)
+    }
+
+    fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
+        let span = self.d.span?;
+        let len = self.src.inner().len();
+        let clamp = |s: Span| (s.start.min(len), s.end.min(len).saturating_sub(s.start.min(len)));
+        let (start, n) = clamp(span);
+        let label = if self.d.label.is_empty() { None } else { Some(self.d.label.clone()) };
+        let mut labels = vec![LabeledSpan::new_primary_with_span(label, (start, n))];
+        for (s, l) in &self.d.related {
+            labels.push(LabeledSpan::new_with_span(Some(l.clone()), clamp(*s)));
+        }
+        Some(Box::new(labels.into_iter()))
+    }
+}
+
+/// Render diagnostics for a source file as text.
+///
+/// `color` turns on ANSI colours; `width` wraps messages. With `color = false`
+/// the output is plain Unicode text and deterministic (used by snapshots).
+pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, color: bool) -> String {
+    let theme = if color { GraphicalTheme::unicode() } else { GraphicalTheme::unicode_nocolor() };
+    let handler = GraphicalReportHandler::new_themed(theme).with_width(width).with_links(false);
+    let mut out = String::new();
+    for d in diags {
+        let report = Report { d, src: NamedSource::new(name, source.to_string()) };
+        if handler.render_report(&mut out, &report).is_err() {
+            out.push_str(&format!("error[{}]: {}\n", d.code.as_str(), d.message));
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// The closest candidate to `name` by edit distance, if it is close enough to be a likely typo.
+pub fn did_you_mean<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let mut best: Option<(usize, &str)> = None;
+    for c in candidates {
+        let d = edit_distance(&name.to_lowercase(), &c.to_lowercase());
+        if d <= (name.len().max(c.len()) / 3).max(1) && best.is_none_or(|(bd, _)| d < bd) {
+            best = Some((d, c));
+        }
+    }
+    best.map(|(_, c)| c)
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().collect();
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for i in 1..=a.len() {
+        let mut cur = vec![i; b.len() + 1];
+        for j in 1..=b.len() {
+            let sub = prev[j - 1] + usize::from(a[i - 1] != b[j - 1]);
+            cur[j] = sub.min(prev[j] + 1).min(cur[j - 1] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn suggestions() {
+        assert_eq!(did_you_mean("reach_lq", ["reach_lp", "ibp_separate"]), Some("reach_lp"));
+        assert_eq!(did_you_mean("zzz", ["reach_lp"]), None);
+        assert_eq!(did_you_mean("a", ["A", "B"]), Some("A"));
+    }
+}

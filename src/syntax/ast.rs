@@ -1,0 +1,228 @@
+//! The abstract syntax tree of a spec file. Every node keeps its source span.
+
+use std::fmt;
+
+/// A byte range in the source text.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct Span {
+    /// First byte.
+    pub start: usize,
+    /// One past the last byte.
+    pub end: usize,
+}
+
+impl Span {
+    /// A span from byte offsets.
+    pub fn new(start: usize, end: usize) -> Span {
+        Span { start, end }
+    }
+}
+
+impl fmt::Debug for Span {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}..{}", self.start, self.end)
+    }
+}
+
+/// A value with the span it was written at.
+#[derive(Clone, PartialEq)]
+pub struct Spanned<T> {
+    /// The value.
+    pub node: T,
+    /// Where it was written.
+    pub span: Span,
+}
+
+impl<T: fmt::Debug> fmt::Debug for Spanned<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if f.alternate() {
+            write!(f, "{:#?} @{:?}", self.node, self.span)
+        } else {
+            write!(f, "{:?} @{:?}", self.node, self.span)
+        }
+    }
+}
+
+/// A parsed spec file: its items in source order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spec {
+    /// The top-level items.
+    pub items: Vec<Item>,
+}
+
+/// A top-level item.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Item {
+    /// `system NAME { … }`
+    System(System),
+    /// `controller "path"`
+    Controller(Spanned<String>),
+    /// `initial NAME = set`
+    Initial(SetDef),
+    /// `goal NAME = set`
+    Goal(SetDef),
+    /// `avoid NAME = set [at …]`
+    Avoid(AvoidDef),
+    /// `horizon N`
+    Horizon(Spanned<u64>),
+    /// `analysis { … }`
+    Analysis(Analysis),
+}
+
+/// `system NAME { … }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct System {
+    /// The system's name.
+    pub name: Spanned<String>,
+    /// Its statements in order.
+    pub stmts: Vec<SystemStmt>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// A statement of a system block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SystemStmt {
+    /// `state x[n]`
+    State { name: Spanned<String>, dim: Spanned<u64>, span: Span },
+    /// `control u[m]`
+    Control { name: Spanned<String>, dim: Spanned<u64>, span: Span },
+    /// `NAME in box(…)`
+    Bound { name: Spanned<String>, set: Spanned<BoxSet>, span: Span },
+    /// `NAME = value`
+    Assign { name: Spanned<String>, value: Spanned<Value>, span: Span },
+}
+
+/// A literal value.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// `[[…], …]`, rows in order.
+    Matrix(Vec<Spanned<Vec<Spanned<f64>>>>),
+    /// `[…]`
+    Vector(Vec<Spanned<f64>>),
+    /// `eye(n)`
+    Eye(Spanned<u64>),
+    /// `zeros(n)` or `zeros(n, m)`
+    Zeros(Spanned<u64>, Option<Spanned<u64>>),
+    /// a bare number
+    Scalar(f64),
+}
+
+/// A named set definition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SetDef {
+    /// The set's name.
+    pub name: Spanned<String>,
+    /// The set.
+    pub set: Spanned<SetExpr>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// An avoid-set definition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AvoidDef {
+    /// The set's name.
+    pub name: Spanned<String>,
+    /// The set (possibly a union).
+    pub set: Spanned<SetExpr>,
+    /// The steps at which it applies (inclusive); all steps if absent.
+    pub steps: Option<Spanned<(u64, u64)>>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// A union of basic sets (one member for a plain set).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SetExpr {
+    /// The members of the union.
+    pub members: Vec<Spanned<SetAtom>>,
+}
+
+/// A basic set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SetAtom {
+    /// `box(…)`
+    Box(BoxSet),
+    /// `{ … }`
+    Polytope(Vec<Constraint>),
+}
+
+/// A box, by component or positionally.
+#[derive(Clone, Debug, PartialEq)]
+pub enum BoxSet {
+    /// `box(x[0] in [a, b], …)`
+    Named(Vec<(Component, Interval)>),
+    /// `box([a, b], …)`
+    Positional(Vec<Interval>),
+}
+
+/// `[lo, hi]`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Interval {
+    /// Lower end.
+    pub lo: Spanned<f64>,
+    /// Upper end.
+    pub hi: Spanned<f64>,
+    /// The whole interval.
+    pub span: Span,
+}
+
+/// `x[i]`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Component {
+    /// The vector's name.
+    pub name: Spanned<String>,
+    /// The index.
+    pub index: Spanned<u64>,
+    /// The whole component.
+    pub span: Span,
+}
+
+/// `Σ coef·x[i] (<= | >=) rhs`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Constraint {
+    /// Terms with signed coefficients.
+    pub terms: Vec<(f64, Component)>,
+    /// The comparison.
+    pub cmp: Cmp,
+    /// The right-hand side.
+    pub rhs: Spanned<f64>,
+    /// The whole constraint.
+    pub span: Span,
+}
+
+/// A comparison operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cmp {
+    /// `<=`
+    Le,
+    /// `>=`
+    Ge,
+}
+
+/// `analysis { … }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct Analysis {
+    /// Its statements.
+    pub stmts: Vec<Spanned<AnalysisStmt>>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// A statement of the analysis block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AnalysisStmt {
+    /// `propagator NAME`
+    Propagator(Spanned<String>),
+    /// `partitioner none` / `partitioner NAME`
+    Partitioner(Spanned<String>),
+    /// `partitioner uniform [k, …]`
+    Uniform(Vec<Spanned<u64>>),
+    /// `boundary NAME`
+    Boundary(Spanned<String>),
+    /// `samples N`
+    Samples(Spanned<u64>),
+    /// `seed N`
+    Seed(Spanned<u64>),
+}

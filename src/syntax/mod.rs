@@ -1,0 +1,337 @@
+//! Parsing: spec text → [`ast::Spec`], with the pest grammar in `grammar/ravel.pest`.
+//!
+//! A syntax error stops parsing and yields one diagnostic (`E0001`) at the
+//! first position the grammar cannot continue from, naming what was expected
+//! there; everything after the grammar (names, shapes, files) is checked by
+//! [`crate::check`], which reports every problem at once.
+
+pub mod ast;
+
+use pest::iterators::Pair;
+use pest::Parser;
+
+use crate::diag::{Code, Diagnostic};
+use ast::*;
+
+#[derive(pest_derive::Parser)]
+#[grammar = "../grammar/ravel.pest"]
+struct Grammar;
+
+type P<'a> = Pair<'a, Rule>;
+
+fn span(p: &P) -> Span {
+    Span::new(p.as_span().start(), p.as_span().end())
+}
+
+fn rule_name(r: &Rule) -> Option<&'static str> {
+    Some(match r {
+        Rule::EOI => "end of file",
+        Rule::item => "a top-level item (system, controller, initial, goal, avoid, horizon, analysis)",
+        Rule::system_stmt => "a system statement (state, control, NAME = value, NAME in box(…))",
+        Rule::state_decl => "`state`",
+        Rule::control_decl => "`control`",
+        Rule::bound_decl => "`NAME in box(…)`",
+        Rule::assign => "`NAME = value`",
+        Rule::analysis_stmt => "an analysis statement (propagator, partitioner, boundary, samples, seed)",
+        Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
+        Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => "a set: box(…) or { … }",
+        Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
+        Rule::interval => "an interval `[lo, hi]`",
+        Rule::constraint | Rule::lin_expr | Rule::first_term | Rule::term => "a linear inequality",
+        Rule::cmp => "`<=` or `>=`",
+        Rule::component => "a component such as `x[0]`",
+        Rule::ident => "a name",
+        Rule::integer => "an integer",
+        Rule::number | Rule::unsigned => "a number",
+        Rule::string => "a quoted path",
+        Rule::steps | Rule::steps_range | Rule::step_single => "`at steps [a, b]` or `at step k`",
+        Rule::uniform => "`uniform [k, …]`",
+        Rule::add_op => "`+` or `-`",
+        _ => return None,
+    })
+}
+
+/// Parse a spec. Fails with one diagnostic on a syntax error, or with one per
+/// oversized integer literal.
+pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
+    let mut pairs = Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
+    let spec = pairs.next().expect("the grammar's `spec` rule always yields one pair");
+    let mut b = Builder { errors: Vec::new() };
+    let items = spec.into_inner().filter(|p| p.as_rule() != Rule::EOI).map(|p| b.item(p)).collect();
+    if b.errors.is_empty() {
+        Ok(Spec { items })
+    } else {
+        Err(b.errors)
+    }
+}
+
+fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
+    let pos = match e.location {
+        pest::error::InputLocation::Pos(p) => p,
+        pest::error::InputLocation::Span((s, _)) => s,
+    };
+    let end = source[pos..].chars().next().map_or(pos, |c| pos + c.len_utf8());
+    let (expected, unexpected) = match &e.variant {
+        pest::error::ErrorVariant::ParsingError { positives, negatives } => (positives.clone(), negatives.clone()),
+        pest::error::ErrorVariant::CustomError { .. } => (vec![], vec![]),
+    };
+    let mut names: Vec<&str> = expected.iter().filter_map(rule_name).collect();
+    names.dedup();
+    let found = source[pos..].split_whitespace().next().map(|t| t.chars().take(20).collect::<String>());
+    let message = match &found {
+        Some(t) => format!("unexpected `{t}`"),
+        None => "unexpected end of file".to_string(),
+    };
+    let label = if names.is_empty() {
+        if unexpected.is_empty() {
+            "the grammar cannot continue here".to_string()
+        } else {
+            "not allowed here".to_string()
+        }
+    } else {
+        format!("expected {}", names.join(" or "))
+    };
+    Diagnostic::new(Code::Syntax, Span::new(pos, end), message)
+        .label(label)
+        .hint("see docs/language.md for the syntax of each item")
+}
+
+struct Builder {
+    errors: Vec<Diagnostic>,
+}
+
+impl Builder {
+    fn integer(&mut self, p: P) -> Spanned<u64> {
+        let s = span(&p);
+        let node = p.as_str().parse::<u64>().unwrap_or_else(|_| {
+            self.errors.push(
+                Diagnostic::new(Code::IntegerTooLarge, s, format!("integer `{}` is too large", p.as_str()))
+                    .label("does not fit in 64 bits")
+                    .hint("use a smaller value"),
+            );
+            0
+        });
+        Spanned { node, span: s }
+    }
+
+    fn number(&mut self, p: P) -> Spanned<f64> {
+        let s = span(&p);
+        // The grammar only admits valid float syntax; overflow parses to ±inf and is
+        // reported by `check` (E0205).
+        let node = p.as_str().parse::<f64>().unwrap_or(f64::NAN);
+        Spanned { node, span: s }
+    }
+
+    fn ident(&mut self, p: P) -> Spanned<String> {
+        Spanned { node: p.as_str().to_string(), span: span(&p) }
+    }
+
+    fn item(&mut self, p: P) -> Item {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let mut inner = p.into_inner();
+        match rule {
+            Rule::system => {
+                let name = self.ident(inner.next().expect("system name"));
+                let stmts = inner.map(|st| self.system_stmt(st)).collect();
+                Item::System(System { name, stmts, span: s })
+            }
+            Rule::controller => {
+                let lit = inner.next().expect("controller path");
+                let text = lit.as_str();
+                Item::Controller(Spanned { node: text[1..text.len() - 1].to_string(), span: span(&lit) })
+            }
+            Rule::initial | Rule::goal => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let def = SetDef { name, set, span: s };
+                if rule == Rule::initial {
+                    Item::Initial(def)
+                } else {
+                    Item::Goal(def)
+                }
+            }
+            Rule::avoid => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let steps = inner.next().map(|st| {
+                    let ss = span(&st);
+                    let which = st.into_inner().next().expect("steps form");
+                    let is_range = which.as_rule() == Rule::steps_range;
+                    let mut nums = which.into_inner();
+                    let a = self.integer(nums.next().expect("step")).node;
+                    let b = if is_range { self.integer(nums.next().expect("step")).node } else { a };
+                    Spanned { node: (a, b), span: ss }
+                });
+                Item::Avoid(AvoidDef { name, set, steps, span: s })
+            }
+            Rule::horizon => Item::Horizon(self.integer(inner.next().expect("horizon value"))),
+            Rule::analysis => {
+                let stmts = inner.map(|st| self.analysis_stmt(st)).collect();
+                Item::Analysis(Analysis { stmts, span: s })
+            }
+            other => unreachable!("grammar item rule {other:?}"),
+        }
+    }
+
+    fn system_stmt(&mut self, p: P) -> SystemStmt {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let mut inner = p.into_inner();
+        let name = self.ident(inner.next().expect("statement name"));
+        match rule {
+            Rule::state_decl => SystemStmt::State { name, dim: self.integer(inner.next().expect("dim")), span: s },
+            Rule::control_decl => SystemStmt::Control { name, dim: self.integer(inner.next().expect("dim")), span: s },
+            Rule::bound_decl => {
+                let b = inner.next().expect("box");
+                let bs = span(&b);
+                SystemStmt::Bound { name, set: Spanned { node: self.box_set(b), span: bs }, span: s }
+            }
+            Rule::assign => {
+                let v = inner.next().expect("value");
+                let vs = span(&v);
+                SystemStmt::Assign { name, value: Spanned { node: self.value(v), span: vs }, span: s }
+            }
+            other => unreachable!("grammar system rule {other:?}"),
+        }
+    }
+
+    fn numbers(&mut self, p: P) -> Vec<Spanned<f64>> {
+        p.into_inner().map(|n| self.number(n)).collect()
+    }
+
+    fn value(&mut self, p: P) -> Value {
+        let v = p.into_inner().next().expect("value kind");
+        match v.as_rule() {
+            Rule::matrix => Value::Matrix(
+                v.into_inner()
+                    .map(|row| {
+                        let rs = span(&row);
+                        Spanned { node: self.numbers(row), span: rs }
+                    })
+                    .collect(),
+            ),
+            Rule::vector => Value::Vector(self.numbers(v)),
+            Rule::eye => Value::Eye(self.integer(v.into_inner().next().expect("eye size"))),
+            Rule::zeros => {
+                let mut it = v.into_inner();
+                let n = self.integer(it.next().expect("zeros size"));
+                let m = it.next().map(|m| self.integer(m));
+                Value::Zeros(n, m)
+            }
+            Rule::number => Value::Scalar(self.number(v).node),
+            other => unreachable!("grammar value rule {other:?}"),
+        }
+    }
+
+    fn set_expr(&mut self, p: P) -> Spanned<SetExpr> {
+        let s = span(&p);
+        let members = p
+            .into_inner()
+            .map(|a| {
+                let sa = span(&a);
+                let node = match a.as_rule() {
+                    Rule::box_set => SetAtom::Box(self.box_set(a)),
+                    Rule::polytope => SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect()),
+                    other => unreachable!("grammar set rule {other:?}"),
+                };
+                Spanned { node, span: sa }
+            })
+            .collect();
+        Spanned { node: SetExpr { members }, span: s }
+    }
+
+    fn box_set(&mut self, p: P) -> BoxSet {
+        let body = p.into_inner().next().expect("box body");
+        match body.as_rule() {
+            Rule::named_intervals => BoxSet::Named(
+                body.into_inner()
+                    .map(|ni| {
+                        let mut it = ni.into_inner();
+                        let c = self.component(it.next().expect("component"));
+                        let i = self.interval(it.next().expect("interval"));
+                        (c, i)
+                    })
+                    .collect(),
+            ),
+            _ => BoxSet::Positional(body.into_inner().map(|i| self.interval(i)).collect()),
+        }
+    }
+
+    fn interval(&mut self, p: P) -> Interval {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let lo = self.number(it.next().expect("lo"));
+        let hi = self.number(it.next().expect("hi"));
+        Interval { lo, hi, span: s }
+    }
+
+    fn component(&mut self, p: P) -> Component {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let name = self.ident(it.next().expect("name"));
+        let index = self.integer(it.next().expect("index"));
+        Component { name, index, span: s }
+    }
+
+    fn term(&mut self, p: P, sign: f64) -> (f64, Component) {
+        let mut coef = sign;
+        let mut comp = None;
+        for part in p.into_inner() {
+            match part.as_rule() {
+                Rule::unsigned => coef *= part.as_str().parse::<f64>().unwrap_or(f64::NAN),
+                Rule::component => comp = Some(self.component(part)),
+                other => unreachable!("grammar term rule {other:?}"),
+            }
+        }
+        (coef, comp.expect("a term has a component"))
+    }
+
+    fn constraint(&mut self, p: P) -> Constraint {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let expr = it.next().expect("expression");
+        let cmp = match it.next().expect("comparison").as_str() {
+            "<=" => Cmp::Le,
+            _ => Cmp::Ge,
+        };
+        let rhs = self.number(it.next().expect("rhs"));
+        let mut terms = Vec::new();
+        let mut sign = 1.0;
+        for part in expr.into_inner() {
+            match part.as_rule() {
+                Rule::first_term => {
+                    let mut sub = part.into_inner().peekable();
+                    let mut first_sign = 1.0;
+                    if sub.peek().is_some_and(|q| q.as_rule() == Rule::add_op) {
+                        first_sign = if sub.next().expect("op").as_str() == "-" { -1.0 } else { 1.0 };
+                    }
+                    let t = sub.next().expect("term");
+                    terms.push(self.term(t, first_sign));
+                }
+                Rule::add_op => sign = if part.as_str() == "-" { -1.0 } else { 1.0 },
+                Rule::term => terms.push(self.term(part, sign)),
+                other => unreachable!("grammar expression rule {other:?}"),
+            }
+        }
+        Constraint { terms, cmp, rhs, span: s }
+    }
+
+    fn analysis_stmt(&mut self, p: P) -> Spanned<AnalysisStmt> {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let arg = p.into_inner().next().expect("analysis argument");
+        let node = match rule {
+            Rule::propagator => AnalysisStmt::Propagator(self.ident(arg)),
+            Rule::partitioner => match arg.as_rule() {
+                Rule::uniform => AnalysisStmt::Uniform(arg.into_inner().map(|i| self.integer(i)).collect()),
+                _ => AnalysisStmt::Partitioner(self.ident(arg)),
+            },
+            Rule::boundary => AnalysisStmt::Boundary(self.ident(arg)),
+            Rule::samples => AnalysisStmt::Samples(self.integer(arg)),
+            Rule::seed => AnalysisStmt::Seed(self.integer(arg)),
+            other => unreachable!("grammar analysis rule {other:?}"),
+        };
+        Spanned { node, span: s }
+    }
+}

@@ -1,1 +1,5 @@
-fn main(){}
+//! The `ravel` binary: a thin wrapper over [`ravel::cli`].
+
+fn main() -> std::process::ExitCode {
+    ravel::cli::main()
+}

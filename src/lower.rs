@@ -1,0 +1,118 @@
+//! Lowering: a [`Checked`] spec → an analysis [`Plan`]. Cannot fail.
+//!
+//! Lowering decides *what* to compute: it appends the control saturation to
+//! the network, splits the initial set into partition cells, and turns goal
+//! and avoid sets into properties over the steps they constrain.
+
+use crate::analysis::closed_loop::{ClosedLoop, Propagator};
+use crate::check::Checked;
+use crate::nn::Layer;
+use crate::sets::{IBox, Polytope};
+
+/// What a property demands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PropertyKind {
+    /// The final reachable set lies in this set.
+    Goal(Polytope),
+    /// No reachable set at these steps touches any member.
+    Avoid {
+        /// The union's members.
+        members: Vec<Polytope>,
+        /// First and last step (inclusive, clipped to the horizon).
+        steps: (usize, usize),
+    },
+}
+
+/// A named property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Property {
+    /// The set's name from the spec.
+    pub name: String,
+    /// What it demands.
+    pub kind: PropertyKind,
+}
+
+/// Everything the executor needs, as plain data.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The system's name.
+    pub system: String,
+    /// The state vector's name.
+    pub state_name: String,
+    /// The control vector's name.
+    pub control_name: String,
+    /// The controller path as written in the spec.
+    pub controller_path: String,
+    /// A one-line description of the network, e.g. `2 → 5 relu → 5 relu → 1`.
+    pub network_summary: String,
+    /// The closed loop (saturation already part of the network).
+    pub closed_loop: ClosedLoop,
+    /// Control limits, if any (for reports).
+    pub limits: Option<IBox>,
+    /// The initial set.
+    pub initial: IBox,
+    /// Its name.
+    pub initial_name: String,
+    /// Partition cells of the initial set (one cell without partitioning).
+    pub cells: Vec<IBox>,
+    /// Cells per dimension.
+    pub grid: Vec<usize>,
+    /// Number of steps.
+    pub horizon: usize,
+    /// The propagator.
+    pub propagator: Propagator,
+    /// The properties, goal first, then avoid sets in spec order.
+    pub properties: Vec<Property>,
+    /// Monte Carlo samples.
+    pub samples: usize,
+    /// Monte Carlo seed.
+    pub seed: u64,
+}
+
+fn summary(c: &Checked) -> String {
+    let net = &c.controller.net;
+    let mut parts = vec![net.inputs.to_string()];
+    for (i, layer) in net.layers.iter().enumerate() {
+        if let Layer::Act(a) = layer {
+            parts.push(format!("{} {}", net.width_at(i), a.name()));
+        }
+    }
+    parts.push(net.outputs().to_string());
+    parts.join(" → ")
+}
+
+/// Lower a checked spec to a plan.
+pub fn lower(c: &Checked) -> Plan {
+    let net = match &c.limits {
+        Some(l) => c.controller.net.with_saturation(&l.lo, &l.hi),
+        None => c.controller.net.clone(),
+    };
+    let mut properties = Vec::new();
+    if let Some(g) = &c.goal {
+        properties.push(Property { name: g.name.clone(), kind: PropertyKind::Goal(g.set.clone()) });
+    }
+    for a in &c.avoids {
+        properties.push(Property {
+            name: a.name.clone(),
+            kind: PropertyKind::Avoid { members: a.members.clone(), steps: (a.steps.0, a.steps.1.min(c.horizon)) },
+        });
+    }
+    Plan {
+        system: c.system.clone(),
+        state_name: c.state.0.clone(),
+        control_name: c.control.0.clone(),
+        controller_path: c.controller_path.clone(),
+        network_summary: summary(c),
+        closed_loop: ClosedLoop::new(c.plant.clone(), net),
+        limits: c.limits.clone(),
+        initial: c.initial.1.clone(),
+        initial_name: c.initial.0.clone(),
+        cells: c.initial.1.grid(&c.partition),
+        grid: c.partition.clone(),
+        horizon: c.horizon,
+        propagator: c.propagator,
+        properties,
+        samples: c.samples,
+        seed: c.seed,
+    }
+}

@@ -1,0 +1,203 @@
+//! Reports: an [`Outcome`] as text for people or as JSON for machines.
+//!
+//! The JSON schema is documented in `docs/json-schema.md`; its identifier is
+//! [`SCHEMA`]. Output is deterministic: timing appears only when the caller
+//! passes it.
+
+use serde_json::{json, Value};
+
+use crate::execute::{Outcome, Status, Trajectory};
+use crate::lower::Plan;
+use crate::sets::IBox;
+
+/// The identifier of the JSON result schema.
+pub const SCHEMA: &str = "ravel-report/1";
+
+/// Format a number in ravel's one float format: fixed with 6 decimals for
+/// ordinary magnitudes, scientific otherwise.
+pub fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0.000000".into()
+    } else if x.is_nan() {
+        "nan".into()
+    } else if x.is_infinite() {
+        if x > 0.0 { "inf" } else { "-inf" }.into()
+    } else if (1e-4..1e7).contains(&x.abs()) {
+        format!("{x:.6}")
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
+fn interval(lo: f64, hi: f64) -> String {
+    format!("[{:>10}, {:>10}]", num(lo), num(hi))
+}
+
+fn vector(v: &[f64]) -> String {
+    format!("[{}]", v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", "))
+}
+
+fn partition_text(plan: &Plan) -> String {
+    if plan.cells.len() == 1 {
+        "no partition (1 cell)".into()
+    } else {
+        format!("uniform partition {:?} ({} cells)", plan.grid, plan.cells.len())
+    }
+}
+
+/// A human-readable report. `timing_ms` adds a timing line.
+pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>) -> String {
+    let mut s = String::new();
+    let x = &plan.state_name;
+    let n = plan.closed_loop.states();
+    let m = plan.closed_loop.plant.b.ncols();
+    s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
+    s += &format!("  system      {} (state {x}[{n}], control {}[{m}], horizon {})\n", plan.system, plan.control_name, plan.horizon);
+    let sat = match &plan.limits {
+        Some(l) => format!(", saturated to {} ∈ {}", plan.control_name, (0..l.dim()).map(|i| format!("[{}, {}]", num(l.lo[i]), num(l.hi[i]))).collect::<Vec<_>>().join(" × ")),
+        None => String::new(),
+    };
+    s += &format!("  controller  {} ({}{sat})\n", plan.controller_path, plan.network_summary);
+    s += &format!(
+        "  analysis    {}, {}, box boundary, {} Monte Carlo samples (seed {})\n\n",
+        plan.propagator.name(),
+        partition_text(plan),
+        plan.samples,
+        plan.seed
+    );
+    s += "  reachable sets (bounding box of all cells, then the hull of the sampled states)\n";
+    for (t, b) in out.reach.iter().enumerate() {
+        for i in 0..n {
+            let lead = if i == 0 { format!("  step {t:>3}") } else { " ".repeat(10) };
+            let sampled = match &out.sampled[t] {
+                Some(sb) => format!("   sampled {}", interval(sb.lo[i], sb.hi[i])),
+                None => String::new(),
+            };
+            s += &format!("{lead}  {x}[{i}] ∈ {}{sampled}\n", interval(b.lo[i], b.hi[i]));
+        }
+    }
+    if let Some(err) = final_error(out) {
+        s += &format!("  final-step error (box volume / sampled-hull volume − 1): {}\n", num(err));
+    }
+    s += "\n  properties\n";
+    let width = out.properties.iter().map(|p| p.name.len() + p.kind.len() + 1).max().unwrap_or(0);
+    for p in &out.properties {
+        let label = format!("{} {}", p.kind, p.name);
+        let why = match (p.status, p.kind) {
+            (Status::Verified, "goal") => format!("every reachable box at step {} is inside, margin {}", p.step, num(p.margin)),
+            (Status::Verified, _) => format!("reachable boxes stay clear, smallest separation {} at step {}", num(p.margin), p.step),
+            (Status::Unsure, "goal") => format!("the reachable box at step {} sticks out by {}; no sampled trajectory misses", p.step, num(-p.margin)),
+            (Status::Unsure, _) => format!("a reachable box at step {} may touch it (separation {}); no sampled trajectory enters", p.step, num(p.margin)),
+            (Status::Falsified, "goal") => format!("a trajectory ends {} outside at step {}", num(-p.margin), p.step),
+            (Status::Falsified, _) => format!("a trajectory is {} inside at step {}", num(-p.margin), p.step),
+        };
+        s += &format!("  {label:<width$}  {:<9}  {why}\n", p.status.as_str());
+        if let Some(tr) = &p.counterexample {
+            s += &counterexample_text(plan, tr);
+        }
+    }
+    s += &format!("\n  verdict: {}\n", out.verdict.as_str());
+    if let Some(ms) = timing_ms {
+        s += &format!("  time: {ms:.3} ms ({} propagator calls, {} samples)\n", out.propagator_calls, plan.samples);
+    }
+    s
+}
+
+fn counterexample_text(plan: &Plan, tr: &Trajectory) -> String {
+    let mut s = format!("      counterexample (x = {}, u = {}, w = process noise, v = sensor noise):\n", plan.state_name, plan.control_name);
+    for (t, x) in tr.states.iter().enumerate() {
+        s += &format!("        t={t:<3} x = {}", vector(x));
+        if t < tr.controls.len() {
+            s += &format!("  u = {}  w = {}  v = {}", vector(&tr.controls[t]), vector(&tr.process_noise[t]), vector(&tr.sensor_noise[t]));
+        }
+        s += "\n";
+    }
+    s
+}
+
+/// The tutorial's error measure at the final step: the volume of the reachable
+/// bounding box over the volume of the sampled states' bounding box, minus 1
+/// (`None` without samples or when the sampled hull is flat).
+pub fn final_error(out: &Outcome) -> Option<f64> {
+    let last = out.reach.last()?;
+    let sb = out.sampled.last()?.as_ref()?;
+    let v = sb.volume();
+    (v > 0.0).then(|| last.volume() / v - 1.0)
+}
+
+fn f(x: f64) -> Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
+}
+
+fn box_json(b: &IBox) -> Value {
+    json!({ "lo": b.lo.iter().map(|v| f(*v)).collect::<Vec<_>>(), "hi": b.hi.iter().map(|v| f(*v)).collect::<Vec<_>>() })
+}
+
+fn traj_json(t: &Trajectory) -> Value {
+    json!({
+        "states": t.states,
+        "controls": t.controls,
+        "process_noise": t.process_noise,
+        "sensor_noise": t.sensor_noise,
+    })
+}
+
+/// The JSON result for one spec (see `docs/json-schema.md`).
+pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>) -> Value {
+    let steps: Vec<Value> = out
+        .reach
+        .iter()
+        .enumerate()
+        .map(|(t, b)| {
+            json!({
+                "step": t,
+                "box": box_json(b),
+                "sampled": out.sampled[t].as_ref().map(box_json),
+                "cells": out.cells.iter().map(|c| box_json(&c[t])).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let props: Vec<Value> = out
+        .properties
+        .iter()
+        .map(|p| {
+            json!({
+                "name": p.name,
+                "kind": p.kind,
+                "status": p.status.as_str(),
+                "margin": f(p.margin),
+                "step": p.step,
+                "counterexample": p.counterexample.as_ref().map(traj_json),
+            })
+        })
+        .collect();
+    let mut v = json!({
+        "spec": spec_name,
+        "verdict": out.verdict.as_str(),
+        "system": plan.system,
+        "state": { "name": plan.state_name, "dim": plan.closed_loop.states() },
+        "control": { "name": plan.control_name, "dim": plan.closed_loop.plant.b.ncols() },
+        "controller": { "path": plan.controller_path, "network": plan.network_summary },
+        "horizon": plan.horizon,
+        "analysis": {
+            "propagator": plan.propagator.name(),
+            "partition": plan.grid,
+            "cells": plan.cells.len(),
+            "boundary": "box",
+            "samples": plan.samples,
+            "seed": plan.seed,
+        },
+        "reachable": steps,
+        "final_error": final_error(out).map(f),
+        "properties": props,
+        "propagator_calls": out.propagator_calls,
+    });
+    if let Some(ms) = timing_ms {
+        v["time_ms"] = json!(ms);
+    }
+    v
+}

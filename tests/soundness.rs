@@ -1,0 +1,168 @@
+//! Monte Carlo soundness: on many seeded random networks and plants, every
+//! simulated trajectory stays inside every reachable set that every
+//! propagator computes, with and without noise, limits and partitioning.
+
+use nalgebra::{DMatrix, DVector};
+use ravel::analysis::closed_loop::{ClosedLoop, Plant, Propagator};
+use ravel::analysis::crown::{Analysis, Mode};
+use ravel::nn::{Activation, Layer, Network};
+use ravel::rng::Rng;
+use ravel::sets::IBox;
+
+const PROPAGATORS: [Propagator; 3] = [Propagator::ReachLp, Propagator::CrownSeparate, Propagator::IbpSeparate];
+
+fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
+    let depth = 1 + rng.below(3);
+    let mut layers = Vec::new();
+    let mut width = inputs;
+    for k in 0..=depth {
+        let out = if k == depth { outputs } else { 2 + rng.below(7) };
+        let scale = 1.5 / (width as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(out, width, |_, _| rng.normal() * scale),
+            b: DVector::from_fn(out, |_, _| rng.normal() * 0.3),
+        });
+        if k < depth {
+            layers.push(Layer::Act(act));
+        }
+        width = out;
+    }
+    Network::new(inputs, layers)
+}
+
+struct Case {
+    cl: ClosedLoop,
+    x0: IBox,
+    horizon: usize,
+    label: String,
+}
+
+fn random_case(seed: u64) -> Case {
+    let mut rng = Rng::new(seed);
+    let n = 1 + rng.below(3);
+    let m = 1 + rng.below(2);
+    let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
+    let noisy = seed % 2 == 1;
+    let limited = (seed / 2) % 2 == 1;
+    let observed = (seed / 4) % 2 == 1;
+    let p = if observed { 1 + rng.below(n + 1) } else { n };
+    let a = DMatrix::from_fn(n, n, |i, j| if i == j { 0.9 } else { 0.0 } + rng.normal() * 0.25);
+    let b = DMatrix::from_fn(n, m, |_, _| rng.normal() * 0.5);
+    let c = DVector::from_fn(n, |_, _| rng.normal() * 0.1);
+    let obs = if observed { DMatrix::from_fn(n, p, |_, _| rng.normal()) } else { DMatrix::identity(n, n) };
+    let noise = |rng: &mut Rng, k: usize| {
+        if noisy {
+            let lo: Vec<f64> = (0..k).map(|_| -rng.uniform(0.0, 0.05)).collect();
+            let hi: Vec<f64> = (0..k).map(|_| rng.uniform(0.0, 0.05)).collect();
+            IBox::new(lo, hi)
+        } else {
+            IBox::new(vec![0.0; k], vec![0.0; k])
+        }
+    };
+    let w = noise(&mut rng, n);
+    let v = noise(&mut rng, p);
+    let mut net = random_network(&mut rng, p, m, act);
+    if limited {
+        let lo: Vec<f64> = (0..m).map(|_| -rng.uniform(0.2, 1.0)).collect();
+        let hi: Vec<f64> = (0..m).map(|_| rng.uniform(0.2, 1.0)).collect();
+        net = net.with_saturation(&lo, &hi);
+    }
+    let centre: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+    let radius: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.4)).collect();
+    let x0 = IBox::new(centre.iter().zip(&radius).map(|(c, r)| c - r).collect(), centre.iter().zip(&radius).map(|(c, r)| c + r).collect());
+    let label = format!("seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited}");
+    Case { cl: ClosedLoop::new(Plant { a, b, c, obs, w, v }, net), x0, horizon: 4, label }
+}
+
+fn reach(cl: &ClosedLoop, x0: &IBox, horizon: usize, prop: Propagator) -> Vec<IBox> {
+    let mut sets = vec![x0.clone()];
+    for t in 0..horizon {
+        let next = cl.step(&sets[t], prop);
+        sets.push(next);
+    }
+    sets
+}
+
+fn sample_point(rng: &mut Rng, b: &IBox) -> Vec<f64> {
+    (0..b.dim())
+        .map(|i| match rng.below(4) {
+            0 => b.lo[i],
+            1 => b.hi[i],
+            _ => rng.uniform(b.lo[i], b.hi[i]),
+        })
+        .collect()
+}
+
+#[test]
+fn every_trajectory_stays_inside_every_reachable_set() {
+    let mut checked = 0usize;
+    for seed in 0..60u64 {
+        let case = random_case(seed);
+        let cells = case.x0.grid(&vec![2; case.x0.dim()]);
+        for prop in PROPAGATORS {
+            let whole = reach(&case.cl, &case.x0, case.horizon, prop);
+            let parts: Vec<Vec<IBox>> = cells.iter().map(|c| reach(&case.cl, c, case.horizon, prop)).collect();
+            let mut rng = Rng::new(seed * 7919 + 1);
+            for _ in 0..200 {
+                let mut x = sample_point(&mut rng, &case.x0);
+                let cell = cells.iter().position(|c| c.contains_point(&x)).expect("the grid covers X0");
+                for t in 0..=case.horizon {
+                    assert!(whole[t].contains_point(&x), "{} {prop:?}: step {t} state {x:?} outside {:?}", case.label, whole[t]);
+                    assert!(parts[cell][t].contains_point(&x), "{} {prop:?} partitioned: step {t} state {x:?} outside {:?}", case.label, parts[cell][t]);
+                    checked += 1;
+                    if t < case.horizon {
+                        let w = sample_point(&mut rng, &case.cl.plant.w);
+                        let v = sample_point(&mut rng, &case.cl.plant.v);
+                        x = case.cl.simulate(&x, &w, &v).1;
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 100_000, "only {checked} states were checked");
+}
+
+#[test]
+fn network_bounds_contain_network_outputs() {
+    for seed in 0..60u64 {
+        let mut rng = Rng::new(1000 + seed);
+        let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
+        let inputs = 1 + rng.below(4);
+        let outputs = 1 + rng.below(3);
+        let net = random_network(&mut rng, inputs, outputs, act);
+        let c: Vec<f64> = (0..inputs).map(|_| rng.normal()).collect();
+        let r = rng.uniform(0.01, 1.5);
+        let input = IBox::new(c.iter().map(|v| v - r).collect(), c.iter().map(|v| v + r).collect());
+        let crown = Analysis::new(&net, &input, Mode::Crown).output_box(Mode::Crown);
+        let ibp = Analysis::new(&net, &input, Mode::Ibp).output_box(Mode::Ibp);
+        assert!(ibp.contains_box(&crown), "CROWN (intersected with IBP) must lie within IBP");
+        for _ in 0..500 {
+            let x = sample_point(&mut rng, &input);
+            let y = net.forward(&x);
+            assert!(crown.contains_point(&y), "seed {seed} {act:?}: {y:?} outside {crown:?}");
+        }
+    }
+}
+
+#[test]
+fn linear_bounds_hold_pointwise() {
+    // CROWN's linear functions (not only their concretisation) must bound the network.
+    for seed in 0..30u64 {
+        let mut rng = Rng::new(5000 + seed);
+        let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
+        let net = random_network(&mut rng, 2, 2, act);
+        let input = IBox::new(vec![-0.7, -0.2], vec![0.4, 0.9]);
+        let a = Analysis::new(&net, &input, Mode::Crown);
+        let spec = DMatrix::from_row_slice(2, 2, &[1.0, -0.5, -1.0, 0.25]);
+        let bound = a.upper(spec.clone());
+        for _ in 0..500 {
+            let x = sample_point(&mut rng, &input);
+            let y = DVector::from_vec(net.forward(&x));
+            let s = &spec * y;
+            for r in 0..2 {
+                let lin: f64 = (0..2).map(|i| bound.coef[(r, i)] * x[i]).sum::<f64>() + bound.offset[r];
+                assert!(s[r] <= lin + 1e-12, "seed {seed} row {r}: {} > {lin}", s[r]);
+            }
+        }
+    }
+}

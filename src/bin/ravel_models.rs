@@ -289,6 +289,11 @@ fn main() {
     write(&inv, "softmax_head.onnx", g.finish(1));
     let three = Network::new(3, vec![Layer::Affine { w: DMatrix::from_element(1, 3, 0.5), b: DVector::zeros(1) }]);
     write(&inv, "three_inputs.onnx", encode(&three, Storage::RawF32, false).finish(1));
+    // declares 2 inputs but its first layer reads 3
+    let wide = Network::new(2, vec![Layer::Affine { w: DMatrix::from_element(1, 3, 0.5), b: DVector::zeros(1) }]);
+    let mut g = encode(&wide, Storage::RawF32, false);
+    g.declare_input(2);
+    write(&inv, "inconsistent_shapes.onnx", g.finish(1));
     let (model, _) = encode_into(GraphBuilder::new(2, Storage::External).external_file("missing.onnx.data"), &di_net, false).finish(1);
     fs::write(inv.join("missing_external_data.onnx"), model).expect("write");
     eprintln!("models written under {}", root.display());

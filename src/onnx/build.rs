@@ -81,6 +81,11 @@ impl GraphBuilder {
         }
     }
 
+    /// Override the declared input size (to write inconsistent models for tests).
+    pub fn declare_input(&mut self, n: usize) {
+        self.input = value_info("input", &[None, Some(n as i64)]);
+    }
+
     /// Name of the external-data file (for [`Storage::External`]).
     pub fn external_file(mut self, name: &str) -> GraphBuilder {
         self.external_name = name.into();

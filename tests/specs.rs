@@ -1,0 +1,76 @@
+//! The spec corpus as tests: every file under `specs/` is parsed, checked and
+//! (if valid) verified, and the results are compared with insta snapshots.
+//!
+//! Category guards run before any snapshot is taken, so a wrong snapshot
+//! cannot be accepted by accident:
+//! * `specs/*.ravel` must check without diagnostics, and the verdict must equal
+//!   the `// expect: VERDICT` header;
+//! * `specs/invalid/*.ravel` must fail with exactly the codes listed in the
+//!   `// expect: E0xxx …` header.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use ravel::diag::render;
+
+fn read(path: &Path) -> Result<Vec<u8>, String> {
+    std::fs::read(path).map_err(|e| e.to_string())
+}
+
+fn expect_header(source: &str) -> Vec<String> {
+    let line = source.lines().next().unwrap_or_default();
+    let rest = line.strip_prefix("// expect:").unwrap_or_else(|| panic!("spec must start with `// expect: …`, found {line:?}"));
+    rest.split_whitespace().map(str::to_string).collect()
+}
+
+fn display_name(path: &Path) -> String {
+    let s = path.to_string_lossy().replace('\\', "/");
+    let i = s.rfind("/specs/").map_or(0, |i| i + 1);
+    s[i..].to_string()
+}
+
+fn parse_snapshot(name: &str, source: &str) -> String {
+    match ravel::syntax::parse(source) {
+        Ok(ast) => format!("{ast:#?}\n"),
+        Err(d) => render(&d, name, source, 100, false),
+    }
+}
+
+#[test]
+fn valid_specs() {
+    insta::glob!("../specs", "*.ravel", |path| {
+        let source = std::fs::read_to_string(path).expect("spec is readable");
+        let name = display_name(path);
+        let expect = expect_header(&source);
+        let checked = match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
+            Ok(c) => c,
+            Err(d) => panic!("{name} is a valid spec but has diagnostics:\n{}", render(&d, &name, &source, 100, false)),
+        };
+        let plan = ravel::lower::lower(&checked);
+        let outcome = ravel::execute::execute(&plan);
+        assert_eq!(vec![outcome.verdict.as_str().to_string()], expect, "{name}: verdict differs from its `// expect:` header");
+        insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
+        insta::assert_snapshot!("result", ravel::report::text(&name, &plan, &outcome, None));
+    });
+}
+
+#[test]
+fn invalid_specs() {
+    insta::glob!("../specs/invalid", "*.ravel", |path| {
+        let source = std::fs::read_to_string(path).expect("spec is readable");
+        let name = display_name(path);
+        let expect: BTreeSet<String> = expect_header(&source).into_iter().collect();
+        let diags = match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
+            Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
+            Err(d) => d,
+        };
+        let codes: BTreeSet<String> = diags.iter().map(|d| d.code.as_str().to_string()).collect();
+        assert_eq!(codes, expect, "{name}: diagnostic codes differ from its `// expect:` header");
+        for d in &diags {
+            assert!(d.hint.is_some(), "{name}: {} has no hint", d.code.as_str());
+            assert!(d.span.is_some(), "{name}: {} has no span", d.code.as_str());
+        }
+        insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
+        insta::assert_snapshot!("diagnostics", render(&diags, &name, &source, 100, false));
+    });
+}

@@ -1,0 +1,179 @@
+//! ONNX loading: the committed models against onnxruntime's outputs, every
+//! supported encoding, and every loader error.
+
+use nalgebra::{DMatrix, DVector};
+use ravel::nn::{Activation, Layer, Network};
+use ravel::onnx::build::{GraphBuilder, Storage};
+use ravel::onnx::{load, ExternalFiles, OnnxErrorKind};
+use serde_json::Value;
+
+fn read_model(name: &str) -> ravel::onnx::Controller {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let bytes = std::fs::read(dir.join(format!("{name}.onnx"))).expect("model exists");
+    let mut ext = ExternalFiles::new();
+    for loc in ravel::onnx::external_locations(&bytes) {
+        ext.insert(loc.clone(), std::fs::read(dir.join(&loc)).map_err(|e| e.to_string()));
+    }
+    load(&bytes, &ext).expect("model loads")
+}
+
+/// Outputs computed by onnxruntime (float32) with scripts/onnx_reference.py.
+#[test]
+fn committed_models_match_onnxruntime() {
+    let text = include_str!("data/onnx_reference.json");
+    let reference: Value = serde_json::from_str(text).expect("valid JSON");
+    let models = reference.as_object().expect("object");
+    assert_eq!(models.len(), 4);
+    for (name, data) in models {
+        let c = read_model(name);
+        let inputs = data["inputs"].as_array().expect("inputs");
+        let outputs = data["outputs"].as_array().expect("outputs");
+        for (x, y) in inputs.iter().zip(outputs) {
+            let x: Vec<f64> = x.as_array().expect("row").iter().map(|v| v.as_f64().expect("number")).collect();
+            let y: Vec<f64> = y.as_array().expect("row").iter().map(|v| v.as_f64().expect("number")).collect();
+            let ours = c.net.forward(&x);
+            assert_eq!(ours.len(), y.len(), "{name}");
+            for (a, b) in ours.iter().zip(&y) {
+                // onnxruntime computes in float32
+                assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{name}: ravel {a} vs onnxruntime {b} at {x:?}");
+            }
+        }
+    }
+}
+
+fn small_net(act: Activation) -> Network {
+    Network::new(
+        2,
+        vec![
+            Layer::Affine { w: DMatrix::from_row_slice(3, 2, &[0.5, -1.25, 2.0, 0.75, -0.5, 1.0]), b: DVector::from_column_slice(&[0.25, -0.5, 0.125]) },
+            Layer::Act(act),
+            Layer::Affine { w: DMatrix::from_row_slice(1, 3, &[1.5, -0.25, 0.5]), b: DVector::from_column_slice(&[-0.375]) },
+        ],
+    )
+}
+
+fn by_hand(act: Activation, x: &[f64]) -> f64 {
+    // the same network written out by hand
+    let z = [0.5 * x[0] - 1.25 * x[1] + 0.25, 2.0 * x[0] + 0.75 * x[1] - 0.5, -0.5 * x[0] + x[1] + 0.125];
+    let h: Vec<f64> = z.iter().map(|v| act.eval(*v)).collect();
+    1.5 * h[0] - 0.25 * h[1] + 0.5 * h[2] - 0.375
+}
+
+#[test]
+fn every_storage_and_layer_form_round_trips() {
+    let storages = [Storage::RawF32, Storage::FloatData, Storage::RawF64, Storage::DoubleData, Storage::External];
+    for act in [Activation::Relu, Activation::Tanh, Activation::Sigmoid] {
+        let net = small_net(act);
+        for storage in storages {
+            for keras in [false, true] {
+                let mut g = GraphBuilder::new(2, storage);
+                for layer in &net.layers {
+                    match layer {
+                        Layer::Affine { w, b } if keras => g.matmul_add(w, b),
+                        Layer::Affine { w, b } => g.gemm(w, b),
+                        Layer::Act(Activation::Relu) => g.unary("Relu"),
+                        Layer::Act(Activation::Tanh) => g.unary("Tanh"),
+                        Layer::Act(Activation::Sigmoid) => g.unary("Sigmoid"),
+                    }
+                }
+                g.unary("Flatten");
+                g.unary("Identity");
+                let (model, data) = g.finish(1);
+                let mut ext = ExternalFiles::new();
+                for loc in ravel::onnx::external_locations(&model) {
+                    ext.insert(loc, Ok(data.clone()));
+                }
+                let c = load(&model, &ext).unwrap_or_else(|e| panic!("{storage:?} keras={keras}: {e:?}"));
+                assert_eq!((c.inputs, c.outputs), (2, 1));
+                for x in [[0.3, -0.7], [-1.5, 2.0], [0.0, 0.0]] {
+                    let y = c.net.forward(&x)[0];
+                    assert!((y - by_hand(act, &x)).abs() < 1e-12, "{storage:?} keras={keras} {act:?}: {y}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn normalisation_nodes_are_affine_layers() {
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.elementwise("Sub", &[1.0, -2.0]);
+    g.elementwise("Div", &[2.0, 4.0]);
+    g.elementwise("Mul", &[3.0, 1.0]);
+    g.elementwise("Add", &[0.5, 0.5]);
+    let (model, _) = g.finish(2);
+    let c = load(&model, &ExternalFiles::new()).expect("loads");
+    let y = c.net.forward(&[5.0, 2.0]);
+    // ((5-1)/2*3 + 0.5, (2+2)/4*1 + 0.5)
+    assert_eq!(y, vec![6.5, 1.5]);
+}
+
+#[test]
+fn gemm_attributes_are_honoured() {
+    use ravel::onnx::proto::*;
+    use prost::Message;
+    // y = alpha * x Bᵀ... with transB = 0: B is [in, out]
+    let t = |name: &str, dims: Vec<i64>, vals: Vec<f32>| TensorProto { dims, data_type: Some(1), float_data: vals, name: Some(name.into()), ..Default::default() };
+    let attr_f = |n: &str, v: f32| AttributeProto { name: Some(n.into()), f: Some(v), r#type: Some(1), ..Default::default() };
+    let vi = |n: &str| ValueInfoProto { name: Some(n.into()), r#type: None };
+    let model = ModelProto {
+        ir_version: Some(8),
+        graph: Some(GraphProto {
+            node: vec![NodeProto {
+                input: vec!["x".into(), "B".into(), "C".into()],
+                output: vec!["y".into()],
+                name: Some("gemm".into()),
+                op_type: Some("Gemm".into()),
+                attribute: vec![attr_f("alpha", 2.0), attr_f("beta", 0.5)],
+                domain: None,
+            }],
+            initializer: vec![t("B", vec![2, 1], vec![1.0, 3.0]), t("C", vec![1], vec![4.0])],
+            input: vec![vi("x")],
+            output: vec![vi("y")],
+            name: None,
+        }),
+        ..Default::default()
+    };
+    let c = load(&model.encode_to_vec(), &ExternalFiles::new()).expect("loads");
+    // 2 * (1*1 + 2*3) + 0.5 * 4 = 16
+    assert_eq!(c.net.forward(&[1.0, 2.0]), vec![16.0]);
+    assert_eq!(c.inputs, 2);
+}
+
+#[test]
+fn loader_errors_name_the_problem() {
+    let e = load(b"not protobuf at all \xff\xff", &ExternalFiles::new()).expect_err("garbage");
+    assert_eq!(e.kind, OnnxErrorKind::Decode);
+
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(&DMatrix::from_element(1, 2, 1.0), &DVector::zeros(1));
+    g.unary("LeakyRelu");
+    let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("unsupported");
+    assert_eq!(e.kind, OnnxErrorKind::Unsupported);
+    assert!(e.message.contains("LeakyRelu"), "{}", e.message);
+
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(&DMatrix::from_element(1, 2, f64::INFINITY), &DVector::zeros(1));
+    let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("inf");
+    assert_eq!(e.kind, OnnxErrorKind::NonFinite);
+
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.elementwise("Div", &[1.0, 0.0]);
+    let e = load(&g.finish(2).0, &ExternalFiles::new()).expect_err("div by zero");
+    assert_eq!(e.kind, OnnxErrorKind::NonFinite);
+
+    let mut g = GraphBuilder::new(2, Storage::External);
+    g.gemm(&DMatrix::from_element(1, 2, 1.0), &DVector::zeros(1));
+    let (model, data) = g.finish(1);
+    let e = load(&model, &ExternalFiles::new()).expect_err("missing data");
+    assert_eq!(e.kind, OnnxErrorKind::ExternalData);
+    let mut ext = ExternalFiles::new();
+    ext.insert("model.onnx.data".into(), Ok(data[..4].to_vec()));
+    let e = load(&model, &ext).expect_err("short data");
+    assert_eq!(e.kind, OnnxErrorKind::ExternalData);
+
+    let mut g = GraphBuilder::new(3, Storage::RawF32);
+    g.gemm(&DMatrix::from_element(1, 2, 1.0), &DVector::zeros(1));
+    let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("shape");
+    assert_eq!(e.kind, OnnxErrorKind::Malformed);
+}

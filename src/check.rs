@@ -98,7 +98,12 @@ pub fn controller_path(spec: &Spec) -> Option<&Spanned<String>> {
 }
 
 const PROPAGATORS: [&str; 3] = ["reach_lp", "crown_separate", "ibp_separate"];
-const PLANNED_PROPAGATORS: [&str; 4] = ["reach_sdp", "sg_ibp_separate", "crown_unrolled", "reach_lp_unrolled"];
+const PLANNED_PROPAGATORS: [&str; 4] = [
+    "reach_sdp",
+    "sg_ibp_separate",
+    "crown_unrolled",
+    "reach_lp_unrolled",
+];
 const PARTITIONERS: [&str; 2] = ["none", "uniform"];
 const BOUNDARIES: [&str; 1] = ["box"];
 
@@ -134,10 +139,14 @@ impl Ctx {
     /// Report a second definition.
     fn duplicate(&mut self, what: &str, first: Span, again: Span) {
         self.err(
-            Diagnostic::new(Code::Duplicate, again, format!("{what} is defined more than once"))
-                .label("defined again here")
-                .related(first, "first defined here")
-                .hint("remove one of the definitions"),
+            Diagnostic::new(
+                Code::Duplicate,
+                again,
+                format!("{what} is defined more than once"),
+            )
+            .label("defined again here")
+            .related(first, "first defined here")
+            .hint("remove one of the definitions"),
         );
     }
 
@@ -149,41 +158,80 @@ impl Ctx {
                 for r in rows.iter().skip(1) {
                     if r.node.len() != cols {
                         self.err(
-                            Diagnostic::new(Code::Ragged, r.span, format!("rows of `{name}` have different lengths"))
-                                .label(format!("this row has {} entries", r.node.len()))
-                                .related(rows[0].span, format!("the first row has {cols}"))
-                                .hint("every row of a matrix needs the same number of entries"),
+                            Diagnostic::new(
+                                Code::Ragged,
+                                r.span,
+                                format!("rows of `{name}` have different lengths"),
+                            )
+                            .label(format!("this row has {} entries", r.node.len()))
+                            .related(rows[0].span, format!("the first row has {cols}"))
+                            .hint("every row of a matrix needs the same number of entries"),
                         );
                         ok = false;
                     }
                 }
-                let data: Vec<f64> = rows.iter().flat_map(|r| r.node.iter()).map(|x| self.finite(x)).collect();
-                ok.then_some(Mat { rows: rows.len(), cols, data, is_vector: false })
+                let data: Vec<f64> = rows
+                    .iter()
+                    .flat_map(|r| r.node.iter())
+                    .map(|x| self.finite(x))
+                    .collect();
+                ok.then_some(Mat {
+                    rows: rows.len(),
+                    cols,
+                    data,
+                    is_vector: false,
+                })
             }
             Value::Vector(xs) => {
                 let data: Vec<f64> = xs.iter().map(|x| self.finite(x)).collect();
-                Some(Mat { rows: data.len(), cols: 1, data, is_vector: true })
+                Some(Mat {
+                    rows: data.len(),
+                    cols: 1,
+                    data,
+                    is_vector: true,
+                })
             }
             Value::Eye(n) => {
                 let n = self.positive(n, "the size of eye(…)")?;
-                let data = (0..n * n).map(|k| if k / n == k % n { 1.0 } else { 0.0 }).collect();
-                Some(Mat { rows: n, cols: n, data, is_vector: false })
+                let data = (0..n * n)
+                    .map(|k| if k / n == k % n { 1.0 } else { 0.0 })
+                    .collect();
+                Some(Mat {
+                    rows: n,
+                    cols: n,
+                    data,
+                    is_vector: false,
+                })
             }
             Value::Zeros(n, m) => {
                 let r = self.positive(n, "the size of zeros(…)")?;
                 match m {
                     Some(m) => {
                         let c = self.positive(m, "the size of zeros(…)")?;
-                        Some(Mat { rows: r, cols: c, data: vec![0.0; r * c], is_vector: false })
+                        Some(Mat {
+                            rows: r,
+                            cols: c,
+                            data: vec![0.0; r * c],
+                            is_vector: false,
+                        })
                     }
-                    None => Some(Mat { rows: r, cols: 1, data: vec![0.0; r], is_vector: true }),
+                    None => Some(Mat {
+                        rows: r,
+                        cols: 1,
+                        data: vec![0.0; r],
+                        is_vector: true,
+                    }),
                 }
             }
             Value::Scalar(_) => {
                 self.err(
-                    Diagnostic::new(Code::WrongKind, v.span, format!("`{name}` must be a matrix or vector, not a number"))
-                        .label("a bare number")
-                        .hint(format!("write a 1 × 1 matrix as `{name} = [[…]]`")),
+                    Diagnostic::new(
+                        Code::WrongKind,
+                        v.span,
+                        format!("`{name}` must be a matrix or vector, not a number"),
+                    )
+                    .label("a bare number")
+                    .hint(format!("write a 1 × 1 matrix as `{name} = [[…]]`")),
                 );
                 None
             }
@@ -192,53 +240,98 @@ impl Ctx {
 
     fn positive(&mut self, n: &Spanned<u64>, what: &str) -> Option<usize> {
         if n.node == 0 {
-            self.err(Diagnostic::new(Code::Zero, n.span, format!("{what} must be at least 1")).label("zero").hint("use a positive size"));
+            self.err(
+                Diagnostic::new(Code::Zero, n.span, format!("{what} must be at least 1"))
+                    .label("zero")
+                    .hint("use a positive size"),
+            );
             return None;
         }
         if n.node > 100_000 {
-            self.err(Diagnostic::new(Code::Zero, n.span, format!("{what} is unreasonably large")).label("more than 100000").hint("ravel analyses small control systems"));
+            self.err(
+                Diagnostic::new(Code::Zero, n.span, format!("{what} is unreasonably large"))
+                    .label("more than 100000")
+                    .hint("ravel analyses small control systems"),
+            );
             return None;
         }
         Some(n.node as usize)
     }
 
     /// A matrix of the given shape (vectors count as one column).
-    fn matrix(&mut self, v: &Spanned<Value>, name: &str, rows: usize, cols: usize, why: &str) -> Option<DMatrix<f64>> {
+    fn matrix(
+        &mut self,
+        v: &Spanned<Value>,
+        name: &str,
+        rows: usize,
+        cols: usize,
+        why: &str,
+    ) -> Option<DMatrix<f64>> {
         let m = self.eval(v, name)?;
         if m.is_vector && !(cols == 1 && rows == m.rows) {
             self.err(
-                Diagnostic::new(Code::WrongKind, v.span, format!("`{name}` must be a {rows} × {cols} matrix, not a vector"))
-                    .label("a vector")
-                    .hint(format!("write a matrix as rows: `{name} = [[…], …]` ({why})")),
+                Diagnostic::new(
+                    Code::WrongKind,
+                    v.span,
+                    format!("`{name}` must be a {rows} × {cols} matrix, not a vector"),
+                )
+                .label("a vector")
+                .hint(format!(
+                    "write a matrix as rows: `{name} = [[…], …]` ({why})"
+                )),
             );
             return None;
         }
         if m.rows != rows || m.cols != cols {
             self.err(
-                Diagnostic::new(Code::Shape, v.span, format!("`{name}` must be {rows} × {cols}, but it is {} × {}", m.rows, m.cols))
-                    .label(format!("{} × {}", m.rows, m.cols))
-                    .hint(why.to_string()),
+                Diagnostic::new(
+                    Code::Shape,
+                    v.span,
+                    format!(
+                        "`{name}` must be {rows} × {cols}, but it is {} × {}",
+                        m.rows, m.cols
+                    ),
+                )
+                .label(format!("{} × {}", m.rows, m.cols))
+                .hint(why.to_string()),
             );
             return None;
         }
         Some(DMatrix::from_row_slice(rows, cols, &m.data))
     }
 
-    fn vector(&mut self, v: &Spanned<Value>, name: &str, n: usize, why: &str) -> Option<DVector<f64>> {
+    fn vector(
+        &mut self,
+        v: &Spanned<Value>,
+        name: &str,
+        n: usize,
+        why: &str,
+    ) -> Option<DVector<f64>> {
         let m = self.eval(v, name)?;
         if !m.is_vector && m.cols != 1 {
             self.err(
-                Diagnostic::new(Code::WrongKind, v.span, format!("`{name}` must be a vector of length {n}, not a {} × {} matrix", m.rows, m.cols))
-                    .label("a matrix")
-                    .hint(format!("write a vector as `{name} = [a, b, …]` ({why})")),
+                Diagnostic::new(
+                    Code::WrongKind,
+                    v.span,
+                    format!(
+                        "`{name}` must be a vector of length {n}, not a {} × {} matrix",
+                        m.rows, m.cols
+                    ),
+                )
+                .label("a matrix")
+                .hint(format!("write a vector as `{name} = [a, b, …]` ({why})")),
             );
             return None;
         }
         if m.rows != n {
             self.err(
-                Diagnostic::new(Code::Shape, v.span, format!("`{name}` must have length {n}, but it has {}", m.rows))
-                    .label(format!("length {}", m.rows))
-                    .hint(why.to_string()),
+                Diagnostic::new(
+                    Code::Shape,
+                    v.span,
+                    format!("`{name}` must have length {n}, but it has {}", m.rows),
+                )
+                .label(format!("length {}", m.rows))
+                .hint(why.to_string()),
             );
             return None;
         }
@@ -250,9 +343,13 @@ impl Ctx {
         let hi = self.finite(&i.hi);
         if lo > hi {
             self.err(
-                Diagnostic::new(Code::EmptyInterval, i.span, format!("interval [{}, {}] is empty", i.lo.node, i.hi.node))
-                    .label("lower end exceeds upper end")
-                    .hint("write intervals as [lower, upper]"),
+                Diagnostic::new(
+                    Code::EmptyInterval,
+                    i.span,
+                    format!("interval [{}, {}] is empty", i.lo.node, i.hi.node),
+                )
+                .label("lower end exceeds upper end")
+                .hint("write intervals as [lower, upper]"),
             );
             return None;
         }
@@ -262,16 +359,28 @@ impl Ctx {
     /// Resolve `x[i]` against a vector `name` of dimension `dim`.
     fn component(&mut self, c: &Component, name: &str, dim: usize) -> Option<usize> {
         if c.name.node != name {
-            let mut d = Diagnostic::new(Code::UnknownName, c.name.span, format!("unknown vector `{}`", c.name.node)).label("not defined");
-            d = d.hint(format!("components here refer to `{name}` (`{name}[0]` … `{name}[{}]`)", dim - 1));
+            let mut d = Diagnostic::new(
+                Code::UnknownName,
+                c.name.span,
+                format!("unknown vector `{}`", c.name.node),
+            )
+            .label("not defined");
+            d = d.hint(format!(
+                "components here refer to `{name}` (`{name}[0]` … `{name}[{}]`)",
+                dim - 1
+            ));
             self.err(d);
             return None;
         }
         if c.index.node >= dim as u64 {
             self.err(
-                Diagnostic::new(Code::IndexOutOfRange, c.span, format!("`{}[{}]` is out of range", c.name.node, c.index.node))
-                    .label(format!("`{name}` has {dim} components"))
-                    .hint(format!("indices run from 0 to {}", dim - 1)),
+                Diagnostic::new(
+                    Code::IndexOutOfRange,
+                    c.span,
+                    format!("`{}[{}]` is out of range", c.name.node, c.index.node),
+                )
+                .label(format!("`{name}` has {dim} components"))
+                .hint(format!("indices run from 0 to {}", dim - 1)),
             );
             return None;
         }
@@ -279,7 +388,14 @@ impl Ctx {
     }
 
     /// A box over vector `name` of dimension `dim`. With `complete`, every component must be bounded.
-    fn box_set(&mut self, b: &Spanned<BoxSet>, name: &str, dim: usize, complete: bool, role: &str) -> Option<IBox> {
+    fn box_set(
+        &mut self,
+        b: &Spanned<BoxSet>,
+        name: &str,
+        dim: usize,
+        complete: bool,
+        role: &str,
+    ) -> Option<IBox> {
         let mut lo = vec![f64::NEG_INFINITY; dim];
         let mut hi = vec![f64::INFINITY; dim];
         let mut seen: Vec<Option<Span>> = vec![None; dim];
@@ -312,7 +428,11 @@ impl Ctx {
                     match (k, v) {
                         (Some(k), Some((l, h))) => {
                             if let Some(first) = seen[k] {
-                                self.duplicate(&format!("the interval of `{name}[{k}]`"), first, c.span);
+                                self.duplicate(
+                                    &format!("the interval of `{name}[{k}]`"),
+                                    first,
+                                    c.span,
+                                );
                                 ok = false;
                             }
                             lo[k] = l;
@@ -323,12 +443,19 @@ impl Ctx {
                     }
                 }
                 if complete && ok {
-                    let missing: Vec<String> = (0..dim).filter(|k| seen[*k].is_none()).map(|k| format!("{name}[{k}]")).collect();
+                    let missing: Vec<String> = (0..dim)
+                        .filter(|k| seen[*k].is_none())
+                        .map(|k| format!("{name}[{k}]"))
+                        .collect();
                     if !missing.is_empty() {
                         self.err(
-                            Diagnostic::new(Code::SetKind, b.span, format!("{role} leaves {} unbounded", missing.join(", ")))
-                                .label("every component needs an interval")
-                                .hint(format!("add `{} in [lo, hi]`", missing[0])),
+                            Diagnostic::new(
+                                Code::SetKind,
+                                b.span,
+                                format!("{role} leaves {} unbounded", missing.join(", ")),
+                            )
+                            .label("every component needs an interval")
+                            .hint(format!("add `{} in [lo, hi]`", missing[0])),
                         );
                         ok = false;
                     }
@@ -344,7 +471,10 @@ impl Ctx {
         for c in cs {
             let mut row = vec![0.0; dim];
             for (coef, comp) in &c.terms {
-                let coef_s = Spanned { node: *coef, span: comp.span };
+                let coef_s = Spanned {
+                    node: *coef,
+                    span: comp.span,
+                };
                 let coef = self.finite(&coef_s);
                 match self.component(comp, name, dim) {
                     Some(k) => row[k] += coef,
@@ -360,11 +490,21 @@ impl Ctx {
         ok.then_some(Polytope { rows })
     }
 
-    fn set_atom(&mut self, a: &Spanned<SetAtom>, name: &str, dim: usize, role: &str) -> Option<Polytope> {
+    fn set_atom(
+        &mut self,
+        a: &Spanned<SetAtom>,
+        name: &str,
+        dim: usize,
+        role: &str,
+    ) -> Option<Polytope> {
         match &a.node {
             SetAtom::Box(b) => {
-                let sb = Spanned { node: b.clone(), span: a.span };
-                self.box_set(&sb, name, dim, false, role).map(|b| Polytope::from_box(&b))
+                let sb = Spanned {
+                    node: b.clone(),
+                    span: a.span,
+                };
+                self.box_set(&sb, name, dim, false, role)
+                    .map(|b| Polytope::from_box(&b))
             }
             SetAtom::Polytope(cs) => self.polytope(cs, name, dim),
         }
@@ -407,12 +547,24 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
     for (what, spans) in [
-        ("the system", systems.iter().map(|s| s.name.span).collect::<Vec<_>>()),
-        ("the controller", controllers.iter().map(|c| c.span).collect()),
-        ("the initial set", initials.iter().map(|s| s.name.span).collect()),
+        (
+            "the system",
+            systems.iter().map(|s| s.name.span).collect::<Vec<_>>(),
+        ),
+        (
+            "the controller",
+            controllers.iter().map(|c| c.span).collect(),
+        ),
+        (
+            "the initial set",
+            initials.iter().map(|s| s.name.span).collect(),
+        ),
         ("the goal", goals.iter().map(|s| s.name.span).collect()),
         ("the horizon", horizons.iter().map(|h| h.span).collect()),
-        ("the analysis block", analyses.iter().map(|a| a.span).collect()),
+        (
+            "the analysis block",
+            analyses.iter().map(|a| a.span).collect(),
+        ),
     ] {
         for s in spans.iter().skip(1) {
             cx.duplicate(what, spans[0], *s);
@@ -420,7 +572,11 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     }
     // set names are unique across initial, goal and avoid sets
     let mut set_names: BTreeMap<&str, Span> = BTreeMap::new();
-    let named = initials.iter().map(|s| &s.name).chain(goals.iter().map(|s| &s.name)).chain(avoids.iter().map(|a| &a.name));
+    let named = initials
+        .iter()
+        .map(|s| &s.name)
+        .chain(goals.iter().map(|s| &s.name))
+        .chain(avoids.iter().map(|a| &a.name));
     for n in named {
         if let Some(first) = set_names.get(n.node.as_str()) {
             if *first != n.span {
@@ -441,19 +597,35 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         })
     };
     if systems.is_empty() {
-        missing(&mut cx, "system", "`system NAME { state x[n] control u[m] A = … B = … }`");
+        missing(
+            &mut cx,
+            "system",
+            "`system NAME { state x[n] control u[m] A = … B = … }`",
+        );
     }
     if controllers.is_empty() {
-        missing(&mut cx, "controller", "`controller \"path/to/policy.onnx\"`");
+        missing(
+            &mut cx,
+            "controller",
+            "`controller \"path/to/policy.onnx\"`",
+        );
     }
     if initials.is_empty() {
-        missing(&mut cx, "initial set", "`initial X0 = box(x[0] in [lo, hi], …)`");
+        missing(
+            &mut cx,
+            "initial set",
+            "`initial X0 = box(x[0] in [lo, hi], …)`",
+        );
     }
     if horizons.is_empty() {
         missing(&mut cx, "horizon", "`horizon N`");
     }
     if goals.is_empty() && avoids.is_empty() {
-        missing(&mut cx, "property to verify (goal or avoid set)", "`goal G = box(…)` or `avoid A = { … }`");
+        missing(
+            &mut cx,
+            "property to verify (goal or avoid set)",
+            "`goal G = box(…)` or `avoid A = { … }`",
+        );
     }
 
     // ---- the system ----
@@ -472,7 +644,9 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         cx.duplicate("the state", first, *span);
                     } else {
                         state_span = Some(*span);
-                        state = cx.positive(dim, "the state dimension").map(|d| (name.node.clone(), d));
+                        state = cx
+                            .positive(dim, "the state dimension")
+                            .map(|d| (name.node.clone(), d));
                     }
                 }
                 SystemStmt::Control { name, dim, span } => {
@@ -480,14 +654,20 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         cx.duplicate("the control", first, *span);
                     } else {
                         control_span = Some(*span);
-                        control = cx.positive(dim, "the control dimension").map(|d| (name.node.clone(), d));
+                        control = cx
+                            .positive(dim, "the control dimension")
+                            .map(|d| (name.node.clone(), d));
                     }
                 }
                 SystemStmt::Assign { name, value, .. } => {
                     const KNOWN: [&str; 4] = ["A", "B", "C", "c"];
                     if !KNOWN.contains(&name.node.as_str()) {
-                        let mut d = Diagnostic::new(Code::UnknownName, name.span, format!("unknown plant parameter `{}`", name.node))
-                            .label("not a plant parameter");
+                        let mut d = Diagnostic::new(
+                            Code::UnknownName,
+                            name.span,
+                            format!("unknown plant parameter `{}`", name.node),
+                        )
+                        .label("not a plant parameter");
                         d = match did_you_mean(&name.node, KNOWN) {
                             Some(s) => d.hint(format!("did you mean `{s}`? The plant is x' = A x + B u + c + w, y = Cᵀ x + v")),
                             None => d.hint("the plant is x' = A x + B u + c + w, y = Cᵀ x + v: define A, B and optionally c and C"),
@@ -503,17 +683,33 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             }
         }
         if state_span.is_none() {
-            cx.err(Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state").label("in this system").hint("add `state x[n]`"));
+            cx.err(
+                Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")
+                    .label("in this system")
+                    .hint("add `state x[n]`"),
+            );
         }
         if control_span.is_none() {
-            cx.err(Diagnostic::new(Code::Missing, sys.name.span, "the system declares no control").label("in this system").hint("add `control u[m]`"));
+            cx.err(
+                Diagnostic::new(
+                    Code::Missing,
+                    sys.name.span,
+                    "the system declares no control",
+                )
+                .label("in this system")
+                .hint("add `control u[m]`"),
+            );
         }
         for req in ["A", "B"] {
             if !assigns.contains_key(req) {
                 cx.err(
-                    Diagnostic::new(Code::Missing, sys.name.span, format!("the system does not define `{req}`"))
-                        .label("in this system")
-                        .hint(format!("add `{req} = [[…], …]`")),
+                    Diagnostic::new(
+                        Code::Missing,
+                        sys.name.span,
+                        format!("the system does not define `{req}`"),
+                    )
+                    .label("in this system")
+                    .hint(format!("add `{req} = [[…], …]`")),
                 );
             }
         }
@@ -524,8 +720,24 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let mut p_dim = None;
     if let (Some((xn, n)), Some((un, m))) = (&state, &control) {
         let (n, m) = (*n, *m);
-        let a = assigns.get("A").and_then(|(v, _)| cx.matrix(v, "A", n, n, &format!("A is n × n with n = {n}, the dimension of `{xn}`")));
-        let b = assigns.get("B").and_then(|(v, _)| cx.matrix(v, "B", n, m, &format!("B is n × m: {n} states by {m} controls")));
+        let a = assigns.get("A").and_then(|(v, _)| {
+            cx.matrix(
+                v,
+                "A",
+                n,
+                n,
+                &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
+            )
+        });
+        let b = assigns.get("B").and_then(|(v, _)| {
+            cx.matrix(
+                v,
+                "B",
+                n,
+                m,
+                &format!("B is n × m: {n} states by {m} controls"),
+            )
+        });
         let c = match assigns.get("c") {
             Some((v, _)) => cx.vector(v, "c", n, &format!("c has one entry per state ({n})")),
             None => Some(DVector::zeros(n)),
@@ -533,7 +745,15 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         let obs = match assigns.get("C") {
             Some((v, _)) => {
                 let cols = cx.eval(v, "C").map(|mm| mm.cols);
-                cols.and_then(|p| cx.matrix(v, "C", n, p, &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v")))
+                cols.and_then(|p| {
+                    cx.matrix(
+                        v,
+                        "C",
+                        n,
+                        p,
+                        &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
+                    )
+                })
             }
             None => Some(DMatrix::identity(n, n)),
         };
@@ -560,7 +780,12 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 limits = cx.box_set(set, un, m, true, "the control limit box");
             } else {
                 let cands = ["w", "v", un.as_str()];
-                let mut d = Diagnostic::new(Code::UnknownName, name.span, format!("unknown bounded quantity `{key}`")).label("not a noise or control name");
+                let mut d = Diagnostic::new(
+                    Code::UnknownName,
+                    name.span,
+                    format!("unknown bounded quantity `{key}`"),
+                )
+                .label("not a noise or control name");
                 d = match did_you_mean(key, cands) {
                     Some(s) => d.hint(format!("did you mean `{s}`? Bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
                     None => d.hint(format!("bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
@@ -578,22 +803,38 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     if let Some(path) = controllers.first() {
         match controller {
             None => cx.err(
-                Diagnostic::new(Code::ControllerUnreadable, path.span, format!("controller `{}` was not read", path.node))
-                    .label("not available")
-                    .hint("the controller file must be readable next to the spec"),
+                Diagnostic::new(
+                    Code::ControllerUnreadable,
+                    path.span,
+                    format!("controller `{}` was not read", path.node),
+                )
+                .label("not available")
+                .hint("the controller file must be readable next to the spec"),
             ),
             Some(file) => match &file.bytes {
                 Err(msg) => cx.err(
-                    Diagnostic::new(Code::ControllerUnreadable, path.span, format!("cannot read controller `{}`: {msg}", path.node))
-                        .label("this file")
-                        .hint("paths are relative to the spec file's folder"),
+                    Diagnostic::new(
+                        Code::ControllerUnreadable,
+                        path.span,
+                        format!("cannot read controller `{}`: {msg}", path.node),
+                    )
+                    .label("this file")
+                    .hint("paths are relative to the spec file's folder"),
                 ),
                 Ok(bytes) => match onnx::load(bytes, &file.external) {
-                    Err(e) => cx.err(Diagnostic::new(onnx_code(e.kind), path.span, e.message).label("in this controller").hint(e.hint)),
+                    Err(e) => cx.err(
+                        Diagnostic::new(onnx_code(e.kind), path.span, e.message)
+                            .label("in this controller")
+                            .hint(e.hint),
+                    ),
                     Ok(c) => {
                         if let Some(p) = p_dim {
                             if c.inputs != p {
-                                let what = if assigns.contains_key("C") { format!("C has {p} columns") } else { format!("without C the controller sees the full state ({p})") };
+                                let what = if assigns.contains_key("C") {
+                                    format!("C has {p} columns")
+                                } else {
+                                    format!("without C the controller sees the full state ({p})")
+                                };
                                 cx.err(
                                     Diagnostic::new(Code::ControllerInputs, path.span, format!("the controller takes {} inputs but observations have {p} components", c.inputs))
                                         .label(format!("{} inputs", c.inputs))
@@ -621,9 +862,21 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let mut horizon = None;
     if let Some(h) = horizons.first() {
         if h.node < 1 {
-            cx.err(Diagnostic::new(Code::Horizon, h.span, "the horizon must be at least 1").label("zero steps").hint("write `horizon N` with N ≥ 1"));
+            cx.err(
+                Diagnostic::new(Code::Horizon, h.span, "the horizon must be at least 1")
+                    .label("zero steps")
+                    .hint("write `horizon N` with N ≥ 1"),
+            );
         } else if h.node > MAX_HORIZON {
-            cx.err(Diagnostic::new(Code::Horizon, h.span, format!("the horizon exceeds {MAX_HORIZON}")).label("too many steps").hint("use a shorter horizon"));
+            cx.err(
+                Diagnostic::new(
+                    Code::Horizon,
+                    h.span,
+                    format!("the horizon exceeds {MAX_HORIZON}"),
+                )
+                .label("too many steps")
+                .hint("use a shorter horizon"),
+            );
         } else {
             horizon = Some(h.node as usize);
         }
@@ -638,9 +891,13 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             let members = &init.set.node.members;
             if members.len() > 1 {
                 cx.err(
-                    Diagnostic::new(Code::SetKind, init.set.span, "the initial set cannot be a union")
-                        .label("a union")
-                        .hint("verify each part in its own spec, or use the bounding box"),
+                    Diagnostic::new(
+                        Code::SetKind,
+                        init.set.span,
+                        "the initial set cannot be a union",
+                    )
+                    .label("a union")
+                    .hint("verify each part in its own spec, or use the bounding box"),
                 );
             } else {
                 match &members[0].node {
@@ -665,24 +922,45 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         .hint("the final reachable set must lie in one box or polytope"),
                 );
             } else if let Some(p) = cx.set_atom(&members[0], xn, *n, "the goal") {
-                goal = Some(GoalDef { name: g.name.node.clone(), set: p });
+                goal = Some(GoalDef {
+                    name: g.name.node.clone(),
+                    set: p,
+                });
             }
         }
         for a in &avoids {
-            let members: Vec<Option<Polytope>> = a.set.node.members.iter().map(|m| cx.set_atom(m, xn, *n, "the avoid set")).collect();
+            let members: Vec<Option<Polytope>> = a
+                .set
+                .node
+                .members
+                .iter()
+                .map(|m| cx.set_atom(m, xn, *n, "the avoid set"))
+                .collect();
             let steps = match (&a.steps, horizon) {
                 (None, Some(h)) => Some((0, h)),
                 (Some(s), h) => {
                     let (lo, hi) = s.node;
                     if lo > hi {
-                        cx.err(Diagnostic::new(Code::StepRange, s.span, format!("step range [{lo}, {hi}] is empty")).label("first step after last").hint("write `at steps [first, last]`"));
+                        cx.err(
+                            Diagnostic::new(
+                                Code::StepRange,
+                                s.span,
+                                format!("step range [{lo}, {hi}] is empty"),
+                            )
+                            .label("first step after last")
+                            .hint("write `at steps [first, last]`"),
+                        );
                         None
                     } else if h.is_some_and(|h| hi as usize > h) {
                         let h = h.unwrap_or(0);
                         cx.err(
-                            Diagnostic::new(Code::StepRange, s.span, format!("step {hi} is beyond the horizon {h}"))
-                                .label("beyond the horizon")
-                                .hint(format!("steps run from 0 (the initial set) to {h}")),
+                            Diagnostic::new(
+                                Code::StepRange,
+                                s.span,
+                                format!("step {hi} is beyond the horizon {h}"),
+                            )
+                            .label("beyond the horizon")
+                            .hint(format!("steps run from 0 (the initial set) to {h}")),
                         );
                         None
                     } else {
@@ -693,7 +971,11 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             };
             if members.iter().all(Option::is_some) {
                 if let Some(steps) = steps {
-                    avoid_specs.push(AvoidSpec { name: a.name.node.clone(), members: members.into_iter().flatten().collect(), steps });
+                    avoid_specs.push(AvoidSpec {
+                        name: a.name.node.clone(),
+                        members: members.into_iter().flatten().collect(),
+                        steps,
+                    });
                 }
             }
         }
@@ -727,8 +1009,16 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         "ibp_separate" => Some(Propagator::IbpSeparate),
                         other => {
                             let planned = PLANNED_PROPAGATORS.contains(&other);
-                            let mut d = Diagnostic::new(Code::UnknownName, p.span, format!("unknown propagator `{other}`"))
-                                .label(if planned { "not available in this version" } else { "not a propagator" });
+                            let mut d = Diagnostic::new(
+                                Code::UnknownName,
+                                p.span,
+                                format!("unknown propagator `{other}`"),
+                            )
+                            .label(if planned {
+                                "not available in this version"
+                            } else {
+                                "not a propagator"
+                            });
                             let list = PROPAGATORS.join(", ");
                             d = match (planned, did_you_mean(other, PROPAGATORS)) {
                                 (true, _) => d.hint(format!("`{other}` is planned but not implemented yet; available: {list}")),
@@ -742,10 +1032,19 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 }
                 AnalysisStmt::Partitioner(p) => {
                     if p.node != "none" {
-                        let mut d = Diagnostic::new(Code::UnknownName, p.span, format!("unknown partitioner `{}`", p.node)).label("not a partitioner");
+                        let mut d = Diagnostic::new(
+                            Code::UnknownName,
+                            p.span,
+                            format!("unknown partitioner `{}`", p.node),
+                        )
+                        .label("not a partitioner");
                         d = match did_you_mean(&p.node, PARTITIONERS) {
-                            Some(s) => d.hint(format!("did you mean `{s}`? Available: none, uniform [k, …]")),
-                            None => d.hint("available: none, uniform [k, …] (guided partitioners are planned)"),
+                            Some(s) => d.hint(format!(
+                                "did you mean `{s}`? Available: none, uniform [k, …]"
+                            )),
+                            None => d.hint(
+                                "available: none, uniform [k, …] (guided partitioners are planned)",
+                            ),
                         };
                         cx.err(d);
                     }
@@ -754,23 +1053,49 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                     if let Some((xn, n)) = &state {
                         if ks.len() != *n {
                             cx.err(
-                                Diagnostic::new(Code::Partition, st.span, format!("the grid has {} counts but `{xn}` has {n} components", ks.len()))
-                                    .label(format!("{} count(s)", ks.len()))
-                                    .hint(format!("give one cell count per state component, e.g. uniform [{}]", vec!["2"; *n].join(", "))),
+                                Diagnostic::new(
+                                    Code::Partition,
+                                    st.span,
+                                    format!(
+                                        "the grid has {} counts but `{xn}` has {n} components",
+                                        ks.len()
+                                    ),
+                                )
+                                .label(format!("{} count(s)", ks.len()))
+                                .hint(format!(
+                                    "give one cell count per state component, e.g. uniform [{}]",
+                                    vec!["2"; *n].join(", ")
+                                )),
                             );
                             partition = None;
                         } else if let Some(k) = ks.iter().find(|k| k.node == 0) {
-                            cx.err(Diagnostic::new(Code::Partition, k.span, "a grid needs at least one cell per dimension").label("zero cells").hint("use 1 to leave a dimension unsplit"));
+                            cx.err(
+                                Diagnostic::new(
+                                    Code::Partition,
+                                    k.span,
+                                    "a grid needs at least one cell per dimension",
+                                )
+                                .label("zero cells")
+                                .hint("use 1 to leave a dimension unsplit"),
+                            );
                             partition = None;
                         } else {
-                            let total = ks.iter().try_fold(1usize, |acc, k| acc.checked_mul(k.node as usize).filter(|t| *t <= MAX_CELLS));
+                            let total = ks.iter().try_fold(1usize, |acc, k| {
+                                acc.checked_mul(k.node as usize).filter(|t| *t <= MAX_CELLS)
+                            });
                             match total {
-                                Some(_) => partition = Some(ks.iter().map(|k| k.node as usize).collect()),
+                                Some(_) => {
+                                    partition = Some(ks.iter().map(|k| k.node as usize).collect())
+                                }
                                 None => {
                                     cx.err(
-                                        Diagnostic::new(Code::Partition, st.span, format!("the grid has more than {MAX_CELLS} cells"))
-                                            .label("too many cells")
-                                            .hint("use fewer cells per dimension"),
+                                        Diagnostic::new(
+                                            Code::Partition,
+                                            st.span,
+                                            format!("the grid has more than {MAX_CELLS} cells"),
+                                        )
+                                        .label("too many cells")
+                                        .hint("use fewer cells per dimension"),
                                     );
                                     partition = None;
                                 }
@@ -781,8 +1106,16 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 AnalysisStmt::Boundary(b) => {
                     if b.node != "box" {
                         let planned = b.node == "polytope" || b.node == "hull";
-                        let mut d = Diagnostic::new(Code::UnknownName, b.span, format!("unknown boundary `{}`", b.node))
-                            .label(if planned { "not available in this version" } else { "not a boundary shape" });
+                        let mut d = Diagnostic::new(
+                            Code::UnknownName,
+                            b.span,
+                            format!("unknown boundary `{}`", b.node),
+                        )
+                        .label(if planned {
+                            "not available in this version"
+                        } else {
+                            "not a boundary shape"
+                        });
                         d = match (planned, did_you_mean(&b.node, BOUNDARIES)) {
                             (true, _) => d.hint("polytope boundaries are planned; available: box"),
                             (false, Some(s)) => d.hint(format!("did you mean `{s}`?")),
@@ -793,7 +1126,15 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 }
                 AnalysisStmt::Samples(s) => {
                     if s.node > MAX_SAMPLES {
-                        cx.err(Diagnostic::new(Code::Zero, s.span, format!("more than {MAX_SAMPLES} samples")).label("too many").hint("use fewer samples"));
+                        cx.err(
+                            Diagnostic::new(
+                                Code::Zero,
+                                s.span,
+                                format!("more than {MAX_SAMPLES} samples"),
+                            )
+                            .label("too many")
+                            .hint("use fewer samples"),
+                        );
                     } else {
                         samples = s.node as usize;
                     }
@@ -804,12 +1145,35 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     }
 
     if !cx.diags.is_empty() {
-        cx.diags.sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
+        cx.diags
+            .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
         return Err(cx.diags);
     }
     // Everything below was produced without diagnostics, so each value is present.
-    match (sys, state, control, plant, ctrl, initial, horizon, propagator, partition, controllers.first()) {
-        (Some(sys), Some(state), Some(control), Some(plant), Some(controller), Some(initial), Some(horizon), Some(propagator), Some(partition), Some(path)) => Ok(Checked {
+    match (
+        sys,
+        state,
+        control,
+        plant,
+        ctrl,
+        initial,
+        horizon,
+        propagator,
+        partition,
+        controllers.first(),
+    ) {
+        (
+            Some(sys),
+            Some(state),
+            Some(control),
+            Some(plant),
+            Some(controller),
+            Some(initial),
+            Some(horizon),
+            Some(propagator),
+            Some(partition),
+            Some(path),
+        ) => Ok(Checked {
             system: sys.name.node.clone(),
             state,
             control,
@@ -826,6 +1190,12 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             samples,
             seed,
         }),
-        _ => Err(vec![Diagnostic::new(Code::Missing, whole, "the spec is incomplete").label("here").hint("see docs/language.md")]),
+        _ => Err(vec![Diagnostic::new(
+            Code::Missing,
+            whole,
+            "the spec is incomplete",
+        )
+        .label("here")
+        .hint("see docs/language.md")]),
     }
 }

@@ -77,10 +77,15 @@ struct Loaded {
 fn load(path: &Path) -> Result<Loaded, String> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read spec `{name}`: {e}"))?;
-    let source = String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
+    let source =
+        String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let result = crate::front_end(&source, dir, &read_file);
-    Ok(Loaded { name, source, result })
+    Ok(Loaded {
+        name,
+        source,
+        result,
+    })
 }
 
 fn diag_json(name: &str, source: &str, diags: &[Diagnostic]) -> Value {
@@ -108,7 +113,11 @@ pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
-            let code = if e.use_stderr() { exit::INPUT_ERROR } else { exit::VERIFIED };
+            let code = if e.use_stderr() {
+                exit::INPUT_ERROR
+            } else {
+                exit::VERIFIED
+            };
             let _ = e.print();
             return ExitCode::from(code);
         }
@@ -136,7 +145,12 @@ pub fn main() -> ExitCode {
             }
             ExitCode::from(code)
         }
-        Cmd::Verify { specs, format, no_timing, timing } => {
+        Cmd::Verify {
+            specs,
+            format,
+            no_timing,
+            timing,
+        } => {
             let mut worst: Option<Status> = None;
             let mut input_error = false;
             let mut results = Vec::new();
@@ -176,7 +190,12 @@ pub fn main() -> ExitCode {
                         let t = (!no_timing).then_some(ms);
                         println!("{}", crate::report::text(&l.name, &plan, &outcome, t));
                     }
-                    Format::Json => results.push(crate::report::json(&l.name, &plan, &outcome, timing.then_some(ms))),
+                    Format::Json => results.push(crate::report::json(
+                        &l.name,
+                        &plan,
+                        &outcome,
+                        timing.then_some(ms),
+                    )),
                 }
             }
             let overall = if input_error {

@@ -141,7 +141,14 @@ pub struct Diagnostic {
 impl Diagnostic {
     /// A diagnostic at `span`.
     pub fn new(code: Code, span: Span, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { code, message: message.into(), span: Some(span), label: String::new(), hint: None, related: Vec::new() }
+        Diagnostic {
+            code,
+            message: message.into(),
+            span: Some(span),
+            label: String::new(),
+            hint: None,
+            related: Vec::new(),
+        }
     }
 
     /// Set the label shown at the span.
@@ -189,7 +196,10 @@ impl miette::Diagnostic for Report<'_> {
     }
 
     fn help<'b>(&'b self) -> Option<Box<dyn fmt::Display + 'b>> {
-        self.d.hint.as_ref().map(|h| Box::new(h.as_str()) as Box<dyn fmt::Display>)
+        self.d
+            .hint
+            .as_ref()
+            .map(|h| Box::new(h.as_str()) as Box<dyn fmt::Display>)
     }
 
     fn source_code(&self) -> Option<&dyn SourceCode> {
@@ -199,9 +209,18 @@ impl miette::Diagnostic for Report<'_> {
     fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
         let span = self.d.span?;
         let len = self.src.inner().len();
-        let clamp = |s: Span| (s.start.min(len), s.end.min(len).saturating_sub(s.start.min(len)));
+        let clamp = |s: Span| {
+            (
+                s.start.min(len),
+                s.end.min(len).saturating_sub(s.start.min(len)),
+            )
+        };
         let (start, n) = clamp(span);
-        let label = if self.d.label.is_empty() { None } else { Some(self.d.label.clone()) };
+        let label = if self.d.label.is_empty() {
+            None
+        } else {
+            Some(self.d.label.clone())
+        };
         let mut labels = vec![LabeledSpan::new_primary_with_span(label, (start, n))];
         for (s, l) in &self.d.related {
             labels.push(LabeledSpan::new_with_span(Some(l.clone()), clamp(*s)));
@@ -215,11 +234,20 @@ impl miette::Diagnostic for Report<'_> {
 /// `color` turns on ANSI colours; `width` wraps messages. With `color = false`
 /// the output is plain Unicode text and deterministic (used by snapshots).
 pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, color: bool) -> String {
-    let theme = if color { GraphicalTheme::unicode() } else { GraphicalTheme::unicode_nocolor() };
-    let handler = GraphicalReportHandler::new_themed(theme).with_width(width).with_links(false);
+    let theme = if color {
+        GraphicalTheme::unicode()
+    } else {
+        GraphicalTheme::unicode_nocolor()
+    };
+    let handler = GraphicalReportHandler::new_themed(theme)
+        .with_width(width)
+        .with_links(false);
     let mut out = String::new();
     for d in diags {
-        let report = Report { d, src: NamedSource::new(name, source.to_string()) };
+        let report = Report {
+            d,
+            src: NamedSource::new(name, source.to_string()),
+        };
         if handler.render_report(&mut out, &report).is_err() {
             out.push_str(&format!("error[{}]: {}\n", d.code.as_str(), d.message));
         }
@@ -229,7 +257,10 @@ pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, colo
 }
 
 /// The closest candidate to `name` by edit distance, if it is close enough to be a likely typo.
-pub fn did_you_mean<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub fn did_you_mean<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
     let mut best: Option<(usize, &str)> = None;
     for c in candidates {
         let d = edit_distance(&name.to_lowercase(), &c.to_lowercase());
@@ -261,7 +292,10 @@ mod tests {
 
     #[test]
     fn suggestions() {
-        assert_eq!(did_you_mean("reach_lq", ["reach_lp", "ibp_separate"]), Some("reach_lp"));
+        assert_eq!(
+            did_you_mean("reach_lq", ["reach_lp", "ibp_separate"]),
+            Some("reach_lp")
+        );
         assert_eq!(did_you_mean("zzz", ["reach_lp"]), None);
         assert_eq!(did_you_mean("a", ["A", "B"]), Some("A"));
     }

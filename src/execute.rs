@@ -129,11 +129,18 @@ pub fn simulate(plan: &Plan, k: usize) -> Trajectory {
     let n = x0.dim();
     let corners = if n <= 12 { 1usize << n } else { 0 };
     let start: Vec<f64> = if k < corners {
-        (0..n).map(|i| if k >> i & 1 == 1 { x0.hi[i] } else { x0.lo[i] }).collect()
+        (0..n)
+            .map(|i| if k >> i & 1 == 1 { x0.hi[i] } else { x0.lo[i] })
+            .collect()
     } else {
         (0..n).map(|i| rng.uniform(x0.lo[i], x0.hi[i])).collect()
     };
-    let mut tr = Trajectory { states: vec![start], controls: vec![], process_noise: vec![], sensor_noise: vec![] };
+    let mut tr = Trajectory {
+        states: vec![start],
+        controls: vec![],
+        process_noise: vec![],
+        sensor_noise: vec![],
+    };
     for t in 0..plan.horizon {
         let w = pick_noise(&mut rng, &cl.plant.w);
         let v = pick_noise(&mut rng, &cl.plant.v);
@@ -149,9 +156,18 @@ pub fn simulate(plan: &Plan, k: usize) -> Trajectory {
 /// Execute a plan.
 pub fn execute(plan: &Plan) -> Outcome {
     let cl = &plan.closed_loop;
-    let cells: Vec<Vec<IBox>> = plan.cells.iter().map(|c| propagate_cell(cl, plan, c)).collect();
+    let cells: Vec<Vec<IBox>> = plan
+        .cells
+        .iter()
+        .map(|c| propagate_cell(cl, plan, c))
+        .collect();
     let reach: Vec<IBox> = (0..=plan.horizon)
-        .map(|t| cells.iter().skip(1).fold(cells[0][t].clone(), |h, c| h.hull(&c[t])))
+        .map(|t| {
+            cells
+                .iter()
+                .skip(1)
+                .fold(cells[0][t].clone(), |h, c| h.hull(&c[t]))
+        })
         .collect();
 
     // Monte Carlo: sample hulls and the worst violation of each property.
@@ -205,7 +221,10 @@ pub fn execute(plan: &Plan) -> Outcome {
         .map(|(prop, worst)| {
             let (kind, margin, step) = match &prop.kind {
                 PropertyKind::Goal(g) => {
-                    let m = cells.iter().map(|c| g.containment_margin(&c[plan.horizon])).fold(f64::INFINITY, f64::min);
+                    let m = cells
+                        .iter()
+                        .map(|c| g.containment_margin(&c[plan.horizon]))
+                        .fold(f64::INFINITY, f64::min);
                     ("goal", m, plan.horizon)
                 }
                 PropertyKind::Avoid { members, steps } => {
@@ -231,12 +250,23 @@ pub fn execute(plan: &Plan) -> Outcome {
                 // A genuine counterexample always wins; a proof next to one would be a soundness bug.
                 Some((depth, k, t)) => {
                     debug_assert!(!proven, "property {} proven and falsified", prop.name);
-                    PropertyResult { name: prop.name.clone(), kind, status: Status::Falsified, margin: -depth, step: *t, counterexample: Some(simulate(plan, *k)) }
+                    PropertyResult {
+                        name: prop.name.clone(),
+                        kind,
+                        status: Status::Falsified,
+                        margin: -depth,
+                        step: *t,
+                        counterexample: Some(simulate(plan, *k)),
+                    }
                 }
                 None => PropertyResult {
                     name: prop.name.clone(),
                     kind,
-                    status: if proven { Status::Verified } else { Status::Unsure },
+                    status: if proven {
+                        Status::Verified
+                    } else {
+                        Status::Unsure
+                    },
                     margin,
                     step,
                     counterexample: None,
@@ -244,6 +274,17 @@ pub fn execute(plan: &Plan) -> Outcome {
             }
         })
         .collect();
-    let verdict = properties.iter().map(|p| p.status).max().unwrap_or(Status::Verified);
-    Outcome { cells, reach, sampled, properties, verdict, propagator_calls: plan.cells.len() * plan.horizon }
+    let verdict = properties
+        .iter()
+        .map(|p| p.status)
+        .max()
+        .unwrap_or(Status::Verified);
+    Outcome {
+        cells,
+        reach,
+        sampled,
+        properties,
+        verdict,
+        propagator_calls: plan.cells.len() * plan.horizon,
+    }
 }

@@ -25,7 +25,11 @@ use diag::Diagnostic;
 ///
 /// The library performs no IO of its own: `read` is the caller's. The CLI
 /// passes a file-system reader; tests may pass anything.
-pub fn front_end(source: &str, spec_dir: &Path, read: &dyn Fn(&Path) -> Result<Vec<u8>, String>) -> Result<Checked, Vec<Diagnostic>> {
+pub fn front_end(
+    source: &str,
+    spec_dir: &Path,
+    read: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
+) -> Result<Checked, Vec<Diagnostic>> {
     let spec = syntax::parse(source)?;
     let controller = check::controller_path(&spec).map(|p| {
         let path = spec_dir.join(&p.node);

@@ -89,12 +89,18 @@ pub fn lower(c: &Checked) -> Plan {
     };
     let mut properties = Vec::new();
     if let Some(g) = &c.goal {
-        properties.push(Property { name: g.name.clone(), kind: PropertyKind::Goal(g.set.clone()) });
+        properties.push(Property {
+            name: g.name.clone(),
+            kind: PropertyKind::Goal(g.set.clone()),
+        });
     }
     for a in &c.avoids {
         properties.push(Property {
             name: a.name.clone(),
-            kind: PropertyKind::Avoid { members: a.members.clone(), steps: (a.steps.0, a.steps.1.min(c.horizon)) },
+            kind: PropertyKind::Avoid {
+                members: a.members.clone(),
+                steps: (a.steps.0, a.steps.1.min(c.horizon)),
+            },
         });
     }
     Plan {

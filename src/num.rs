@@ -17,7 +17,7 @@
 pub const U: f64 = f64::EPSILON / 2.0;
 
 /// Smallest positive subnormal: bounds the absolute error of an underflowing product.
-pub const ETA: f64 = 4.9406564584124654e-324;
+pub const ETA: f64 = f64::from_bits(1);
 
 /// `γ(n) = n·u / (1 − n·u)`, the relative error factor of an `n`-term sum.
 pub fn gamma(n: usize) -> f64 {
@@ -121,7 +121,10 @@ mod tests {
         let (s, e) = two_sum(0.1 + 0.2, -0.3);
         let (s1, e1) = two_sum(0.1, 0.2);
         let exact_hi = s + e + e1;
-        assert!(lo <= exact_hi && exact_hi <= up, "{lo} {exact_hi} {up} {s1}");
+        assert!(
+            lo <= exact_hi && exact_hi <= up,
+            "{lo} {exact_hi} {up} {s1}"
+        );
     }
 
     fn two_sum(a: f64, b: f64) -> (f64, f64) {

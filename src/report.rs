@@ -34,14 +34,21 @@ fn interval(lo: f64, hi: f64) -> String {
 }
 
 fn vector(v: &[f64]) -> String {
-    format!("[{}]", v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", "))
+    format!(
+        "[{}]",
+        v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", ")
+    )
 }
 
 fn partition_text(plan: &Plan) -> String {
     if plan.cells.len() == 1 {
         "no partition (1 cell)".into()
     } else {
-        format!("uniform partition {:?} ({} cells)", plan.grid, plan.cells.len())
+        format!(
+            "uniform partition {:?} ({} cells)",
+            plan.grid,
+            plan.cells.len()
+        )
     }
 }
 
@@ -52,12 +59,25 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     let n = plan.closed_loop.states();
     let m = plan.closed_loop.plant.b.ncols();
     s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
-    s += &format!("  system      {} (state {x}[{n}], control {}[{m}], horizon {})\n", plan.system, plan.control_name, plan.horizon);
+    s += &format!(
+        "  system      {} (state {x}[{n}], control {}[{m}], horizon {})\n",
+        plan.system, plan.control_name, plan.horizon
+    );
     let sat = match &plan.limits {
-        Some(l) => format!(", saturated to {} ∈ {}", plan.control_name, (0..l.dim()).map(|i| format!("[{}, {}]", num(l.lo[i]), num(l.hi[i]))).collect::<Vec<_>>().join(" × ")),
+        Some(l) => format!(
+            ", saturated to {} ∈ {}",
+            plan.control_name,
+            (0..l.dim())
+                .map(|i| format!("[{}, {}]", num(l.lo[i]), num(l.hi[i])))
+                .collect::<Vec<_>>()
+                .join(" × ")
+        ),
         None => String::new(),
     };
-    s += &format!("  controller  {} ({}{sat})\n", plan.controller_path, plan.network_summary);
+    s += &format!(
+        "  controller  {} ({}{sat})\n",
+        plan.controller_path, plan.network_summary
+    );
     s += &format!(
         "  analysis    {}, {}, box boundary, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
@@ -68,19 +88,34 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     s += "  reachable sets (bounding box of all cells, then the hull of the sampled states)\n";
     for (t, b) in out.reach.iter().enumerate() {
         for i in 0..n {
-            let lead = if i == 0 { format!("  step {t:>3}") } else { " ".repeat(10) };
+            let lead = if i == 0 {
+                format!("  step {t:>3}")
+            } else {
+                " ".repeat(10)
+            };
             let sampled = match &out.sampled[t] {
                 Some(sb) => format!("   sampled {}", interval(sb.lo[i], sb.hi[i])),
                 None => String::new(),
             };
-            s += &format!("{lead}  {x}[{i}] ∈ {}{sampled}\n", interval(b.lo[i], b.hi[i]));
+            s += &format!(
+                "{lead}  {x}[{i}] ∈ {}{sampled}\n",
+                interval(b.lo[i], b.hi[i])
+            );
         }
     }
     if let Some(err) = final_error(out) {
-        s += &format!("  final-step error (box volume / sampled-hull volume − 1): {}\n", num(err));
+        s += &format!(
+            "  final-step error (box volume / sampled-hull volume − 1): {}\n",
+            num(err)
+        );
     }
     s += "\n  properties\n";
-    let width = out.properties.iter().map(|p| p.name.len() + p.kind.len() + 1).max().unwrap_or(0);
+    let width = out
+        .properties
+        .iter()
+        .map(|p| p.name.len() + p.kind.len() + 1)
+        .max()
+        .unwrap_or(0);
     for p in &out.properties {
         let label = format!("{} {}", p.kind, p.name);
         let why = match (p.status, p.kind) {
@@ -98,17 +133,28 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     }
     s += &format!("\n  verdict: {}\n", out.verdict.as_str());
     if let Some(ms) = timing_ms {
-        s += &format!("  time: {ms:.3} ms ({} propagator calls, {} samples)\n", out.propagator_calls, plan.samples);
+        s += &format!(
+            "  time: {ms:.3} ms ({} propagator calls, {} samples)\n",
+            out.propagator_calls, plan.samples
+        );
     }
     s
 }
 
 fn counterexample_text(plan: &Plan, tr: &Trajectory) -> String {
-    let mut s = format!("      counterexample (x = {}, u = {}, w = process noise, v = sensor noise):\n", plan.state_name, plan.control_name);
+    let mut s = format!(
+        "      counterexample (x = {}, u = {}, w = process noise, v = sensor noise):\n",
+        plan.state_name, plan.control_name
+    );
     for (t, x) in tr.states.iter().enumerate() {
         s += &format!("        t={t:<3} x = {}", vector(x));
         if t < tr.controls.len() {
-            s += &format!("  u = {}  w = {}  v = {}", vector(&tr.controls[t]), vector(&tr.process_noise[t]), vector(&tr.sensor_noise[t]));
+            s += &format!(
+                "  u = {}  w = {}  v = {}",
+                vector(&tr.controls[t]),
+                vector(&tr.process_noise[t]),
+                vector(&tr.sensor_noise[t])
+            );
         }
         s += "\n";
     }

@@ -30,12 +30,18 @@ impl IBox {
 
     /// Largest absolute value of each coordinate.
     pub fn abs_max(&self) -> Vec<f64> {
-        self.lo.iter().zip(&self.hi).map(|(l, h)| num::abs_max(*l, *h)).collect()
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .map(|(l, h)| num::abs_max(*l, *h))
+            .collect()
     }
 
     /// Whether `x` lies in the box.
     pub fn contains_point(&self, x: &[f64]) -> bool {
-        x.iter().zip(self.lo.iter().zip(&self.hi)).all(|(x, (l, h))| l <= x && x <= h)
+        x.iter()
+            .zip(self.lo.iter().zip(&self.hi))
+            .all(|(x, (l, h))| l <= x && x <= h)
     }
 
     /// Whether `other` lies inside this box.
@@ -46,16 +52,32 @@ impl IBox {
     /// The smallest box containing both.
     pub fn hull(&self, other: &IBox) -> IBox {
         IBox::new(
-            self.lo.iter().zip(&other.lo).map(|(a, b)| a.min(*b)).collect(),
-            self.hi.iter().zip(&other.hi).map(|(a, b)| a.max(*b)).collect(),
+            self.lo
+                .iter()
+                .zip(&other.lo)
+                .map(|(a, b)| a.min(*b))
+                .collect(),
+            self.hi
+                .iter()
+                .zip(&other.hi)
+                .map(|(a, b)| a.max(*b))
+                .collect(),
         )
     }
 
     /// The intersection of two boxes (may be empty if they do not overlap).
     pub fn intersect(&self, other: &IBox) -> IBox {
         IBox::new(
-            self.lo.iter().zip(&other.lo).map(|(a, b)| a.max(*b)).collect(),
-            self.hi.iter().zip(&other.hi).map(|(a, b)| a.min(*b)).collect(),
+            self.lo
+                .iter()
+                .zip(&other.lo)
+                .map(|(a, b)| a.max(*b))
+                .collect(),
+            self.hi
+                .iter()
+                .zip(&other.hi)
+                .map(|(a, b)| a.min(*b))
+                .collect(),
         )
     }
 
@@ -182,7 +204,10 @@ mod tests {
         let b = IBox::new(vec![0.0, -1.0], vec![3.0, 1.0]);
         let cells = b.grid(&[3, 2]);
         assert_eq!(cells.len(), 6);
-        let hull = cells.iter().skip(1).fold(cells[0].clone(), |h, c| h.hull(c));
+        let hull = cells
+            .iter()
+            .skip(1)
+            .fold(cells[0].clone(), |h, c| h.hull(c));
         assert_eq!(hull, b);
         assert_eq!(cells[1], IBox::new(vec![0.0, 0.0], vec![1.0, 1.0]));
     }

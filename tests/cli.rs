@@ -9,18 +9,44 @@ fn ravel(args: &[&str]) -> (i32, String, String) {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("the binary runs");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 #[test]
 fn exit_codes_follow_the_verdict() {
     assert_eq!(ravel(&["verify", "specs/double_integrator.ravel"]).0, 0);
-    assert_eq!(ravel(&["verify", "specs/double_integrator_falsified.ravel"]).0, 1);
-    assert_eq!(ravel(&["verify", "specs/double_integrator_hard.ravel"]).0, 3);
+    assert_eq!(
+        ravel(&["verify", "specs/double_integrator_falsified.ravel"]).0,
+        1
+    );
+    assert_eq!(
+        ravel(&["verify", "specs/double_integrator_hard.ravel"]).0,
+        3
+    );
     assert_eq!(ravel(&["verify", "specs/invalid/wrong_shape.ravel"]).0, 2);
     // FALSIFIED outranks UNSURE; input errors outrank both
-    assert_eq!(ravel(&["verify", "specs/double_integrator_hard.ravel", "specs/double_integrator_falsified.ravel"]).0, 1);
-    assert_eq!(ravel(&["verify", "specs/double_integrator_falsified.ravel", "specs/invalid/wrong_shape.ravel"]).0, 2);
+    assert_eq!(
+        ravel(&[
+            "verify",
+            "specs/double_integrator_hard.ravel",
+            "specs/double_integrator_falsified.ravel"
+        ])
+        .0,
+        1
+    );
+    assert_eq!(
+        ravel(&[
+            "verify",
+            "specs/double_integrator_falsified.ravel",
+            "specs/invalid/wrong_shape.ravel"
+        ])
+        .0,
+        2
+    );
     assert_eq!(ravel(&["verify", "specs/no_such_spec.ravel"]).0, 2);
     assert_eq!(ravel(&["frobnicate"]).0, 2);
     assert_eq!(ravel(&["verify"]).0, 2);
@@ -28,20 +54,33 @@ fn exit_codes_follow_the_verdict() {
 
 #[test]
 fn check_reports_diagnostics_without_colour_when_piped() {
-    let (code, out, err) = ravel(&["check", "specs/double_integrator.ravel", "specs/invalid/many_errors.ravel"]);
+    let (code, out, err) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "specs/invalid/many_errors.ravel",
+    ]);
     assert_eq!(code, 2);
     assert!(out.contains("ok: specs/double_integrator.ravel"));
     for c in ["E0101", "E0201", "E0203", "E0206"] {
         assert!(err.contains(c), "missing {c} in\n{err}");
     }
-    assert!(!err.contains('\u{1b}'), "no ANSI escapes when stderr is not a terminal");
+    assert!(
+        !err.contains('\u{1b}'),
+        "no ANSI escapes when stderr is not a terminal"
+    );
     assert_eq!(ravel(&["check", "specs/quadrotor.ravel"]).0, 0);
 }
 
 #[test]
 fn text_report_shows_sets_properties_and_timing() {
     let (_, out, _) = ravel(&["verify", "specs/double_integrator.ravel"]);
-    for needle in ["step   5", "goal G", "VERIFIED", "verdict: VERIFIED", "time:"] {
+    for needle in [
+        "step   5",
+        "goal G",
+        "VERIFIED",
+        "verdict: VERIFIED",
+        "time:",
+    ] {
         assert!(out.contains(needle), "missing {needle:?} in\n{out}");
     }
     let (_, out, _) = ravel(&["verify", "--no-timing", "specs/double_integrator.ravel"]);
@@ -50,7 +89,14 @@ fn text_report_shows_sets_properties_and_timing() {
 
 #[test]
 fn json_output_is_deterministic_and_follows_the_schema() {
-    let args = ["verify", "--format", "json", "specs/double_integrator.ravel", "specs/double_integrator_falsified.ravel", "specs/invalid/wrong_shape.ravel"];
+    let args = [
+        "verify",
+        "--format",
+        "json",
+        "specs/double_integrator.ravel",
+        "specs/double_integrator_falsified.ravel",
+        "specs/invalid/wrong_shape.ravel",
+    ];
     let (code, out, _) = ravel(&args);
     assert_eq!(code, 2);
     assert_eq!(out, ravel(&args).1, "same inputs, same bytes");
@@ -61,7 +107,13 @@ fn json_output_is_deterministic_and_follows_the_schema() {
     assert_eq!(r.len(), 3);
     assert_eq!(r[0]["verdict"], "VERIFIED");
     assert_eq!(r[0]["reachable"].as_array().expect("steps").len(), 6);
-    assert_eq!(r[0]["reachable"][5]["box"]["lo"].as_array().expect("lo").len(), 2);
+    assert_eq!(
+        r[0]["reachable"][5]["box"]["lo"]
+            .as_array()
+            .expect("lo")
+            .len(),
+        2
+    );
     assert_eq!(r[0]["properties"][0]["status"], "VERIFIED");
     assert!(r[0].get("time_ms").is_none());
     assert_eq!(r[1]["verdict"], "FALSIFIED");
@@ -71,7 +123,13 @@ fn json_output_is_deterministic_and_follows_the_schema() {
     assert_eq!(r[2]["verdict"], "ERROR");
     assert_eq!(r[2]["errors"][0]["code"], "E0201");
     assert!(r[2]["errors"][0]["line"].as_u64().expect("line") > 0);
-    let (_, out, _) = ravel(&["verify", "--format", "json", "--timing", "specs/double_integrator.ravel"]);
+    let (_, out, _) = ravel(&[
+        "verify",
+        "--format",
+        "json",
+        "--timing",
+        "specs/double_integrator.ravel",
+    ]);
     let v: serde_json::Value = serde_json::from_str(&out).expect("valid JSON");
     assert!(v["results"][0]["time_ms"].as_f64().is_some());
 }
@@ -79,14 +137,26 @@ fn json_output_is_deterministic_and_follows_the_schema() {
 #[test]
 fn counterexamples_are_real_trajectories() {
     // Replay the reported counterexample through the plant and controller, independently of ravel's simulator.
-    let (_, out, _) = ravel(&["verify", "--format", "json", "specs/double_integrator_falsified.ravel"]);
+    let (_, out, _) = ravel(&[
+        "verify",
+        "--format",
+        "json",
+        "specs/double_integrator_falsified.ravel",
+    ]);
     let v: serde_json::Value = serde_json::from_str(&out).expect("valid JSON");
     let cex = &v["results"][0]["properties"][0]["counterexample"];
     let xs: Vec<Vec<f64>> = serde_json::from_value(cex["states"].clone()).expect("states");
     let us: Vec<Vec<f64>> = serde_json::from_value(cex["controls"].clone()).expect("controls");
-    let bytes = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/models/double_integrator.onnx")).expect("model");
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/models/double_integrator.onnx"
+    ))
+    .expect("model");
     let c = ravel::onnx::load(&bytes, &Default::default()).expect("loads");
-    assert!((2.5..=3.0).contains(&xs[0][0]) && (-0.25..=0.25).contains(&xs[0][1]), "starts in X0");
+    assert!(
+        (2.5..=3.0).contains(&xs[0][0]) && (-0.25..=0.25).contains(&xs[0][1]),
+        "starts in X0"
+    );
     for t in 0..5 {
         let u = c.net.forward(&xs[t])[0].clamp(-1.0, 1.0);
         assert!((u - us[t][0]).abs() < 1e-12);
@@ -94,5 +164,8 @@ fn counterexamples_are_real_trajectories() {
         assert!((next[0] - xs[t + 1][0]).abs() < 1e-12 && (next[1] - xs[t + 1][1]).abs() < 1e-12);
     }
     let last = &xs[5];
-    assert!(!(0.1..=1.0).contains(&last[0]) || !(-1.0..=1.0).contains(&last[1]), "ends outside G: {last:?}");
+    assert!(
+        !(0.1..=1.0).contains(&last[0]) || !(-1.0..=1.0).contains(&last[1]),
+        "ends outside G: {last:?}"
+    );
 }

@@ -12,7 +12,10 @@ fn read_model(name: &str) -> ravel::onnx::Controller {
     let bytes = std::fs::read(dir.join(format!("{name}.onnx"))).expect("model exists");
     let mut ext = ExternalFiles::new();
     for loc in ravel::onnx::external_locations(&bytes) {
-        ext.insert(loc.clone(), std::fs::read(dir.join(&loc)).map_err(|e| e.to_string()));
+        ext.insert(
+            loc.clone(),
+            std::fs::read(dir.join(&loc)).map_err(|e| e.to_string()),
+        );
     }
     load(&bytes, &ext).expect("model loads")
 }
@@ -29,13 +32,26 @@ fn committed_models_match_onnxruntime() {
         let inputs = data["inputs"].as_array().expect("inputs");
         let outputs = data["outputs"].as_array().expect("outputs");
         for (x, y) in inputs.iter().zip(outputs) {
-            let x: Vec<f64> = x.as_array().expect("row").iter().map(|v| v.as_f64().expect("number")).collect();
-            let y: Vec<f64> = y.as_array().expect("row").iter().map(|v| v.as_f64().expect("number")).collect();
+            let x: Vec<f64> = x
+                .as_array()
+                .expect("row")
+                .iter()
+                .map(|v| v.as_f64().expect("number"))
+                .collect();
+            let y: Vec<f64> = y
+                .as_array()
+                .expect("row")
+                .iter()
+                .map(|v| v.as_f64().expect("number"))
+                .collect();
             let ours = c.net.forward(&x);
             assert_eq!(ours.len(), y.len(), "{name}");
             for (a, b) in ours.iter().zip(&y) {
                 // onnxruntime computes in float32
-                assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{name}: ravel {a} vs onnxruntime {b} at {x:?}");
+                assert!(
+                    (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
+                    "{name}: ravel {a} vs onnxruntime {b} at {x:?}"
+                );
             }
         }
     }
@@ -45,23 +61,39 @@ fn small_net(act: Activation) -> Network {
     Network::new(
         2,
         vec![
-            Layer::Affine { w: DMatrix::from_row_slice(3, 2, &[0.5, -1.25, 2.0, 0.75, -0.5, 1.0]), b: DVector::from_column_slice(&[0.25, -0.5, 0.125]) },
+            Layer::Affine {
+                w: DMatrix::from_row_slice(3, 2, &[0.5, -1.25, 2.0, 0.75, -0.5, 1.0]),
+                b: DVector::from_column_slice(&[0.25, -0.5, 0.125]),
+            },
             Layer::Act(act),
-            Layer::Affine { w: DMatrix::from_row_slice(1, 3, &[1.5, -0.25, 0.5]), b: DVector::from_column_slice(&[-0.375]) },
+            Layer::Affine {
+                w: DMatrix::from_row_slice(1, 3, &[1.5, -0.25, 0.5]),
+                b: DVector::from_column_slice(&[-0.375]),
+            },
         ],
     )
 }
 
 fn by_hand(act: Activation, x: &[f64]) -> f64 {
     // the same network written out by hand
-    let z = [0.5 * x[0] - 1.25 * x[1] + 0.25, 2.0 * x[0] + 0.75 * x[1] - 0.5, -0.5 * x[0] + x[1] + 0.125];
+    let z = [
+        0.5 * x[0] - 1.25 * x[1] + 0.25,
+        2.0 * x[0] + 0.75 * x[1] - 0.5,
+        -0.5 * x[0] + x[1] + 0.125,
+    ];
     let h: Vec<f64> = z.iter().map(|v| act.eval(*v)).collect();
     1.5 * h[0] - 0.25 * h[1] + 0.5 * h[2] - 0.375
 }
 
 #[test]
 fn every_storage_and_layer_form_round_trips() {
-    let storages = [Storage::RawF32, Storage::FloatData, Storage::RawF64, Storage::DoubleData, Storage::External];
+    let storages = [
+        Storage::RawF32,
+        Storage::FloatData,
+        Storage::RawF64,
+        Storage::DoubleData,
+        Storage::External,
+    ];
     for act in [Activation::Relu, Activation::Tanh, Activation::Sigmoid] {
         let net = small_net(act);
         for storage in storages {
@@ -83,11 +115,15 @@ fn every_storage_and_layer_form_round_trips() {
                 for loc in ravel::onnx::external_locations(&model) {
                     ext.insert(loc, Ok(data.clone()));
                 }
-                let c = load(&model, &ext).unwrap_or_else(|e| panic!("{storage:?} keras={keras}: {e:?}"));
+                let c = load(&model, &ext)
+                    .unwrap_or_else(|e| panic!("{storage:?} keras={keras}: {e:?}"));
                 assert_eq!((c.inputs, c.outputs), (2, 1));
                 for x in [[0.3, -0.7], [-1.5, 2.0], [0.0, 0.0]] {
                     let y = c.net.forward(&x)[0];
-                    assert!((y - by_hand(act, &x)).abs() < 1e-12, "{storage:?} keras={keras} {act:?}: {y}");
+                    assert!(
+                        (y - by_hand(act, &x)).abs() < 1e-12,
+                        "{storage:?} keras={keras} {act:?}: {y}"
+                    );
                 }
             }
         }
@@ -110,12 +146,26 @@ fn normalisation_nodes_are_affine_layers() {
 
 #[test]
 fn gemm_attributes_are_honoured() {
-    use ravel::onnx::proto::*;
     use prost::Message;
+    use ravel::onnx::proto::*;
     // y = alpha * x Bᵀ... with transB = 0: B is [in, out]
-    let t = |name: &str, dims: Vec<i64>, vals: Vec<f32>| TensorProto { dims, data_type: Some(1), float_data: vals, name: Some(name.into()), ..Default::default() };
-    let attr_f = |n: &str, v: f32| AttributeProto { name: Some(n.into()), f: Some(v), r#type: Some(1), ..Default::default() };
-    let vi = |n: &str| ValueInfoProto { name: Some(n.into()), r#type: None };
+    let t = |name: &str, dims: Vec<i64>, vals: Vec<f32>| TensorProto {
+        dims,
+        data_type: Some(1),
+        float_data: vals,
+        name: Some(name.into()),
+        ..Default::default()
+    };
+    let attr_f = |n: &str, v: f32| AttributeProto {
+        name: Some(n.into()),
+        f: Some(v),
+        r#type: Some(1),
+        ..Default::default()
+    };
+    let vi = |n: &str| ValueInfoProto {
+        name: Some(n.into()),
+        r#type: None,
+    };
     let model = ModelProto {
         ir_version: Some(8),
         graph: Some(GraphProto {
@@ -127,7 +177,10 @@ fn gemm_attributes_are_honoured() {
                 attribute: vec![attr_f("alpha", 2.0), attr_f("beta", 0.5)],
                 domain: None,
             }],
-            initializer: vec![t("B", vec![2, 1], vec![1.0, 3.0]), t("C", vec![1], vec![4.0])],
+            initializer: vec![
+                t("B", vec![2, 1], vec![1.0, 3.0]),
+                t("C", vec![1], vec![4.0]),
+            ],
             input: vec![vi("x")],
             output: vec![vi("y")],
             name: None,
@@ -153,7 +206,10 @@ fn loader_errors_name_the_problem() {
     assert!(e.message.contains("LeakyRelu"), "{}", e.message);
 
     let mut g = GraphBuilder::new(2, Storage::RawF32);
-    g.gemm(&DMatrix::from_element(1, 2, f64::INFINITY), &DVector::zeros(1));
+    g.gemm(
+        &DMatrix::from_element(1, 2, f64::INFINITY),
+        &DVector::zeros(1),
+    );
     let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("inf");
     assert_eq!(e.kind, OnnxErrorKind::NonFinite);
 

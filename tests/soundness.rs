@@ -9,14 +9,22 @@ use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
 use ravel::sets::IBox;
 
-const PROPAGATORS: [Propagator; 3] = [Propagator::ReachLp, Propagator::CrownSeparate, Propagator::IbpSeparate];
+const PROPAGATORS: [Propagator; 3] = [
+    Propagator::ReachLp,
+    Propagator::CrownSeparate,
+    Propagator::IbpSeparate,
+];
 
 fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
     let depth = 1 + rng.below(3);
     let mut layers = Vec::new();
     let mut width = inputs;
     for k in 0..=depth {
-        let out = if k == depth { outputs } else { 2 + rng.below(7) };
+        let out = if k == depth {
+            outputs
+        } else {
+            2 + rng.below(7)
+        };
         let scale = 1.5 / (width as f64).sqrt();
         layers.push(Layer::Affine {
             w: DMatrix::from_fn(out, width, |_, _| rng.normal() * scale),
@@ -46,10 +54,18 @@ fn random_case(seed: u64) -> Case {
     let limited = (seed / 2) % 2 == 1;
     let observed = (seed / 4) % 2 == 1;
     let p = if observed { 1 + rng.below(n + 1) } else { n };
-    let a = DMatrix::from_fn(n, n, |i, j| if i == j { 0.9 } else { 0.0 } + rng.normal() * 0.25);
+    let a = DMatrix::from_fn(
+        n,
+        n,
+        |i, j| if i == j { 0.9 } else { 0.0 } + rng.normal() * 0.25,
+    );
     let b = DMatrix::from_fn(n, m, |_, _| rng.normal() * 0.5);
     let c = DVector::from_fn(n, |_, _| rng.normal() * 0.1);
-    let obs = if observed { DMatrix::from_fn(n, p, |_, _| rng.normal()) } else { DMatrix::identity(n, n) };
+    let obs = if observed {
+        DMatrix::from_fn(n, p, |_, _| rng.normal())
+    } else {
+        DMatrix::identity(n, n)
+    };
     let noise = |rng: &mut Rng, k: usize| {
         if noisy {
             let lo: Vec<f64> = (0..k).map(|_| -rng.uniform(0.0, 0.05)).collect();
@@ -69,9 +85,17 @@ fn random_case(seed: u64) -> Case {
     }
     let centre: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
     let radius: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.4)).collect();
-    let x0 = IBox::new(centre.iter().zip(&radius).map(|(c, r)| c - r).collect(), centre.iter().zip(&radius).map(|(c, r)| c + r).collect());
+    let x0 = IBox::new(
+        centre.iter().zip(&radius).map(|(c, r)| c - r).collect(),
+        centre.iter().zip(&radius).map(|(c, r)| c + r).collect(),
+    );
     let label = format!("seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited}");
-    Case { cl: ClosedLoop::new(Plant { a, b, c, obs, w, v }, net), x0, horizon: 4, label }
+    Case {
+        cl: ClosedLoop::new(Plant { a, b, c, obs, w, v }, net),
+        x0,
+        horizon: 4,
+        label,
+    }
 }
 
 fn reach(cl: &ClosedLoop, x0: &IBox, horizon: usize, prop: Propagator) -> Vec<IBox> {
@@ -101,14 +125,30 @@ fn every_trajectory_stays_inside_every_reachable_set() {
         let cells = case.x0.grid(&vec![2; case.x0.dim()]);
         for prop in PROPAGATORS {
             let whole = reach(&case.cl, &case.x0, case.horizon, prop);
-            let parts: Vec<Vec<IBox>> = cells.iter().map(|c| reach(&case.cl, c, case.horizon, prop)).collect();
+            let parts: Vec<Vec<IBox>> = cells
+                .iter()
+                .map(|c| reach(&case.cl, c, case.horizon, prop))
+                .collect();
             let mut rng = Rng::new(seed * 7919 + 1);
             for _ in 0..200 {
                 let mut x = sample_point(&mut rng, &case.x0);
-                let cell = cells.iter().position(|c| c.contains_point(&x)).expect("the grid covers X0");
+                let cell = cells
+                    .iter()
+                    .position(|c| c.contains_point(&x))
+                    .expect("the grid covers X0");
                 for t in 0..=case.horizon {
-                    assert!(whole[t].contains_point(&x), "{} {prop:?}: step {t} state {x:?} outside {:?}", case.label, whole[t]);
-                    assert!(parts[cell][t].contains_point(&x), "{} {prop:?} partitioned: step {t} state {x:?} outside {:?}", case.label, parts[cell][t]);
+                    assert!(
+                        whole[t].contains_point(&x),
+                        "{} {prop:?}: step {t} state {x:?} outside {:?}",
+                        case.label,
+                        whole[t]
+                    );
+                    assert!(
+                        parts[cell][t].contains_point(&x),
+                        "{} {prop:?} partitioned: step {t} state {x:?} outside {:?}",
+                        case.label,
+                        parts[cell][t]
+                    );
                     checked += 1;
                     if t < case.horizon {
                         let w = sample_point(&mut rng, &case.cl.plant.w);
@@ -132,14 +172,23 @@ fn network_bounds_contain_network_outputs() {
         let net = random_network(&mut rng, inputs, outputs, act);
         let c: Vec<f64> = (0..inputs).map(|_| rng.normal()).collect();
         let r = rng.uniform(0.01, 1.5);
-        let input = IBox::new(c.iter().map(|v| v - r).collect(), c.iter().map(|v| v + r).collect());
+        let input = IBox::new(
+            c.iter().map(|v| v - r).collect(),
+            c.iter().map(|v| v + r).collect(),
+        );
         let crown = Analysis::new(&net, &input, Mode::Crown).output_box(Mode::Crown);
         let ibp = Analysis::new(&net, &input, Mode::Ibp).output_box(Mode::Ibp);
-        assert!(ibp.contains_box(&crown), "CROWN (intersected with IBP) must lie within IBP");
+        assert!(
+            ibp.contains_box(&crown),
+            "CROWN (intersected with IBP) must lie within IBP"
+        );
         for _ in 0..500 {
             let x = sample_point(&mut rng, &input);
             let y = net.forward(&x);
-            assert!(crown.contains_point(&y), "seed {seed} {act:?}: {y:?} outside {crown:?}");
+            assert!(
+                crown.contains_point(&y),
+                "seed {seed} {act:?}: {y:?} outside {crown:?}"
+            );
         }
     }
 }
@@ -160,7 +209,8 @@ fn linear_bounds_hold_pointwise() {
             let y = DVector::from_vec(net.forward(&x));
             let s = &spec * y;
             for r in 0..2 {
-                let lin: f64 = (0..2).map(|i| bound.coef[(r, i)] * x[i]).sum::<f64>() + bound.offset[r];
+                let lin: f64 =
+                    (0..2).map(|i| bound.coef[(r, i)] * x[i]).sum::<f64>() + bound.offset[r];
                 assert!(s[r] <= lin + 1e-12, "seed {seed} row {r}: {} > {lin}", s[r]);
             }
         }

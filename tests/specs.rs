@@ -19,7 +19,9 @@ fn read(path: &Path) -> Result<Vec<u8>, String> {
 
 fn expect_header(source: &str) -> Vec<String> {
     let line = source.lines().next().unwrap_or_default();
-    let rest = line.strip_prefix("// expect:").unwrap_or_else(|| panic!("spec must start with `// expect: …`, found {line:?}"));
+    let rest = line
+        .strip_prefix("// expect:")
+        .unwrap_or_else(|| panic!("spec must start with `// expect: …`, found {line:?}"));
     rest.split_whitespace().map(str::to_string).collect()
 }
 
@@ -42,13 +44,21 @@ fn valid_specs() {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
         let expect = expect_header(&source);
-        let checked = match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
-            Ok(c) => c,
-            Err(d) => panic!("{name} is a valid spec but has diagnostics:\n{}", render(&d, &name, &source, 100, false)),
-        };
+        let checked =
+            match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
+                Ok(c) => c,
+                Err(d) => panic!(
+                    "{name} is a valid spec but has diagnostics:\n{}",
+                    render(&d, &name, &source, 100, false)
+                ),
+            };
         let plan = ravel::lower::lower(&checked);
         let outcome = ravel::execute::execute(&plan);
-        assert_eq!(vec![outcome.verdict.as_str().to_string()], expect, "{name}: verdict differs from its `// expect:` header");
+        assert_eq!(
+            vec![outcome.verdict.as_str().to_string()],
+            expect,
+            "{name}: verdict differs from its `// expect:` header"
+        );
         insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
         insta::assert_snapshot!("result", ravel::report::text(&name, &plan, &outcome, None));
     });
@@ -60,12 +70,16 @@ fn invalid_specs() {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
         let expect: BTreeSet<String> = expect_header(&source).into_iter().collect();
-        let diags = match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
-            Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
-            Err(d) => d,
-        };
+        let diags =
+            match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
+                Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
+                Err(d) => d,
+            };
         let codes: BTreeSet<String> = diags.iter().map(|d| d.code.as_str().to_string()).collect();
-        assert_eq!(codes, expect, "{name}: diagnostic codes differ from its `// expect:` header");
+        assert_eq!(
+            codes, expect,
+            "{name}: diagnostic codes differ from its `// expect:` header"
+        );
         for d in &diags {
             assert!(d.hint.is_some(), "{name}: {} has no hint", d.code.as_str());
             assert!(d.span.is_some(), "{name}: {} has no span", d.code.as_str());

@@ -94,7 +94,15 @@ impl ClosedLoop {
             facets[(i, i)] = 1.0;
             facets[(n + i, i)] = -1.0;
         }
-        ClosedLoop { plant, net, obs_xv, obs_xvw, dyn_xvw, dyn_xuw, facets }
+        ClosedLoop {
+            plant,
+            net,
+            obs_xv,
+            obs_xvw,
+            dyn_xvw,
+            dyn_xuw,
+            facets,
+        }
     }
 
     /// State dimension.
@@ -108,7 +116,10 @@ impl ClosedLoop {
         let y = self.plant.obs.transpose() * &xv + DVector::from_column_slice(v);
         let u = self.net.forward(y.as_slice());
         let uv = DVector::from_column_slice(&u);
-        let next = &self.plant.a * &xv + &self.plant.b * uv + &self.plant.c + DVector::from_column_slice(w);
+        let next = &self.plant.a * &xv
+            + &self.plant.b * uv
+            + &self.plant.c
+            + DVector::from_column_slice(w);
         (u, next.as_slice().to_vec())
     }
 
@@ -136,7 +147,11 @@ impl ClosedLoop {
 
     /// `A X + B U + c + W` in interval arithmetic.
     fn push_control_box(&self, x: &IBox, u: &IBox) -> IBox {
-        affine_image(&self.dyn_xuw, &self.plant.c, &x.product(u).product(&self.plant.w))
+        affine_image(
+            &self.dyn_xuw,
+            &self.plant.c,
+            &x.product(u).product(&self.plant.w),
+        )
     }
 
     /// Reach-LP with box facets (the closed form of the tutorial's Lemma on
@@ -163,8 +178,15 @@ impl ClosedLoop {
             })
             .collect();
         let p = self.plant.obs.ncols();
-        let control = analysis.upper(spec).through_affine(&self.obs_xvw, &DVector::zeros(p), &abs_xi);
-        let direct = LinearUpper::of_spec(self.facets.clone()).through_affine(&self.dyn_xvw, &self.plant.c, &abs_xi);
+        let control =
+            analysis
+                .upper(spec)
+                .through_affine(&self.obs_xvw, &DVector::zeros(p), &abs_xi);
+        let direct = LinearUpper::of_spec(self.facets.clone()).through_affine(
+            &self.dyn_xvw,
+            &self.plant.c,
+            &abs_xi,
+        );
         let total = direct.add(&control, &abs_xi);
         let ub: Vec<f64> = total
             .concretize(&xi)

@@ -30,12 +30,20 @@ impl LinearUpper {
     /// The identity bound `sᵣ ≤ Fᵣ z` for a specification matrix `F`.
     pub fn of_spec(f: DMatrix<f64>) -> LinearUpper {
         let k = f.nrows();
-        LinearUpper { coef: f, offset: vec![0.0; k] }
+        LinearUpper {
+            coef: f,
+            offset: vec![0.0; k],
+        }
     }
 
     /// Substitute `z = W z' + b` (exactly), where `|z'| ≤ abs_in` element-wise.
     /// The product `coef · W` is rounded; its error is added to the offsets.
-    pub fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, abs_in: &[f64]) -> LinearUpper {
+    pub fn through_affine(
+        &self,
+        w: &DMatrix<f64>,
+        b: &DVector<f64>,
+        abs_in: &[f64],
+    ) -> LinearUpper {
         let coef = &self.coef * w;
         // |W|·|z'|max, rounded up (all terms non-negative)
         let wz: Vec<f64> = (0..w.nrows())
@@ -60,7 +68,11 @@ impl LinearUpper {
         let offset = (0..coef.nrows())
             .map(|r| {
                 let row: Vec<f64> = coef.row(r).iter().copied().collect();
-                sum_upper([self.offset[r], other.offset[r], slack(2.0 * U, &row, abs_in)])
+                sum_upper([
+                    self.offset[r],
+                    other.offset[r],
+                    slack(2.0 * U, &row, abs_in),
+                ])
             })
             .collect();
         LinearUpper { coef, offset }
@@ -153,7 +165,11 @@ impl<'a> Analysis<'a> {
 
     /// Bounds of the network output (IBP, or CROWN intersected with IBP).
     pub fn output_box(&self, mode: Mode) -> IBox {
-        let ibp = self.boxes.last().cloned().unwrap_or_else(|| self.boxes[0].clone());
+        let ibp = self
+            .boxes
+            .last()
+            .cloned()
+            .unwrap_or_else(|| self.boxes[0].clone());
         if mode == Mode::Ibp {
             return ibp;
         }
@@ -196,7 +212,11 @@ fn through_relaxation(bound: &LinearUpper, rel: &[Relax], abs_in: &[f64]) -> Lin
         terms.push(bound.offset[r]);
         for (j, rl) in rel.iter().enumerate() {
             let l = bound.coef[(r, j)];
-            let (a, b) = if l >= 0.0 { (rl.au, rl.bu) } else { (rl.al, rl.bl) };
+            let (a, b) = if l >= 0.0 {
+                (rl.au, rl.bu)
+            } else {
+                (rl.al, rl.bl)
+            };
             coef[(r, j)] = l * a;
             if l != 0.0 {
                 terms.push(l * b);

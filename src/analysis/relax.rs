@@ -54,18 +54,37 @@ fn range(act: Activation) -> (f64, f64) {
 
 fn relax_relu(l: f64, u: f64) -> Relax {
     if u <= 0.0 {
-        Relax { al: 0.0, bl: 0.0, au: 0.0, bu: 0.0 }
+        Relax {
+            al: 0.0,
+            bl: 0.0,
+            au: 0.0,
+            bu: 0.0,
+        }
     } else if l >= 0.0 {
-        Relax { al: 1.0, bl: 0.0, au: 1.0, bu: 0.0 }
+        Relax {
+            al: 1.0,
+            bl: 0.0,
+            au: 1.0,
+            bu: 0.0,
+        }
     } else {
         // Upper: the chord through (l, 0) and (u, u). relu(z) − αz is convex, so its
         // supremum over [l, u] is at an endpoint, whatever rounding α carries.
         let a = u / (u - l);
-        let a = if a.is_finite() { a.clamp(0.0, 1.0) } else { 0.0 };
+        let a = if a.is_finite() {
+            a.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let bu = gap_upper(0.0, 0.0, a, l).max(gap_upper(u, 0.0, a, u));
         // Lower: the adaptive choice of CROWN (slope 1 if the positive side is larger).
         let al = if u >= -l { 1.0 } else { 0.0 };
-        Relax { al, bl: 0.0, au: a, bu }
+        Relax {
+            al,
+            bl: 0.0,
+            au: a,
+            bu,
+        }
     }
 }
 
@@ -187,7 +206,12 @@ fn inf_gap(act: Activation, a: f64, l: f64, u: f64) -> f64 {
 fn relax_smooth(act: Activation, l: f64, u: f64) -> Relax {
     let (min, max) = range(act);
     if !(l.is_finite() && u.is_finite()) {
-        return Relax { al: 0.0, bl: min, au: 0.0, bu: max };
+        return Relax {
+            al: 0.0,
+            bl: min,
+            au: 0.0,
+            bu: max,
+        };
     }
     let (fl, _) = value(act, l);
     let (fu, _) = value(act, u);
@@ -235,8 +259,14 @@ mod tests {
                         let z = l + (u - l) * (k as f64 / 400.0);
                         let f = act.eval(z);
                         let tol = 1e-14;
-                        assert!(r.al * z + r.bl <= f + tol, "{act:?} lower at {z} on [{l},{u}]: {r:?}");
-                        assert!(r.au * z + r.bu >= f - tol, "{act:?} upper at {z} on [{l},{u}]: {r:?}");
+                        assert!(
+                            r.al * z + r.bl <= f + tol,
+                            "{act:?} lower at {z} on [{l},{u}]: {r:?}"
+                        );
+                        assert!(
+                            r.au * z + r.bu >= f - tol,
+                            "{act:?} upper at {z} on [{l},{u}]: {r:?}"
+                        );
                     }
                 }
             }

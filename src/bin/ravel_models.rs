@@ -23,7 +23,9 @@ fn lqr(a: &DMatrix<f64>, b: &DMatrix<f64>, q: &DMatrix<f64>, r: &DMatrix<f64>) -
     let mut p = q.clone();
     for _ in 0..5000 {
         let btp = b.transpose() * &p;
-        let inv = (r + &btp * b).try_inverse().expect("R + BᵀPB is invertible for R > 0");
+        let inv = (r + &btp * b)
+            .try_inverse()
+            .expect("R + BᵀPB is invertible for R > 0");
         let next = q + a.transpose() * &p * a - a.transpose() * &p * b * &inv * &btp * a;
         let done = (&next - &p).amax() < 1e-12;
         p = next;
@@ -48,7 +50,9 @@ impl Mlp {
         for k in 0..sizes.len() - 1 {
             let (n_in, n_out) = (sizes[k], sizes[k + 1]);
             let scale = (6.0 / n_in as f64).sqrt();
-            w.push(DMatrix::from_fn(n_out, n_in, |_, _| rng.uniform(-scale, scale) * 0.5));
+            w.push(DMatrix::from_fn(n_out, n_in, |_, _| {
+                rng.uniform(-scale, scale) * 0.5
+            }));
             b.push(DVector::from_fn(n_out, |_, _| rng.uniform(-0.1, 0.1)));
         }
         Mlp { w, b, act }
@@ -72,7 +76,14 @@ impl Mlp {
     }
 
     /// Adam on mean squared error over mini-batches.
-    fn train(&mut self, xs: &[DVector<f64>], ys: &[DVector<f64>], steps: usize, lr: f64, rng: &mut Rng) {
+    fn train(
+        &mut self,
+        xs: &[DVector<f64>],
+        ys: &[DVector<f64>],
+        steps: usize,
+        lr: f64,
+        rng: &mut Rng,
+    ) {
         let layers = self.w.len();
         let mut mw: Vec<DMatrix<f64>> = self.w.iter().map(|w| w.map(|_| 0.0)).collect();
         let mut vw = mw.clone();
@@ -89,7 +100,11 @@ impl Mlp {
                 let mut zs = Vec::new();
                 for k in 0..layers {
                     let z = &self.w[k] * hs.last().expect("input") + &self.b[k];
-                    let h = if k + 1 < layers { z.map(|v| self.act.eval(v)) } else { z.clone() };
+                    let h = if k + 1 < layers {
+                        z.map(|v| self.act.eval(v))
+                    } else {
+                        z.clone()
+                    };
                     zs.push(z);
                     hs.push(h);
                 }
@@ -120,7 +135,10 @@ impl Mlp {
     fn network(&self) -> Network {
         let mut layers = Vec::new();
         for k in 0..self.w.len() {
-            layers.push(Layer::Affine { w: self.w[k].map(|v| v as f32 as f64), b: self.b[k].map(|v| v as f32 as f64) });
+            layers.push(Layer::Affine {
+                w: self.w[k].map(|v| v as f32 as f64),
+                b: self.b[k].map(|v| v as f32 as f64),
+            });
             if k + 1 < self.w.len() {
                 layers.push(Layer::Act(self.act));
             }
@@ -130,10 +148,17 @@ impl Mlp {
 
     fn mse(&self, xs: &[DVector<f64>], ys: &[DVector<f64>]) -> f64 {
         let net = self.network();
-        let total: f64 = xs.iter().zip(ys).map(|(x, y)| {
-            let o = net.forward(x.as_slice());
-            o.iter().zip(y.iter()).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
-        }).sum();
+        let total: f64 = xs
+            .iter()
+            .zip(ys)
+            .map(|(x, y)| {
+                let o = net.forward(x.as_slice());
+                o.iter()
+                    .zip(y.iter())
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>()
+            })
+            .sum();
         total / xs.len() as f64
     }
 }
@@ -159,13 +184,23 @@ fn train(task: &Task) -> Network {
     let k = lqr(&task.a, &task.b, &task.q, &task.r);
     let mut rng = Rng::new(task.seed);
     let xs: Vec<DVector<f64>> = (0..task.samples)
-        .map(|_| DVector::from_iterator(task.region.len(), task.region.iter().map(|(l, h)| rng.uniform(*l, *h))))
+        .map(|_| {
+            DVector::from_iterator(
+                task.region.len(),
+                task.region.iter().map(|(l, h)| rng.uniform(*l, *h)),
+            )
+        })
         .collect();
     let ys: Vec<DVector<f64>> = xs
         .iter()
         .map(|x| {
             let u = &task.u_eq - &k * x;
-            DVector::from_iterator(u.len(), u.iter().enumerate().map(|(i, v)| v.clamp(task.u_lo[i], task.u_hi[i])))
+            DVector::from_iterator(
+                u.len(),
+                u.iter()
+                    .enumerate()
+                    .map(|(i, v)| v.clamp(task.u_lo[i], task.u_hi[i])),
+            )
         })
         .collect();
     let mut sizes = vec![task.a.nrows()];
@@ -173,7 +208,12 @@ fn train(task: &Task) -> Network {
     sizes.push(task.b.ncols());
     let mut mlp = Mlp::new(&sizes, task.act, &mut rng);
     mlp.train(&xs, &ys, task.steps, 3e-3, &mut rng);
-    eprintln!("{}: LQR gain {:?}, imitation MSE {:.2e}", task.name, k.as_slice(), mlp.mse(&xs, &ys));
+    eprintln!(
+        "{}: LQR gain {:?}, imitation MSE {:.2e}",
+        task.name,
+        k.as_slice(),
+        mlp.mse(&xs, &ys)
+    );
     mlp.network()
 }
 
@@ -226,12 +266,32 @@ fn main() {
     };
     let di_net = train(&di);
     let n = di_net.outputs();
-    write(root, "double_integrator.onnx", encode(&di_net, Storage::RawF32, false).finish(n));
+    write(
+        root,
+        "double_integrator.onnx",
+        encode(&di_net, Storage::RawF32, false).finish(n),
+    );
     // the same network with its weights in an external data file, as current PyTorch writes them
-    write(root, "double_integrator_external.onnx", encode_into(GraphBuilder::new(2, Storage::External).external_file("double_integrator_external.onnx.data"), &di_net, false).finish(n));
+    write(
+        root,
+        "double_integrator_external.onnx",
+        encode_into(
+            GraphBuilder::new(2, Storage::External)
+                .external_file("double_integrator_external.onnx.data"),
+            &di_net,
+            false,
+        )
+        .finish(n),
+    );
 
     // a tanh controller for the noisy output-feedback loop, with input normalisation nodes
-    let di_tanh = Task { name: "double_integrator_tanh", hidden: vec![8, 8], act: Activation::Tanh, seed: 2, ..di };
+    let di_tanh = Task {
+        name: "double_integrator_tanh",
+        hidden: vec![8, 8],
+        act: Activation::Tanh,
+        seed: 2,
+        ..di
+    };
     let tanh_net = train(&di_tanh);
     let mut g = GraphBuilder::new(2, Storage::FloatData);
     // (y - 0) / 1 normalisation, written out the way exporters do
@@ -263,9 +323,24 @@ fn main() {
         q: DMatrix::from_diagonal(&DVector::from_column_slice(&[1.0, 1.0, 1.0, 0.5, 0.5, 0.5])),
         r: DMatrix::from_diagonal(&DVector::from_column_slice(&[2.0, 2.0, 0.5])),
         u_eq: DVector::from_column_slice(&[0.0, 0.0, g0]),
-        u_lo: vec![-std::f64::consts::PI / 9.0, -std::f64::consts::PI / 9.0, 0.0],
-        u_hi: vec![std::f64::consts::PI / 9.0, std::f64::consts::PI / 9.0, 2.0 * g0],
-        region: vec![(3.0, 6.0), (3.0, 6.0), (1.5, 4.0), (-0.5, 1.5), (-1.0, 1.0), (-1.0, 1.0)],
+        u_lo: vec![
+            -std::f64::consts::PI / 9.0,
+            -std::f64::consts::PI / 9.0,
+            0.0,
+        ],
+        u_hi: vec![
+            std::f64::consts::PI / 9.0,
+            std::f64::consts::PI / 9.0,
+            2.0 * g0,
+        ],
+        region: vec![
+            (3.0, 6.0),
+            (3.0, 6.0),
+            (1.5, 4.0),
+            (-0.5, 1.5),
+            (-1.0, 1.0),
+            (-1.0, 1.0),
+        ],
         hidden: vec![32, 32],
         act: Activation::Relu,
         samples: 6000,
@@ -273,28 +348,70 @@ fn main() {
         seed: 3,
     };
     let quad_net = train(&quad);
-    write(root, "quadrotor.onnx", encode(&quad_net, Storage::RawF32, true).finish(3));
+    write(
+        root,
+        "quadrotor.onnx",
+        encode(&quad_net, Storage::RawF32, true).finish(3),
+    );
 
     // invalid models, one per loader diagnostic
     let inv = root.join("invalid");
-    fs::write(inv.join("not_a_model.onnx"), b"this is a text file, not a protobuf\n").expect("write");
+    fs::write(
+        inv.join("not_a_model.onnx"),
+        b"this is a text file, not a protobuf\n",
+    )
+    .expect("write");
     let mut nan = di_net.clone();
     if let Some(Layer::Affine { w, .. }) = nan.layers.get_mut(2) {
         w[(1, 3)] = f64::NAN;
     }
-    write(&inv, "nan_weights.onnx", encode(&nan, Storage::RawF32, false).finish(1));
+    write(
+        &inv,
+        "nan_weights.onnx",
+        encode(&nan, Storage::RawF32, false).finish(1),
+    );
     let mut g = encode(&di_net, Storage::RawF32, false);
-    g.node("Softmax", &[], vec![AttributeProto { name: Some("axis".into()), i: Some(1), r#type: Some(2), ..Default::default() }]);
+    g.node(
+        "Softmax",
+        &[],
+        vec![AttributeProto {
+            name: Some("axis".into()),
+            i: Some(1),
+            r#type: Some(2),
+            ..Default::default()
+        }],
+    );
     let _ = NodeProto::default();
     write(&inv, "softmax_head.onnx", g.finish(1));
-    let three = Network::new(3, vec![Layer::Affine { w: DMatrix::from_element(1, 3, 0.5), b: DVector::zeros(1) }]);
-    write(&inv, "three_inputs.onnx", encode(&three, Storage::RawF32, false).finish(1));
+    let three = Network::new(
+        3,
+        vec![Layer::Affine {
+            w: DMatrix::from_element(1, 3, 0.5),
+            b: DVector::zeros(1),
+        }],
+    );
+    write(
+        &inv,
+        "three_inputs.onnx",
+        encode(&three, Storage::RawF32, false).finish(1),
+    );
     // declares 2 inputs but its first layer reads 3
-    let wide = Network::new(2, vec![Layer::Affine { w: DMatrix::from_element(1, 3, 0.5), b: DVector::zeros(1) }]);
+    let wide = Network::new(
+        2,
+        vec![Layer::Affine {
+            w: DMatrix::from_element(1, 3, 0.5),
+            b: DVector::zeros(1),
+        }],
+    );
     let mut g = encode(&wide, Storage::RawF32, false);
     g.declare_input(2);
     write(&inv, "inconsistent_shapes.onnx", g.finish(1));
-    let (model, _) = encode_into(GraphBuilder::new(2, Storage::External).external_file("missing.onnx.data"), &di_net, false).finish(1);
+    let (model, _) = encode_into(
+        GraphBuilder::new(2, Storage::External).external_file("missing.onnx.data"),
+        &di_net,
+        false,
+    )
+    .finish(1);
     fs::write(inv.join("missing_external_data.onnx"), model).expect("write");
     eprintln!("models written under {}", root.display());
 }

@@ -43,8 +43,14 @@ fn value_info(name: &str, dims: &[Option<i64>]) -> ValueInfoProto {
                     dim: dims
                         .iter()
                         .map(|d| match d {
-                            Some(v) => Dimension { dim_value: Some(*v), dim_param: None },
-                            None => Dimension { dim_value: None, dim_param: Some("batch".into()) },
+                            Some(v) => Dimension {
+                                dim_value: Some(*v),
+                                dim_param: None,
+                            },
+                            None => Dimension {
+                                dim_value: None,
+                                dim_param: Some("batch".into()),
+                            },
                         })
                         .collect(),
                 }),
@@ -54,11 +60,21 @@ fn value_info(name: &str, dims: &[Option<i64>]) -> ValueInfoProto {
 }
 
 fn int_attr(name: &str, v: i64) -> AttributeProto {
-    AttributeProto { name: Some(name.into()), i: Some(v), r#type: Some(2), ..Default::default() }
+    AttributeProto {
+        name: Some(name.into()),
+        i: Some(v),
+        r#type: Some(2),
+        ..Default::default()
+    }
 }
 
 fn float_attr(name: &str, v: f32) -> AttributeProto {
-    AttributeProto { name: Some(name.into()), f: Some(v), r#type: Some(1), ..Default::default() }
+    AttributeProto {
+        name: Some(name.into()),
+        f: Some(v),
+        r#type: Some(1),
+        ..Default::default()
+    }
 }
 
 /// The entries of `m` in row-major order (ONNX's layout).
@@ -100,11 +116,20 @@ impl GraphBuilder {
     /// Add an initializer with row-major values.
     pub fn constant(&mut self, stem: &str, dims: &[usize], values: &[f64]) -> String {
         let name = self.fresh(stem);
-        let mut t = TensorProto { dims: dims.iter().map(|d| *d as i64).collect(), name: Some(name.clone()), ..Default::default() };
+        let mut t = TensorProto {
+            dims: dims.iter().map(|d| *d as i64).collect(),
+            name: Some(name.clone()),
+            ..Default::default()
+        };
         match self.storage {
             Storage::RawF32 => {
                 t.data_type = Some(dtype::FLOAT);
-                t.raw_data = Some(values.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect());
+                t.raw_data = Some(
+                    values
+                        .iter()
+                        .flat_map(|v| (*v as f32).to_le_bytes())
+                        .collect(),
+                );
             }
             Storage::FloatData => {
                 t.data_type = Some(dtype::FLOAT);
@@ -120,8 +145,14 @@ impl GraphBuilder {
             }
             Storage::External => {
                 t.data_type = Some(dtype::FLOAT);
-                let bytes: Vec<u8> = values.iter().flat_map(|v| (*v as f32).to_le_bytes()).collect();
-                let entry = |k: &str, v: String| StringStringEntryProto { key: Some(k.into()), value: Some(v) };
+                let bytes: Vec<u8> = values
+                    .iter()
+                    .flat_map(|v| (*v as f32).to_le_bytes())
+                    .collect();
+                let entry = |k: &str, v: String| StringStringEntryProto {
+                    key: Some(k.into()),
+                    value: Some(v),
+                };
                 t.external_data = vec![
                     entry("location", self.external_name.clone()),
                     entry("offset", self.external.len().to_string()),
@@ -141,7 +172,14 @@ impl GraphBuilder {
         let mut input = vec![self.current.clone()];
         input.extend(extra.iter().cloned());
         let name = self.fresh(op);
-        self.nodes.push(NodeProto { input, output: vec![out.clone()], name: Some(name), op_type: Some(op.into()), attribute: attrs, domain: None });
+        self.nodes.push(NodeProto {
+            input,
+            output: vec![out.clone()],
+            name: Some(name),
+            op_type: Some(op.into()),
+            attribute: attrs,
+            domain: None,
+        });
         self.current = out;
     }
 
@@ -150,7 +188,15 @@ impl GraphBuilder {
         let wt = row_major(w);
         let wn = self.constant("weight", &[w.nrows(), w.ncols()], &wt);
         let bn = self.constant("bias", &[b.len()], b.as_slice());
-        self.node("Gemm", &[wn, bn], vec![float_attr("alpha", 1.0), float_attr("beta", 1.0), int_attr("transB", 1)]);
+        self.node(
+            "Gemm",
+            &[wn, bn],
+            vec![
+                float_attr("alpha", 1.0),
+                float_attr("beta", 1.0),
+                int_attr("transB", 1),
+            ],
+        );
     }
 
     /// `MatMul` by `Wᵀ` (the Keras form, weights stored `in × out`), then `Add` of the bias.
@@ -188,7 +234,10 @@ impl GraphBuilder {
             producer_name: Some("ravel-models".into()),
             producer_version: Some(env!("CARGO_PKG_VERSION").into()),
             graph: Some(graph),
-            opset_import: vec![OperatorSetIdProto { domain: Some(String::new()), version: Some(17) }],
+            opset_import: vec![OperatorSetIdProto {
+                domain: Some(String::new()),
+                version: Some(17),
+            }],
         };
         (model.encode_to_vec(), self.external)
     }

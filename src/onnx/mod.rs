@@ -55,7 +55,11 @@ pub struct OnnxError {
 }
 
 fn err(kind: OnnxErrorKind, message: impl Into<String>, hint: impl Into<String>) -> OnnxError {
-    OnnxError { kind, message: message.into(), hint: hint.into() }
+    OnnxError {
+        kind,
+        message: message.into(),
+        hint: hint.into(),
+    }
 }
 
 /// A controller loaded from ONNX: the network and the declared input and output sizes.
@@ -72,7 +76,9 @@ pub struct Controller {
 /// The `location`s of external-data files referenced by the model, so the caller can read them.
 /// Undecodable bytes give an empty list (the error is reported by [`load`]).
 pub fn external_locations(bytes: &[u8]) -> Vec<String> {
-    let Ok(model) = ModelProto::decode(bytes) else { return Vec::new() };
+    let Ok(model) = ModelProto::decode(bytes) else {
+        return Vec::new();
+    };
     let mut out = Vec::new();
     let mut visit = |t: &TensorProto| {
         if t.data_location == Some(1) {
@@ -111,7 +117,10 @@ fn node_label(n: &NodeProto) -> String {
     let op = n.op_type.clone().unwrap_or_default();
     match n.name.as_deref() {
         Some(name) if !name.is_empty() => format!("node '{name}' ({op})"),
-        _ => format!("the {op} node producing '{}'", n.output.first().cloned().unwrap_or_default()),
+        _ => format!(
+            "the {op} node producing '{}'",
+            n.output.first().cloned().unwrap_or_default()
+        ),
     }
 }
 
@@ -125,23 +134,29 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
     let mut dims = Vec::with_capacity(t.dims.len());
     for &d in &t.dims {
         if d < 0 {
-            return Err(err(OnnxErrorKind::Malformed, format!("tensor '{name}' has a negative dimension {d}"), "re-export the model"));
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("tensor '{name}' has a negative dimension {d}"),
+                "re-export the model",
+            ));
         }
         dims.push(d as usize);
     }
     let numel: usize = dims.iter().product();
     let dt = t.data_type.unwrap_or(0);
-    let width = match dt {
-        dtype::FLOAT | dtype::INT32 => 4,
-        dtype::DOUBLE | dtype::INT64 => 8,
-        other => {
-            return Err(err(
+    let width =
+        match dt {
+            dtype::FLOAT | dtype::INT32 => 4,
+            dtype::DOUBLE | dtype::INT64 => 8,
+            other => return Err(err(
                 OnnxErrorKind::Unsupported,
-                format!("tensor '{name}' has ONNX data type {other} ({}), which ravel does not read", dtype_name(other)),
+                format!(
+                    "tensor '{name}' has ONNX data type {other} ({}), which ravel does not read",
+                    dtype_name(other)
+                ),
                 "export the weights as float32 or float64",
-            ))
-        }
-    };
+            )),
+        };
     let raw: Option<Vec<u8>> = if t.data_location == Some(1) {
         Some(read_external(t, &name, external)?)
     } else {
@@ -152,7 +167,12 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
             if bytes.len() != numel * width {
                 return Err(err(
                     OnnxErrorKind::Malformed,
-                    format!("tensor '{name}' has {} bytes of data but its shape {:?} needs {}", bytes.len(), dims, numel * width),
+                    format!(
+                        "tensor '{name}' has {} bytes of data but its shape {:?} needs {}",
+                        bytes.len(),
+                        dims,
+                        numel * width
+                    ),
                     "re-export the model",
                 ));
             }
@@ -161,8 +181,12 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
                 .map(|c| match dt {
                     dtype::FLOAT => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
                     dtype::INT32 => i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
-                    dtype::DOUBLE => f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]),
-                    _ => i64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f64,
+                    dtype::DOUBLE => {
+                        f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])
+                    }
+                    _ => {
+                        i64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f64
+                    }
                 })
                 .collect()
         }
@@ -176,7 +200,11 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
     if data.len() != numel {
         return Err(err(
             OnnxErrorKind::Malformed,
-            format!("tensor '{name}' has {} values but its shape {:?} needs {numel}", data.len(), dims),
+            format!(
+                "tensor '{name}' has {} values but its shape {:?} needs {numel}",
+                data.len(),
+                dims
+            ),
             "re-export the model",
         ));
     }
@@ -194,7 +222,11 @@ fn dtype_name(d: i32) -> &'static str {
     }
 }
 
-fn read_external(t: &TensorProto, name: &str, external: &ExternalFiles) -> Result<Vec<u8>, OnnxError> {
+fn read_external(
+    t: &TensorProto,
+    name: &str,
+    external: &ExternalFiles,
+) -> Result<Vec<u8>, OnnxError> {
     let mut location = None;
     let (mut offset, mut length) = (0usize, None);
     for e in &t.external_data {
@@ -207,7 +239,11 @@ fn read_external(t: &TensorProto, name: &str, external: &ExternalFiles) -> Resul
         }
     }
     let Some(location) = location else {
-        return Err(err(OnnxErrorKind::ExternalData, format!("tensor '{name}' is external but has no location"), "re-export the model with its data file"));
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!("tensor '{name}' is external but has no location"),
+            "re-export the model with its data file",
+        ));
     };
     let bytes = match external.get(&location) {
         Some(Ok(b)) => b,
@@ -249,7 +285,10 @@ fn attr_i(n: &NodeProto, name: &str, default: i64) -> i64 {
 }
 
 fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
-    attr(n, name).and_then(|a| a.f).map(|f| f as f64).unwrap_or(default)
+    attr(n, name)
+        .and_then(|a| a.f)
+        .map(|f| f as f64)
+        .unwrap_or(default)
 }
 
 /// The ops ravel accepts, for hints.
@@ -267,7 +306,11 @@ impl Lowering {
     /// Split a binary node's inputs into (const, is_const_first).
     fn const_operand(&self, n: &NodeProto) -> Result<(Tensor, bool), OnnxError> {
         if n.input.len() != 2 {
-            return Err(err(OnnxErrorKind::Malformed, format!("{} needs two inputs", node_label(n)), "re-export the model"));
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} needs two inputs", node_label(n)),
+                "re-export the model",
+            ));
         }
         let (a, b) = (&n.input[0], &n.input[1]);
         if a == &self.current {
@@ -288,7 +331,11 @@ impl Lowering {
 
     fn width(&self) -> Result<usize, OnnxError> {
         self.width.ok_or_else(|| {
-            err(OnnxErrorKind::Malformed, "the input size is unknown before the first element-wise op", "give the graph input a static shape")
+            err(
+                OnnxErrorKind::Malformed,
+                "the input size is unknown before the first element-wise op",
+                "give the graph input a static shape",
+            )
         })
     }
 
@@ -302,7 +349,11 @@ impl Lowering {
         } else {
             Err(err(
                 OnnxErrorKind::Malformed,
-                format!("{} uses a constant of {} elements on a value of width {w}", node_label(n), t.data.len()),
+                format!(
+                    "{} uses a constant of {} elements on a value of width {w}",
+                    node_label(n),
+                    t.data.len()
+                ),
                 "the constant must be a scalar or have one entry per element",
             ))
         }
@@ -326,17 +377,28 @@ impl Lowering {
 
     fn node(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
         let op = n.op_type.clone().unwrap_or_default();
-        if n.domain.as_deref().is_some_and(|d| !d.is_empty() && d != "ai.onnx") {
+        if n.domain
+            .as_deref()
+            .is_some_and(|d| !d.is_empty() && d != "ai.onnx")
+        {
             return Err(err(
                 OnnxErrorKind::Unsupported,
-                format!("{} is in operator domain '{}'", node_label(n), n.domain.clone().unwrap_or_default()),
+                format!(
+                    "{} is in operator domain '{}'",
+                    node_label(n),
+                    n.domain.clone().unwrap_or_default()
+                ),
                 format!("ravel supports the default ONNX domain: {SUPPORTED_OPS}"),
             ));
         }
         let out = n.output.first().cloned().unwrap_or_default();
         if op == "Constant" {
             let t = attr(n, "value").and_then(|a| a.t.as_ref()).ok_or_else(|| {
-                err(OnnxErrorKind::Unsupported, format!("{} has no tensor 'value'", node_label(n)), "use a tensor-valued Constant")
+                err(
+                    OnnxErrorKind::Unsupported,
+                    format!("{} has no tensor 'value'", node_label(n)),
+                    "use a tensor-valued Constant",
+                )
             })?;
             let t = tensor_values(t, &ExternalFiles::new())?;
             check_finite(&format!("constant '{out}'"), &t)?;
@@ -348,27 +410,54 @@ impl Lowering {
         if !uses_current {
             return Err(err(
                 OnnxErrorKind::Unsupported,
-                format!("{} does not consume the running value '{}'", node_label(n), self.current),
+                format!(
+                    "{} does not consume the running value '{}'",
+                    node_label(n),
+                    self.current
+                ),
                 "export a plain feed-forward network on one input (constant folding on)",
             ));
         }
         match op.as_str() {
             "Gemm" => {
                 if first != self.current || attr_i(n, "transA", 0) != 0 {
-                    return Err(err(OnnxErrorKind::Unsupported, format!("{} must have the data as its first input and transA = 0", node_label(n)), "re-export with the input as A"));
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} must have the data as its first input and transA = 0",
+                            node_label(n)
+                        ),
+                        "re-export with the input as A",
+                    ));
                 }
                 let bname = n.input.get(1).cloned().unwrap_or_default();
                 let bt = self.consts.get(&bname).cloned().ok_or_else(|| {
-                    err(OnnxErrorKind::Unsupported, format!("{} has a non-constant weight '{bname}'", node_label(n)), "weights must be initializers")
+                    err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} has a non-constant weight '{bname}'", node_label(n)),
+                        "weights must be initializers",
+                    )
                 })?;
                 if bt.dims.len() != 2 {
-                    return Err(err(OnnxErrorKind::Malformed, format!("{} has weight of shape {:?}, expected 2-D", node_label(n), bt.dims), "re-export the model"));
+                    return Err(err(
+                        OnnxErrorKind::Malformed,
+                        format!(
+                            "{} has weight of shape {:?}, expected 2-D",
+                            node_label(n),
+                            bt.dims
+                        ),
+                        "re-export the model",
+                    ));
                 }
                 let (r, c) = (bt.dims[0], bt.dims[1]);
                 let m = DMatrix::from_row_slice(r, c, &bt.data);
                 let alpha = attr_f(n, "alpha", 1.0);
                 let beta = attr_f(n, "beta", 1.0);
-                let mut w = if attr_i(n, "transB", 0) != 0 { m } else { m.transpose() };
+                let mut w = if attr_i(n, "transB", 0) != 0 {
+                    m
+                } else {
+                    m.transpose()
+                };
                 if alpha != 1.0 {
                     w *= alpha;
                 }
@@ -377,7 +466,11 @@ impl Lowering {
                 let mut b = DVector::zeros(outputs);
                 if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
                     let ct = self.consts.get(cname).cloned().ok_or_else(|| {
-                        err(OnnxErrorKind::Unsupported, format!("{} has a non-constant bias '{cname}'", node_label(n)), "biases must be initializers")
+                        err(
+                            OnnxErrorKind::Unsupported,
+                            format!("{} has a non-constant bias '{cname}'", node_label(n)),
+                            "biases must be initializers",
+                        )
                     })?;
                     self.width = Some(outputs);
                     b = self.broadcast(n, &ct)? * beta;
@@ -387,7 +480,14 @@ impl Lowering {
             "MatMul" => {
                 let (t, const_first) = self.const_operand(n)?;
                 if const_first || t.dims.len() != 2 {
-                    return Err(err(OnnxErrorKind::Unsupported, format!("{} must multiply the data (left) by a 2-D constant (right)", node_label(n)), "export Linear layers as x @ W"));
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} must multiply the data (left) by a 2-D constant (right)",
+                            node_label(n)
+                        ),
+                        "export Linear layers as x @ W",
+                    ));
                 }
                 let w = DMatrix::from_row_slice(t.dims[0], t.dims[1], &t.data).transpose();
                 self.expect_width(n, w.ncols())?;
@@ -405,12 +505,26 @@ impl Lowering {
                     ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
                     (_, false) => {
                         if v.iter().any(|x| *x == 0.0) {
-                            return Err(err(OnnxErrorKind::NonFinite, format!("{} divides by zero", node_label(n)), "fix the normalisation constants"));
+                            return Err(err(
+                                OnnxErrorKind::NonFinite,
+                                format!("{} divides by zero", node_label(n)),
+                                "fix the normalisation constants",
+                            ));
                         }
-                        self.push_affine(DMatrix::from_diagonal(&v.map(|x| 1.0 / x)), DVector::zeros(w));
+                        self.push_affine(
+                            DMatrix::from_diagonal(&v.map(|x| 1.0 / x)),
+                            DVector::zeros(w),
+                        );
                     }
                     (_, true) => {
-                        return Err(err(OnnxErrorKind::Unsupported, format!("{} divides a constant by the data, which is not affine", node_label(n)), "only division by constants is supported"));
+                        return Err(err(
+                            OnnxErrorKind::Unsupported,
+                            format!(
+                                "{} divides a constant by the data, which is not affine",
+                                node_label(n)
+                            ),
+                            "only division by constants is supported",
+                        ));
                     }
                 }
             }
@@ -419,13 +533,20 @@ impl Lowering {
             "Sigmoid" => self.layers.push(Layer::Act(Activation::Sigmoid)),
             "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" | "Dropout" => {
                 if first != self.current {
-                    return Err(err(OnnxErrorKind::Unsupported, format!("{} reshapes a constant", node_label(n)), "export with constant folding on"));
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} reshapes a constant", node_label(n)),
+                        "export with constant folding on",
+                    ));
                 }
             }
             other => {
                 return Err(err(
                     OnnxErrorKind::Unsupported,
-                    format!("{} uses operator '{other}', which ravel does not support", node_label(n)),
+                    format!(
+                        "{} uses operator '{other}', which ravel does not support",
+                        node_label(n)
+                    ),
                     format!("supported operators: {SUPPORTED_OPS}"),
                 ))
             }
@@ -438,7 +559,10 @@ impl Lowering {
         match self.width {
             Some(w) if w != k => Err(err(
                 OnnxErrorKind::Malformed,
-                format!("{} expects {k} inputs but receives a value of width {w}", node_label(n)),
+                format!(
+                    "{} expects {k} inputs but receives a value of width {w}",
+                    node_label(n)
+                ),
                 "the model's shapes are inconsistent: re-export it",
             )),
             _ => {
@@ -453,7 +577,10 @@ fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
     if let Some(i) = t.data.iter().position(|v| !v.is_finite()) {
         return Err(err(
             OnnxErrorKind::NonFinite,
-            format!("{what} holds a non-finite value ({}) at flat index {i}", t.data[i]),
+            format!(
+                "{what} holds a non-finite value ({}) at flat index {i}",
+                t.data[i]
+            ),
             "the training diverged or the export is corrupt; retrain or re-export",
         ));
     }
@@ -463,9 +590,19 @@ fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
 /// Decode an ONNX model and lower it to a network.
 pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxError> {
     let model = ModelProto::decode(bytes).map_err(|e| {
-        err(OnnxErrorKind::Decode, format!("the file is not a valid ONNX model ({e})"), "check that the path points to an .onnx file exported by PyTorch, Keras or similar")
+        err(
+            OnnxErrorKind::Decode,
+            format!("the file is not a valid ONNX model ({e})"),
+            "check that the path points to an .onnx file exported by PyTorch, Keras or similar",
+        )
     })?;
-    let graph = model.graph.as_ref().ok_or_else(|| err(OnnxErrorKind::Decode, "the file is not an ONNX model (it has no graph)", "check that the path points to an .onnx file"))?;
+    let graph = model.graph.as_ref().ok_or_else(|| {
+        err(
+            OnnxErrorKind::Decode,
+            "the file is not an ONNX model (it has no graph)",
+            "check that the path points to an .onnx file",
+        )
+    })?;
     let mut consts = HashMap::new();
     for t in &graph.initializer {
         let name = tensor_name(t);
@@ -473,28 +610,55 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         check_finite(&format!("initializer '{name}'"), &v)?;
         consts.insert(name, v);
     }
-    let data_inputs: Vec<_> = graph.input.iter().filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or(""))).collect();
+    let data_inputs: Vec<_> = graph
+        .input
+        .iter()
+        .filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or("")))
+        .collect();
     if data_inputs.len() != 1 {
         return Err(err(
             OnnxErrorKind::Unsupported,
-            format!("the graph has {} data inputs; ravel needs exactly one (the observation vector)", data_inputs.len()),
+            format!(
+                "the graph has {} data inputs; ravel needs exactly one (the observation vector)",
+                data_inputs.len()
+            ),
             "export the controller with a single input tensor",
         ));
     }
     let input = data_inputs[0];
-    let declared = input.r#type.as_ref().and_then(|t| t.tensor_type.as_ref()).and_then(|t| t.shape.as_ref()).map(|s| {
-        // the product of the fixed dimensions; symbolic ones (batch) count as 1
-        s.dim.iter().map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as usize).product::<usize>()
-    });
-    let mut low = Lowering { consts, current: input.name.clone().unwrap_or_default(), width: declared, layers: Vec::new() };
+    let declared = input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.shape.as_ref())
+        .map(|s| {
+            // the product of the fixed dimensions; symbolic ones (batch) count as 1
+            s.dim
+                .iter()
+                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as usize)
+                .product::<usize>()
+        });
+    let mut low = Lowering {
+        consts,
+        current: input.name.clone().unwrap_or_default(),
+        width: declared,
+        layers: Vec::new(),
+    };
     for n in &graph.node {
         low.node(n)?;
     }
-    let output = graph.output.first().and_then(|o| o.name.clone()).unwrap_or_default();
+    let output = graph
+        .output
+        .first()
+        .and_then(|o| o.name.clone())
+        .unwrap_or_default();
     if graph.output.len() != 1 || output != low.current {
         return Err(err(
             OnnxErrorKind::Unsupported,
-            format!("the graph output '{output}' is not the end of the layer chain ('{}')", low.current),
+            format!(
+                "the graph output '{output}' is not the end of the layer chain ('{}')",
+                low.current
+            ),
             "export the controller with a single output",
         ));
     }
@@ -503,9 +667,17 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         _ => None,
     });
     let Some(inputs) = inputs else {
-        return Err(err(OnnxErrorKind::Malformed, "cannot determine the input size", "give the graph input a static shape"));
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            "cannot determine the input size",
+            "give the graph input a static shape",
+        ));
     };
     let net = Network::new(inputs, low.layers);
     let outputs = net.outputs();
-    Ok(Controller { net, inputs, outputs })
+    Ok(Controller {
+        net,
+        inputs,
+        outputs,
+    })
 }

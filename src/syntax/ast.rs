@@ -84,13 +84,29 @@ pub struct System {
 #[derive(Clone, Debug, PartialEq)]
 pub enum SystemStmt {
     /// `state x[n]`
-    State { name: Spanned<String>, dim: Spanned<u64>, span: Span },
+    State {
+        name: Spanned<String>,
+        dim: Spanned<u64>,
+        span: Span,
+    },
     /// `control u[m]`
-    Control { name: Spanned<String>, dim: Spanned<u64>, span: Span },
+    Control {
+        name: Spanned<String>,
+        dim: Spanned<u64>,
+        span: Span,
+    },
     /// `NAME in box(…)`
-    Bound { name: Spanned<String>, set: Spanned<BoxSet>, span: Span },
+    Bound {
+        name: Spanned<String>,
+        set: Spanned<BoxSet>,
+        span: Span,
+    },
     /// `NAME = value`
-    Assign { name: Spanned<String>, value: Spanned<Value>, span: Span },
+    Assign {
+        name: Spanned<String>,
+        value: Spanned<Value>,
+        span: Span,
+    },
 }
 
 /// A literal value.

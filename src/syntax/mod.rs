@@ -26,15 +26,21 @@ fn span(p: &P) -> Span {
 fn rule_name(r: &Rule) -> Option<&'static str> {
     Some(match r {
         Rule::EOI => "end of file",
-        Rule::item => "a top-level item (system, controller, initial, goal, avoid, horizon, analysis)",
+        Rule::item => {
+            "a top-level item (system, controller, initial, goal, avoid, horizon, analysis)"
+        }
         Rule::system_stmt => "a system statement (state, control, NAME = value, NAME in box(…))",
         Rule::state_decl => "`state`",
         Rule::control_decl => "`control`",
         Rule::bound_decl => "`NAME in box(…)`",
         Rule::assign => "`NAME = value`",
-        Rule::analysis_stmt => "an analysis statement (propagator, partitioner, boundary, samples, seed)",
+        Rule::analysis_stmt => {
+            "an analysis statement (propagator, partitioner, boundary, samples, seed)"
+        }
         Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
-        Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => "a set: box(…) or { … }",
+        Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => {
+            "a set: box(…) or { … }"
+        }
         Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
         Rule::interval => "an interval `[lo, hi]`",
         Rule::constraint | Rule::lin_expr | Rule::first_term | Rule::term => "a linear inequality",
@@ -54,10 +60,17 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
 /// Parse a spec. Fails with one diagnostic on a syntax error, or with one per
 /// oversized integer literal.
 pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
-    let mut pairs = Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
-    let spec = pairs.next().expect("the grammar's `spec` rule always yields one pair");
+    let mut pairs =
+        Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
+    let spec = pairs
+        .next()
+        .expect("the grammar's `spec` rule always yields one pair");
     let mut b = Builder { errors: Vec::new() };
-    let items = spec.into_inner().filter(|p| p.as_rule() != Rule::EOI).map(|p| b.item(p)).collect();
+    let items = spec
+        .into_inner()
+        .filter(|p| p.as_rule() != Rule::EOI)
+        .map(|p| b.item(p))
+        .collect();
     if b.errors.is_empty() {
         Ok(Spec { items })
     } else {
@@ -70,14 +83,23 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
         pest::error::InputLocation::Pos(p) => p,
         pest::error::InputLocation::Span((s, _)) => s,
     };
-    let end = source[pos..].chars().next().map_or(pos, |c| pos + c.len_utf8());
+    let end = source[pos..]
+        .chars()
+        .next()
+        .map_or(pos, |c| pos + c.len_utf8());
     let (expected, unexpected) = match &e.variant {
-        pest::error::ErrorVariant::ParsingError { positives, negatives } => (positives.clone(), negatives.clone()),
+        pest::error::ErrorVariant::ParsingError {
+            positives,
+            negatives,
+        } => (positives.clone(), negatives.clone()),
         pest::error::ErrorVariant::CustomError { .. } => (vec![], vec![]),
     };
     let mut names: Vec<&str> = expected.iter().filter_map(rule_name).collect();
     names.dedup();
-    let found = source[pos..].split_whitespace().next().map(|t| t.chars().take(20).collect::<String>());
+    let found = source[pos..]
+        .split_whitespace()
+        .next()
+        .map(|t| t.chars().take(20).collect::<String>());
     let message = match &found {
         Some(t) => format!("unexpected `{t}`"),
         None => "unexpected end of file".to_string(),
@@ -105,9 +127,13 @@ impl Builder {
         let s = span(&p);
         let node = p.as_str().parse::<u64>().unwrap_or_else(|_| {
             self.errors.push(
-                Diagnostic::new(Code::IntegerTooLarge, s, format!("integer `{}` is too large", p.as_str()))
-                    .label("does not fit in 64 bits")
-                    .hint("use a smaller value"),
+                Diagnostic::new(
+                    Code::IntegerTooLarge,
+                    s,
+                    format!("integer `{}` is too large", p.as_str()),
+                )
+                .label("does not fit in 64 bits")
+                .hint("use a smaller value"),
             );
             0
         });
@@ -123,7 +149,10 @@ impl Builder {
     }
 
     fn ident(&mut self, p: P) -> Spanned<String> {
-        Spanned { node: p.as_str().to_string(), span: span(&p) }
+        Spanned {
+            node: p.as_str().to_string(),
+            span: span(&p),
+        }
     }
 
     fn item(&mut self, p: P) -> Item {
@@ -134,12 +163,19 @@ impl Builder {
             Rule::system => {
                 let name = self.ident(inner.next().expect("system name"));
                 let stmts = inner.map(|st| self.system_stmt(st)).collect();
-                Item::System(System { name, stmts, span: s })
+                Item::System(System {
+                    name,
+                    stmts,
+                    span: s,
+                })
             }
             Rule::controller => {
                 let lit = inner.next().expect("controller path");
                 let text = lit.as_str();
-                Item::Controller(Spanned { node: text[1..text.len() - 1].to_string(), span: span(&lit) })
+                Item::Controller(Spanned {
+                    node: text[1..text.len() - 1].to_string(),
+                    span: span(&lit),
+                })
             }
             Rule::initial | Rule::goal => {
                 let name = self.ident(inner.next().expect("set name"));
@@ -160,10 +196,22 @@ impl Builder {
                     let is_range = which.as_rule() == Rule::steps_range;
                     let mut nums = which.into_inner();
                     let a = self.integer(nums.next().expect("step")).node;
-                    let b = if is_range { self.integer(nums.next().expect("step")).node } else { a };
-                    Spanned { node: (a, b), span: ss }
+                    let b = if is_range {
+                        self.integer(nums.next().expect("step")).node
+                    } else {
+                        a
+                    };
+                    Spanned {
+                        node: (a, b),
+                        span: ss,
+                    }
                 });
-                Item::Avoid(AvoidDef { name, set, steps, span: s })
+                Item::Avoid(AvoidDef {
+                    name,
+                    set,
+                    steps,
+                    span: s,
+                })
             }
             Rule::horizon => Item::Horizon(self.integer(inner.next().expect("horizon value"))),
             Rule::analysis => {
@@ -180,17 +228,39 @@ impl Builder {
         let mut inner = p.into_inner();
         let name = self.ident(inner.next().expect("statement name"));
         match rule {
-            Rule::state_decl => SystemStmt::State { name, dim: self.integer(inner.next().expect("dim")), span: s },
-            Rule::control_decl => SystemStmt::Control { name, dim: self.integer(inner.next().expect("dim")), span: s },
+            Rule::state_decl => SystemStmt::State {
+                name,
+                dim: self.integer(inner.next().expect("dim")),
+                span: s,
+            },
+            Rule::control_decl => SystemStmt::Control {
+                name,
+                dim: self.integer(inner.next().expect("dim")),
+                span: s,
+            },
             Rule::bound_decl => {
                 let b = inner.next().expect("box");
                 let bs = span(&b);
-                SystemStmt::Bound { name, set: Spanned { node: self.box_set(b), span: bs }, span: s }
+                SystemStmt::Bound {
+                    name,
+                    set: Spanned {
+                        node: self.box_set(b),
+                        span: bs,
+                    },
+                    span: s,
+                }
             }
             Rule::assign => {
                 let v = inner.next().expect("value");
                 let vs = span(&v);
-                SystemStmt::Assign { name, value: Spanned { node: self.value(v), span: vs }, span: s }
+                SystemStmt::Assign {
+                    name,
+                    value: Spanned {
+                        node: self.value(v),
+                        span: vs,
+                    },
+                    span: s,
+                }
             }
             other => unreachable!("grammar system rule {other:?}"),
         }
@@ -207,7 +277,10 @@ impl Builder {
                 v.into_inner()
                     .map(|row| {
                         let rs = span(&row);
-                        Spanned { node: self.numbers(row), span: rs }
+                        Spanned {
+                            node: self.numbers(row),
+                            span: rs,
+                        }
                     })
                     .collect(),
             ),
@@ -232,13 +305,18 @@ impl Builder {
                 let sa = span(&a);
                 let node = match a.as_rule() {
                     Rule::box_set => SetAtom::Box(self.box_set(a)),
-                    Rule::polytope => SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect()),
+                    Rule::polytope => {
+                        SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect())
+                    }
                     other => unreachable!("grammar set rule {other:?}"),
                 };
                 Spanned { node, span: sa }
             })
             .collect();
-        Spanned { node: SetExpr { members }, span: s }
+        Spanned {
+            node: SetExpr { members },
+            span: s,
+        }
     }
 
     fn box_set(&mut self, p: P) -> BoxSet {
@@ -271,7 +349,11 @@ impl Builder {
         let mut it = p.into_inner();
         let name = self.ident(it.next().expect("name"));
         let index = self.integer(it.next().expect("index"));
-        Component { name, index, span: s }
+        Component {
+            name,
+            index,
+            span: s,
+        }
     }
 
     fn term(&mut self, p: P, sign: f64) -> (f64, Component) {
@@ -304,7 +386,11 @@ impl Builder {
                     let mut sub = part.into_inner().peekable();
                     let mut first_sign = 1.0;
                     if sub.peek().is_some_and(|q| q.as_rule() == Rule::add_op) {
-                        first_sign = if sub.next().expect("op").as_str() == "-" { -1.0 } else { 1.0 };
+                        first_sign = if sub.next().expect("op").as_str() == "-" {
+                            -1.0
+                        } else {
+                            1.0
+                        };
                     }
                     let t = sub.next().expect("term");
                     terms.push(self.term(t, first_sign));
@@ -314,7 +400,12 @@ impl Builder {
                 other => unreachable!("grammar expression rule {other:?}"),
             }
         }
-        Constraint { terms, cmp, rhs, span: s }
+        Constraint {
+            terms,
+            cmp,
+            rhs,
+            span: s,
+        }
     }
 
     fn analysis_stmt(&mut self, p: P) -> Spanned<AnalysisStmt> {
@@ -324,7 +415,9 @@ impl Builder {
         let node = match rule {
             Rule::propagator => AnalysisStmt::Propagator(self.ident(arg)),
             Rule::partitioner => match arg.as_rule() {
-                Rule::uniform => AnalysisStmt::Uniform(arg.into_inner().map(|i| self.integer(i)).collect()),
+                Rule::uniform => {
+                    AnalysisStmt::Uniform(arg.into_inner().map(|i| self.integer(i)).collect())
+                }
                 _ => AnalysisStmt::Partitioner(self.ident(arg)),
             },
             Rule::boundary => AnalysisStmt::Boundary(self.ident(arg)),

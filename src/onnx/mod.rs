@@ -144,19 +144,20 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
     }
     let numel: usize = dims.iter().product();
     let dt = t.data_type.unwrap_or(0);
-    let width =
-        match dt {
-            dtype::FLOAT | dtype::INT32 => 4,
-            dtype::DOUBLE | dtype::INT64 => 8,
-            other => return Err(err(
+    let width = match dt {
+        dtype::FLOAT | dtype::INT32 => 4,
+        dtype::DOUBLE | dtype::INT64 => 8,
+        other => {
+            return Err(err(
                 OnnxErrorKind::Unsupported,
                 format!(
                     "tensor '{name}' has ONNX data type {other} ({}), which ravel does not read",
                     dtype_name(other)
                 ),
                 "export the weights as float32 or float64",
-            )),
-        };
+            ))
+        }
+    };
     let raw: Option<Vec<u8>> = if t.data_location == Some(1) {
         Some(read_external(t, &name, external)?)
     } else {

@@ -163,7 +163,9 @@ impl ClosedLoop {
     fn reach_lp(&self, x: &IBox, y: &IBox) -> IBox {
         let n = self.states();
         let analysis = Analysis::new(&self.net, y, Mode::Crown);
-        let u_box = analysis.output_box(Mode::Crown);
+        // Only the size of u is needed here (for a rounding-error term), so the
+        // cheap IBP-propagated box suffices.
+        let u_box = analysis.output_box(Mode::Ibp);
         let xi = x.product(&self.plant.v).product(&self.plant.w);
         let abs_xi = xi.abs_max();
         let spec = &self.facets * &self.plant.b;

@@ -14,7 +14,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::relax::{image, relax, Relax};
 use crate::nn::{Layer, Network};
-use crate::num::{dot_box_lower, dot_box_upper, gamma, slack, sum_lower, sum_upper, U};
+use crate::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper, U};
 use crate::sets::IBox;
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
@@ -38,25 +38,17 @@ impl LinearUpper {
 
     /// Substitute `z = W z' + b` (exactly), where `|z'| ≤ abs_in` element-wise.
     /// The product `coef · W` is rounded; its error is added to the offsets.
-    pub fn through_affine(
-        &self,
-        w: &DMatrix<f64>,
-        b: &DVector<f64>,
-        abs_in: &[f64],
-    ) -> LinearUpper {
+    pub fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, abs_in: &[f64]) -> LinearUpper {
         let coef = &self.coef * w;
         // |W|·|z'|max, rounded up (all terms non-negative)
-        let wz: Vec<f64> = (0..w.nrows())
-            .map(|j| sum_upper((0..w.ncols()).map(|i| w[(j, i)].abs() * abs_in[i])))
-            .collect();
+        let wz: Vec<f64> = (0..w.nrows()).map(|j| sum_upper((0..w.ncols()).map(|i| w[(j, i)].abs() * abs_in[i]))).collect();
         let k = gamma(w.nrows() + 2);
         let offset = (0..self.coef.nrows())
             .map(|r| {
-                let row: Vec<f64> = self.coef.row(r).iter().copied().collect();
-                let mut terms: Vec<f64> = row.iter().zip(b.iter()).map(|(l, b)| l * b).collect();
-                terms.push(self.offset[r]);
-                terms.push(slack(k, &row, &wz));
-                sum_upper(terms)
+                let row = self.coef.row(r);
+                let err = slack_iter(k, row.iter().copied(), &wz);
+                let products = row.iter().zip(b.iter()).map(|(l, b)| l * b);
+                sum_upper(products.chain([self.offset[r], err]))
             })
             .collect();
         LinearUpper { coef, offset }
@@ -66,14 +58,7 @@ impl LinearUpper {
     pub fn add(&self, other: &LinearUpper, abs_in: &[f64]) -> LinearUpper {
         let coef = &self.coef + &other.coef;
         let offset = (0..coef.nrows())
-            .map(|r| {
-                let row: Vec<f64> = coef.row(r).iter().copied().collect();
-                sum_upper([
-                    self.offset[r],
-                    other.offset[r],
-                    slack(2.0 * U, &row, abs_in),
-                ])
-            })
+            .map(|r| sum_upper([self.offset[r], other.offset[r], slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in)]))
             .collect();
         LinearUpper { coef, offset }
     }
@@ -82,11 +67,38 @@ impl LinearUpper {
     pub fn concretize(&self, b: &IBox) -> Vec<f64> {
         (0..self.coef.nrows())
             .map(|r| {
-                let row: Vec<f64> = self.coef.row(r).iter().copied().collect();
-                sum_upper([dot_box_upper(&row, &b.lo, &b.hi), self.offset[r]])
+                let row = self.coef.row(r);
+                let terms = row.iter().zip(b.lo.iter().zip(&b.hi)).map(|(&a, (&l, &h))| if a == 0.0 { 0.0 } else if a > 0.0 { a * h } else { a * l });
+                sum_upper(terms.chain([self.offset[r]]))
             })
             .collect()
     }
+}
+
+/// `k · Σ|aᵢ|·mᵢ` rounded up: a bound on the error of rounded coefficients `a` applied to `|z| ≤ m`.
+fn slack_iter(k: f64, a: impl Iterator<Item = f64>, m: &[f64]) -> f64 {
+    let mut s = 0.0;
+    let mut n = 0usize;
+    for (a, m) in a.zip(m) {
+        if a != 0.0 {
+            s += a.abs() * m;
+        }
+        n += 1;
+    }
+    (k * s * 1.0625 + (n as f64 + 2.0) * crate::num::ETA).next_up()
+}
+
+/// The `2n × n` specification `[I; −I]`: upper bounds, then negated lower bounds.
+pub fn plus_minus_identity(n: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(2 * n, n, |r, c| {
+        if r == c {
+            1.0
+        } else if r == n + c {
+            -1.0
+        } else {
+            0.0
+        }
+    })
 }
 
 /// Certified interval image of a box under `z = W x + b`.
@@ -137,12 +149,10 @@ impl<'a> Analysis<'a> {
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     if mode == Mode::Crown && feeds_activation {
                         let n = w.nrows();
-                        let eye = DMatrix::<f64>::identity(n, n);
-                        let up = a.backward(eye.clone(), i + 1).concretize(input);
-                        let neg = a.backward(-eye, i + 1).concretize(input);
+                        let both = a.backward(plus_minus_identity(n), i + 1).concretize(input);
                         for j in 0..n {
-                            next.hi[j] = next.hi[j].min(up[j]);
-                            next.lo[j] = next.lo[j].max(-neg[j]);
+                            next.hi[j] = next.hi[j].min(both[j]);
+                            next.lo[j] = next.lo[j].max(-both[n + j]);
                         }
                     }
                     (next, Vec::new())
@@ -174,12 +184,9 @@ impl<'a> Analysis<'a> {
             return ibp;
         }
         let m = ibp.dim();
-        let eye = DMatrix::<f64>::identity(m, m);
-        let input = &self.boxes[0];
-        let up = self.upper(eye.clone()).concretize(input);
-        let neg = self.upper(-eye).concretize(input);
-        let lo = (0..m).map(|j| ibp.lo[j].max(-neg[j])).collect();
-        let hi = (0..m).map(|j| ibp.hi[j].min(up[j])).collect();
+        let both = self.upper(plus_minus_identity(m)).concretize(&self.boxes[0]);
+        let lo = (0..m).map(|j| ibp.lo[j].max(-both[m + j])).collect();
+        let hi = (0..m).map(|j| ibp.hi[j].min(both[j])).collect();
         IBox::new(lo, hi)
     }
 
@@ -222,8 +229,7 @@ fn through_relaxation(bound: &LinearUpper, rel: &[Relax], abs_in: &[f64]) -> Lin
                 terms.push(l * b);
             }
         }
-        let row: Vec<f64> = coef.row(r).iter().copied().collect();
-        terms.push(slack(2.0 * U, &row, abs_in));
+        terms.push(slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in));
         offset.push(sum_upper(terms));
     }
     LinearUpper { coef, offset }

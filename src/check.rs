@@ -682,6 +682,31 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 SystemStmt::Bound { name, set, .. } => bounds.push((name, set)),
             }
         }
+        if let (Some((xn, _)), Some((un, _)), Some(ss), Some(cs)) =
+            (&state, &control, state_span, control_span)
+        {
+            if xn == un {
+                cx.duplicate(&format!("the name `{xn}`"), ss, cs);
+            }
+        }
+        for (decl, span) in [(&state, state_span), (&control, control_span)] {
+            if let (Some((name, _)), Some(span)) = (decl, span) {
+                if name == "w" || name == "v" {
+                    cx.err(
+                        Diagnostic::new(
+                            Code::Duplicate,
+                            span,
+                            format!(
+                                "the name `{name}` is reserved for {} noise",
+                                if name == "w" { "process" } else { "sensor" }
+                            ),
+                        )
+                        .label("reserved name")
+                        .hint("`w` and `v` name the process and sensor noise; choose another name"),
+                    );
+                }
+            }
+        }
         if state_span.is_none() {
             cx.err(
                 Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")

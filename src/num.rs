@@ -19,10 +19,12 @@ pub const U: f64 = f64::EPSILON / 2.0;
 /// Smallest positive subnormal: bounds the absolute error of an underflowing product.
 pub const ETA: f64 = f64::from_bits(1);
 
-/// `γ(n) = n·u / (1 − n·u)`, the relative error factor of an `n`-term sum.
+/// An upper bound of `γ(n) = n·u / (1 − n·u)`, the relative error factor of an
+/// `n`-term sum: `1.01·n·u`, valid while `n·u ≤ 0.0099` (n below 4·10¹³), and
+/// free of the division.
 pub fn gamma(n: usize) -> f64 {
-    let nu = n as f64 * U;
-    nu / (1.0 - nu)
+    debug_assert!((n as f64) * U <= 0.0099);
+    n as f64 * (U * 1.01)
 }
 
 /// The error bound for `count` rounded operations on terms with absolute sum `abs_sum`,
@@ -107,6 +109,14 @@ pub fn gap_lower(f: f64, f_err: f64, a: f64, z: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gamma_bounds_the_textbook_factor() {
+        for n in [1usize, 2, 10, 1000, 1 << 30] {
+            let nu = n as f64 * U;
+            assert!(gamma(n) >= nu / (1.0 - nu));
+        }
+    }
 
     #[test]
     fn sum_upper_bounds_a_cancelling_sum() {

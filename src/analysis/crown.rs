@@ -38,15 +38,28 @@ impl LinearUpper {
 
     /// Substitute `z = W z' + b` (exactly), where `|z'| ≤ abs_in` element-wise.
     /// The product `coef · W` is rounded; its error is added to the offsets.
-    pub fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, abs_in: &[f64]) -> LinearUpper {
+    pub fn through_affine(
+        &self,
+        w: &DMatrix<f64>,
+        b: &DVector<f64>,
+        abs_in: &[f64],
+    ) -> LinearUpper {
+        self.through_affine_scaled(w, b, &weight_scale(w, abs_in))
+    }
+
+    /// [`LinearUpper::through_affine`] with `|W|·|z'|max` precomputed (see [`weight_scale`]).
+    pub fn through_affine_scaled(
+        &self,
+        w: &DMatrix<f64>,
+        b: &DVector<f64>,
+        wz: &[f64],
+    ) -> LinearUpper {
         let coef = &self.coef * w;
-        // |W|·|z'|max, rounded up (all terms non-negative)
-        let wz: Vec<f64> = (0..w.nrows()).map(|j| sum_upper((0..w.ncols()).map(|i| w[(j, i)].abs() * abs_in[i]))).collect();
         let k = gamma(w.nrows() + 2);
         let offset = (0..self.coef.nrows())
             .map(|r| {
                 let row = self.coef.row(r);
-                let err = slack_iter(k, row.iter().copied(), &wz);
+                let err = slack_iter(k, row.iter().copied(), wz);
                 let products = row.iter().zip(b.iter()).map(|(l, b)| l * b);
                 sum_upper(products.chain([self.offset[r], err]))
             })
@@ -58,7 +71,13 @@ impl LinearUpper {
     pub fn add(&self, other: &LinearUpper, abs_in: &[f64]) -> LinearUpper {
         let coef = &self.coef + &other.coef;
         let offset = (0..coef.nrows())
-            .map(|r| sum_upper([self.offset[r], other.offset[r], slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in)]))
+            .map(|r| {
+                sum_upper([
+                    self.offset[r],
+                    other.offset[r],
+                    slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in),
+                ])
+            })
             .collect();
         LinearUpper { coef, offset }
     }
@@ -68,11 +87,29 @@ impl LinearUpper {
         (0..self.coef.nrows())
             .map(|r| {
                 let row = self.coef.row(r);
-                let terms = row.iter().zip(b.lo.iter().zip(&b.hi)).map(|(&a, (&l, &h))| if a == 0.0 { 0.0 } else if a > 0.0 { a * h } else { a * l });
+                let terms = row
+                    .iter()
+                    .zip(b.lo.iter().zip(&b.hi))
+                    .map(|(&a, (&l, &h))| {
+                        if a == 0.0 {
+                            0.0
+                        } else if a > 0.0 {
+                            a * h
+                        } else {
+                            a * l
+                        }
+                    });
                 sum_upper(terms.chain([self.offset[r]]))
             })
             .collect()
     }
+}
+
+/// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
+pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
+    (0..w.nrows())
+        .map(|j| sum_upper((0..w.ncols()).map(|i| w[(j, i)].abs() * m[i])))
+        .collect()
 }
 
 /// `k · Σ|aᵢ|·mᵢ` rounded up: a bound on the error of rounded coefficients `a` applied to `|z| ≤ m`.
@@ -131,6 +168,8 @@ pub struct Analysis<'a> {
     boxes: Vec<IBox>,
     /// The relaxation of each activation layer (empty for affine layers).
     relax: Vec<Vec<Relax>>,
+    /// `|W|·|h|max` of each affine layer (empty for activations), for error terms.
+    scales: Vec<Vec<f64>>,
 }
 
 impl<'a> Analysis<'a> {
@@ -140,8 +179,14 @@ impl<'a> Analysis<'a> {
             net,
             boxes: vec![input.clone()],
             relax: Vec::with_capacity(net.layers.len()),
+            scales: Vec::with_capacity(net.layers.len()),
         };
         for (i, layer) in net.layers.iter().enumerate() {
+            let current = &a.boxes[i];
+            a.scales.push(match layer {
+                Layer::Affine { w, .. } => weight_scale(w, &current.abs_max()),
+                Layer::Act(_) => Vec::new(),
+            });
             let current = &a.boxes[i];
             let (next, rel) = match layer {
                 Layer::Affine { w, b } => {
@@ -184,7 +229,9 @@ impl<'a> Analysis<'a> {
             return ibp;
         }
         let m = ibp.dim();
-        let both = self.upper(plus_minus_identity(m)).concretize(&self.boxes[0]);
+        let both = self
+            .upper(plus_minus_identity(m))
+            .concretize(&self.boxes[0]);
         let lo = (0..m).map(|j| ibp.lo[j].max(-both[m + j])).collect();
         let hi = (0..m).map(|j| ibp.hi[j].min(both[j])).collect();
         IBox::new(lo, hi)
@@ -199,10 +246,11 @@ impl<'a> Analysis<'a> {
     fn backward(&self, spec: DMatrix<f64>, end: usize) -> LinearUpper {
         let mut bound = LinearUpper::of_spec(spec);
         for i in (0..end).rev() {
-            let abs_in = self.boxes[i].abs_max();
             bound = match &self.net.layers[i] {
-                Layer::Affine { w, b } => bound.through_affine(w, b, &abs_in),
-                Layer::Act(_) => through_relaxation(&bound, &self.relax[i], &abs_in),
+                Layer::Affine { w, b } => bound.through_affine_scaled(w, b, &self.scales[i]),
+                Layer::Act(_) => {
+                    through_relaxation(&bound, &self.relax[i], &self.boxes[i].abs_max())
+                }
             };
         }
         bound

@@ -53,6 +53,7 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::steps | Rule::steps_range | Rule::step_single => "`at steps [a, b]` or `at step k`",
         Rule::uniform => "`uniform [k, …]`",
         Rule::add_op => "`+` or `-`",
+        Rule::close => "`]`",
         _ => return None,
     })
 }
@@ -267,7 +268,10 @@ impl Builder {
     }
 
     fn numbers(&mut self, p: P) -> Vec<Spanned<f64>> {
-        p.into_inner().map(|n| self.number(n)).collect()
+        p.into_inner()
+            .filter(|n| n.as_rule() == Rule::number)
+            .map(|n| self.number(n))
+            .collect()
     }
 
     fn value(&mut self, p: P) -> Value {
@@ -275,6 +279,7 @@ impl Builder {
         match v.as_rule() {
             Rule::matrix => Value::Matrix(
                 v.into_inner()
+                    .filter(|row| row.as_rule() == Rule::vector)
                     .map(|row| {
                         let rs = span(&row);
                         Spanned {
@@ -426,5 +431,59 @@ impl Builder {
             other => unreachable!("grammar analysis rule {other:?}"),
         };
         Spanned { node, span: s }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn avoid_set(src: &str) -> SetExpr {
+        let spec = parse(src).unwrap_or_else(|d| panic!("{d:?}"));
+        match &spec.items[0] {
+            Item::Avoid(a) => a.set.node.clone(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn linear_terms_keep_their_signs_and_coefficients() {
+        let set = avoid_set(
+            "avoid A = { -x[0] + 2 x[1] - 0.5*x[0] >= -1e-1 } | box([0, 1]) /* block */ // line\n",
+        );
+        assert_eq!(set.members.len(), 2);
+        let SetAtom::Polytope(cs) = &set.members[0].node else {
+            panic!("polytope expected")
+        };
+        let coefs: Vec<(f64, u64)> = cs[0]
+            .terms
+            .iter()
+            .map(|(c, comp)| (*c, comp.index.node))
+            .collect();
+        assert_eq!(coefs, vec![(-1.0, 0), (2.0, 1), (-0.5, 0)]);
+        assert_eq!(cs[0].cmp, Cmp::Ge);
+        assert_eq!(cs[0].rhs.node, -0.1);
+    }
+
+    #[test]
+    fn values_and_steps() {
+        let spec = parse("system s { state x[2] control u[1] A = eye(2) B = zeros(2, 1) c = zeros(2) C = [[1e0], [.5]] }\navoid A = box(x[1] in [-1, 1]) at step 3\n").expect("parses");
+        let Item::System(sys) = &spec.items[0] else {
+            panic!("system expected")
+        };
+        assert_eq!(sys.stmts.len(), 6);
+        let Item::Avoid(a) = &spec.items[1] else {
+            panic!("avoid expected")
+        };
+        assert_eq!(a.steps.as_ref().map(|s| s.node), Some((3, 3)));
+    }
+
+    #[test]
+    fn syntax_errors_point_at_the_problem() {
+        let d = parse("horizon 5\nhorizon").expect_err("incomplete");
+        assert_eq!(d[0].code, Code::Syntax);
+        assert_eq!(d[0].span.map(|s| s.start), Some(17));
+        let d = parse("horizon 99999999999999999999").expect_err("too large");
+        assert_eq!(d[0].code, Code::IntegerTooLarge);
     }
 }

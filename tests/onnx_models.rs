@@ -99,15 +99,7 @@ fn every_storage_and_layer_form_round_trips() {
         for storage in storages {
             for keras in [false, true] {
                 let mut g = GraphBuilder::new(2, storage);
-                for layer in &net.layers {
-                    match layer {
-                        Layer::Affine { w, b } if keras => g.matmul_add(w, b),
-                        Layer::Affine { w, b } => g.gemm(w, b),
-                        Layer::Act(Activation::Relu) => g.unary("Relu"),
-                        Layer::Act(Activation::Tanh) => g.unary("Tanh"),
-                        Layer::Act(Activation::Sigmoid) => g.unary("Sigmoid"),
-                    }
-                }
+                g.network(&net, keras);
                 g.unary("Flatten");
                 g.unary("Identity");
                 let (model, data) = g.finish(1);

@@ -230,15 +230,7 @@ fn encode(net: &Network, storage: Storage, keras: bool) -> GraphBuilder {
 }
 
 fn encode_into(mut g: GraphBuilder, net: &Network, keras: bool) -> GraphBuilder {
-    for layer in &net.layers {
-        match layer {
-            Layer::Affine { w, b } if keras => g.matmul_add(w, b),
-            Layer::Affine { w, b } => g.gemm(w, b),
-            Layer::Act(Activation::Relu) => g.unary("Relu"),
-            Layer::Act(Activation::Tanh) => g.unary("Tanh"),
-            Layer::Act(Activation::Sigmoid) => g.unary("Sigmoid"),
-        }
-    }
+    g.network(net, keras);
     g
 }
 

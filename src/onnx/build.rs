@@ -5,6 +5,7 @@ use nalgebra::{DMatrix, DVector};
 use prost::Message;
 
 use super::proto::*;
+use crate::nn::{Activation, Layer, Network};
 
 /// How a builder stores tensor data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -218,6 +219,20 @@ impl GraphBuilder {
     /// A node with no extra inputs (`Relu`, `Tanh`, `Sigmoid`, `Flatten`, `Identity`, …).
     pub fn unary(&mut self, op: &str) {
         self.node(op, &[], vec![]);
+    }
+
+    /// Append every layer of `net`: affine layers as `Gemm` (PyTorch style) or,
+    /// with `keras`, as `MatMul` + `Add`; activations as their ONNX ops.
+    pub fn network(&mut self, net: &Network, keras: bool) {
+        for layer in &net.layers {
+            match layer {
+                Layer::Affine { w, b } if keras => self.matmul_add(w, b),
+                Layer::Affine { w, b } => self.gemm(w, b),
+                Layer::Act(Activation::Relu) => self.unary("Relu"),
+                Layer::Act(Activation::Tanh) => self.unary("Tanh"),
+                Layer::Act(Activation::Sigmoid) => self.unary("Sigmoid"),
+            }
+        }
     }
 
     /// Encode the model; the second value is the external-data file (empty unless used).

@@ -119,12 +119,38 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     for p in &out.properties {
         let label = format!("{} {}", p.kind, p.name);
         let why = match (p.status, p.kind) {
-            (Status::Verified, "goal") => format!("every reachable box at step {} is inside, margin {}", p.step, num(p.margin)),
-            (Status::Verified, _) => format!("reachable boxes stay clear, smallest separation {} at step {}", num(p.margin), p.step),
-            (Status::Unsure, "goal") => format!("the reachable box at step {} sticks out by {}; no sampled trajectory misses", p.step, num(-p.margin)),
-            (Status::Unsure, _) => format!("a reachable box at step {} may touch it (separation {}); no sampled trajectory enters", p.step, num(p.margin)),
-            (Status::Falsified, "goal") => format!("a trajectory ends {} outside at step {}", num(-p.margin), p.step),
-            (Status::Falsified, _) => format!("a trajectory is {} inside at step {}", num(-p.margin), p.step),
+            (Status::Verified, "goal") => format!(
+                "every reachable box at step {} is inside, margin {}",
+                p.step,
+                num(p.margin)
+            ),
+            (Status::Verified, _) => format!(
+                "reachable boxes stay clear, smallest separation {} at step {}",
+                num(p.margin),
+                p.step
+            ),
+            (Status::Unsure, "goal") => format!(
+                "the reachable box at step {} sticks out by {}; {}",
+                p.step,
+                num(-p.margin),
+                no_witness("misses")
+            ),
+            (Status::Unsure, _) => format!(
+                "a reachable box at step {} may touch it (separation {}); {}",
+                p.step,
+                num(p.margin),
+                no_witness("enters")
+            ),
+            (Status::Falsified, "goal") => format!(
+                "a trajectory ends {} outside at step {}",
+                num(-p.margin),
+                p.step
+            ),
+            (Status::Falsified, _) => format!(
+                "a trajectory is {} inside at step {}",
+                num(-p.margin),
+                p.step
+            ),
         };
         s += &format!("  {label:<width$}  {:<9}  {why}\n", p.status.as_str());
         if let Some(tr) = &p.counterexample {

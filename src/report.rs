@@ -110,6 +110,13 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         );
     }
     s += "\n  properties\n";
+    let no_witness = |what: &str| {
+        if plan.samples == 0 {
+            "no Monte Carlo samples were drawn".to_string()
+        } else {
+            format!("no sampled trajectory {what}")
+        }
+    };
     let width = out
         .properties
         .iter()

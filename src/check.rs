@@ -264,10 +264,12 @@ impl Ctx {
         v: &Spanned<Value>,
         name: &str,
         rows: usize,
-        cols: usize,
+        cols: Option<usize>,
         why: &str,
     ) -> Option<DMatrix<f64>> {
         let m = self.eval(v, name)?;
+        // `None`: any number of columns (C's column count defines the observation size)
+        let cols = cols.unwrap_or(m.cols);
         if m.is_vector && !(cols == 1 && rows == m.rows) {
             self.err(
                 Diagnostic::new(
@@ -750,7 +752,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 v,
                 "A",
                 n,
-                n,
+                Some(n),
                 &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
             )
         });
@@ -759,7 +761,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 v,
                 "B",
                 n,
-                m,
+                Some(m),
                 &format!("B is n × m: {n} states by {m} controls"),
             )
         });
@@ -768,18 +770,13 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             None => Some(DVector::zeros(n)),
         };
         let obs = match assigns.get("C") {
-            Some((v, _)) => {
-                let cols = cx.eval(v, "C").map(|mm| mm.cols);
-                cols.and_then(|p| {
-                    cx.matrix(
-                        v,
-                        "C",
-                        n,
-                        p,
-                        &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
-                    )
-                })
-            }
+            Some((v, _)) => cx.matrix(
+                v,
+                "C",
+                n,
+                None,
+                &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
+            ),
             None => Some(DMatrix::identity(n, n)),
         };
         let p = obs.as_ref().map(|o| o.ncols());

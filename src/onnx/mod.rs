@@ -454,6 +454,16 @@ impl Lowering {
                 let m = DMatrix::from_row_slice(r, c, &bt.data);
                 let alpha = attr_f(n, "alpha", 1.0);
                 let beta = attr_f(n, "beta", 1.0);
+                if !(alpha.is_finite() && beta.is_finite()) {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!(
+                            "{} has a non-finite alpha ({alpha}) or beta ({beta})",
+                            node_label(n)
+                        ),
+                        "re-export the model",
+                    ));
+                }
                 let mut w = if attr_i(n, "transB", 0) != 0 {
                     m
                 } else {

@@ -43,16 +43,17 @@ fn main() {
         ] {
             for grid in &grids {
                 checked.propagator = prop;
-                checked.partition = grid.clone();
+                checked.partitioner = ravel::lower::Partitioner::Uniform(grid.clone());
                 checked.samples = 2000;
                 let plan = ravel::lower::lower(&checked);
-                let outcome = execute(&plan);
+                let outcome = execute(&plan, &|| 0.0);
+                let cells = plan.initial.grid(grid);
                 let error = ravel::report::final_error(&outcome).unwrap_or(f64::NAN);
                 let mut runs = 0u32;
                 let start = Instant::now();
                 while start.elapsed().as_secs_f64() < 0.3 {
-                    for cell in &plan.cells {
-                        black_box(propagate_cell(&plan.closed_loop, &plan, black_box(cell)));
+                    for cell in &cells {
+                        black_box(propagate_cell(&plan, black_box(cell)));
                     }
                     runs += 1;
                 }
@@ -66,7 +67,7 @@ fn main() {
                     "{:<34} {:<16} {:>6} {:>14} {:>12.1}",
                     spec,
                     prop.name(),
-                    plan.cells.len(),
+                    cells.len(),
                     time,
                     error
                 );

@@ -182,7 +182,7 @@ pub fn main() -> ExitCode {
                 };
                 let started = Instant::now();
                 let plan = crate::lower::lower(&checked);
-                let outcome = crate::execute::execute(&plan);
+                let outcome = crate::execute::execute(&plan, &|| started.elapsed().as_secs_f64());
                 let ms = started.elapsed().as_secs_f64() * 1e3;
                 worst = worst.max(Some(outcome.verdict));
                 match format {

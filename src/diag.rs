@@ -43,6 +43,16 @@ pub enum Code {
     Zero,
     /// E0209: a set of a kind this role does not accept.
     SetKind,
+    /// E0210: a set that is empty, or unbounded where a bounded set is needed.
+    EmptyOrUnbounded,
+    /// E0211: reachable-set boundary directions that cannot be used.
+    Boundary,
+    /// E0212: a time-varying plant whose list is shorter than the horizon.
+    PerStepLength,
+    /// E0213: a bad time declaration (unknown kind, missing or non-positive `dt`).
+    TimeStep,
+    /// E0214: a partitioner budget item with an invalid value.
+    Budget,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -63,7 +73,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 24] = [
+    pub const ALL: [Code; 29] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -80,6 +90,11 @@ impl Code {
         Code::Partition,
         Code::Zero,
         Code::SetKind,
+        Code::EmptyOrUnbounded,
+        Code::Boundary,
+        Code::PerStepLength,
+        Code::TimeStep,
+        Code::Budget,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -109,6 +124,11 @@ impl Code {
             Code::Partition => "E0207",
             Code::Zero => "E0208",
             Code::SetKind => "E0209",
+            Code::EmptyOrUnbounded => "E0210",
+            Code::Boundary => "E0211",
+            Code::PerStepLength => "E0212",
+            Code::TimeStep => "E0213",
+            Code::Budget => "E0214",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

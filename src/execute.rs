@@ -7,12 +7,17 @@
 //! * A property is VERIFIED when the certified margins prove it on every cell,
 //!   FALSIFIED when a simulated trajectory (seeded samples of the initial set
 //!   and of the noise, including extreme noise values) violates it by more
-//!   than a floating-point tolerance, and UNSURE otherwise.
+//!   than a floating-point tolerance, and UNSURE otherwise. A bound that an
+//!   LP solver could not certify (see [`crate::lp`]) never yields VERIFIED.
+//! * Monte Carlo runs first, so the property-guided partitioner knows which
+//!   properties are already decided before it spends any propagator call.
 
-use crate::analysis::closed_loop::ClosedLoop;
-use crate::lower::{Plan, PropertyKind};
+use crate::analysis::closed_loop::{Propagator, Step};
+use crate::analysis::partition::{outside, refine, Budget, Strategy};
+use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
+use crate::lp;
 use crate::rng::Rng;
-use crate::sets::IBox;
+use crate::sets::{IBox, Polytope, Region};
 
 /// A verdict.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -71,8 +76,14 @@ pub struct PropertyResult {
 /// Everything execution found.
 #[derive(Clone, Debug)]
 pub struct Outcome {
-    /// `cells[c][t]`: the box of cell `c` at step `t`.
-    pub cells: Vec<Vec<IBox>>,
+    /// The partition cells of the initial set (as boxes: the cell's bounding box).
+    pub partition: Vec<IBox>,
+    /// How the partitioner stopped: `"grid"`, or `"done"`, `"calls"`, `"time"`, `"stopped"`.
+    pub partition_stop: &'static str,
+    /// `cells[c][t]`: the set of cell `c` at step `t`.
+    pub cells: Vec<Vec<Region>>,
+    /// LP solver statuses that forced a fallback bound, with the step (sorted, unique).
+    pub solver_issues: Vec<(usize, &'static str)>,
     /// The bounding box of all cells per step.
     pub reach: Vec<IBox>,
     /// The bounding box of the simulated states per step (if any samples).
@@ -92,15 +103,93 @@ fn tolerance(x: &[f64], rhs_scale: f64) -> f64 {
     1e-9 * (1.0 + m)
 }
 
-/// Reachable boxes of one cell over the horizon.
-pub fn propagate_cell(cl: &ClosedLoop, plan: &Plan, cell: &IBox) -> Vec<IBox> {
-    let mut sets = Vec::with_capacity(plan.horizon + 1);
-    sets.push(cell.clone());
-    for t in 0..plan.horizon {
-        let next = cl.step(&sets[t], plan.propagator);
-        sets.push(next);
+/// Reachable sets of one cell over the horizon.
+pub fn propagate_cell(plan: &Plan, cell: &Region) -> Vec<Step> {
+    let cl = &plan.closed_loop;
+    if plan.propagator == Propagator::CrownUnrolled {
+        return cl.unrolled(cell, plan.horizon, &plan.boundary);
     }
-    sets
+    let mut steps = Vec::with_capacity(plan.horizon + 1);
+    steps.push(Step {
+        set: cell.clone(),
+        issues: Vec::new(),
+    });
+    for t in 0..plan.horizon {
+        let next = cl.step(t, &steps[t].set, plan.propagator, &plan.boundary);
+        steps.push(next);
+    }
+    steps
+}
+
+/// Whether a cell is certainly empty (a polytope cell of a polytope initial set).
+fn certainly_empty(cell: &Region) -> bool {
+    match cell {
+        Region::Polytope { bbox, rows } => {
+            lp::separation(&[], rows, &bbox.lo, &bbox.hi).value > 0.0
+        }
+        Region::Box(_) | Region::Ball { .. } => false,
+    }
+}
+
+/// A certified margin of one property on one cell's sets, with the step it
+/// refers to and whether an LP solver issue weakened it.
+fn cell_margin(prop: &Property, sets: &[Step]) -> (f64, usize, bool) {
+    match &prop.kind {
+        PropertyKind::Goal(g) => {
+            let t = sets.len() - 1;
+            let (m, issue) = containment_margin(g, &sets[t].set);
+            (m, t, issue || !sets[t].issues.is_empty())
+        }
+        PropertyKind::Avoid { members, steps } => {
+            let mut best = (f64::INFINITY, steps.0, false);
+            for (t, step) in sets.iter().enumerate().take(steps.1 + 1).skip(steps.0) {
+                for m in members {
+                    let (s, issue) = separation_margin(m, &step.set);
+                    let issue = issue || !step.issues.is_empty();
+                    if s < best.0 || (issue && !best.2 && s <= best.0) {
+                        best = (s, t, issue || best.2);
+                    } else if issue {
+                        best.2 = true;
+                    }
+                }
+            }
+            best
+        }
+    }
+}
+
+/// `min_r (hᵣ − max_{x∈S} Hᵣ x)`: non-negative means `S ⊆ P`.
+fn containment_margin(p: &Polytope, set: &Region) -> (f64, bool) {
+    if let Region::Box(b) = set {
+        return (p.containment_margin(b), false);
+    }
+    let mut issue = false;
+    let m = p
+        .rows
+        .iter()
+        .map(|(a, h)| {
+            let s = set.support(a);
+            issue |= s.issue.is_some();
+            crate::num::sum_lower([*h, -s.value])
+        })
+        .fold(f64::INFINITY, f64::min);
+    (m, issue)
+}
+
+/// A lower bound of `min_{x∈S} max_r (Hᵣ x − hᵣ)`: positive means `S ∩ P = ∅`.
+/// A single separating row is tried first; an LP decides the rest exactly.
+fn separation_margin(p: &Polytope, set: &Region) -> (f64, bool) {
+    let bbox = set.bbox();
+    let single = p.separation_margin(&bbox);
+    if single > 0.0 && !matches!(set, Region::Polytope { .. }) {
+        return (single, false);
+    }
+    let rows: &[(Vec<f64>, f64)] = match set {
+        Region::Polytope { rows, .. } => rows,
+        Region::Box(_) | Region::Ball { .. } => &[],
+    };
+    let lp = lp::separation(rows, &p.rows, &bbox.lo, &bbox.hi);
+    (lp.value.max(single), lp.issue.is_some())
 }
 
 /// Per-sample random stream: sample `k` of seed `s` is reproducible on its own.
@@ -120,20 +209,17 @@ fn pick_noise(rng: &mut Rng, b: &IBox) -> Vec<f64> {
         .collect()
 }
 
-/// Simulate sample `k`: the first samples are the corners of the initial box
-/// (up to 2^12 of them), the rest uniform; noise is extreme half of the time.
-pub fn simulate(plan: &Plan, k: usize) -> Trajectory {
+/// Simulate sample `k`: the first samples are the initial set's special
+/// points (box corners, up to 2^12 of them; ball extremes), the rest random;
+/// noise is extreme half of the time. `None` when no initial state could be
+/// drawn (rejection sampling of a thin polytope).
+pub fn simulate(plan: &Plan, k: usize) -> Option<Trajectory> {
     let cl = &plan.closed_loop;
     let mut rng = sample_rng(plan.seed, k);
-    let x0 = &plan.initial;
-    let n = x0.dim();
-    let corners = if n <= 12 { 1usize << n } else { 0 };
-    let start: Vec<f64> = if k < corners {
-        (0..n)
-            .map(|i| if k >> i & 1 == 1 { x0.hi[i] } else { x0.lo[i] })
-            .collect()
-    } else {
-        (0..n).map(|i| rng.uniform(x0.lo[i], x0.hi[i])).collect()
+    let special = plan.initial.special_points();
+    let start = match special.get(k) {
+        Some(p) => p.clone(),
+        None => plan.initial.sample(&mut || rng.uniform(0.0, 1.0))?,
     };
     let mut tr = Trajectory {
         states: vec![start],
@@ -144,38 +230,29 @@ pub fn simulate(plan: &Plan, k: usize) -> Trajectory {
     for t in 0..plan.horizon {
         let w = pick_noise(&mut rng, &cl.plant.w);
         let v = pick_noise(&mut rng, &cl.plant.v);
-        let (u, next) = cl.simulate(&tr.states[t], &w, &v);
+        let (u, next) = cl.simulate(t, &tr.states[t], &w, &v);
         tr.controls.push(u);
         tr.process_noise.push(w);
         tr.sensor_noise.push(v);
         tr.states.push(next);
     }
-    tr
+    Some(tr)
 }
 
-/// Execute a plan.
-pub fn execute(plan: &Plan) -> Outcome {
-    let cl = &plan.closed_loop;
-    let cells: Vec<Vec<IBox>> = plan
-        .cells
-        .iter()
-        .map(|c| propagate_cell(cl, plan, c))
-        .collect();
-    let reach: Vec<IBox> = (0..=plan.horizon)
-        .map(|t| {
-            cells
-                .iter()
-                .skip(1)
-                .fold(cells[0][t].clone(), |h, c| h.hull(&c[t]))
-        })
-        .collect();
+/// What the Monte Carlo pass found.
+struct MonteCarlo {
+    sampled: Vec<Option<IBox>>,
+    /// (depth of violation, sample index, step) per property
+    worst: Vec<Option<(f64, usize, usize)>>,
+}
 
-    // Monte Carlo: sample hulls and the worst violation of each property.
+fn monte_carlo(plan: &Plan) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
-    // (depth of violation, sample index, step) per property; depth > 0 means violated
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
     for k in 0..plan.samples {
-        let tr = simulate(plan, k);
+        let Some(tr) = simulate(plan, k) else {
+            continue;
+        };
         for (t, x) in tr.states.iter().enumerate() {
             let p = IBox::point(x);
             sampled[t] = Some(match &sampled[t] {
@@ -213,39 +290,178 @@ pub fn execute(plan: &Plan) -> Outcome {
             }
         }
     }
+    MonteCarlo { sampled, worst }
+}
+
+/// Whether a margin proves the property.
+fn proves(prop: &Property, margin: f64) -> bool {
+    match &prop.kind {
+        PropertyKind::Goal(_) => margin >= 0.0,
+        PropertyKind::Avoid { .. } => margin > 0.0,
+    }
+}
+
+/// The region of a partition cell: polytope cells keep the initial set's
+/// rows; ball cells are boxes (their union covers the ball); the root is the
+/// initial set itself.
+fn cell_region(initial: &Region, cell: &IBox) -> Region {
+    if *cell == initial.bbox() {
+        return initial.clone();
+    }
+    match initial {
+        Region::Polytope { rows, .. } => Region::Polytope {
+            bbox: cell.clone(),
+            rows: rows.clone(),
+        },
+        Region::Box(_) | Region::Ball { .. } => Region::Box(cell.clone()),
+    }
+}
+
+/// Execute a plan. `elapsed` returns the seconds since the run started; it
+/// is consulted only by a partitioner with a time budget.
+pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
+    let mc = monte_carlo(plan);
+    let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
+
+    // ---- partition and propagate ----
+    let calls: usize;
+    let (partition, cells, partition_stop): (Vec<IBox>, Vec<Vec<Step>>, &'static str) =
+        match &plan.partitioner {
+            Partitioner::Uniform(grid) => {
+                let regions: Vec<Region> = plan
+                    .initial
+                    .grid(grid)
+                    .into_iter()
+                    .filter(|c| !certainly_empty(c))
+                    .collect();
+                let regions = if regions.is_empty() {
+                    vec![plan.initial.clone()]
+                } else {
+                    regions
+                };
+                calls = regions.len();
+                let sets = regions.iter().map(|c| propagate_cell(plan, c)).collect();
+                (regions.iter().map(Region::bbox).collect(), sets, "grid")
+            }
+            Partitioner::Guided { guide, budget } => {
+                let strategy = match guide {
+                    Guide::Sg => Strategy::Sg,
+                    Guide::Gsg | Guide::Property => Strategy::Gsg,
+                };
+                // nothing left to decide: one call for the report's sets
+                let budget = if *guide == Guide::Property && !undecided.iter().any(|u| *u) {
+                    Budget {
+                        calls: 1,
+                        ..*budget
+                    }
+                } else {
+                    *budget
+                };
+                let root = plan.initial.bbox();
+                let r = refine(
+                    &root,
+                    strategy,
+                    &budget,
+                    &mut |c| {
+                        let region = cell_region(&plan.initial, c);
+                        if certainly_empty(&region) {
+                            let sets = vec![
+                                Step {
+                                    set: region,
+                                    issues: Vec::new()
+                                };
+                                plan.horizon + 1
+                            ];
+                            return (Some(sets), f64::NEG_INFINITY);
+                        }
+                        let sets = propagate_cell(plan, &region);
+                        let score = match guide {
+                            Guide::Sg | Guide::Gsg => (0..=plan.horizon)
+                                .map(|t| match &mc.sampled[t] {
+                                    Some(h) => outside(&sets[t].set.bbox(), h),
+                                    None => f64::INFINITY,
+                                })
+                                .fold(0.0, f64::max),
+                            Guide::Property => plan
+                                .properties
+                                .iter()
+                                .zip(&undecided)
+                                .filter(|(_, u)| **u)
+                                .map(|(p, _)| {
+                                    let (m, _, issue) = cell_margin(p, &sets);
+                                    if proves(p, m) && !issue {
+                                        -1.0
+                                    } else {
+                                        (-m).max(0.0) + f64::MIN_POSITIVE
+                                    }
+                                })
+                                .fold(-1.0, f64::max),
+                        };
+                        (Some(sets), score)
+                    },
+                    &mut |_| false,
+                    elapsed,
+                );
+                calls = r.calls;
+                let mut leaves = r.leaves;
+                // deterministic order: by cell position
+                leaves.sort_by(|a, b| {
+                    a.cell
+                        .lo
+                        .iter()
+                        .zip(&b.cell.lo)
+                        .map(|(x, y)| x.total_cmp(y))
+                        .find(|o| o.is_ne())
+                        .unwrap_or(std::cmp::Ordering::Equal)
+                });
+                let part = leaves.iter().map(|l| l.cell.clone()).collect();
+                let sets = leaves.into_iter().filter_map(|l| l.value).collect();
+                (part, sets, r.stop)
+            }
+        };
+    let reach: Vec<IBox> = (0..=plan.horizon)
+        .map(|t| {
+            cells
+                .iter()
+                .skip(1)
+                .fold(cells[0][t].set.bbox(), |h, c| h.hull(&c[t].set.bbox()))
+        })
+        .collect();
+    let mut solver_issues: Vec<(usize, &'static str)> = cells
+        .iter()
+        .flat_map(|c| {
+            c.iter()
+                .enumerate()
+                .flat_map(|(t, s)| s.issues.iter().map(move |i| (t, *i)))
+        })
+        .collect();
+    solver_issues.sort();
+    solver_issues.dedup();
 
     let properties: Vec<PropertyResult> = plan
         .properties
         .iter()
-        .zip(&worst)
+        .zip(&mc.worst)
         .map(|(prop, worst)| {
-            let (kind, margin, step) = match &prop.kind {
-                PropertyKind::Goal(g) => {
-                    let m = cells
-                        .iter()
-                        .map(|c| g.containment_margin(&c[plan.horizon]))
-                        .fold(f64::INFINITY, f64::min);
-                    ("goal", m, plan.horizon)
-                }
-                PropertyKind::Avoid { members, steps } => {
-                    let mut best = (f64::INFINITY, steps.0);
-                    for t in steps.0..=steps.1 {
-                        for c in &cells {
-                            for m in members {
-                                let s = m.separation_margin(&c[t]);
-                                if s < best.0 {
-                                    best = (s, t);
-                                }
-                            }
-                        }
-                    }
-                    ("avoid", best.0, best.1)
-                }
+            let kind = match prop.kind {
+                PropertyKind::Goal(_) => "goal",
+                PropertyKind::Avoid { .. } => "avoid",
             };
-            let proven = match &prop.kind {
-                PropertyKind::Goal(_) => margin >= 0.0,
-                PropertyKind::Avoid { .. } => margin > 0.0,
+            let mut margin = f64::INFINITY;
+            let mut step = match &prop.kind {
+                PropertyKind::Goal(_) => plan.horizon,
+                PropertyKind::Avoid { steps, .. } => steps.0,
             };
+            let mut issue = false;
+            for c in &cells {
+                let (m, t, i) = cell_margin(prop, c);
+                issue |= i;
+                if m < margin {
+                    margin = m;
+                    step = t;
+                }
+            }
+            let proven = proves(prop, margin) && !issue;
             match worst {
                 // A genuine counterexample always wins; a proof next to one would be a soundness bug.
                 Some((depth, k, t)) => {
@@ -256,7 +472,7 @@ pub fn execute(plan: &Plan) -> Outcome {
                         status: Status::Falsified,
                         margin: -depth,
                         step: *t,
-                        counterexample: Some(simulate(plan, *k)),
+                        counterexample: simulate(plan, *k),
                     }
                 }
                 None => PropertyResult {
@@ -280,11 +496,17 @@ pub fn execute(plan: &Plan) -> Outcome {
         .max()
         .unwrap_or(Status::Verified);
     Outcome {
-        cells,
+        partition,
+        partition_stop,
+        cells: cells
+            .into_iter()
+            .map(|c| c.into_iter().map(|s| s.set).collect())
+            .collect(),
+        solver_issues,
         reach,
-        sampled,
+        sampled: mc.sampled,
         properties,
         verdict,
-        propagator_calls: plan.cells.len() * plan.horizon,
+        propagator_calls: calls * plan.horizon,
     }
 }

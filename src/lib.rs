@@ -7,6 +7,7 @@ pub mod cli;
 pub mod diag;
 pub mod execute;
 pub mod lower;
+pub mod lp;
 pub mod nn;
 pub mod num;
 pub mod onnx;

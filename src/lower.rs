@@ -4,10 +4,48 @@
 //! the network, splits the initial set into partition cells, and turns goal
 //! and avoid sets into properties over the steps they constrain.
 
-use crate::analysis::closed_loop::{ClosedLoop, Propagator};
+use crate::analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
+use crate::analysis::partition::Budget;
 use crate::check::Checked;
 use crate::nn::Layer;
-use crate::sets::{IBox, Polytope};
+use crate::sets::{IBox, Polytope, Region};
+
+/// What guides a refining partitioner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Guide {
+    /// Simulation-guided: refine cells whose sets leave the sampled hull, depth first.
+    Sg,
+    /// Greedy simulation-guided: refine the cell that sticks out furthest first.
+    Gsg,
+    /// Property-guided: refine the cell with the worst unproven property margin
+    /// first; stop when every cell is proven or the verdict is decided.
+    Property,
+}
+
+impl Guide {
+    /// The spec-language name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Guide::Sg => "sg",
+            Guide::Gsg => "gsg",
+            Guide::Property => "property",
+        }
+    }
+}
+
+/// How the initial set is split.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Partitioner {
+    /// A uniform grid (all ones: no partition).
+    Uniform(Vec<usize>),
+    /// Refinement by bisection, guided and budgeted.
+    Guided {
+        /// What decides which cell to split.
+        guide: Guide,
+        /// When to stop.
+        budget: Budget,
+    },
+}
 
 /// What a property demands.
 #[derive(Clone, Debug, PartialEq)]
@@ -47,16 +85,18 @@ pub struct Plan {
     pub network_summary: String,
     /// The closed loop (saturation already part of the network).
     pub closed_loop: ClosedLoop,
+    /// The time step when the spec's plant was continuous-time (already discretised).
+    pub dt: Option<f64>,
     /// Control limits, if any (for reports).
     pub limits: Option<IBox>,
     /// The initial set.
-    pub initial: IBox,
+    pub initial: Region,
     /// Its name.
     pub initial_name: String,
-    /// Partition cells of the initial set (one cell without partitioning).
-    pub cells: Vec<IBox>,
-    /// Cells per dimension.
-    pub grid: Vec<usize>,
+    /// How the initial set is split.
+    pub partitioner: Partitioner,
+    /// The shape of the reachable sets.
+    pub boundary: Boundary,
     /// Number of steps.
     pub horizon: usize,
     /// The propagator.
@@ -109,12 +149,13 @@ pub fn lower(c: &Checked) -> Plan {
         control_name: c.control.0.clone(),
         controller_path: c.controller_path.clone(),
         network_summary: summary(c),
-        closed_loop: ClosedLoop::new(c.plant.clone(), net),
+        closed_loop: ClosedLoop::time_varying(c.plants.clone(), net),
+        dt: c.dt,
         limits: c.limits.clone(),
         initial: c.initial.1.clone(),
         initial_name: c.initial.0.clone(),
-        cells: c.initial.1.grid(&c.partition),
-        grid: c.partition.clone(),
+        partitioner: c.partitioner.clone(),
+        boundary: c.boundary.clone(),
         horizon: c.horizon,
         propagator: c.propagator,
         properties,

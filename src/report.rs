@@ -6,9 +6,10 @@
 
 use serde_json::{json, Value};
 
+use crate::analysis::closed_loop::Boundary;
 use crate::execute::{Outcome, Status, Trajectory};
-use crate::lower::Plan;
-use crate::sets::IBox;
+use crate::lower::{Partitioner, Plan};
+use crate::sets::{IBox, Region};
 
 /// The identifier of the JSON result schema.
 pub const SCHEMA: &str = "ravel-report/1";
@@ -40,15 +41,29 @@ fn vector(v: &[f64]) -> String {
     )
 }
 
-fn partition_text(plan: &Plan) -> String {
-    if plan.cells.len() == 1 {
-        "no partition (1 cell)".into()
-    } else {
-        format!(
-            "uniform partition {:?} ({} cells)",
-            plan.grid,
-            plan.cells.len()
-        )
+fn partition_text(plan: &Plan, out: &Outcome) -> String {
+    let cells = out.partition.len();
+    match &plan.partitioner {
+        Partitioner::Uniform(grid) if grid.iter().all(|k| *k == 1) => {
+            "no partition (1 cell)".into()
+        }
+        Partitioner::Uniform(grid) => format!("uniform partition {grid:?} ({cells} cells)"),
+        Partitioner::Guided { guide, budget } => {
+            let why = match out.partition_stop {
+                "done" => "every cell settled".to_string(),
+                "calls" => format!("budget of {} cell evaluations spent", budget.calls),
+                "time" => "time budget spent".to_string(),
+                _ => "stopped".to_string(),
+            };
+            format!("{} partition ({cells} cells, {why})", guide.name())
+        }
+    }
+}
+
+fn boundary_text(b: &Boundary) -> String {
+    match b {
+        Boundary::Box => "box boundary".into(),
+        Boundary::Polytope(d) => format!("polytope boundary ({} directions + box)", d.nrows()),
     }
 }
 
@@ -59,8 +74,15 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     let n = plan.closed_loop.states();
     let m = plan.closed_loop.plant.b.ncols();
     s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
+    let mut timing = String::new();
+    if let Some(dt) = plan.dt {
+        timing += &format!(", continuous time, dt {} (zero-order hold)", num(dt));
+    }
+    if plan.closed_loop.is_time_varying() {
+        timing += ", time-varying";
+    }
     s += &format!(
-        "  system      {} (state {x}[{n}], control {}[{m}], horizon {})\n",
+        "  system      {} (state {x}[{n}], control {}[{m}], horizon {}{timing})\n",
         plan.system, plan.control_name, plan.horizon
     );
     let sat = match &plan.limits {
@@ -79,9 +101,10 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         plan.controller_path, plan.network_summary
     );
     s += &format!(
-        "  analysis    {}, {}, box boundary, {} Monte Carlo samples (seed {})\n\n",
+        "  analysis    {}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
-        partition_text(plan),
+        partition_text(plan, out),
+        boundary_text(&plan.boundary),
         plan.samples,
         plan.seed
     );
@@ -107,6 +130,17 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         s += &format!(
             "  final-step error (box volume / sampled-hull volume − 1): {}\n",
             num(err)
+        );
+    }
+    if !out.solver_issues.is_empty() {
+        let list: Vec<String> = out
+            .solver_issues
+            .iter()
+            .map(|(t, i)| format!("{i} at step {t}"))
+            .collect();
+        s += &format!(
+            "  LP solver: {}; those bounds fell back to bounding boxes and no property is reported VERIFIED\n",
+            list.join(", ")
         );
     }
     s += "\n  properties\n";
@@ -212,6 +246,17 @@ fn f(x: f64) -> Value {
     }
 }
 
+fn region_json(r: &Region) -> Value {
+    let mut v = box_json(&r.bbox());
+    if let Region::Polytope { rows, .. } = r {
+        v["rows"] = rows
+            .iter()
+            .map(|(a, b)| json!({ "a": a.iter().map(|x| f(*x)).collect::<Vec<_>>(), "b": f(*b) }))
+            .collect();
+    }
+    v
+}
+
 fn box_json(b: &IBox) -> Value {
     json!({ "lo": b.lo.iter().map(|v| f(*v)).collect::<Vec<_>>(), "hi": b.hi.iter().map(|v| f(*v)).collect::<Vec<_>>() })
 }
@@ -236,7 +281,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 "step": t,
                 "box": box_json(b),
                 "sampled": out.sampled[t].as_ref().map(box_json),
-                "cells": out.cells.iter().map(|c| box_json(&c[t])).collect::<Vec<_>>(),
+                "cells": out.cells.iter().map(|c| region_json(&c[t])).collect::<Vec<_>>(),
             })
         })
         .collect();
@@ -264,9 +309,20 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "horizon": plan.horizon,
         "analysis": {
             "propagator": plan.propagator.name(),
-            "partition": plan.grid,
-            "cells": plan.cells.len(),
-            "boundary": "box",
+            "partitioner": match &plan.partitioner {
+                Partitioner::Uniform(_) => "uniform",
+                Partitioner::Guided { guide, .. } => guide.name(),
+            },
+            "partition": match &plan.partitioner {
+                Partitioner::Uniform(grid) => json!(grid),
+                Partitioner::Guided { .. } => Value::Null,
+            },
+            "partition_stop": out.partition_stop,
+            "cells": out.partition.len(),
+            "boundary": match &plan.boundary {
+                Boundary::Box => "box",
+                Boundary::Polytope(_) => "polytope",
+            },
             "samples": plan.samples,
             "seed": plan.seed,
         },
@@ -274,6 +330,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "final_error": final_error(out).map(f),
         "properties": props,
         "propagator_calls": out.propagator_calls,
+        "solver_issues": out.solver_issues.iter().map(|(t, i)| json!({ "step": t, "status": i })).collect::<Vec<_>>(),
     });
     if let Some(ms) = timing_ms {
         v["time_ms"] = json!(ms);

@@ -1,5 +1,6 @@
 //! Sets over the state space: axis-aligned boxes and polytopes `{x | H x ≤ h}`.
 
+use crate::lp::{self, LpBound};
 use crate::num;
 
 /// A closed axis-aligned box `lo ≤ x ≤ hi`. Bounds may be infinite.
@@ -192,6 +193,262 @@ impl Polytope {
                 num::sum_lower([lo, -*h])
             })
             .fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
+/// The norm of an ℓp ball.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Norm {
+    /// ℓ1: the sum of absolute values.
+    L1,
+    /// ℓ2: the Euclidean norm.
+    L2,
+    /// ℓ∞: the largest absolute value.
+    LInf,
+}
+
+impl Norm {
+    /// The spec-language name (`1`, `2`, `inf`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Norm::L1 => "1",
+            Norm::L2 => "2",
+            Norm::LInf => "inf",
+        }
+    }
+}
+
+/// A set of states: a box, a bounded polytope (rows plus a bounding box that
+/// contains it), or an ℓp ball `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}` with per-dimension radii.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Region {
+    /// An axis-aligned box.
+    Box(IBox),
+    /// `{x ∈ bbox | H x ≤ h}`; `bbox` is part of the set's definition.
+    Polytope {
+        /// A box containing the set (the set is intersected with it).
+        bbox: IBox,
+        /// The rows `(Hᵣ, hᵣ)`.
+        rows: Vec<(Vec<f64>, f64)>,
+    },
+    /// An ℓp ball with per-dimension radii.
+    Ball {
+        /// The centre.
+        center: Vec<f64>,
+        /// The radius along each dimension (non-negative).
+        radius: Vec<f64>,
+        /// Which norm.
+        norm: Norm,
+    },
+}
+
+impl Region {
+    /// A box containing the set (exact for boxes and balls, rounded outward).
+    pub fn bbox(&self) -> IBox {
+        match self {
+            Region::Box(b) => b.clone(),
+            Region::Polytope { bbox, .. } => bbox.clone(),
+            Region::Ball { center, radius, .. } => IBox::new(
+                center
+                    .iter()
+                    .zip(radius)
+                    .map(|(c, r)| num::sum_lower([*c, -r]))
+                    .collect(),
+                center
+                    .iter()
+                    .zip(radius)
+                    .map(|(c, r)| num::sum_upper([*c, *r]))
+                    .collect(),
+            ),
+        }
+    }
+
+    /// Dimension.
+    pub fn dim(&self) -> usize {
+        match self {
+            Region::Box(b) | Region::Polytope { bbox: b, .. } => b.dim(),
+            Region::Ball { center, .. } => center.len(),
+        }
+    }
+
+    /// A certified upper bound of `max_{x ∈ self} gᵀx` (the support function).
+    /// Polytopes need an LP; see [`crate::lp`] for why the bound is sound even
+    /// when the solver is inexact.
+    pub fn support(&self, g: &[f64]) -> LpBound {
+        let value = match self {
+            Region::Box(b) => num::dot_box_upper(g, &b.lo, &b.hi),
+            Region::Polytope { bbox, rows } => return lp::maximize(g, rows, &bbox.lo, &bbox.hi),
+            Region::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                // gᵀc + ‖diag(r) g‖_q with q the dual norm of p
+                let scaled: Vec<f64> = g.iter().zip(radius).map(|(g, r)| (g * r).abs()).collect();
+                let dual = match norm {
+                    Norm::LInf => num::sum_upper(scaled.iter().copied()),
+                    Norm::L1 => scaled.iter().copied().fold(0.0, f64::max),
+                    Norm::L2 => {
+                        let sq = num::sum_upper(scaled.iter().map(|s| s * s));
+                        (sq * (1.0 + 8.0 * num::U)).sqrt() * (1.0 + 4.0 * num::U)
+                    }
+                };
+                // each |gᵢ rᵢ| is within one rounding of exact
+                let dual = (dual * (1.0 + 4.0 * num::U) + num::ETA).next_up();
+                num::sum_upper([num::dot_box_upper(g, center, center), dual])
+            }
+        };
+        LpBound { value, issue: None }
+    }
+
+    /// Whether `x` certainly lies in the set (a conservative test: points on
+    /// the boundary may be refused, points outside never pass).
+    pub fn contains_point(&self, x: &[f64]) -> bool {
+        match self {
+            Region::Box(b) => b.contains_point(x),
+            Region::Polytope { bbox, rows } => {
+                bbox.contains_point(x)
+                    && rows.iter().all(|(a, h)| num::dot_box_upper(a, x, x) <= *h)
+            }
+            Region::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                let mut parts = Vec::with_capacity(x.len());
+                for i in 0..x.len() {
+                    let d = (x[i] - center[i]).abs();
+                    if radius[i] == 0.0 {
+                        if d != 0.0 {
+                            return false;
+                        }
+                        parts.push(0.0);
+                    } else {
+                        parts.push(d / radius[i]);
+                    }
+                }
+                let slack = 1.0 - 16.0 * (x.len() as f64 + 2.0) * num::U;
+                match norm {
+                    Norm::LInf => parts.iter().all(|p| *p <= slack),
+                    Norm::L1 => parts.iter().sum::<f64>() <= slack,
+                    Norm::L2 => parts.iter().map(|p| p * p).sum::<f64>() <= slack,
+                }
+            }
+        }
+    }
+
+    /// The states the sampler tries first: the box corners, the ball's axis
+    /// extremes pulled slightly inward, nothing for polytopes.
+    pub fn special_points(&self) -> Vec<Vec<f64>> {
+        let n = self.dim();
+        match self {
+            Region::Box(b) if n <= 12 => (0..1usize << n)
+                .map(|k| {
+                    (0..n)
+                        .map(|i| if k >> i & 1 == 1 { b.hi[i] } else { b.lo[i] })
+                        .collect()
+                })
+                .collect(),
+            Region::Ball { center, radius, .. } => {
+                let mut pts = vec![center.clone()];
+                for i in 0..n {
+                    for s in [-1.0, 1.0] {
+                        let mut p = center.clone();
+                        p[i] += s * radius[i] * (1.0 - 1e-9);
+                        pts.push(p);
+                    }
+                }
+                pts.retain(|p| self.contains_point(p));
+                pts
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// One random point of the set from uniform numbers in `[0, 1)` drawn by
+    /// `next`, or `None` when rejection sampling of a polytope failed.
+    pub fn sample(&self, next: &mut dyn FnMut() -> f64) -> Option<Vec<f64>> {
+        match self {
+            Region::Box(b) => Some(
+                (0..b.dim())
+                    .map(|i| b.lo[i] + (b.hi[i] - b.lo[i]) * next())
+                    .collect(),
+            ),
+            Region::Polytope { bbox, .. } => (0..1000).find_map(|_| {
+                let x: Vec<f64> = (0..bbox.dim())
+                    .map(|i| bbox.lo[i] + (bbox.hi[i] - bbox.lo[i]) * next())
+                    .collect();
+                self.contains_point(&x).then_some(x)
+            }),
+            Region::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                // a point of the unit cube, pulled into the unit ball radially
+                let n = center.len();
+                let d: Vec<f64> = (0..n).map(|_| 2.0 * next() - 1.0).collect();
+                let len = match norm {
+                    Norm::LInf => d.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+                    Norm::L1 => d.iter().map(|v| v.abs()).sum(),
+                    Norm::L2 => d.iter().map(|v| v * v).sum::<f64>().sqrt(),
+                };
+                let scale = if len > 1.0 { next() / len } else { 1.0 } * (1.0 - 1e-9);
+                let x: Vec<f64> = (0..n)
+                    .map(|i| center[i] + radius[i] * d[i] * scale)
+                    .collect();
+                self.contains_point(&x).then_some(x)
+            }
+        }
+    }
+
+    /// Split into cells whose union contains the set: a grid over the bounding
+    /// box. Polytope cells keep the set's rows (their union is the set); a
+    /// ball's cells are boxes, those that certainly miss the ball dropped
+    /// (their union covers the ball, an over-approximation).
+    pub fn grid(&self, counts: &[usize]) -> Vec<Region> {
+        match self {
+            Region::Box(b) => b.grid(counts).into_iter().map(Region::Box).collect(),
+            Region::Polytope { bbox, rows } => bbox
+                .grid(counts)
+                .into_iter()
+                .map(|c| Region::Polytope {
+                    bbox: c,
+                    rows: rows.clone(),
+                })
+                .collect(),
+            Region::Ball {
+                center,
+                radius,
+                norm,
+            } => self
+                .bbox()
+                .grid(counts)
+                .into_iter()
+                .filter(|c| {
+                    // the cell's point nearest the centre, in ball units
+                    let d: Vec<f64> = (0..c.dim())
+                        .map(|i| {
+                            let gap = (c.lo[i] - center[i]).max(center[i] - c.hi[i]).max(0.0);
+                            if radius[i] > 0.0 {
+                                gap / radius[i]
+                            } else if gap > 0.0 {
+                                f64::INFINITY
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect();
+                    let len = match norm {
+                        Norm::LInf => d.iter().fold(0.0f64, |a, v| a.max(*v)),
+                        Norm::L1 => d.iter().sum(),
+                        Norm::L2 => d.iter().map(|v| v * v).sum::<f64>().sqrt(),
+                    };
+                    len <= 1.0 + 1e-9
+                })
+                .map(Region::Box)
+                .collect(),
+        }
     }
 }
 

@@ -1,19 +1,17 @@
 //! Monte Carlo soundness: on many seeded random networks and plants, every
 //! simulated trajectory stays inside every reachable set that every
-//! propagator computes, with and without noise, limits and partitioning.
+//! propagator computes, with and without noise, limits and partitioning,
+//! with box and polytope boundaries, box and ℓp-ball initial sets, and
+//! time-varying plants.
 
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::closed_loop::{ClosedLoop, Plant, Propagator};
+use ravel::analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
 use ravel::analysis::crown::{Analysis, Mode};
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
-use ravel::sets::IBox;
+use ravel::sets::{IBox, Norm, Region};
 
-const PROPAGATORS: [Propagator; 3] = [
-    Propagator::ReachLp,
-    Propagator::CrownSeparate,
-    Propagator::IbpSeparate,
-];
+const PROPAGATORS: [Propagator; 5] = Propagator::ALL;
 
 fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
     let depth = 1 + rng.below(3);
@@ -40,7 +38,7 @@ fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation)
 
 struct Case {
     cl: ClosedLoop,
-    x0: IBox,
+    x0: Region,
     horizon: usize,
     label: String,
 }
@@ -85,26 +83,111 @@ fn random_case(seed: u64) -> Case {
     }
     let centre: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
     let radius: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.4)).collect();
-    let x0 = IBox::new(
-        centre.iter().zip(&radius).map(|(c, r)| c - r).collect(),
-        centre.iter().zip(&radius).map(|(c, r)| c + r).collect(),
+    let ball = seed % 4 == 3;
+    let x0 = if ball {
+        let norm = [Norm::L1, Norm::L2, Norm::LInf][(seed / 4) as usize % 3];
+        Region::Ball {
+            center: centre,
+            radius,
+            norm,
+        }
+    } else {
+        Region::Box(IBox::new(
+            centre.iter().zip(&radius).map(|(c, r)| c - r).collect(),
+            centre.iter().zip(&radius).map(|(c, r)| c + r).collect(),
+        ))
+    };
+    let varying = seed % 5 == 2;
+    let horizon = 4;
+    let plant = Plant { a, b, c, obs, w, v };
+    let plants: Vec<Plant> = if varying {
+        (0..horizon)
+            .map(|_| {
+                let mut p = plant.clone();
+                p.a = p.a.map(|x| x + rng.normal() * 0.1);
+                p.b = p.b.map(|x| x + rng.normal() * 0.1);
+                p.c = p.c.map(|x| x + rng.normal() * 0.1);
+                p
+            })
+            .collect()
+    } else {
+        vec![plant]
+    };
+    let label = format!(
+        "seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited} ball={ball} varying={varying}"
     );
-    let label = format!("seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited}");
     Case {
-        cl: ClosedLoop::new(Plant { a, b, c, obs, w, v }, net),
+        cl: ClosedLoop::time_varying(plants, net),
         x0,
-        horizon: 4,
+        horizon,
         label,
     }
 }
 
-fn reach(cl: &ClosedLoop, x0: &IBox, horizon: usize, prop: Propagator) -> Vec<IBox> {
+fn reach(
+    cl: &ClosedLoop,
+    x0: &Region,
+    horizon: usize,
+    prop: Propagator,
+    boundary: &Boundary,
+) -> Vec<Region> {
+    if prop == Propagator::CrownUnrolled {
+        return cl
+            .unrolled(x0, horizon, boundary)
+            .into_iter()
+            .map(|s| s.set)
+            .collect();
+    }
     let mut sets = vec![x0.clone()];
     for t in 0..horizon {
-        let next = cl.step(&sets[t], prop);
-        sets.push(next);
+        let next = cl.step(t, &sets[t], prop, boundary);
+        sets.push(next.set);
     }
     sets
+}
+
+/// Membership with this test's own arithmetic (a hair of slack for the f64
+/// simulation of rows; boxes are checked exactly).
+fn inside(r: &Region, x: &[f64]) -> bool {
+    let b = r.bbox();
+    if !b.contains_point(x) {
+        return false;
+    }
+    match r {
+        Region::Polytope { rows, .. } => rows.iter().all(|(a, h)| {
+            let ax: f64 = a.iter().zip(x).map(|(a, x)| a * x).sum();
+            ax <= h + 1e-12 * (1.0 + h.abs())
+        }),
+        _ => true,
+    }
+}
+
+/// A start state: box corners and interior points; for a ball, points of
+/// its bounding box that pass this test's own norm check.
+fn initial_point(rng: &mut Rng, x0: &Region) -> Vec<f64> {
+    match x0 {
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => loop {
+            let x: Vec<f64> = (0..center.len())
+                .map(|i| rng.uniform(center[i] - radius[i], center[i] + radius[i]))
+                .collect();
+            let d: Vec<f64> = (0..x.len())
+                .map(|i| ((x[i] - center[i]) / radius[i]).abs())
+                .collect();
+            let len = match norm {
+                Norm::L1 => d.iter().sum(),
+                Norm::L2 => d.iter().map(|v| v * v).sum::<f64>().sqrt(),
+                Norm::LInf => d.iter().fold(0.0f64, |a, v| a.max(*v)),
+            };
+            if len <= 1.0 {
+                return x;
+            }
+        },
+        _ => sample_point(rng, &x0.bbox()),
+    }
 }
 
 fn sample_point(rng: &mut Rng, b: &IBox) -> Vec<f64> {
@@ -122,44 +205,55 @@ fn every_trajectory_stays_inside_every_reachable_set() {
     let mut checked = 0usize;
     for seed in 0..60u64 {
         let case = random_case(seed);
-        let cells = case.x0.grid(&vec![2; case.x0.dim()]);
-        for prop in PROPAGATORS {
-            let whole = reach(&case.cl, &case.x0, case.horizon, prop);
-            let parts: Vec<Vec<IBox>> = cells
-                .iter()
-                .map(|c| reach(&case.cl, c, case.horizon, prop))
-                .collect();
-            let mut rng = Rng::new(seed * 7919 + 1);
-            for _ in 0..200 {
-                let mut x = sample_point(&mut rng, &case.x0);
-                let cell = cells
+        let n = case.x0.dim();
+        let cells = case.x0.grid(&vec![2; n]);
+        let mut boundaries = vec![Boundary::Box];
+        if n == 2 {
+            boundaries.push(Boundary::spread(6));
+        } else if seed % 3 == 0 {
+            boundaries.push(Boundary::Polytope(DMatrix::from_fn(3, n, |r, c| {
+                ((r * 7 + c * 3 + seed as usize) % 5) as f64 - 2.0 + 0.5
+            })));
+        }
+        for boundary in &boundaries {
+            for prop in PROPAGATORS {
+                let whole = reach(&case.cl, &case.x0, case.horizon, prop, boundary);
+                let parts: Vec<Vec<Region>> = cells
                     .iter()
-                    .position(|c| c.contains_point(&x))
-                    .expect("the grid covers X0");
-                for t in 0..=case.horizon {
-                    assert!(
-                        whole[t].contains_point(&x),
-                        "{} {prop:?}: step {t} state {x:?} outside {:?}",
-                        case.label,
-                        whole[t]
-                    );
-                    assert!(
-                        parts[cell][t].contains_point(&x),
-                        "{} {prop:?} partitioned: step {t} state {x:?} outside {:?}",
-                        case.label,
-                        parts[cell][t]
-                    );
-                    checked += 1;
-                    if t < case.horizon {
-                        let w = sample_point(&mut rng, &case.cl.plant.w);
-                        let v = sample_point(&mut rng, &case.cl.plant.v);
-                        x = case.cl.simulate(&x, &w, &v).1;
+                    .map(|c| reach(&case.cl, c, case.horizon, prop, boundary))
+                    .collect();
+                let mut rng = Rng::new(seed * 7919 + 1);
+                for _ in 0..100 {
+                    let mut x = initial_point(&mut rng, &case.x0);
+                    let cell = cells
+                        .iter()
+                        .position(|c| c.bbox().contains_point(&x))
+                        .expect("the grid covers X0");
+                    for t in 0..=case.horizon {
+                        assert!(
+                            inside(&whole[t], &x),
+                            "{} {prop:?} {boundary:?}: step {t} state {x:?} outside {:?}",
+                            case.label,
+                            whole[t]
+                        );
+                        assert!(
+                            inside(&parts[cell][t], &x),
+                            "{} {prop:?} {boundary:?} partitioned: step {t} state {x:?} outside {:?}",
+                            case.label,
+                            parts[cell][t]
+                        );
+                        checked += 1;
+                        if t < case.horizon {
+                            let w = sample_point(&mut rng, &case.cl.plant.w);
+                            let v = sample_point(&mut rng, &case.cl.plant.v);
+                            x = case.cl.simulate(t, &x, &w, &v).1;
+                        }
                     }
                 }
             }
         }
     }
-    assert!(checked > 100_000, "only {checked} states were checked");
+    assert!(checked > 150_000, "only {checked} states were checked");
 }
 
 #[test]

@@ -53,7 +53,16 @@ fn valid_specs() {
                 ),
             };
         let plan = ravel::lower::lower(&checked);
-        let outcome = ravel::execute::execute(&plan);
+        let outcome = ravel::execute::execute(&plan, &|| 0.0);
+        // every simulated state lies in the reachable set's bounding box
+        for (t, (reach, sampled)) in outcome.reach.iter().zip(&outcome.sampled).enumerate() {
+            if let Some(s) = sampled {
+                assert!(
+                    reach.contains_box(s),
+                    "{name}: sampled states at step {t} leave the reachable set"
+                );
+            }
+        }
         assert_eq!(
             vec![outcome.verdict.as_str().to_string()],
             expect,

@@ -4,13 +4,22 @@
 //! The plant is `x⁺ = A x + B u + c + w`, `y = Cᵀ x + v`, `u = π(y)` where `π`
 //! already contains the control saturation. Noise `w ∈ W`, `v ∈ V` is
 //! adversarial: any value in its box at every step.
+//!
+//! Step-by-step propagators map a set of states to a set of next states.
+//! The unrolled propagator ([`ClosedLoop::unrolled`]) instead bounds `x_t`
+//! directly as a linear function of `x_0`, back-substituting through `t`
+//! copies of the loop (CROWN on the unrolled computation graph); noise
+//! enters each copy once and is bounded over its box where it enters, which
+//! loses nothing because every noise variable is independent of all others.
 
 use nalgebra::{DMatrix, DVector};
 
 use super::crown::{affine_image, Analysis, LinearUpper, Mode};
+use super::partition::{outside, refine, Budget, Strategy};
 use crate::nn::Network;
 use crate::num::{gamma, slack, sum_upper};
-use crate::sets::IBox;
+use crate::rng::Rng;
+use crate::sets::{IBox, Region};
 
 /// A linear plant with bounded noise.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,41 +47,113 @@ pub enum Propagator {
     CrownSeparate,
     /// A box of controls from IBP, pushed through the dynamics.
     IbpSeparate,
+    /// A box of controls from IBP with a simulation-guided partition of the
+    /// observation box (CL-SG-IBP), pushed through the dynamics.
+    SgIbpSeparate,
+    /// CROWN through the whole unrolled loop: `x_t` bounded as a function of `x_0`.
+    CrownUnrolled,
 }
 
 impl Propagator {
+    /// Every propagator, in the order of the documentation.
+    pub const ALL: [Propagator; 5] = [
+        Propagator::ReachLp,
+        Propagator::CrownUnrolled,
+        Propagator::CrownSeparate,
+        Propagator::IbpSeparate,
+        Propagator::SgIbpSeparate,
+    ];
+
     /// The spec-language name.
     pub fn name(self) -> &'static str {
         match self {
             Propagator::ReachLp => "reach_lp",
             Propagator::CrownSeparate => "crown_separate",
             Propagator::IbpSeparate => "ibp_separate",
+            Propagator::SgIbpSeparate => "sg_ibp_separate",
+            Propagator::CrownUnrolled => "crown_unrolled",
         }
     }
 }
 
+/// The shape of the reachable sets.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Boundary {
+    /// Axis-aligned boxes.
+    Box,
+    /// Polytopes `{x | D x ≤ d}` with fixed directions `D` (`k × n`), each
+    /// intersected with its bounding box (which is always computed too).
+    Polytope(DMatrix<f64>),
+}
+
+impl Boundary {
+    /// `k` directions evenly spread over the circle (2-D states).
+    pub fn spread(k: usize) -> Boundary {
+        let d = DMatrix::from_fn(k, 2, |r, c| {
+            let a = std::f64::consts::TAU * r as f64 / k as f64;
+            if c == 0 {
+                a.cos()
+            } else {
+                a.sin()
+            }
+        });
+        Boundary::Polytope(d)
+    }
+}
+
+/// One propagated set and the LP solver issues met computing it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Step {
+    /// The reachable set.
+    pub set: Region,
+    /// Solver statuses that forced a fallback bound (empty when all certified).
+    pub issues: Vec<&'static str>,
+}
+
+/// Monte Carlo samples and cell budget of the SG-IBP control bound.
+const SG_SAMPLES: usize = 64;
+const SG_BUDGET: Budget = Budget {
+    calls: 64,
+    min_size: 1.0 / 16.0,
+    seconds: None,
+};
+
+/// The dynamics of one step, with its block matrices.
+#[derive(Clone, Debug)]
+struct Dynamics {
+    /// The step's plant.
+    plant: Plant,
+    /// `[A I]`: `(x, w) ↦ A x + w`.
+    dyn_xw: DMatrix<f64>,
+    /// `[A B I]`: `(x, u, w) ↦ A x + B u + w`.
+    dyn_xuw: DMatrix<f64>,
+}
+
 /// A closed loop ready for analysis, with the block matrices precomputed.
+/// A time-varying plant has one [`Plant`] per step (`A`, `B`, `c` vary; `C`
+/// and the noise boxes are those of the first).
 #[derive(Clone, Debug)]
 pub struct ClosedLoop {
-    /// The plant.
+    /// The plant of step 0 (and of every step when time-invariant).
     pub plant: Plant,
     /// The controller, saturation included.
     pub net: Network,
     /// `[Cᵀ I]`: `(x, v) ↦ y`.
     obs_xv: DMatrix<f64>,
-    /// `[Cᵀ I 0]`: `(x, v, w) ↦ y`.
-    obs_xvw: DMatrix<f64>,
-    /// `[A 0 I]`: `(x, v, w) ↦ A x + w`.
-    dyn_xvw: DMatrix<f64>,
-    /// `[A B I]`: `(x, u, w) ↦ A x + B u + w`.
-    dyn_xuw: DMatrix<f64>,
-    /// Box facets `[I; −I]`.
-    facets: DMatrix<f64>,
+    /// The dynamics per step (one entry: time-invariant).
+    dynamics: Vec<Dynamics>,
 }
 
 impl ClosedLoop {
-    /// Assemble a closed loop (dimensions must agree; `check` guarantees it).
+    /// Assemble a time-invariant closed loop (dimensions must agree; `check` guarantees it).
     pub fn new(plant: Plant, net: Network) -> ClosedLoop {
+        ClosedLoop::time_varying(vec![plant], net)
+    }
+
+    /// Assemble a closed loop whose step `t` uses `plants[t]` (the last one
+    /// for later steps); `plants` must not be empty.
+    pub fn time_varying(plants: Vec<Plant>, net: Network) -> ClosedLoop {
+        let plant = plants[0].clone();
         let n = plant.a.nrows();
         let m = plant.b.ncols();
         let p = plant.obs.ncols();
@@ -80,29 +161,44 @@ impl ClosedLoop {
         let mut obs_xv = DMatrix::zeros(p, n + p);
         obs_xv.view_mut((0, 0), (p, n)).copy_from(&ct);
         obs_xv.view_mut((0, n), (p, p)).fill_with_identity();
-        let mut obs_xvw = DMatrix::zeros(p, n + p + n);
-        obs_xvw.view_mut((0, 0), (p, n + p)).copy_from(&obs_xv);
-        let mut dyn_xvw = DMatrix::zeros(n, n + p + n);
-        dyn_xvw.view_mut((0, 0), (n, n)).copy_from(&plant.a);
-        dyn_xvw.view_mut((0, n + p), (n, n)).fill_with_identity();
-        let mut dyn_xuw = DMatrix::zeros(n, n + m + n);
-        dyn_xuw.view_mut((0, 0), (n, n)).copy_from(&plant.a);
-        dyn_xuw.view_mut((0, n), (n, m)).copy_from(&plant.b);
-        dyn_xuw.view_mut((0, n + m), (n, n)).fill_with_identity();
-        let mut facets = DMatrix::zeros(2 * n, n);
-        for i in 0..n {
-            facets[(i, i)] = 1.0;
-            facets[(n + i, i)] = -1.0;
-        }
+        let dynamics = plants
+            .into_iter()
+            .map(|pl| {
+                let mut dyn_xw = DMatrix::zeros(n, 2 * n);
+                dyn_xw.view_mut((0, 0), (n, n)).copy_from(&pl.a);
+                dyn_xw.view_mut((0, n), (n, n)).fill_with_identity();
+                let mut dyn_xuw = DMatrix::zeros(n, n + m + n);
+                dyn_xuw.view_mut((0, 0), (n, n)).copy_from(&pl.a);
+                dyn_xuw.view_mut((0, n), (n, m)).copy_from(&pl.b);
+                dyn_xuw.view_mut((0, n + m), (n, n)).fill_with_identity();
+                Dynamics {
+                    plant: pl,
+                    dyn_xw,
+                    dyn_xuw,
+                }
+            })
+            .collect();
         ClosedLoop {
             plant,
             net,
             obs_xv,
-            obs_xvw,
-            dyn_xvw,
-            dyn_xuw,
-            facets,
+            dynamics,
         }
+    }
+
+    /// The dynamics of step `t`.
+    fn at(&self, t: usize) -> &Dynamics {
+        &self.dynamics[t.min(self.dynamics.len() - 1)]
+    }
+
+    /// The plant used at step `t`.
+    pub fn plant_at(&self, t: usize) -> &Plant {
+        &self.at(t).plant
+    }
+
+    /// Whether `A`, `B` or `c` change over time.
+    pub fn is_time_varying(&self) -> bool {
+        self.dynamics.len() > 1
     }
 
     /// State dimension.
@@ -110,16 +206,14 @@ impl ClosedLoop {
         self.plant.a.nrows()
     }
 
-    /// One exact step: returns `(u, x⁺)` for state `x` and noise `w`, `v` (in `f64`).
-    pub fn simulate(&self, x: &[f64], w: &[f64], v: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    /// One exact step `t`: returns `(u, x⁺)` for state `x` and noise `w`, `v` (in `f64`).
+    pub fn simulate(&self, t: usize, x: &[f64], w: &[f64], v: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let xv = DVector::from_column_slice(x);
         let y = self.plant.obs.transpose() * &xv + DVector::from_column_slice(v);
         let u = self.net.forward(y.as_slice());
         let uv = DVector::from_column_slice(&u);
-        let next = &self.plant.a * &xv
-            + &self.plant.b * uv
-            + &self.plant.c
-            + DVector::from_column_slice(w);
+        let pl = self.plant_at(t);
+        let next = &pl.a * &xv + &pl.b * uv + &pl.c + DVector::from_column_slice(w);
         (u, next.as_slice().to_vec())
     }
 
@@ -129,75 +223,227 @@ impl ClosedLoop {
         affine_image(&self.obs_xv, &DVector::zeros(p), &x.product(&self.plant.v))
     }
 
-    /// An over-approximation of the set of next states for states in `x`.
-    pub fn step(&self, x: &IBox, prop: Propagator) -> IBox {
-        let y = self.observation_box(x);
-        match prop {
-            Propagator::IbpSeparate => {
-                let u = Analysis::new(&self.net, &y, Mode::Ibp).output_box(Mode::Ibp);
-                self.push_control_box(x, &u)
-            }
-            Propagator::CrownSeparate => {
-                let u = Analysis::new(&self.net, &y, Mode::Crown).output_box(Mode::Crown);
-                self.push_control_box(x, &u)
-            }
-            Propagator::ReachLp => self.reach_lp(x, &y),
+    /// The facet matrix of a boundary: `[I; −I]` (the bounding box), then its directions.
+    pub fn facets(&self, boundary: &Boundary) -> DMatrix<f64> {
+        let n = self.states();
+        let extra = match boundary {
+            Boundary::Box => 0,
+            Boundary::Polytope(d) => d.nrows(),
+        };
+        let mut f = DMatrix::zeros(2 * n + extra, n);
+        for i in 0..n {
+            f[(i, i)] = 1.0;
+            f[(n + i, i)] = -1.0;
+        }
+        if let Boundary::Polytope(d) = boundary {
+            f.view_mut((2 * n, 0), (extra, n)).copy_from(d);
+        }
+        f
+    }
+
+    /// The set `{x | F x ≤ ub}` for the facets of `boundary`.
+    fn region_of(&self, boundary: &Boundary, ub: &[f64]) -> Region {
+        let n = self.states();
+        let bbox = IBox::new(ub[n..2 * n].iter().map(|v| -v).collect(), ub[..n].to_vec());
+        match boundary {
+            Boundary::Box => Region::Box(bbox),
+            Boundary::Polytope(d) => Region::Polytope {
+                bbox,
+                rows: (0..d.nrows())
+                    .map(|r| (d.row(r).iter().copied().collect(), ub[2 * n + r]))
+                    .collect(),
+            },
         }
     }
 
-    /// `A X + B U + c + W` in interval arithmetic.
-    fn push_control_box(&self, x: &IBox, u: &IBox) -> IBox {
-        affine_image(
-            &self.dyn_xuw,
-            &self.plant.c,
-            &x.product(u).product(&self.plant.w),
-        )
+    /// An over-approximation of the set of states at step `t + 1` for states
+    /// in `x` at step `t`.
+    pub fn step(&self, t: usize, x: &Region, prop: Propagator, boundary: &Boundary) -> Step {
+        let bbox = x.bbox();
+        let y = self.observation_box(&bbox);
+        let facets = self.facets(boundary);
+        let bound = match prop {
+            Propagator::ReachLp | Propagator::CrownUnrolled => {
+                let analysis = Analysis::new(&self.net, &y, Mode::Crown);
+                self.back_step(t, &LinearUpper::of_spec(facets), &analysis, &bbox)
+            }
+            Propagator::IbpSeparate => {
+                let u = Analysis::new(&self.net, &y, Mode::Ibp).output_box(Mode::Ibp);
+                self.push_control_box(t, facets, &bbox, &u)
+            }
+            Propagator::CrownSeparate => {
+                let u = Analysis::new(&self.net, &y, Mode::Crown).output_box(Mode::Crown);
+                self.push_control_box(t, facets, &bbox, &u)
+            }
+            Propagator::SgIbpSeparate => {
+                let u = self.sg_ibp_control(&y);
+                self.push_control_box(t, facets, &bbox, &u)
+            }
+        };
+        let (ub, issues) = bound.concretize_region(x);
+        Step {
+            set: self.region_of(boundary, &ub),
+            issues,
+        }
     }
 
-    /// Reach-LP with box facets (the closed form of the tutorial's Lemma on
-    /// bounds of `x_{t+1}`): for each facet `a`, CROWN bounds `aᵀB π(y)` by a
-    /// linear function of `y` (choosing the upper or lower relaxation per
-    /// control by the sign of `aᵀB`, which CROWN with specification `aᵀB`
-    /// does per neuron), `y = Cᵀx + v` is substituted, the dynamics are
-    /// added, and the result is maximised over `x × V × W`.
-    fn reach_lp(&self, x: &IBox, y: &IBox) -> IBox {
-        let n = self.states();
-        let analysis = Analysis::new(&self.net, y, Mode::Crown);
-        // Only the size of u is needed here (for a rounding-error term), so the
-        // cheap IBP-propagated box suffices.
-        let u_box = analysis.output_box(Mode::Ibp);
-        let xi = x.product(&self.plant.v).product(&self.plant.w);
-        let abs_xi = xi.abs_max();
-        let spec = &self.facets * &self.plant.b;
-        // rounding error of F·B, times the size of u
-        let k = gamma(n + 2);
-        let fb_abs = self.facets.abs() * self.plant.b.abs();
-        let u_abs = u_box.abs_max();
-        let spec_slack: Vec<f64> = (0..spec.nrows())
-            .map(|r| {
-                let row: Vec<f64> = fb_abs.row(r).iter().copied().collect();
-                slack(k, &row, &u_abs)
-            })
-            .collect();
-        let p = self.plant.obs.ncols();
-        let control =
-            analysis
-                .upper(spec)
-                .through_affine(&self.obs_xvw, &DVector::zeros(p), &abs_xi);
-        let direct = LinearUpper::of_spec(self.facets.clone()).through_affine(
-            &self.dyn_xvw,
-            &self.plant.c,
-            &abs_xi,
+    /// The control box over `y` by IBP on a simulation-guided partition of `y`.
+    fn sg_ibp_control(&self, y: &IBox) -> IBox {
+        let mut rng = Rng::new(0x5EED);
+        let mut hull: Option<IBox> = None;
+        for k in 0..SG_SAMPLES {
+            let p: Vec<f64> = (0..y.dim())
+                .map(|i| {
+                    if k < 2 {
+                        if k == 0 {
+                            y.lo[i]
+                        } else {
+                            y.hi[i]
+                        }
+                    } else {
+                        rng.uniform(y.lo[i], y.hi[i])
+                    }
+                })
+                .collect();
+            let u = IBox::point(&self.net.forward(&p));
+            hull = Some(hull.map_or(u.clone(), |h| h.hull(&u)));
+        }
+        let hull = hull.unwrap_or_else(|| y.clone());
+        let r = refine(
+            y,
+            Strategy::Sg,
+            &SG_BUDGET,
+            &mut |c| {
+                let b = Analysis::new(&self.net, c, Mode::Ibp).output_box(Mode::Ibp);
+                let s = outside(&b, &hull);
+                (b, s)
+            },
+            &mut |_| false,
+            &|| 0.0,
         );
-        let total = direct.add(&control, &abs_xi);
-        let ub: Vec<f64> = total
-            .concretize(&xi)
-            .into_iter()
-            .zip(&spec_slack)
-            .map(|(b, s)| sum_upper([b, *s]))
-            .collect();
-        let hi = ub[..n].to_vec();
-        let lo = ub[n..].iter().map(|v| -v).collect();
-        IBox::new(lo, hi)
+        let mut leaves = r.leaves.into_iter();
+        let first = leaves.next().map(|l| l.value).unwrap_or(hull);
+        leaves.fold(first, |h, l| h.hull(&l.value))
+    }
+
+    /// `F (A x + B u + c + w)` bounded linearly in `x`, over `u ∈ U`, `w ∈ W`.
+    fn push_control_box(&self, t: usize, facets: DMatrix<f64>, x: &IBox, u: &IBox) -> LinearUpper {
+        let n = self.states();
+        let xuw = x.product(u).product(&self.plant.w);
+        let d = self.at(t);
+        LinearUpper::of_spec(facets)
+            .through_affine(&d.dyn_xuw, &d.plant.c, &xuw.abs_max())
+            .split_concretize(n, &u.product(&self.plant.w))
+    }
+
+    /// One step of back-substitution (the tutorial's Lemma on bounds of
+    /// `x_{t+1}`): a bound `M x_{t+1} ≤ …` becomes one linear in `x_t`, for
+    /// `x_t ∈ x` (a box containing the reachable states). CROWN with
+    /// specification `M B` bounds `M B π(y)` by a linear function of `y`
+    /// (choosing the upper or lower relaxation per control by the sign of
+    /// each row, per neuron), `y = Cᵀx + v` is substituted, and the noise
+    /// `v`, `w` is bounded over its boxes.
+    fn back_step(
+        &self,
+        t: usize,
+        bound: &LinearUpper,
+        analysis: &Analysis,
+        x: &IBox,
+    ) -> LinearUpper {
+        let n = self.states();
+        let (w, v) = (&self.plant.w, &self.plant.v);
+        let d = self.at(t);
+        let abs_x = x.abs_max();
+        let direct = bound
+            .through_affine(&d.dyn_xw, &d.plant.c, &x.product(w).abs_max())
+            .split_concretize(n, w);
+        // S = M B in f64; its rounding error times the size of u goes into the offsets
+        let spec = &bound.coef * &d.plant.b;
+        let k = gamma(n + 2);
+        let mb_abs = bound.coef.abs() * d.plant.b.abs();
+        let u_abs = analysis.output_box(Mode::Ibp).abs_max();
+        let p = self.plant.obs.ncols();
+        let mut control = analysis
+            .upper(spec)
+            .through_affine(&self.obs_xv, &DVector::zeros(p), &x.product(v).abs_max())
+            .split_concretize(n, v);
+        for r in 0..control.offset.len() {
+            let row: Vec<f64> = mb_abs.row(r).iter().copied().collect();
+            control.offset[r] = sum_upper([control.offset[r], slack(k, &row, &u_abs)]);
+        }
+        direct.add(&control, &abs_x)
+    }
+
+    /// The unrolled propagator: reachable sets of steps `0..=horizon` from
+    /// `x0`, each bounded through all earlier copies of the loop back to `x0`
+    /// and intersected with the one-step Reach-LP bound from the previous set.
+    /// Hidden-neuron bounds of copy `t` are themselves unrolled (the
+    /// [`Analysis::with_hook`] hook), and kept for later steps, so the cost is
+    /// quadratic in the horizon, not exponential.
+    pub fn unrolled(&self, x0: &Region, horizon: usize, boundary: &Boundary) -> Vec<Step> {
+        let n = self.states();
+        let p = self.plant.obs.ncols();
+        let facets = self.facets(boundary);
+        let mut steps = vec![Step {
+            set: x0.clone(),
+            issues: Vec::new(),
+        }];
+        let mut boxes = vec![x0.bbox()];
+        let mut analyses: Vec<Analysis> = Vec::with_capacity(horizon);
+        for t in 0..horizon {
+            let y = self.observation_box(&boxes[t]);
+            let hook_issues = std::cell::RefCell::new(Vec::new());
+            let analysis = {
+                let hook = |over_y: &LinearUpper| -> Vec<f64> {
+                    let over_x = over_y
+                        .through_affine(
+                            &self.obs_xv,
+                            &DVector::zeros(p),
+                            &boxes[t].product(&self.plant.v).abs_max(),
+                        )
+                        .split_concretize(n, &self.plant.v);
+                    let over_x0 = self.back_to_start(over_x, &analyses, &boxes, t);
+                    let (ub, issues) = over_x0.concretize_region(x0);
+                    hook_issues.borrow_mut().extend(issues);
+                    ub
+                };
+                Analysis::with_hook(&self.net, &y, Mode::Crown, Some(&hook))
+            };
+            let over_xt = self.back_step(
+                t,
+                &LinearUpper::of_spec(facets.clone()),
+                &analysis,
+                &boxes[t],
+            );
+            analyses.push(analysis);
+            let (one_step, mut issues) = over_xt.concretize_region(&steps[t].set);
+            let over_x0 = self.back_to_start(over_xt, &analyses[..t], &boxes, t);
+            let (through, more) = over_x0.concretize_region(x0);
+            issues.extend(more);
+            issues.extend(hook_issues.into_inner());
+            let ub: Vec<f64> = one_step
+                .iter()
+                .zip(&through)
+                .map(|(a, b)| a.min(*b))
+                .collect();
+            let set = self.region_of(boundary, &ub);
+            boxes.push(set.bbox());
+            steps.push(Step { set, issues });
+        }
+        steps
+    }
+
+    /// Back-substitute a bound on `x_s` to one on `x_0` through `analyses[..s]`.
+    fn back_to_start(
+        &self,
+        mut bound: LinearUpper,
+        analyses: &[Analysis],
+        boxes: &[IBox],
+        s: usize,
+    ) -> LinearUpper {
+        for r in (0..s).rev() {
+            bound = self.back_step(r, &bound, &analyses[r], &boxes[r]);
+        }
+        bound
     }
 }

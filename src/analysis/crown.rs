@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector};
 use super::relax::{image, relax, Relax};
 use crate::nn::{Layer, Network};
 use crate::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper, U};
-use crate::sets::IBox;
+use crate::sets::{IBox, Region};
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
 #[derive(Clone, Debug, PartialEq)]
@@ -80,6 +80,40 @@ impl LinearUpper {
             })
             .collect();
         LinearUpper { coef, offset }
+    }
+
+    /// Keep the first `keep` variables and bound the rest over `tail` (added to
+    /// the offsets): a bound on `(z, ζ)` becomes one on `z` valid for all `ζ ∈ tail`.
+    pub fn split_concretize(&self, keep: usize, tail: &IBox) -> LinearUpper {
+        let k = self.coef.nrows();
+        let coef = self.coef.columns(0, keep).into_owned();
+        let offset = (0..k)
+            .map(|r| {
+                let row: Vec<f64> = (keep..self.coef.ncols())
+                    .map(|c| self.coef[(r, c)])
+                    .collect();
+                sum_upper([self.offset[r], dot_box_upper(&row, &tail.lo, &tail.hi)])
+            })
+            .collect();
+        LinearUpper { coef, offset }
+    }
+
+    /// Certified upper bounds of each row over a region, and the solver
+    /// issues met (each bound is valid regardless; see [`crate::lp`]).
+    pub fn concretize_region(&self, region: &Region) -> (Vec<f64>, Vec<&'static str>) {
+        if let Region::Box(b) = region {
+            return (self.concretize(b), Vec::new());
+        }
+        let mut issues = Vec::new();
+        let ub = (0..self.coef.nrows())
+            .map(|r| {
+                let row: Vec<f64> = self.coef.row(r).iter().copied().collect();
+                let s = region.support(&row);
+                issues.extend(s.issue);
+                sum_upper([s.value, self.offset[r]])
+            })
+            .collect();
+        (ub, issues)
     }
 
     /// Certified upper bounds of each row over the box.
@@ -150,6 +184,9 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
     IBox::new(lo, hi)
 }
 
+/// Other certified upper bounds of a linear bound's rows (see [`Analysis::with_hook`]).
+pub type BoundHook<'h> = dyn Fn(&LinearUpper) -> Vec<f64> + 'h;
+
 /// How hidden-layer bounds are computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
@@ -175,6 +212,20 @@ pub struct Analysis<'a> {
 impl<'a> Analysis<'a> {
     /// Bound every layer of `net` over `input`.
     pub fn new(net: &'a Network, input: &IBox, mode: Mode) -> Analysis<'a> {
+        Analysis::with_hook(net, input, mode, None)
+    }
+
+    /// [`Analysis::new`], where in CROWN mode the linear bound of every
+    /// pre-activation (a [`LinearUpper`] over the network input) is also
+    /// handed to `hook`, which returns other certified upper bounds of its
+    /// rows; the tighter of the two is kept. The unrolled closed-loop
+    /// propagator uses this to bound hidden neurons through earlier steps.
+    pub fn with_hook(
+        net: &'a Network,
+        input: &IBox,
+        mode: Mode,
+        hook: Option<&BoundHook>,
+    ) -> Analysis<'a> {
         let mut a = Analysis {
             net,
             boxes: vec![input.clone()],
@@ -194,7 +245,13 @@ impl<'a> Analysis<'a> {
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     if mode == Mode::Crown && feeds_activation {
                         let n = w.nrows();
-                        let both = a.backward(plus_minus_identity(n), i + 1).concretize(input);
+                        let bound = a.backward(plus_minus_identity(n), i + 1);
+                        let mut both = bound.concretize(input);
+                        if let Some(h) = hook {
+                            for (b, o) in both.iter_mut().zip(h(&bound)) {
+                                *b = b.min(o);
+                            }
+                        }
                         for j in 0..n {
                             next.hi[j] = next.hi[j].min(both[j]);
                             next.lo[j] = next.lo[j].max(-both[n + j]);

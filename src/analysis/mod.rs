@@ -2,4 +2,5 @@
 
 pub mod closed_loop;
 pub mod crown;
+pub mod partition;
 pub mod relax;

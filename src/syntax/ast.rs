@@ -107,6 +107,12 @@ pub enum SystemStmt {
         value: Spanned<Value>,
         span: Span,
     },
+    /// `time continuous dt 0.1` / `time discrete`
+    Time {
+        kind: Spanned<String>,
+        dt: Option<Spanned<f64>>,
+        span: Span,
+    },
 }
 
 /// A literal value.
@@ -122,6 +128,8 @@ pub enum Value {
     Zeros(Spanned<u64>, Option<Spanned<u64>>),
     /// a bare number
     Scalar(f64),
+    /// `per_step(v0, v1, …)`: one value per step
+    PerStep(Vec<Spanned<Value>>),
 }
 
 /// A named set definition.
@@ -162,6 +170,19 @@ pub enum SetAtom {
     Box(BoxSet),
     /// `{ … }`
     Polytope(Vec<Constraint>),
+    /// `ball(center […], radius …, norm p)`
+    Ball(BallSet),
+}
+
+/// An ℓp ball as written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BallSet {
+    /// The centre.
+    pub center: Spanned<Vec<Spanned<f64>>>,
+    /// The radius: a number or one per dimension.
+    pub radius: Spanned<Value>,
+    /// `1`, `2` or `inf` (absent: 2).
+    pub norm: Option<Spanned<String>>,
 }
 
 /// A box, by component or positionally.
@@ -237,6 +258,15 @@ pub enum AnalysisStmt {
     Uniform(Vec<Spanned<u64>>),
     /// `boundary NAME`
     Boundary(Spanned<String>),
+    /// `boundary polytope K` (a count) or `boundary polytope [[…], …]`
+    BoundaryPolytope(Spanned<Value>),
+    /// `partitioner sg|gsg|property (budget…)`
+    Guided {
+        /// The guide's name.
+        guide: Spanned<String>,
+        /// `(name, value)` budget items.
+        budget: Vec<(Spanned<String>, Spanned<f64>)>,
+    },
     /// `samples N`
     Samples(Spanned<u64>),
     /// `seed N`

@@ -39,7 +39,7 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         }
         Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
         Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => {
-            "a set: box(…) or { … }"
+            "a set: box(…), { … } or ball(…)"
         }
         Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
         Rule::interval => "an interval `[lo, hi]`",
@@ -52,6 +52,13 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::string => "a quoted path",
         Rule::steps | Rule::steps_range | Rule::step_single => "`at steps [a, b]` or `at step k`",
         Rule::uniform => "`uniform [k, …]`",
+        Rule::ball => "`ball(center […], radius …, norm p)`",
+        Rule::norm => "`1`, `2` or `inf`",
+        Rule::guided | Rule::guide => "`sg`, `gsg` or `property`",
+        Rule::budget | Rule::budget_item => "a budget item such as `calls 100`",
+        Rule::boundary_polytope => "`polytope K` or `polytope [[…], …]`",
+        Rule::per_step => "`per_step(value, …)`",
+        Rule::time_decl | Rule::time_kw => "`time continuous dt …` or `time discrete`",
         Rule::add_op => "`+` or `-`",
         Rule::close => "`]`",
         _ => return None,
@@ -227,6 +234,12 @@ impl Builder {
         let s = span(&p);
         let rule = p.as_rule();
         let mut inner = p.into_inner();
+        if rule == Rule::time_decl {
+            let _keyword = inner.next();
+            let kind = self.ident(inner.next().expect("time kind"));
+            let dt = inner.next().map(|d| self.number(d));
+            return SystemStmt::Time { kind, dt, span: s };
+        }
         let name = self.ident(inner.next().expect("statement name"));
         match rule {
             Rule::state_decl => SystemStmt::State {
@@ -254,12 +267,24 @@ impl Builder {
             Rule::assign => {
                 let v = inner.next().expect("value");
                 let vs = span(&v);
+                let node = if v.as_rule() == Rule::per_step {
+                    Value::PerStep(
+                        v.into_inner()
+                            .map(|x| {
+                                let xs = span(&x);
+                                Spanned {
+                                    node: self.value(x),
+                                    span: xs,
+                                }
+                            })
+                            .collect(),
+                    )
+                } else {
+                    self.value(v)
+                };
                 SystemStmt::Assign {
                     name,
-                    value: Spanned {
-                        node: self.value(v),
-                        span: vs,
-                    },
+                    value: Spanned { node, span: vs },
                     span: s,
                 }
             }
@@ -312,6 +337,33 @@ impl Builder {
                     Rule::box_set => SetAtom::Box(self.box_set(a)),
                     Rule::polytope => {
                         SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect())
+                    }
+                    Rule::ball => {
+                        let mut it = a.into_inner();
+                        let c = it.next().expect("centre");
+                        let cs = span(&c);
+                        let center = Spanned {
+                            node: self.numbers(c),
+                            span: cs,
+                        };
+                        let r = it.next().expect("radius");
+                        let rs = span(&r);
+                        let radius = Spanned {
+                            node: match r.as_rule() {
+                                Rule::vector => Value::Vector(self.numbers(r)),
+                                _ => Value::Scalar(self.number(r).node),
+                            },
+                            span: rs,
+                        };
+                        let norm = it.next().map(|n| Spanned {
+                            node: n.as_str().to_string(),
+                            span: span(&n),
+                        });
+                        SetAtom::Ball(BallSet {
+                            center,
+                            radius,
+                            norm,
+                        })
                     }
                     other => unreachable!("grammar set rule {other:?}"),
                 };
@@ -423,9 +475,53 @@ impl Builder {
                 Rule::uniform => {
                     AnalysisStmt::Uniform(arg.into_inner().map(|i| self.integer(i)).collect())
                 }
+                Rule::guided => {
+                    let mut it = arg.into_inner();
+                    let g = it.next().expect("guide");
+                    let guide = Spanned {
+                        node: g.as_str().to_string(),
+                        span: span(&g),
+                    };
+                    let budget = it
+                        .next()
+                        .map(|b| {
+                            b.into_inner()
+                                .map(|item| {
+                                    let mut kv = item.into_inner();
+                                    let k = self.ident(kv.next().expect("budget name"));
+                                    let v = self.number(kv.next().expect("budget value"));
+                                    (k, v)
+                                })
+                                .collect()
+                        })
+                        .unwrap_or_default();
+                    AnalysisStmt::Guided { guide, budget }
+                }
                 _ => AnalysisStmt::Partitioner(self.ident(arg)),
             },
-            Rule::boundary => AnalysisStmt::Boundary(self.ident(arg)),
+            Rule::boundary => match arg.as_rule() {
+                Rule::boundary_polytope => {
+                    let d = arg.into_inner().next().expect("directions");
+                    let ds = span(&d);
+                    let node = match d.as_rule() {
+                        Rule::integer => Value::Scalar(self.integer(d).node as f64),
+                        _ => Value::Matrix(
+                            d.into_inner()
+                                .filter(|row| row.as_rule() == Rule::vector)
+                                .map(|row| {
+                                    let rs = span(&row);
+                                    Spanned {
+                                        node: self.numbers(row),
+                                        span: rs,
+                                    }
+                                })
+                                .collect(),
+                        ),
+                    };
+                    AnalysisStmt::BoundaryPolytope(Spanned { node, span: ds })
+                }
+                _ => AnalysisStmt::Boundary(self.ident(arg)),
+            },
             Rule::samples => AnalysisStmt::Samples(self.integer(arg)),
             Rule::seed => AnalysisStmt::Seed(self.integer(arg)),
             other => unreachable!("grammar analysis rule {other:?}"),

@@ -10,11 +10,15 @@ use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::analysis::closed_loop::{Plant, Propagator};
+mod extra;
+
+use crate::analysis::closed_loop::{Boundary, Plant, Propagator};
 use crate::diag::{did_you_mean, Code, Diagnostic};
+use crate::lower::{Guide, Partitioner};
 use crate::onnx::{self, Controller, ExternalFiles, OnnxErrorKind};
-use crate::sets::{IBox, Polytope};
+use crate::sets::{IBox, Polytope, Region};
 use crate::syntax::ast::*;
+pub use extra::{zero_order_hold, DEFAULT_BUDGET};
 
 /// The controller file as read by the caller.
 #[derive(Clone, Debug)]
@@ -63,16 +67,19 @@ pub struct Checked {
     pub state: (String, usize),
     /// The control vector's name and dimension.
     pub control: (String, usize),
-    /// The plant.
-    pub plant: Plant,
+    /// The plant per step (one entry when time-invariant), discretised if
+    /// the spec gave continuous time.
+    pub plants: Vec<Plant>,
+    /// The time step of a continuous-time plant.
+    pub dt: Option<f64>,
     /// Control limits, if any.
     pub limits: Option<IBox>,
     /// The controller's path as written.
     pub controller_path: String,
     /// The loaded controller.
     pub controller: Controller,
-    /// The initial set's name and box.
-    pub initial: (String, IBox),
+    /// The initial set's name and region.
+    pub initial: (String, Region),
     /// The goal, if any.
     pub goal: Option<GoalDef>,
     /// The avoid sets.
@@ -81,8 +88,10 @@ pub struct Checked {
     pub horizon: usize,
     /// The propagator.
     pub propagator: Propagator,
-    /// Cells per state dimension (all 1 without partitioning).
-    pub partition: Vec<usize>,
+    /// How the initial set is split.
+    pub partitioner: Partitioner,
+    /// The shape of the reachable sets.
+    pub boundary: Boundary,
     /// Monte Carlo samples.
     pub samples: usize,
     /// Monte Carlo seed.
@@ -97,15 +106,16 @@ pub fn controller_path(spec: &Spec) -> Option<&Spanned<String>> {
     })
 }
 
-const PROPAGATORS: [&str; 3] = ["reach_lp", "crown_separate", "ibp_separate"];
-const PLANNED_PROPAGATORS: [&str; 4] = [
-    "reach_sdp",
-    "sg_ibp_separate",
+const PROPAGATORS: [&str; 5] = [
+    "reach_lp",
     "crown_unrolled",
-    "reach_lp_unrolled",
+    "crown_separate",
+    "ibp_separate",
+    "sg_ibp_separate",
 ];
-const PARTITIONERS: [&str; 2] = ["none", "uniform"];
-const BOUNDARIES: [&str; 1] = ["box"];
+const PLANNED_PROPAGATORS: [&str; 1] = ["reach_sdp"];
+const PARTITIONERS: [&str; 5] = ["none", "uniform", "sg", "gsg", "property"];
+const BOUNDARIES: [&str; 2] = ["box", "polytope"];
 
 struct Ctx {
     diags: Vec<Diagnostic>,
@@ -222,6 +232,18 @@ impl Ctx {
                         is_vector: true,
                     }),
                 }
+            }
+            Value::PerStep(_) => {
+                self.err(
+                    Diagnostic::new(
+                        Code::WrongKind,
+                        v.span,
+                        format!("`{name}` cannot vary over time"),
+                    )
+                    .label("a per-step list")
+                    .hint("per_step(…) is allowed for A, B and c only"),
+                );
+                None
             }
             Value::Scalar(_) => {
                 self.err(
@@ -509,7 +531,35 @@ impl Ctx {
                     .map(|b| Polytope::from_box(&b))
             }
             SetAtom::Polytope(cs) => self.polytope(cs, name, dim),
+            SetAtom::Ball(_) => {
+                self.err(
+                    Diagnostic::new(Code::SetKind, a.span, format!("{role} cannot be a ball"))
+                        .label("a ball")
+                        .hint("balls are initial sets only; use a box or a polytope"),
+                );
+                None
+            }
         }
+    }
+}
+
+/// Evaluate a value that may be a `per_step(…)` list: the values, and the
+/// list's span when it is one.
+fn per_step<T>(
+    cx: &mut Ctx,
+    v: &Spanned<Value>,
+    one: &mut dyn FnMut(&mut Ctx, &Spanned<Value>) -> Option<T>,
+) -> Option<(Vec<T>, Option<Span>)> {
+    match &v.node {
+        Value::PerStep(items) => {
+            let vals: Vec<Option<T>> = items.iter().map(|x| one(cx, x)).collect();
+            if vals.iter().all(Option::is_some) {
+                Some((vals.into_iter().flatten().collect(), Some(v.span)))
+            } else {
+                None
+            }
+        }
+        _ => one(cx, v).map(|x| (vec![x], None)),
     }
 }
 
@@ -636,6 +686,8 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let mut control: Option<(String, usize)> = None;
     let mut assigns: BTreeMap<&str, (&Spanned<Value>, Span)> = BTreeMap::new();
     let mut bounds: Vec<(&Spanned<String>, &Spanned<BoxSet>)> = Vec::new();
+    let mut time_span = None;
+    let mut time: Result<Option<f64>, ()> = Ok(None);
     if let Some(sys) = sys {
         let mut state_span = None;
         let mut control_span = None;
@@ -682,6 +734,14 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                     }
                 }
                 SystemStmt::Bound { name, set, .. } => bounds.push((name, set)),
+                SystemStmt::Time { kind, dt, span } => {
+                    if let Some(first) = time_span {
+                        cx.duplicate("the time declaration", first, *span);
+                    } else {
+                        time_span = Some(*span);
+                        time = cx.time_decl(kind, dt, *span);
+                    }
+                }
             }
         }
         if let (Some((xn, _)), Some((un, _)), Some(ss), Some(cs)) =
@@ -742,32 +802,39 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
 
-    let mut plant = None;
+    let mut plant: Option<Vec<Plant>> = None;
+    let mut per_step_lists: Vec<(usize, Span)> = Vec::new();
     let mut limits = None;
     let mut p_dim = None;
     if let (Some((xn, n)), Some((un, m))) = (&state, &control) {
         let (n, m) = (*n, *m);
         let a = assigns.get("A").and_then(|(v, _)| {
-            cx.matrix(
-                v,
-                "A",
-                n,
-                Some(n),
-                &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
-            )
+            per_step(&mut cx, v, &mut |cx, v| {
+                cx.matrix(
+                    v,
+                    "A",
+                    n,
+                    Some(n),
+                    &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
+                )
+            })
         });
         let b = assigns.get("B").and_then(|(v, _)| {
-            cx.matrix(
-                v,
-                "B",
-                n,
-                Some(m),
-                &format!("B is n × m: {n} states by {m} controls"),
-            )
+            per_step(&mut cx, v, &mut |cx, v| {
+                cx.matrix(
+                    v,
+                    "B",
+                    n,
+                    Some(m),
+                    &format!("B is n × m: {n} states by {m} controls"),
+                )
+            })
         });
         let c = match assigns.get("c") {
-            Some((v, _)) => cx.vector(v, "c", n, &format!("c has one entry per state ({n})")),
-            None => Some(DVector::zeros(n)),
+            Some((v, _)) => per_step(&mut cx, v, &mut |cx, v| {
+                cx.vector(v, "c", n, &format!("c has one entry per state ({n})"))
+            }),
+            None => Some((vec![DVector::zeros(n)], None)),
         };
         let obs = match assigns.get("C") {
             Some((v, _)) => cx.matrix(
@@ -816,7 +883,25 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             }
         }
         if let (Some(a), Some(b), Some(c), Some(obs), Some(w), Some(v)) = (a, b, c, obs, w, v) {
-            plant = Some(Plant { a, b, c, obs, w, v });
+            for (list, span) in [(a.0.len(), a.1), (b.0.len(), b.1), (c.0.len(), c.1)] {
+                if let Some(span) = span {
+                    per_step_lists.push((list, span));
+                }
+            }
+            let len = a.0.len().max(b.0.len()).max(c.0.len());
+            let pick = |k: usize, l: usize| k.min(l - 1);
+            plant = Some(
+                (0..len)
+                    .map(|k| Plant {
+                        a: a.0[pick(k, a.0.len())].clone(),
+                        b: b.0[pick(k, b.0.len())].clone(),
+                        c: c.0[pick(k, c.0.len())].clone(),
+                        obs: obs.clone(),
+                        w: w.clone(),
+                        v: v.clone(),
+                    })
+                    .collect::<Vec<Plant>>(),
+            );
         }
     }
 
@@ -924,14 +1009,27 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             } else {
                 match &members[0].node {
                     SetAtom::Box(b) => {
-                        let sb = Spanned { node: b.clone(), span: members[0].span };
-                        initial = cx.box_set(&sb, xn, *n, true, "the initial set").map(|b| (init.name.node.clone(), b));
+                        let sb = Spanned {
+                            node: b.clone(),
+                            span: members[0].span,
+                        };
+                        initial = cx
+                            .box_set(&sb, xn, *n, true, "the initial set")
+                            .map(|b| (init.name.node.clone(), Region::Box(b)));
                     }
-                    SetAtom::Polytope(_) => cx.err(
-                        Diagnostic::new(Code::SetKind, members[0].span, "the initial set must be a box in this version of ravel")
-                            .label("a polytope")
-                            .hint("polytope initial sets need LP-based propagation (planned); use box(…) for now"),
-                    ),
+                    SetAtom::Polytope(cs) => {
+                        initial = cx
+                            .polytope(cs, xn, *n)
+                            .and_then(|p| {
+                                cx.bounded_polytope(p, members[0].span, "the initial set")
+                            })
+                            .map(|r| (init.name.node.clone(), r));
+                    }
+                    SetAtom::Ball(b) => {
+                        initial = cx
+                            .ball(b, members[0].span, xn, *n)
+                            .map(|r| (init.name.node.clone(), r));
+                    }
                 }
             }
         }
@@ -1005,7 +1103,11 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
 
     // ---- analysis ----
     let mut propagator = Some(Propagator::ReachLp);
-    let mut partition: Option<Vec<usize>> = state.as_ref().map(|(_, n)| vec![1; *n]);
+    let mut partition: Option<Partitioner> = state
+        .as_ref()
+        .map(|(_, n)| Partitioner::Uniform(vec![1; *n]));
+    let mut boundary = Some(Boundary::Box);
+    let mut guided_span = None;
     let mut samples = DEFAULT_SAMPLES;
     let mut seed = 0u64;
     if let Some(an) = analyses.first() {
@@ -1013,8 +1115,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         for st in &an.stmts {
             let key = match &st.node {
                 AnalysisStmt::Propagator(_) => "propagator",
-                AnalysisStmt::Partitioner(_) | AnalysisStmt::Uniform(_) => "partitioner",
-                AnalysisStmt::Boundary(_) => "boundary",
+                AnalysisStmt::Partitioner(_)
+                | AnalysisStmt::Uniform(_)
+                | AnalysisStmt::Guided { .. } => "partitioner",
+                AnalysisStmt::Boundary(_) | AnalysisStmt::BoundaryPolytope(_) => "boundary",
                 AnalysisStmt::Samples(_) => "samples",
                 AnalysisStmt::Seed(_) => "seed",
             };
@@ -1027,8 +1131,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 AnalysisStmt::Propagator(p) => {
                     propagator = match p.node.as_str() {
                         "reach_lp" => Some(Propagator::ReachLp),
+                        "crown_unrolled" => Some(Propagator::CrownUnrolled),
                         "crown_separate" => Some(Propagator::CrownSeparate),
                         "ibp_separate" => Some(Propagator::IbpSeparate),
+                        "sg_ibp_separate" => Some(Propagator::SgIbpSeparate),
                         other => {
                             let planned = PLANNED_PROPAGATORS.contains(&other);
                             let mut d = Diagnostic::new(
@@ -1062,10 +1168,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         .label("not a partitioner");
                         d = match did_you_mean(&p.node, PARTITIONERS) {
                             Some(s) => d.hint(format!(
-                                "did you mean `{s}`? Available: none, uniform [k, …]"
+                                "did you mean `{s}`? Available: none, uniform [k, …], sg, gsg, property"
                             )),
                             None => d.hint(
-                                "available: none, uniform [k, …] (guided partitioners are planned)",
+                                "available: none, uniform [k, …], sg, gsg, property (each with an optional budget)",
                             ),
                         };
                         cx.err(d);
@@ -1107,7 +1213,9 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                             });
                             match total {
                                 Some(_) => {
-                                    partition = Some(ks.iter().map(|k| k.node as usize).collect())
+                                    partition = Some(Partitioner::Uniform(
+                                        ks.iter().map(|k| k.node as usize).collect(),
+                                    ))
                                 }
                                 None => {
                                     cx.err(
@@ -1125,9 +1233,32 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         }
                     }
                 }
+                AnalysisStmt::Guided { guide, budget } => {
+                    let g = match guide.node.as_str() {
+                        "sg" => Guide::Sg,
+                        "gsg" => Guide::Gsg,
+                        _ => Guide::Property,
+                    };
+                    guided_span = Some((g, st.span));
+                    partition = cx
+                        .budget(budget)
+                        .map(|budget| Partitioner::Guided { guide: g, budget });
+                }
+                AnalysisStmt::BoundaryPolytope(v) => {
+                    if let Some((xn, n)) = &state {
+                        boundary = cx.boundary_polytope(v, xn, *n);
+                    }
+                }
                 AnalysisStmt::Boundary(b) => {
-                    if b.node != "box" {
-                        let planned = b.node == "polytope" || b.node == "hull";
+                    if b.node == "polytope" {
+                        cx.err(
+                            Diagnostic::new(Code::Boundary, b.span, "a polytope boundary needs its directions")
+                                .label("no directions")
+                                .hint("write `boundary polytope 8` (evenly spread, 2-D states) or `boundary polytope [[1, 1], [1, -1]]`"),
+                        );
+                        boundary = None;
+                    } else if b.node != "box" {
+                        let planned = b.node == "hull";
                         let mut d = Diagnostic::new(
                             Code::UnknownName,
                             b.span,
@@ -1139,11 +1270,12 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                             "not a boundary shape"
                         });
                         d = match (planned, did_you_mean(&b.node, BOUNDARIES)) {
-                            (true, _) => d.hint("polytope boundaries are planned; available: box"),
+                            (true, _) => d.hint("convex-hull boundaries are planned; available: box, polytope K, polytope [[…], …]"),
                             (false, Some(s)) => d.hint(format!("did you mean `{s}`?")),
-                            (false, None) => d.hint("available: box"),
+                            (false, None) => d.hint("available: box, polytope K, polytope [[…], …]"),
                         };
                         cx.err(d);
+                        boundary = None;
                     }
                 }
                 AnalysisStmt::Samples(s) => {
@@ -1166,6 +1298,62 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
 
+    if let (Some((g, span)), true) = (guided_span, samples == 0) {
+        if g != Guide::Property {
+            cx.err(
+                Diagnostic::new(
+                    Code::Partition,
+                    span,
+                    format!(
+                        "the `{}` partitioner is guided by Monte Carlo samples, but `samples` is 0",
+                        g.name()
+                    ),
+                )
+                .label("no samples to guide it")
+                .hint("draw samples (e.g. `samples 1000`) or use `partitioner property`"),
+            );
+        }
+    }
+    if let Some(h) = horizon {
+        for (len, span) in &per_step_lists {
+            if *len < h {
+                cx.err(
+                    Diagnostic::new(
+                        Code::PerStepLength,
+                        *span,
+                        format!("the list has {len} values but the horizon is {h}"),
+                    )
+                    .label(format!("{len} value(s)"))
+                    .hint(format!(
+                        "give one value per step 0 … {}: at least {h}",
+                        h - 1
+                    )),
+                );
+            }
+        }
+    }
+    if let (Ok(Some(dt)), Some(plants)) = (time, plant.as_mut()) {
+        let mut ok = true;
+        for p in plants.iter_mut() {
+            match zero_order_hold(p, dt) {
+                Some(d) => *p = d,
+                None => ok = false,
+            }
+        }
+        if !ok {
+            cx.err(
+                Diagnostic::new(
+                    Code::TimeStep,
+                    time_span.unwrap_or(whole),
+                    format!("e^(A·{dt}) overflows"),
+                )
+                .label("time step too large for these dynamics")
+                .hint("use a smaller dt"),
+            );
+        }
+    }
+    let dt = time.ok().flatten();
+
     if !cx.diags.is_empty() {
         cx.diags
             .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
@@ -1182,6 +1370,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         horizon,
         propagator,
         partition,
+        boundary,
         controllers.first(),
     ) {
         (
@@ -1193,13 +1382,15 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             Some(initial),
             Some(horizon),
             Some(propagator),
-            Some(partition),
+            Some(partitioner),
+            Some(boundary),
             Some(path),
         ) => Ok(Checked {
             system: sys.name.node.clone(),
             state,
             control,
-            plant,
+            plants: plant,
+            dt,
             limits,
             controller_path: path.node.clone(),
             controller,
@@ -1208,7 +1399,8 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             avoids: avoid_specs,
             horizon,
             propagator,
-            partition,
+            partitioner,
+            boundary,
             samples,
             seed,
         }),

@@ -1,0 +1,290 @@
+//! Partitioners: split an input box into cells, guided by a score per cell.
+//!
+//! One engine serves the open-loop analysis of a network (the control box of
+//! `sg_ibp_separate`) and the closed-loop partitioners over `X0`:
+//!
+//! * **SG** (simulation-guided, after Xiang et al.): cells are taken depth
+//!   first; a cell whose bound lies inside the Monte Carlo hull (score ≤ 0) is
+//!   final, any other is bisected until the budget or the minimum size stops it.
+//! * **GSG** (greedy SG, after Everett et al.): the cell with the largest
+//!   score is refined first, so a limited budget is spent where the bound is
+//!   worst; refinement stops when every cell scores ≤ 0 or the budget is spent.
+//!
+//! A cell is bisected along the dimension that is widest relative to the
+//! root box (two children per split, so the cost stays linear in the state
+//! dimension). The score function decides what "worst" means: distance
+//! outside the sampled hull for SG/GSG, the negative property margin for the
+//! property-guided closed-loop partitioner.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use crate::sets::IBox;
+
+/// Which cell to refine next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// Depth first; stop refining cells that score ≤ 0.
+    Sg,
+    /// The cell with the largest score first.
+    Gsg,
+}
+
+/// When refinement stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Budget {
+    /// Most evaluations of a cell (the root counts).
+    pub calls: usize,
+    /// Cells narrower than this fraction of the root along every dimension are not split.
+    pub min_size: f64,
+    /// Wall-clock limit in seconds (checked between evaluations), if any.
+    pub seconds: Option<f64>,
+}
+
+/// A final cell with its evaluation and score.
+#[derive(Clone, Debug)]
+pub struct Leaf<T> {
+    /// The cell.
+    pub cell: IBox,
+    /// What the evaluation returned.
+    pub value: T,
+    /// Its score (≤ 0: nothing left to gain).
+    pub score: f64,
+}
+
+/// What a refinement did.
+#[derive(Clone, Debug)]
+pub struct Refined<T> {
+    /// The final cells; their union is the root box.
+    pub leaves: Vec<Leaf<T>>,
+    /// Evaluations made.
+    pub calls: usize,
+    /// Why it stopped: `"done"`, `"calls"`, `"time"` or `"stopped"`.
+    pub stop: &'static str,
+}
+
+struct Queued<T> {
+    score: f64,
+    order: usize,
+    leaf: Leaf<T>,
+}
+
+impl<T> PartialEq for Queued<T> {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == Ordering::Equal
+    }
+}
+impl<T> Eq for Queued<T> {}
+impl<T> PartialOrd for Queued<T> {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl<T> Ord for Queued<T> {
+    fn cmp(&self, o: &Self) -> Ordering {
+        // largest score first; ties: earlier cell first (deterministic)
+        self.score
+            .total_cmp(&o.score)
+            .then_with(|| o.order.cmp(&self.order))
+    }
+}
+
+/// Bisect `cell` along its widest dimension relative to `root`, or `None`
+/// when every dimension is already below `min_size` of the root.
+pub fn bisect(cell: &IBox, root: &IBox, min_size: f64) -> Option<(IBox, IBox)> {
+    let mut best: Option<(usize, f64)> = None;
+    for d in 0..cell.dim() {
+        let rw = root.hi[d] - root.lo[d];
+        if rw <= 0.0 {
+            continue;
+        }
+        let rel = (cell.hi[d] - cell.lo[d]) / rw;
+        if rel > min_size && best.is_none_or(|b| rel > b.1) {
+            best = Some((d, rel));
+        }
+    }
+    let (d, _) = best?;
+    let mid = cell.lo[d] + 0.5 * (cell.hi[d] - cell.lo[d]);
+    if !(cell.lo[d] < mid && mid < cell.hi[d]) {
+        return None;
+    }
+    let mut a = cell.clone();
+    a.hi[d] = mid;
+    let mut b = cell.clone();
+    b.lo[d] = mid;
+    Some((a, b))
+}
+
+/// Refine `root` with `eval` (which returns a value and its score).
+/// `stop_all` is asked after every evaluation whether the whole search can
+/// end (the property-guided partitioner ends when the verdict is decided).
+/// `elapsed` returns seconds since the start (only called with a time budget).
+pub fn refine<T>(
+    root: &IBox,
+    strategy: Strategy,
+    budget: &Budget,
+    eval: &mut dyn FnMut(&IBox) -> (T, f64),
+    stop_all: &mut dyn FnMut(&T) -> bool,
+    elapsed: &dyn Fn() -> f64,
+) -> Refined<T> {
+    let mut calls = 0usize;
+    let mut order = 0usize;
+    let mut done: Vec<Leaf<T>> = Vec::new();
+    let mut stop = "done";
+    let (v, score) = eval(root);
+    calls += 1;
+    let first = Leaf {
+        cell: root.clone(),
+        value: v,
+        score,
+    };
+    let halt = stop_all(&first.value);
+    let mut heap = BinaryHeap::new();
+    let mut stack = Vec::new();
+    match strategy {
+        Strategy::Gsg => heap.push(Queued {
+            score,
+            order,
+            leaf: first,
+        }),
+        Strategy::Sg => stack.push(first),
+    }
+    if halt {
+        stop = "stopped";
+    }
+    loop {
+        if stop != "done" {
+            break;
+        }
+        let leaf = match strategy {
+            Strategy::Gsg => match heap.pop() {
+                Some(q) => q.leaf,
+                None => break,
+            },
+            Strategy::Sg => match stack.pop() {
+                Some(l) => l,
+                None => break,
+            },
+        };
+        if leaf.score <= 0.0 {
+            done.push(leaf);
+            if strategy == Strategy::Gsg {
+                // the best remaining cell has nothing to gain: neither has any other
+                break;
+            }
+            continue;
+        }
+        if calls + 2 > budget.calls {
+            stop = "calls";
+            done.push(leaf);
+            break;
+        }
+        if budget.seconds.is_some_and(|s| elapsed() >= s) {
+            stop = "time";
+            done.push(leaf);
+            break;
+        }
+        let Some((a, b)) = bisect(&leaf.cell, root, budget.min_size) else {
+            done.push(leaf);
+            continue;
+        };
+        for c in [b, a] {
+            let (v, score) = eval(&c);
+            calls += 1;
+            order += 1;
+            let halt = stop_all(&v);
+            let l = Leaf {
+                cell: c,
+                value: v,
+                score,
+            };
+            match strategy {
+                Strategy::Gsg => heap.push(Queued {
+                    score,
+                    order,
+                    leaf: l,
+                }),
+                Strategy::Sg => stack.push(l),
+            }
+            if halt {
+                stop = "stopped";
+            }
+        }
+    }
+    done.extend(stack);
+    done.extend(heap.into_iter().map(|q| q.leaf));
+    Refined {
+        leaves: done,
+        calls,
+        stop,
+    }
+}
+
+/// How far `b` sticks out of `hull`, relative to the hull's width per
+/// dimension (0 when inside): the SG/GSG score of a bound.
+pub fn outside(b: &IBox, hull: &IBox) -> f64 {
+    (0..b.dim())
+        .map(|i| {
+            let w = (hull.hi[i] - hull.lo[i]).max(1e-12);
+            ((b.hi[i] - hull.hi[i]).max(hull.lo[i] - b.lo[i]).max(0.0)) / w
+        })
+        .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cover_check(leaves: &[IBox], root: &IBox) {
+        let vol: f64 = leaves.iter().map(IBox::volume).sum();
+        assert!((vol - root.volume()).abs() < 1e-12 * root.volume().max(1.0));
+        for l in leaves {
+            assert!(root.contains_box(l));
+        }
+    }
+
+    #[test]
+    fn both_strategies_cover_the_root_and_respect_the_budget() {
+        let root = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
+        for strategy in [Strategy::Sg, Strategy::Gsg] {
+            let budget = Budget {
+                calls: 21,
+                min_size: 0.01,
+                seconds: None,
+            };
+            // score: how far the cell reaches beyond x ≤ 0.3
+            let r = refine(
+                &root,
+                strategy,
+                &budget,
+                &mut |c| ((), c.hi[0] - 0.3),
+                &mut |_| false,
+                &|| 0.0,
+            );
+            assert!(r.calls <= 21, "{strategy:?}: {}", r.calls);
+            let cells: Vec<IBox> = r.leaves.iter().map(|l| l.cell.clone()).collect();
+            cover_check(&cells, &root);
+        }
+    }
+
+    #[test]
+    fn refinement_stops_when_every_cell_is_good() {
+        let root = IBox::new(vec![0.0], vec![1.0]);
+        let budget = Budget {
+            calls: 1000,
+            min_size: 1e-6,
+            seconds: None,
+        };
+        let r = refine(
+            &root,
+            Strategy::Gsg,
+            &budget,
+            &mut |c| ((), c.hi[0] - c.lo[0] - 0.25),
+            &mut |_| false,
+            &|| 0.0,
+        );
+        assert_eq!(r.stop, "done");
+        assert_eq!(r.leaves.len(), 4);
+        assert!(r.leaves.iter().all(|l| l.score <= 0.0));
+    }
+}

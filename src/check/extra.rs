@@ -1,0 +1,429 @@
+//! Checks of the language's second tier: initial sets that are polytopes or
+//! ℓp balls, reachable-set boundaries, guided-partitioner budgets, and
+//! time-varying or continuous-time plants.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::Ctx;
+use crate::analysis::closed_loop::{Boundary, Plant};
+use crate::analysis::partition::Budget;
+use crate::diag::{did_you_mean, Code, Diagnostic};
+use crate::lp;
+use crate::sets::{IBox, Norm, Polytope, Region};
+use crate::syntax::ast::*;
+
+/// Default budget of the guided partitioners.
+pub const DEFAULT_BUDGET: Budget = Budget {
+    calls: 256,
+    min_size: 1.0 / 64.0,
+    seconds: None,
+};
+
+/// Most propagator calls a budget may allow.
+const MAX_CALLS: f64 = 1_000_000.0;
+
+impl Ctx {
+    /// A polytope initial set: it must be bounded and not empty. Its bounding
+    /// box comes from `2n` certified LP bounds inside a large box; a bound
+    /// that reaches the large box's edge means the polytope is unbounded
+    /// (a convex set that meets the large box and leaves it must touch its boundary).
+    pub(super) fn bounded_polytope(
+        &mut self,
+        p: Polytope,
+        span: Span,
+        role: &str,
+    ) -> Option<Region> {
+        let n = p.rows.first().map_or(0, |r| r.0.len());
+        let scale = p.rows.iter().fold(1.0f64, |a, r| a.max(r.1.abs()));
+        let big = 1e6 * scale;
+        let lo = vec![-big; n];
+        let hi = vec![big; n];
+        let empty = lp::separation(&[], &p.rows, &lo, &hi);
+        if empty.value > 0.0 {
+            self.err(
+                Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is empty"))
+                    .label("no state satisfies every inequality")
+                    .hint("check the directions of `<=` and `>=`"),
+            );
+            return None;
+        }
+        let mut bb_lo = vec![0.0; n];
+        let mut bb_hi = vec![0.0; n];
+        for i in 0..n {
+            let mut e = vec![0.0; n];
+            e[i] = 1.0;
+            let up = lp::maximize(&e, &p.rows, &lo, &hi);
+            e[i] = -1.0;
+            let down = lp::maximize(&e, &p.rows, &lo, &hi);
+            if let Some(issue) = up.issue.or(down.issue) {
+                self.err(
+                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} could not be bounded (LP solver: {issue})"))
+                        .label("bounding box unknown")
+                        .hint("the inequalities may be nearly parallel or badly scaled; rescale them or use a box"),
+                );
+                return None;
+            }
+            if up.value >= 0.5 * big || -down.value <= -0.5 * big {
+                self.err(
+                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
+                        .label(format!(
+                            "component {i} has no finite {} bound",
+                            if up.value >= 0.5 * big {
+                                "upper"
+                            } else {
+                                "lower"
+                            }
+                        ))
+                        .hint("add inequalities that bound every component, or use a box"),
+                );
+                return None;
+            }
+            bb_hi[i] = up.value;
+            bb_lo[i] = -down.value;
+        }
+        if empty.issue.is_none() && empty.value == 0.0 {
+            // flat: fine for the analysis, but the sampler finds no state in it
+        }
+        Some(Region::Polytope {
+            bbox: IBox::new(bb_lo, bb_hi),
+            rows: p.rows,
+        })
+    }
+
+    /// An ℓp ball with per-dimension radii.
+    pub(super) fn ball(
+        &mut self,
+        b: &BallSet,
+        span: Span,
+        name: &str,
+        dim: usize,
+    ) -> Option<Region> {
+        let center: Vec<f64> = b.center.node.iter().map(|x| self.finite(x)).collect();
+        let mut ok = true;
+        if center.len() != dim {
+            self.err(
+                Diagnostic::new(
+                    Code::Shape,
+                    b.center.span,
+                    format!(
+                        "the ball's centre has {} entries but `{name}` has {dim}",
+                        center.len()
+                    ),
+                )
+                .label(format!("{} entries", center.len()))
+                .hint(format!(
+                    "give one centre coordinate per component of `{name}`"
+                )),
+            );
+            ok = false;
+        }
+        let radius: Vec<f64> = match &b.radius.node {
+            Value::Scalar(r) => vec![*r; dim],
+            Value::Vector(rs) => {
+                let r: Vec<f64> = rs.iter().map(|x| self.finite(x)).collect();
+                if r.len() != dim {
+                    self.err(
+                        Diagnostic::new(
+                            Code::Shape,
+                            b.radius.span,
+                            format!(
+                                "the ball has {} radii but `{name}` has {dim} components",
+                                r.len()
+                            ),
+                        )
+                        .label(format!("{} radii", r.len()))
+                        .hint("give one radius, or one per component"),
+                    );
+                    ok = false;
+                }
+                r
+            }
+            _ => Vec::new(),
+        };
+        if radius.iter().any(|r| !r.is_finite()) {
+            self.err(
+                Diagnostic::new(
+                    Code::NonFinite,
+                    b.radius.span,
+                    "the ball's radius is not finite",
+                )
+                .label("not a finite number")
+                .hint("write a finite radius"),
+            );
+            ok = false;
+        } else if radius.iter().any(|r| *r < 0.0) {
+            self.err(
+                Diagnostic::new(
+                    Code::EmptyOrUnbounded,
+                    b.radius.span,
+                    "a ball with a negative radius is empty",
+                )
+                .label("negative radius")
+                .hint("radii must be ≥ 0"),
+            );
+            ok = false;
+        }
+        let norm = match b.norm.as_ref().map(|n| n.node.as_str()) {
+            None | Some("2") => Norm::L2,
+            Some("1") => Norm::L1,
+            _ => Norm::LInf,
+        };
+        let _ = span;
+        ok.then_some(Region::Ball {
+            center,
+            radius,
+            norm,
+        })
+    }
+
+    /// `boundary polytope K` or `boundary polytope [[…], …]`.
+    pub(super) fn boundary_polytope(
+        &mut self,
+        v: &Spanned<Value>,
+        name: &str,
+        n: usize,
+    ) -> Option<Boundary> {
+        match &v.node {
+            Value::Scalar(k) => {
+                let k = *k as usize;
+                if n != 2 {
+                    self.err(
+                        Diagnostic::new(Code::Boundary, v.span, format!("evenly spread directions need a 2-D state, but `{name}` has {n} components"))
+                            .label("a count of directions")
+                            .hint(format!("give the directions as a matrix with {n} columns: `boundary polytope [[…], …]`")),
+                    );
+                    return None;
+                }
+                if k == 0 || k > 1000 {
+                    self.err(
+                        Diagnostic::new(
+                            Code::Boundary,
+                            v.span,
+                            format!("{k} directions: a polytope boundary needs between 1 and 1000"),
+                        )
+                        .label("bad count")
+                        .hint("8 or 16 directions are typical"),
+                    );
+                    return None;
+                }
+                Some(Boundary::spread(k))
+            }
+            Value::Matrix(rows) => {
+                let m = self.matrix(
+                    v,
+                    "the boundary directions",
+                    rows.len(),
+                    Some(n),
+                    &format!("one direction per row, {n} columns (one per component of `{name}`)"),
+                )?;
+                for (r, row) in rows.iter().enumerate() {
+                    if (0..n).all(|c| m[(r, c)] == 0.0) {
+                        self.err(
+                            Diagnostic::new(
+                                Code::Boundary,
+                                row.span,
+                                "a zero direction bounds nothing",
+                            )
+                            .label("all zeros")
+                            .hint("remove the row or give it a non-zero entry"),
+                        );
+                        return None;
+                    }
+                }
+                Some(Boundary::Polytope(m))
+            }
+            _ => None,
+        }
+    }
+
+    /// The budget of a guided partitioner.
+    pub(super) fn budget(&mut self, items: &[(Spanned<String>, Spanned<f64>)]) -> Option<Budget> {
+        const NAMES: [&str; 3] = ["calls", "min_size", "time"];
+        let mut b = DEFAULT_BUDGET;
+        let mut ok = true;
+        let mut seen: Vec<(&str, Span)> = Vec::new();
+        for (k, v) in items {
+            if let Some((_, first)) = seen.iter().find(|(s, _)| *s == k.node) {
+                self.duplicate(&format!("the budget item `{}`", k.node), *first, k.span);
+                ok = false;
+                continue;
+            }
+            seen.push((&k.node, k.span));
+            let x = self.finite(v);
+            let bad = |cx: &mut Ctx, what: &str, hint: &str| {
+                cx.err(
+                    Diagnostic::new(Code::Budget, v.span, format!("`{}` {what}", k.node))
+                        .label("invalid budget")
+                        .hint(hint.to_string()),
+                );
+            };
+            match k.node.as_str() {
+                "calls" => {
+                    if !((1.0..=MAX_CALLS).contains(&x) && x.fract() == 0.0) {
+                        bad(
+                            self,
+                            "must be a whole number of cell evaluations from 1 to 1000000",
+                            "e.g. `calls 200`",
+                        );
+                        ok = false;
+                    } else {
+                        b.calls = x as usize;
+                    }
+                }
+                "min_size" => {
+                    if !(x > 0.0 && x <= 1.0) {
+                        bad(
+                            self,
+                            "must be a fraction of the initial set's width in (0, 1]",
+                            "e.g. `min_size 0.01`: cells narrower than 1 % are not split",
+                        );
+                        ok = false;
+                    } else {
+                        b.min_size = x;
+                    }
+                }
+                "time" => {
+                    if !(x > 0.0 && x.is_finite()) {
+                        bad(
+                            self,
+                            "must be a positive number of seconds",
+                            "e.g. `time 2.5`",
+                        );
+                        ok = false;
+                    } else {
+                        b.seconds = Some(x);
+                    }
+                }
+                other => {
+                    let mut d = Diagnostic::new(
+                        Code::UnknownName,
+                        k.span,
+                        format!("unknown budget item `{other}`"),
+                    )
+                    .label("not a budget item");
+                    d = match did_you_mean(other, NAMES) {
+                        Some(s) => d.hint(format!(
+                            "did you mean `{s}`? Budget items: calls, min_size, time"
+                        )),
+                        None => d.hint("budget items: calls N, min_size r, time s"),
+                    };
+                    self.err(d);
+                    ok = false;
+                }
+            }
+        }
+        ok.then_some(b)
+    }
+
+    /// `time continuous dt …` / `time discrete`: `Some(dt)` for continuous time.
+    pub(super) fn time_decl(
+        &mut self,
+        kind: &Spanned<String>,
+        dt: &Option<Spanned<f64>>,
+        span: Span,
+    ) -> Result<Option<f64>, ()> {
+        match (kind.node.as_str(), dt) {
+            ("discrete", None) => Ok(None),
+            ("discrete", Some(d)) => {
+                self.err(
+                    Diagnostic::new(
+                        Code::TimeStep,
+                        d.span,
+                        "`dt` applies only to continuous time",
+                    )
+                    .label("a time step for a discrete-time plant")
+                    .hint("write `time continuous dt …` to discretise A, B, c, or drop `dt`"),
+                );
+                Err(())
+            }
+            ("continuous", None) => {
+                self.err(
+                    Diagnostic::new(Code::TimeStep, span, "a continuous-time plant needs a time step")
+                        .label("no `dt`")
+                        .hint("write `time continuous dt 0.1`: the controller acts every dt seconds (zero-order hold)"),
+                );
+                Err(())
+            }
+            ("continuous", Some(d)) => {
+                let x = self.finite(d);
+                if x > 0.0 && x.is_finite() {
+                    Ok(Some(x))
+                } else {
+                    self.err(
+                        Diagnostic::new(
+                            Code::TimeStep,
+                            d.span,
+                            format!("the time step must be positive, not {}", d.node),
+                        )
+                        .label("dt ≤ 0")
+                        .hint("the controller's sampling period in seconds, e.g. `dt 0.1`"),
+                    );
+                    Err(())
+                }
+            }
+            (other, _) => {
+                let mut d = Diagnostic::new(
+                    Code::UnknownName,
+                    kind.span,
+                    format!("unknown time kind `{other}`"),
+                )
+                .label("not a kind of time");
+                d = match did_you_mean(other, ["continuous", "discrete"]) {
+                    Some(s) => d.hint(format!("did you mean `{s}`?")),
+                    None => d.hint("write `time continuous dt …` or `time discrete`"),
+                };
+                self.err(d);
+                Err(())
+            }
+        }
+    }
+}
+
+/// Exact zero-order-hold discretisation of `ẋ = A x + B u + c` over `dt`:
+/// `exp([[A, B, c], [0, 0, 0]]·dt) = [[A_d, B_d, c_d], [0, I, 0…]]`, so
+/// `A_d = e^{A dt}` and `B_d`, `c_d` are the input integrals `∫₀^dt e^{Aτ} dτ · (B, c)`.
+/// `None` when the exponential is not finite.
+pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
+    let n = plant.a.nrows();
+    let m = plant.b.ncols();
+    let k = n + m + 1;
+    let mut big = DMatrix::<f64>::zeros(k, k);
+    big.view_mut((0, 0), (n, n)).copy_from(&plant.a);
+    big.view_mut((0, n), (n, m)).copy_from(&plant.b);
+    big.view_mut((0, n + m), (n, 1)).copy_from(&plant.c);
+    let e = (big * dt).exp();
+    if e.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(Plant {
+        a: e.view((0, 0), (n, n)).into_owned(),
+        b: e.view((0, n), (n, m)).into_owned(),
+        c: DVector::from_iterator(n, e.view((0, n + m), (n, 1)).iter().copied()),
+        obs: plant.obs.clone(),
+        w: plant.w.clone(),
+        v: plant.v.clone(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_order_hold_of_a_double_integrator() {
+        // ẋ = [[0, 1], [0, 0]] x + [0, 1] u: A_d = [[1, dt], [0, 1]], B_d = [dt²/2, dt]
+        let p = Plant {
+            a: DMatrix::from_row_slice(2, 2, &[0.0, 1.0, 0.0, 0.0]),
+            b: DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
+            c: DVector::from_column_slice(&[0.0, -2.0]),
+            obs: DMatrix::identity(2, 2),
+            w: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+            v: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+        };
+        let d = zero_order_hold(&p, 0.5).expect("finite");
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        assert!(close(d.a[(0, 1)], 0.5) && close(d.a[(0, 0)], 1.0) && close(d.a[(1, 0)], 0.0));
+        assert!(close(d.b[(0, 0)], 0.125) && close(d.b[(1, 0)], 0.5));
+        assert!(close(d.c[0], -0.25) && close(d.c[1], -1.0));
+    }
+}

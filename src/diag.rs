@@ -53,6 +53,8 @@ pub enum Code {
     TimeStep,
     /// E0214: a partitioner budget item with an invalid value.
     Budget,
+    /// E0215: Reach-SDP requested for a network with non-ReLU activations.
+    SdpActivation,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -73,7 +75,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 29] = [
+    pub const ALL: [Code; 30] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -95,6 +97,7 @@ impl Code {
         Code::PerStepLength,
         Code::TimeStep,
         Code::Budget,
+        Code::SdpActivation,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -129,6 +132,7 @@ impl Code {
             Code::PerStepLength => "E0212",
             Code::TimeStep => "E0213",
             Code::Budget => "E0214",
+            Code::SdpActivation => "E0215",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

@@ -1,5 +1,5 @@
 //! ravel: a Reach-Avoid Verification Language and its compiler.
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 
 pub mod analysis;
 pub mod check;

@@ -16,6 +16,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::crown::{affine_image, Analysis, LinearUpper, Mode};
 use super::partition::{outside, refine, Budget, Strategy};
+use super::sdp;
 use crate::nn::Network;
 use crate::num::{gamma, slack, sum_upper};
 use crate::rng::Rng;
@@ -52,12 +53,16 @@ pub enum Propagator {
     SgIbpSeparate,
     /// CROWN through the whole unrolled loop: `x_t` bounded as a function of `x_0`.
     CrownUnrolled,
+    /// Reach-SDP: a semidefinite program per facet (ReLU networks only),
+    /// intersected with the Reach-LP bound.
+    ReachSdp,
 }
 
 impl Propagator {
     /// Every propagator, in the order of the documentation.
-    pub const ALL: [Propagator; 5] = [
+    pub const ALL: [Propagator; 6] = [
         Propagator::ReachLp,
+        Propagator::ReachSdp,
         Propagator::CrownUnrolled,
         Propagator::CrownSeparate,
         Propagator::IbpSeparate,
@@ -72,6 +77,7 @@ impl Propagator {
             Propagator::IbpSeparate => "ibp_separate",
             Propagator::SgIbpSeparate => "sg_ibp_separate",
             Propagator::CrownUnrolled => "crown_unrolled",
+            Propagator::ReachSdp => "reach_sdp",
         }
     }
 }
@@ -263,28 +269,133 @@ impl ClosedLoop {
         let y = self.observation_box(&bbox);
         let facets = self.facets(boundary);
         let bound = match prop {
-            Propagator::ReachLp | Propagator::CrownUnrolled => {
+            Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp => {
                 let analysis = Analysis::new(&self.net, &y, Mode::Crown);
-                self.back_step(t, &LinearUpper::of_spec(facets), &analysis, &bbox)
+                self.back_step(t, &LinearUpper::of_spec(facets.clone()), &analysis, &bbox)
             }
             Propagator::IbpSeparate => {
                 let u = Analysis::new(&self.net, &y, Mode::Ibp).output_box(Mode::Ibp);
-                self.push_control_box(t, facets, &bbox, &u)
+                self.push_control_box(t, facets.clone(), &bbox, &u)
             }
             Propagator::CrownSeparate => {
                 let u = Analysis::new(&self.net, &y, Mode::Crown).output_box(Mode::Crown);
-                self.push_control_box(t, facets, &bbox, &u)
+                self.push_control_box(t, facets.clone(), &bbox, &u)
             }
             Propagator::SgIbpSeparate => {
                 let u = self.sg_ibp_control(&y);
-                self.push_control_box(t, facets, &bbox, &u)
+                self.push_control_box(t, facets.clone(), &bbox, &u)
             }
         };
-        let (ub, issues) = bound.concretize_region(x);
+        let (mut ub, mut issues) = bound.concretize_region(x);
+        if prop == Propagator::ReachSdp {
+            let (sdp, more) = self.reach_sdp(t, x, &facets);
+            for (u, s) in ub.iter_mut().zip(sdp) {
+                *u = u.min(s);
+            }
+            issues.extend(more);
+        }
         Step {
             set: self.region_of(boundary, &ub),
             issues,
         }
+    }
+
+    /// Reach-SDP bounds of every facet for states in `x` at step `t` (see
+    /// [`super::sdp`]); `+∞` where the solver's answer was not usable, and the
+    /// issue is reported. A network that is not ReLU-only gives `+∞` everywhere
+    /// (`check` rejects that combination).
+    fn reach_sdp(
+        &self,
+        t: usize,
+        x: &Region,
+        facets: &DMatrix<f64>,
+    ) -> (Vec<f64>, Vec<&'static str>) {
+        let n = self.states();
+        let p = self.plant.obs.ncols();
+        let bbox = x.bbox();
+        let xi = bbox.product(&self.plant.v);
+        let Some(merged) = sdp::merge(&self.net, &self.obs_xv, &xi) else {
+            return (
+                vec![f64::INFINITY; facets.nrows()],
+                vec!["SDP needs a ReLU network"],
+            );
+        };
+        let rows: Vec<(Vec<f64>, f64)> = match x {
+            Region::Polytope { rows, .. } => rows
+                .iter()
+                .map(|(a, h)| {
+                    let mut a = a.clone();
+                    a.extend(std::iter::repeat_n(0.0, p));
+                    (a, *h)
+                })
+                .collect(),
+            Region::Box(_) | Region::Ball { .. } => Vec::new(),
+        };
+        let prog = sdp::StepSdp::new(&merged, &xi, &rows);
+        let d = self.at(t);
+        let (wl, bl) = merged
+            .layers
+            .last()
+            .expect("a merged network has an output layer");
+        let h_max = prog.last_hidden_max();
+        let x_max = bbox.abs_max();
+        let h_off = prog.last_hidden();
+        let mut out = Vec::with_capacity(facets.nrows());
+        let mut issues = Vec::new();
+        for r in 0..facets.nrows() {
+            let c: Vec<f64> = facets.row(r).iter().copied().collect();
+            let ca: Vec<f64> = (0..n)
+                .map(|j| (0..n).map(|i| c[i] * d.plant.a[(i, j)]).sum())
+                .collect();
+            let cb: Vec<f64> = (0..d.plant.b.ncols())
+                .map(|j| (0..n).map(|i| c[i] * d.plant.b[(i, j)]).sum())
+                .collect();
+            let mut phi = vec![0.0; prog.dim()];
+            phi[..n].copy_from_slice(&ca);
+            for k in 0..wl.ncols() {
+                phi[h_off + k] = (0..wl.nrows()).map(|j| cb[j] * wl[(j, k)]).sum();
+            }
+            // constant: cᵀB b_L + cᵀc + max_w cᵀw + |cᵀB|·(merge error) + rounding of φ
+            let cab: Vec<f64> = (0..n)
+                .map(|j| (0..n).map(|i| (c[i] * d.plant.a[(i, j)]).abs()).sum())
+                .collect();
+            let cbb: Vec<f64> = cb.iter().map(|v| v.abs()).collect();
+            let cbb_abs: Vec<f64> = (0..d.plant.b.ncols())
+                .map(|j| (0..n).map(|i| (c[i] * d.plant.b[(i, j)]).abs()).sum())
+                .collect();
+            let size = sum_upper((0..n).map(|j| cab[j] * x_max[j]).chain((0..wl.nrows()).map(
+                |j| {
+                    cbb_abs[j]
+                        * sum_upper(
+                            (0..wl.ncols())
+                                .map(|k| wl[(j, k)].abs() * h_max[k])
+                                .chain([bl[j].abs()]),
+                        )
+                },
+            )));
+            let round = (gamma(n + wl.ncols() + 4) * size * 1.0625 + 1e-300).next_up();
+            let konst = sum_upper(
+                (0..wl.nrows())
+                    .map(|j| cb[j] * bl[j])
+                    .chain((0..n).map(|i| c[i] * d.plant.c[i]))
+                    .chain([
+                        crate::num::dot_box_upper(&c, &self.plant.w.lo, &self.plant.w.hi),
+                        sum_upper(cbb.iter().zip(&merged.err).map(|(a, e)| a * e)),
+                        round,
+                        slack(
+                            gamma(n + 2),
+                            &c.iter().map(|v| v.abs()).collect::<Vec<_>>(),
+                            &d.plant.c.iter().map(|v| v.abs()).collect::<Vec<_>>(),
+                        ),
+                    ]),
+            );
+            let last = prog.dim() - 1;
+            phi[last] = konst;
+            let b = prog.bound(&phi);
+            issues.extend(b.issue);
+            out.push(b.value);
+        }
+        (out, issues)
     }
 
     /// The control box over `y` by IBP on a simulation-guided partition of `y`.

@@ -275,6 +275,11 @@ impl<'a> Analysis<'a> {
         a
     }
 
+    /// The bounds of the value before every layer (`boxes()[0]` is the input box).
+    pub fn boxes(&self) -> &[IBox] {
+        &self.boxes
+    }
+
     /// Bounds of the network output (IBP, or CROWN intersected with IBP).
     pub fn output_box(&self, mode: Mode) -> IBox {
         let ibp = self

@@ -4,3 +4,4 @@ pub mod closed_loop;
 pub mod crown;
 pub mod partition;
 pub mod relax;
+pub mod sdp;

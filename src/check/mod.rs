@@ -106,14 +106,15 @@ pub fn controller_path(spec: &Spec) -> Option<&Spanned<String>> {
     })
 }
 
-const PROPAGATORS: [&str; 5] = [
+const PROPAGATORS: [&str; 6] = [
     "reach_lp",
+    "reach_sdp",
     "crown_unrolled",
     "crown_separate",
     "ibp_separate",
     "sg_ibp_separate",
 ];
-const PLANNED_PROPAGATORS: [&str; 1] = ["reach_sdp"];
+const PLANNED_PROPAGATORS: [&str; 1] = ["reach_sdp_unrolled"];
 const PARTITIONERS: [&str; 5] = ["none", "uniform", "sg", "gsg", "property"];
 const BOUNDARIES: [&str; 2] = ["box", "polytope"];
 
@@ -1108,6 +1109,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         .map(|(_, n)| Partitioner::Uniform(vec![1; *n]));
     let mut boundary = Some(Boundary::Box);
     let mut guided_span = None;
+    let mut sdp_span = None;
     let mut samples = DEFAULT_SAMPLES;
     let mut seed = 0u64;
     if let Some(an) = analyses.first() {
@@ -1135,6 +1137,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         "crown_separate" => Some(Propagator::CrownSeparate),
                         "ibp_separate" => Some(Propagator::IbpSeparate),
                         "sg_ibp_separate" => Some(Propagator::SgIbpSeparate),
+                        "reach_sdp" => {
+                            sdp_span = Some(p.span);
+                            Some(Propagator::ReachSdp)
+                        }
                         other => {
                             let planned = PLANNED_PROPAGATORS.contains(&other);
                             let mut d = Diagnostic::new(
@@ -1298,6 +1304,25 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
 
+    if let (Some(span), Some(c)) = (sdp_span, &ctrl) {
+        if let Some(act) = c.net.layers.iter().find_map(|l| match l {
+            crate::nn::Layer::Act(a) if *a != crate::nn::Activation::Relu => Some(*a),
+            _ => None,
+        }) {
+            cx.err(
+                Diagnostic::new(
+                    Code::SdpActivation,
+                    span,
+                    format!(
+                        "Reach-SDP encodes ReLU networks only, but the controller uses {}",
+                        act.name()
+                    ),
+                )
+                .label("needs a ReLU network")
+                .hint("use `reach_lp` or `crown_unrolled`, which handle tanh and sigmoid"),
+            );
+        }
+    }
     if let (Some((g, span)), true) = (guided_span, samples == 0) {
         if g != Guide::Property {
             cx.err(

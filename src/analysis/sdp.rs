@@ -1,0 +1,503 @@
+//! Reach-SDP (after Hu et al. 2020): one closed-loop step bounded by a
+//! semidefinite program over quadratic constraints, solved with Clarabel's
+//! PSD cone, and **re-certified** independently of the solver.
+//!
+//! # The program
+//! With `v = (ξ, h₁, …, h_L, 1)`, where `ξ = (x, v_noise)` is the step's
+//! input and `h_k` the post-activations of the ReLU layers, every fact used
+//! is a quadratic form `vᵀS v ≥ 0` (or `= 0`) that holds on every feasible `v`:
+//! the input polytope's rows `rᵢ = gᵢ − Gᵢξ ≥ 0` and their pairwise products
+//! `rᵢ rⱼ ≥ 0`; per neuron `h ≥ 0`, `h ≥ z`, `h (h − z) = 0`, and the triangle
+//! `u(z − l) ≥ (u − l) h` from pre-activation bounds `[l, u]` (or `h = 0`,
+//! `h = z` for stable neurons). For a facet `c`, the objective
+//! `f(v) = cᵀ(A x + B u + c₀) + max_w cᵀw` is linear in `v`. If
+//! `M = F − d·e eᵀ + Σ μᵢ Sᵢ + Σ λⱼ Eⱼ ⪯ 0` with `μ ≥ 0`, then
+//! `f(v) − d ≤ vᵀ M v ≤ 0` on feasible points: `d` bounds the facet. The SDP
+//! minimises `d` over the multipliers.
+//!
+//! # Soundness
+//! The solver's answer is only a proposal. ravel rebuilds `M` from the
+//! proposed multipliers (negative `μ` clipped to 0) in `f64` with an
+//! entrywise error bound `E`, bounds its largest eigenvalue by
+//! `λ̂ + ‖E‖_F + 100·N·u·‖M‖_F`, and uses `d + max(0, λ)·R²` with
+//! `R² ≥ ‖v‖²` from the layer boxes: valid whatever the solver did. The SDP
+//! is set up on a "merged" ReLU network (consecutive affine layers, and the
+//! observation map `y = Cᵀx + v`, multiplied out in `f64`); the difference to
+//! the exact network is bounded layer by layer (ReLU is 1-Lipschitz) and
+//! added to the bound. Statuses other than `Solved`/`AlmostSolved` give no
+//! SDP bound: the caller keeps its Reach-LP bound and reports the issue.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
+
+use super::crown::{Analysis, Mode};
+use crate::nn::{Activation, Layer, Network};
+use crate::num::{gamma, sum_upper, U};
+use crate::sets::IBox;
+
+/// A ReLU network in the form `z₁ = W₀ξ + b₀, h_k = ReLU(z_k), z_{k+1} = W_k h_k + b_k`,
+/// output `W_L h_L + b_L`, with a bound on how far its output may be from the
+/// exact network's.
+#[derive(Clone, Debug)]
+pub struct MergedNet {
+    /// `(W_k, b_k)` for k = 0 … L.
+    pub layers: Vec<(DMatrix<f64>, DVector<f64>)>,
+    /// `|u_exact − u_merged| ≤ err` per output, for inputs in the box it was built for.
+    pub err: Vec<f64>,
+    /// The merged network as a [`Network`] (for its layer bounds).
+    pub net: Network,
+}
+
+/// Whether every activation of `net` is a ReLU (the only nonlinearity Reach-SDP encodes).
+pub fn supports(net: &Network) -> bool {
+    net.layers
+        .iter()
+        .all(|l| matches!(l, Layer::Affine { .. } | Layer::Act(Activation::Relu)))
+}
+
+/// Merge `net ∘ pre` (with `pre` the affine input map) into [`MergedNet`];
+/// `input` bounds the input of `pre`. `None` for a non-ReLU network.
+pub fn merge(net: &Network, pre: &DMatrix<f64>, input: &IBox) -> Option<MergedNet> {
+    if !supports(net) {
+        return None;
+    }
+    let mut layers = Vec::new();
+    let mut w = pre.clone();
+    let mut b = DVector::<f64>::zeros(pre.nrows());
+    // error of the current composed value (vs exact) and magnitude of the block input
+    let mut err = vec![0.0; pre.nrows()];
+    let mut mag = input.abs_max();
+    let mut cur_box = input.clone();
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w: wl, b: bl } => {
+                // value before this layer is within `err` of exact and within |W||mag|+|b| in size
+                let size: Vec<f64> = (0..w.nrows())
+                    .map(|r| {
+                        sum_upper(
+                            (0..w.ncols())
+                                .map(|c| w[(r, c)].abs() * mag[c])
+                                .chain([b[r].abs(), err[r]]),
+                        )
+                    })
+                    .collect();
+                let k = gamma(wl.ncols() + 2);
+                let new_w = wl * &w;
+                let new_b = wl * &b + bl;
+                let new_err: Vec<f64> = (0..wl.nrows())
+                    .map(|r| {
+                        let prop = sum_upper((0..wl.ncols()).map(|c| wl[(r, c)].abs() * err[c]));
+                        let round = sum_upper(
+                            (0..wl.ncols())
+                                .map(|c| wl[(r, c)].abs() * size[c])
+                                .chain([bl[r].abs()]),
+                        );
+                        sum_upper([prop, (k * round * 1.0625 + 1e-300).next_up()])
+                    })
+                    .collect();
+                w = new_w;
+                b = new_b;
+                err = new_err;
+            }
+            Layer::Act(_) => {
+                layers.push((w.clone(), b.clone()));
+                // post-activation magnitudes: ReLU of the composed value's box
+                let z = crate::analysis::crown::affine_image(&w, &b, &cur_box);
+                let h_box = IBox::new(
+                    z.lo.iter().map(|l| l.max(0.0)).collect(),
+                    z.hi.iter()
+                        .zip(&err)
+                        .map(|(h, e)| sum_upper([h.max(0.0), *e]))
+                        .collect(),
+                );
+                mag = h_box.abs_max();
+                cur_box = h_box;
+                // ReLU is 1-Lipschitz: the post-activation error is the pre-activation one
+                w = DMatrix::identity(mag.len(), mag.len());
+                b = DVector::zeros(mag.len());
+            }
+        }
+    }
+    layers.push((w, b));
+    let mut net_layers = Vec::new();
+    for (i, (w, b)) in layers.iter().enumerate() {
+        net_layers.push(Layer::Affine {
+            w: w.clone(),
+            b: b.clone(),
+        });
+        if i + 1 < layers.len() {
+            net_layers.push(Layer::Act(Activation::Relu));
+        }
+    }
+    let merged = Network::new(pre.ncols(), net_layers);
+    Some(MergedNet {
+        layers,
+        err,
+        net: merged,
+    })
+}
+
+#[allow(unsafe_code)]
+extern "C" {
+    /// OpenBLAS's thread-count switch (the library `build.rs` links).
+    fn openblas_set_num_threads(n: std::os::raw::c_int);
+}
+
+/// The SDPs are small: OpenBLAS's threads only add overhead (and fight
+/// the caller's own parallelism), so they are switched off once. This is the
+/// crate's only `unsafe` (the crate denies it everywhere else).
+#[allow(unsafe_code)]
+fn single_threaded_blas() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    // SAFETY: a plain setter of OpenBLAS's global thread count, called once
+    // before the first solve; it takes an int and touches no Rust memory.
+    ONCE.call_once(|| unsafe { openblas_set_num_threads(1) });
+}
+
+/// A sparse symmetric quadratic form, accumulated as triplets `(i, j, value)` with `i ≤ j`.
+#[derive(Default)]
+struct Form {
+    entries: Vec<(usize, usize, f64)>,
+}
+
+impl Form {
+    /// `+ coef · sym(α βᵀ)` for sparse vectors α, β.
+    fn outer(&mut self, coef: f64, a: &[(usize, f64)], b: &[(usize, f64)]) {
+        for &(i, x) in a {
+            for &(j, y) in b {
+                // a stored (i, j) with i < j stands for both S_ij and S_ji
+                let v = if i == j {
+                    coef * x * y
+                } else {
+                    0.5 * coef * x * y
+                };
+                if v != 0.0 {
+                    self.entries.push((i.min(j), i.max(j), v));
+                }
+            }
+        }
+    }
+}
+
+/// Position of `(i, j)`, `i ≤ j`, in the upper-triangle column-major vector.
+fn tri(i: usize, j: usize) -> usize {
+    j * (j + 1) / 2 + i
+}
+
+/// What one facet bound came to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SdpBound {
+    /// A certified upper bound of the facet (`+∞` when there is none).
+    pub value: f64,
+    /// The solver status when it was not trusted.
+    pub issue: Option<&'static str>,
+}
+
+/// The data of one step's SDPs, shared by all facets.
+pub struct StepSdp<'a> {
+    net: &'a MergedNet,
+    /// Input rows `G ξ ≤ g` (the region's rows and the box of ξ).
+    rows: Vec<(Vec<f64>, f64)>,
+    /// Pre-activation boxes of the hidden layers (merged network).
+    pre: Vec<IBox>,
+    /// Dimension of ξ.
+    d0: usize,
+    /// Offsets of each hidden layer in v.
+    offsets: Vec<usize>,
+    /// Dimension of v.
+    dim: usize,
+    /// `R² ≥ ‖v‖²`.
+    radius2: f64,
+}
+
+impl<'a> StepSdp<'a> {
+    /// Prepare the SDPs of one step: `xi` bounds ξ, `rows` are extra input rows on ξ.
+    pub fn new(net: &'a MergedNet, xi: &IBox, rows: &[(Vec<f64>, f64)]) -> StepSdp<'a> {
+        let d0 = xi.dim();
+        let analysis = Analysis::new(&net.net, xi, Mode::Crown);
+        let boxes = analysis_boxes(&analysis);
+        let mut pre = Vec::new();
+        let mut offsets = Vec::new();
+        let mut at = d0;
+        let mut radius2 = 1.0 + xi.abs_max().iter().map(|m| m * m).sum::<f64>();
+        for (k, _) in net.layers.iter().enumerate().take(net.layers.len() - 1) {
+            let z = boxes[2 * k + 1].clone();
+            offsets.push(at);
+            at += z.dim();
+            radius2 += z.hi.iter().map(|h| h.max(0.0) * h.max(0.0)).sum::<f64>();
+            pre.push(z);
+        }
+        let mut all_rows: Vec<(Vec<f64>, f64)> = rows.to_vec();
+        for i in 0..d0 {
+            let mut e = vec![0.0; d0];
+            e[i] = 1.0;
+            all_rows.push((e.clone(), xi.hi[i]));
+            e[i] = -1.0;
+            all_rows.push((e, -xi.lo[i]));
+        }
+        StepSdp {
+            net,
+            rows: all_rows,
+            pre,
+            d0,
+            offsets,
+            dim: at + 1,
+            radius2: radius2 * (1.0 + 1e-12),
+        }
+    }
+
+    /// The constraint forms: `(form, nonnegative multiplier?)`.
+    fn constraints(&self) -> Vec<(Form, bool)> {
+        let one = self.dim - 1;
+        let mut out = Vec::new();
+        // input rows r_i = g_i − G_i ξ as sparse vectors over v
+        let r: Vec<Vec<(usize, f64)>> = self
+            .rows
+            .iter()
+            .map(|(a, g)| {
+                let mut v: Vec<(usize, f64)> = a
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, x)| **x != 0.0)
+                    .map(|(i, x)| (i, -x))
+                    .collect();
+                v.push((one, *g));
+                v
+            })
+            .collect();
+        let unit = [(one, 1.0)];
+        for (i, ri) in r.iter().enumerate() {
+            let mut f = Form::default();
+            f.outer(1.0, ri, &unit);
+            out.push((f, true));
+            for rj in r.iter().skip(i + 1) {
+                let mut f = Form::default();
+                f.outer(1.0, ri, rj);
+                out.push((f, true));
+            }
+        }
+        // neurons
+        for (k, z_box) in self.pre.iter().enumerate() {
+            let (w, b) = &self.net.layers[k];
+            let in_off = if k == 0 { 0 } else { self.offsets[k - 1] };
+            for j in 0..z_box.dim() {
+                let hj = self.offsets[k] + j;
+                let mut z: Vec<(usize, f64)> = (0..w.ncols())
+                    .filter(|c| w[(j, *c)] != 0.0)
+                    .map(|c| (in_off + c, w[(j, c)]))
+                    .collect();
+                z.push((one, b[j]));
+                let h = [(hj, 1.0)];
+                let mut h_minus_z: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, -x)).collect();
+                h_minus_z.push((hj, 1.0));
+                let (l, u) = (z_box.lo[j], z_box.hi[j]);
+                let mut f = Form::default();
+                f.outer(1.0, &h, &unit);
+                out.push((f, true));
+                let mut f = Form::default();
+                f.outer(1.0, &h_minus_z, &unit);
+                out.push((f, true));
+                let mut f = Form::default();
+                f.outer(1.0, &h, &h_minus_z);
+                out.push((f, false));
+                if u <= 0.0 {
+                    let mut f = Form::default();
+                    f.outer(-1.0, &h, &unit);
+                    out.push((f, true));
+                } else if l >= 0.0 {
+                    let mut f = Form::default();
+                    f.outer(-1.0, &h_minus_z, &unit);
+                    out.push((f, true));
+                } else if u.is_finite() && l.is_finite() {
+                    // u (z − l) − (u − l) h ≥ 0
+                    let mut t: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, u * x)).collect();
+                    t.push((one, -u * l));
+                    t.push((hj, -(u - l)));
+                    let mut f = Form::default();
+                    f.outer(1.0, &t, &unit);
+                    out.push((f, true));
+                }
+            }
+        }
+        out
+    }
+
+    /// A certified upper bound of `φᵀv` (φ over v's coordinates, constant in the last).
+    pub fn bound(&self, phi: &[f64]) -> SdpBound {
+        single_threaded_blas();
+        let n = self.dim;
+        let one = n - 1;
+        let cons = self.constraints();
+        let nvar = 1 + cons.len();
+        let nnon = cons.iter().filter(|c| c.1).count();
+        let tdim = n * (n + 1) / 2;
+        let sq2 = std::f64::consts::SQRT_2;
+        let svec_scale = |i: usize, j: usize| if i == j { 1.0 } else { sq2 };
+        // objective form F = sym(φ eᵀ)
+        let phi_sparse: Vec<(usize, f64)> = phi
+            .iter()
+            .enumerate()
+            .filter(|(_, x)| **x != 0.0)
+            .map(|(i, x)| (i, *x))
+            .collect();
+        let mut fobj = Form::default();
+        fobj.outer(1.0, &phi_sparse, &[(one, 1.0)]);
+        // A, b: rows 0..nnon are μ ≥ 0; then the PSD block s = svec(−M)
+        let (mut ri, mut ci, mut vs) = (Vec::new(), Vec::new(), Vec::new());
+        let mut bvec = vec![0.0; nnon + tdim];
+        for (i, j, v) in &fobj.entries {
+            bvec[nnon + tri(*i, *j)] -= v * svec_scale(*i, *j);
+        }
+        // d: s gets +d·svec(e eᵀ) → A column −svec(e eᵀ)
+        ri.push(nnon + tri(one, one));
+        ci.push(0);
+        vs.push(-1.0);
+        let mut k_non = 0;
+        for (c, (form, nonneg)) in cons.iter().enumerate() {
+            let col = 1 + c;
+            if *nonneg {
+                ri.push(k_non);
+                ci.push(col);
+                vs.push(-1.0);
+                k_non += 1;
+            }
+            for (i, j, v) in &form.entries {
+                ri.push(nnon + tri(*i, *j));
+                ci.push(col);
+                vs.push(v * svec_scale(*i, *j));
+            }
+        }
+        let a = CscMatrix::new_from_triplets(nnon + tdim, nvar, ri, ci, vs);
+        let p = CscMatrix::<f64>::zeros((nvar, nvar));
+        let mut q = vec![0.0; nvar];
+        q[0] = 1.0;
+        let cones = [
+            SupportedConeT::NonnegativeConeT(nnon),
+            SupportedConeT::PSDTriangleConeT(n),
+        ];
+        let settings = match DefaultSettingsBuilder::default()
+            .verbose(false)
+            .max_iter(100)
+            .build()
+        {
+            Ok(s) => s,
+            Err(_) => return none("bad solver settings"),
+        };
+        let mut solver = match DefaultSolver::new(&p, &q, &a, &bvec, &cones, settings) {
+            Ok(s) => s,
+            Err(_) => return none("rejected problem data"),
+        };
+        solver.solve();
+        if let Some(issue) = untrusted(solver.solution.status) {
+            return none(issue);
+        }
+        let x = &solver.solution.x;
+        if x.iter().any(|v| !v.is_finite()) {
+            return none("non-finite solution");
+        }
+        // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
+        let d = x[0];
+        let mut m = DMatrix::<f64>::zeros(n, n);
+        let mut mabs = DMatrix::<f64>::zeros(n, n);
+        let mut terms = 0usize;
+        let add = |m: &mut DMatrix<f64>, mabs: &mut DMatrix<f64>, i: usize, j: usize, v: f64| {
+            m[(i, j)] += v;
+            mabs[(i, j)] += v.abs();
+        };
+        for (i, j, v) in &fobj.entries {
+            add(&mut m, &mut mabs, *i, *j, *v);
+        }
+        add(&mut m, &mut mabs, one, one, -d);
+        for (c, (form, nonneg)) in cons.iter().enumerate() {
+            let mult = if *nonneg { x[1 + c].max(0.0) } else { x[1 + c] };
+            if mult == 0.0 {
+                continue;
+            }
+            terms += 1;
+            for (i, j, v) in &form.entries {
+                add(&mut m, &mut mabs, *i, *j, mult * v);
+            }
+        }
+        // symmetrise (entries were stored with i ≤ j; off-diagonal ones carry half the sum each side)
+        let mut sym = DMatrix::<f64>::zeros(n, n);
+        let mut err = 0.0f64;
+        let k = gamma(terms + fobj.entries.len() + 8);
+        for j in 0..n {
+            for i in 0..=j {
+                let (v, a) = (m[(i, j)], mabs[(i, j)]);
+                sym[(i, j)] = v;
+                sym[(j, i)] = v;
+                let e = k * a * 1.0625;
+                err += if i == j { e * e } else { 2.0 * e * e };
+            }
+        }
+        let err_f = (err.sqrt() * (1.0 + 1e-10)).next_up();
+        let norm_f = sym.norm();
+        let eig = SymmetricEigen::new(sym);
+        let lam = eig
+            .eigenvalues
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        if !lam.is_finite() {
+            return none("eigenvalues not finite");
+        }
+        let lam_bound = sum_upper([lam, err_f, 100.0 * n as f64 * U * norm_f]);
+        let value = sum_upper([d, lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12)]);
+        SdpBound { value, issue: None }
+    }
+
+    /// Dimension of ξ.
+    pub fn input_dim(&self) -> usize {
+        self.d0
+    }
+
+    /// Largest magnitude of each neuron of the last hidden layer.
+    pub fn last_hidden_max(&self) -> Vec<f64> {
+        self.pre
+            .last()
+            .map(|z| z.hi.iter().map(|h| h.max(0.0)).collect())
+            .unwrap_or_default()
+    }
+
+    /// Offset of the last hidden layer in v.
+    pub fn last_hidden(&self) -> usize {
+        *self.offsets.last().unwrap_or(&self.d0)
+    }
+
+    /// Dimension of v.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+}
+
+fn none(issue: &'static str) -> SdpBound {
+    SdpBound {
+        value: f64::INFINITY,
+        issue: Some(issue),
+    }
+}
+
+fn untrusted(status: SolverStatus) -> Option<&'static str> {
+    match status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => None,
+        SolverStatus::Unsolved => Some("SDP unsolved"),
+        SolverStatus::PrimalInfeasible => Some("SDP primal infeasible"),
+        SolverStatus::DualInfeasible => Some("SDP dual infeasible"),
+        SolverStatus::AlmostPrimalInfeasible => Some("SDP almost primal infeasible"),
+        SolverStatus::AlmostDualInfeasible => Some("SDP almost dual infeasible"),
+        SolverStatus::MaxIterations => Some("SDP iteration limit"),
+        SolverStatus::MaxTime => Some("SDP time limit"),
+        SolverStatus::NumericalError => Some("SDP numerical error"),
+        SolverStatus::InsufficientProgress => Some("SDP insufficient progress"),
+        SolverStatus::CallbackTerminated => Some("SDP terminated"),
+    }
+}
+
+/// The boxes of an analysis (before every layer).
+fn analysis_boxes(a: &Analysis) -> Vec<IBox> {
+    a.boxes().to_vec()
+}

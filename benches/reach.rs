@@ -53,7 +53,7 @@ fn main() {
                 let start = Instant::now();
                 while start.elapsed().as_secs_f64() < 0.3 {
                     for cell in &cells {
-                        black_box(propagate_cell(&plan, black_box(cell)));
+                        black_box(propagate_cell(&plan, black_box(cell), None));
                     }
                     runs += 1;
                 }

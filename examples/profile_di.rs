@@ -9,6 +9,6 @@ fn main() {
     let c = ravel::front_end(&src, path.parent().unwrap(), &read).unwrap();
     let plan = ravel::lower::lower(&c);
     for _ in 0..200 {
-        std::hint::black_box(ravel::execute::propagate_cell(&plan, &plan.initial));
+        std::hint::black_box(ravel::execute::propagate_cell(&plan, &plan.initial, None));
     }
 }

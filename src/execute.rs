@@ -103,11 +103,14 @@ fn tolerance(x: &[f64], rhs_scale: f64) -> f64 {
     1e-9 * (1.0 + m)
 }
 
-/// Reachable sets of one cell over the horizon.
-pub fn propagate_cell(plan: &Plan, cell: &Region) -> Vec<Step> {
+/// Reachable sets of one cell over the horizon. With `parent` (the sets of a
+/// cell containing this one), every set is intersected with the parent's, so
+/// a partition is never looser than the cell it refines.
+pub fn propagate_cell(plan: &Plan, cell: &Region, parent: Option<&[Step]>) -> Vec<Step> {
     let cl = &plan.closed_loop;
     if plan.propagator == Propagator::CrownUnrolled {
-        return cl.unrolled(cell, plan.horizon, &plan.boundary);
+        let parent: Option<Vec<Region>> = parent.map(|p| p.iter().map(|s| s.set.clone()).collect());
+        return cl.unrolled(cell, plan.horizon, &plan.boundary, parent.as_deref());
     }
     let mut steps = Vec::with_capacity(plan.horizon + 1);
     steps.push(Step {
@@ -115,7 +118,10 @@ pub fn propagate_cell(plan: &Plan, cell: &Region) -> Vec<Step> {
         issues: Vec::new(),
     });
     for t in 0..plan.horizon {
-        let next = cl.step(t, &steps[t].set, plan.propagator, &plan.boundary);
+        let mut next = cl.step(t, &steps[t].set, plan.propagator, &plan.boundary);
+        if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
+            next.set = next.set.intersect(&p.set);
+        }
         steps.push(next);
     }
     steps
@@ -339,8 +345,13 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                 } else {
                     regions
                 };
-                calls = regions.len();
-                let sets = regions.iter().map(|c| propagate_cell(plan, c)).collect();
+                // the whole initial set first: every cell is kept inside it
+                let root = (regions.len() > 1).then(|| propagate_cell(plan, &plan.initial, None));
+                calls = regions.len() + usize::from(root.is_some());
+                let sets = regions
+                    .iter()
+                    .map(|c| propagate_cell(plan, c, root.as_deref()))
+                    .collect();
                 (regions.iter().map(Region::bbox).collect(), sets, "grid")
             }
             Partitioner::Guided { guide, budget } => {
@@ -362,7 +373,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     &root,
                     strategy,
                     &budget,
-                    &mut |c| {
+                    &mut |c, parent: Option<&Option<Vec<Step>>>| {
                         let region = cell_region(&plan.initial, c);
                         if certainly_empty(&region) {
                             let sets = vec![
@@ -374,7 +385,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                             ];
                             return (Some(sets), f64::NEG_INFINITY);
                         }
-                        let sets = propagate_cell(plan, &region);
+                        let sets = propagate_cell(plan, &region, parent.and_then(|p| p.as_deref()));
                         let score = match guide {
                             Guide::Sg | Guide::Gsg => (0..=plan.horizon)
                                 .map(|t| match &mc.sampled[t] {

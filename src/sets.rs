@@ -301,6 +301,28 @@ impl Region {
         LpBound { value, issue: None }
     }
 
+    /// The intersection with a set of the same shape (boxes, or polytopes with
+    /// the same row directions): both contain the true states, so does this.
+    /// Other combinations keep `self`.
+    pub fn intersect(&self, other: &Region) -> Region {
+        match (self, other) {
+            (Region::Box(a), Region::Box(b)) => Region::Box(a.intersect(b)),
+            (Region::Polytope { bbox: a, rows: ra }, Region::Polytope { bbox: b, rows: rb })
+                if ra.len() == rb.len() && ra.iter().zip(rb).all(|(x, y)| x.0 == y.0) =>
+            {
+                Region::Polytope {
+                    bbox: a.intersect(b),
+                    rows: ra
+                        .iter()
+                        .zip(rb)
+                        .map(|(x, y)| (x.0.clone(), x.1.min(y.1)))
+                        .collect(),
+                }
+            }
+            _ => self.clone(),
+        }
+    }
+
     /// Whether `x` certainly lies in the set (a conservative test: points on
     /// the boundary may be refused, points outside never pass).
     pub fn contains_point(&self, x: &[f64]) -> bool {

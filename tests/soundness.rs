@@ -133,7 +133,7 @@ fn reach(
 ) -> Vec<Region> {
     if prop == Propagator::CrownUnrolled {
         return cl
-            .unrolled(x0, horizon, boundary)
+            .unrolled(x0, horizon, boundary, None)
             .into_iter()
             .map(|s| s.set)
             .collect();

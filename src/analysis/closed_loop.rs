@@ -268,9 +268,18 @@ impl ClosedLoop {
         let bbox = x.bbox();
         let y = self.observation_box(&bbox);
         let facets = self.facets(boundary);
+        let mut extra = None;
         let bound = match prop {
             Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp => {
+                // Reach-LP, intersected with CL-CROWN from the same analysis:
+                // never looser than CL-CROWN (CL-CROWN's control box is also
+                // intersected with IBP, which Reach-LP's per-facet bound is not)
                 let analysis = Analysis::new(&self.net, &y, Mode::Crown);
+                let u = analysis.output_box(Mode::Crown);
+                let (separate, more) = self
+                    .push_control_box(t, facets.clone(), &bbox, &u)
+                    .concretize_region(x);
+                extra = Some((separate, more));
                 self.back_step(t, &LinearUpper::of_spec(facets.clone()), &analysis, &bbox)
             }
             Propagator::IbpSeparate => {
@@ -287,6 +296,12 @@ impl ClosedLoop {
             }
         };
         let (mut ub, mut issues) = bound.concretize_region(x);
+        if let Some((other, more)) = extra {
+            for (u, o) in ub.iter_mut().zip(other) {
+                *u = u.min(o);
+            }
+            issues.extend(more);
+        }
         if prop == Propagator::ReachSdp {
             let (sdp, more) = self.reach_sdp(t, x, &facets);
             for (u, s) in ub.iter_mut().zip(sdp) {
@@ -424,8 +439,11 @@ impl ClosedLoop {
             y,
             Strategy::Sg,
             &SG_BUDGET,
-            &mut |c| {
-                let b = Analysis::new(&self.net, c, Mode::Ibp).output_box(Mode::Ibp);
+            &mut |c, parent| {
+                let mut b = Analysis::new(&self.net, c, Mode::Ibp).output_box(Mode::Ibp);
+                if let Some(p) = parent {
+                    b = b.intersect(p);
+                }
                 let s = outside(&b, &hull);
                 (b, s)
             },
@@ -491,7 +509,15 @@ impl ClosedLoop {
     /// Hidden-neuron bounds of copy `t` are themselves unrolled (the
     /// [`Analysis::with_hook`] hook), and kept for later steps, so the cost is
     /// quadratic in the horizon, not exponential.
-    pub fn unrolled(&self, x0: &Region, horizon: usize, boundary: &Boundary) -> Vec<Step> {
+    /// With `parent` (the sets of a cell containing `x0`, same boundary), each
+    /// set is also intersected with the parent's set of the same step.
+    pub fn unrolled(
+        &self,
+        x0: &Region,
+        horizon: usize,
+        boundary: &Boundary,
+        parent: Option<&[Region]>,
+    ) -> Vec<Step> {
         let n = self.states();
         let p = self.plant.obs.ncols();
         let facets = self.facets(boundary);
@@ -537,7 +563,10 @@ impl ClosedLoop {
                 .zip(&through)
                 .map(|(a, b)| a.min(*b))
                 .collect();
-            let set = self.region_of(boundary, &ub);
+            let mut set = self.region_of(boundary, &ub);
+            if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
+                set = set.intersect(p);
+            }
             boxes.push(set.bbox());
             steps.push(Step { set, issues });
         }

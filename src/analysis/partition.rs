@@ -115,7 +115,8 @@ pub fn bisect(cell: &IBox, root: &IBox, min_size: f64) -> Option<(IBox, IBox)> {
     Some((a, b))
 }
 
-/// Refine `root` with `eval` (which returns a value and its score).
+/// Refine `root` with `eval` (which returns a value and its score; it is
+/// handed the parent cell's value, so a child can be kept inside its parent).
 /// `stop_all` is asked after every evaluation whether the whole search can
 /// end (the property-guided partitioner ends when the verdict is decided).
 /// `elapsed` returns seconds since the start (only called with a time budget).
@@ -123,7 +124,7 @@ pub fn refine<T>(
     root: &IBox,
     strategy: Strategy,
     budget: &Budget,
-    eval: &mut dyn FnMut(&IBox) -> (T, f64),
+    eval: &mut dyn FnMut(&IBox, Option<&T>) -> (T, f64),
     stop_all: &mut dyn FnMut(&T) -> bool,
     elapsed: &dyn Fn() -> f64,
 ) -> Refined<T> {
@@ -131,7 +132,7 @@ pub fn refine<T>(
     let mut order = 0usize;
     let mut done: Vec<Leaf<T>> = Vec::new();
     let mut stop = "done";
-    let (v, score) = eval(root);
+    let (v, score) = eval(root, None);
     calls += 1;
     let first = Leaf {
         cell: root.clone(),
@@ -189,7 +190,7 @@ pub fn refine<T>(
             continue;
         };
         for c in [b, a] {
-            let (v, score) = eval(&c);
+            let (v, score) = eval(&c, Some(&leaf.value));
             calls += 1;
             order += 1;
             let halt = stop_all(&v);
@@ -257,7 +258,7 @@ mod tests {
                 &root,
                 strategy,
                 &budget,
-                &mut |c| ((), c.hi[0] - 0.3),
+                &mut |c, _| ((), c.hi[0] - 0.3),
                 &mut |_| false,
                 &|| 0.0,
             );
@@ -279,7 +280,7 @@ mod tests {
             &root,
             Strategy::Gsg,
             &budget,
-            &mut |c| ((), c.hi[0] - c.lo[0] - 0.25),
+            &mut |c, _| ((), c.hi[0] - c.lo[0] - 0.25),
             &mut |_| false,
             &|| 0.0,
         );

@@ -89,6 +89,9 @@ impl<T> Ord for Queued<T> {
     }
 }
 
+/// Evaluates a cell (given its parent's value): the value and its score.
+pub type CellEval<'e, T> = dyn FnMut(&IBox, Option<&T>) -> (T, f64) + 'e;
+
 /// Bisect `cell` along its widest dimension relative to `root`, or `None`
 /// when every dimension is already below `min_size` of the root.
 pub fn bisect(cell: &IBox, root: &IBox, min_size: f64) -> Option<(IBox, IBox)> {
@@ -124,7 +127,7 @@ pub fn refine<T>(
     root: &IBox,
     strategy: Strategy,
     budget: &Budget,
-    eval: &mut dyn FnMut(&IBox, Option<&T>) -> (T, f64),
+    eval: &mut CellEval<T>,
     stop_all: &mut dyn FnMut(&T) -> bool,
     elapsed: &dyn Fn() -> f64,
 ) -> Refined<T> {

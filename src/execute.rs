@@ -12,7 +12,7 @@
 //! * Monte Carlo runs first, so the property-guided partitioner knows which
 //!   properties are already decided before it spends any propagator call.
 
-use crate::analysis::closed_loop::{Propagator, Step};
+use crate::analysis::closed_loop::{Boundary, Propagator, Step};
 use crate::analysis::partition::{outside, refine, Budget, Strategy};
 use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
 use crate::lp;
@@ -250,16 +250,23 @@ struct MonteCarlo {
     sampled: Vec<Option<IBox>>,
     /// (depth of violation, sample index, step) per property
     worst: Vec<Option<(f64, usize, usize)>>,
+    /// the simulated 2-D states per step, kept only for a hull boundary
+    points: Vec<Vec<[f64; 2]>>,
 }
 
 fn monte_carlo(plan: &Plan) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
+    let keep = plan.boundary == Boundary::Hull;
+    let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
     for k in 0..plan.samples {
         let Some(tr) = simulate(plan, k) else {
             continue;
         };
         for (t, x) in tr.states.iter().enumerate() {
+            if keep && x.len() == 2 {
+                points[t].push([x[0], x[1]]);
+            }
             let p = IBox::point(x);
             sampled[t] = Some(match &sampled[t] {
                 Some(b) => b.hull(&p),
@@ -296,7 +303,11 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
             }
         }
     }
-    MonteCarlo { sampled, worst }
+    MonteCarlo {
+        sampled,
+        worst,
+        points,
+    }
 }
 
 /// Whether a margin proves the property.
@@ -323,10 +334,30 @@ fn cell_region(initial: &Region, cell: &IBox) -> Region {
     }
 }
 
+/// The smallest angle between two directions of a hull boundary (7.5°): at
+/// most 48 directions per step, however many samples.
+pub const HULL_MIN_ANGLE: f64 = std::f64::consts::TAU / 48.0;
+
 /// Execute a plan. `elapsed` returns the seconds since the run started; it
 /// is consulted only by a partitioner with a time budget.
 pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
     let mc = monte_carlo(plan);
+    // a hull boundary takes its directions from the samples of each step
+    let resolved;
+    let plan = if plan.boundary == Boundary::Hull {
+        resolved = Plan {
+            boundary: Boundary::PerStep(
+                mc.points
+                    .iter()
+                    .map(|p| Boundary::hull_directions(p, HULL_MIN_ANGLE))
+                    .collect(),
+            ),
+            ..plan.clone()
+        };
+        &resolved
+    } else {
+        plan
+    };
     let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
 
     // ---- partition and propagate ----

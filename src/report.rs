@@ -64,6 +64,8 @@ fn boundary_text(b: &Boundary) -> String {
     match b {
         Boundary::Box => "box boundary".into(),
         Boundary::Polytope(d) => format!("polytope boundary ({} directions + box)", d.nrows()),
+        Boundary::Hull => "hull boundary (edge normals of the sampled convex hull + box)".into(),
+        Boundary::PerStep(_) => "polytope boundary (directions per step + box)".into(),
     }
 }
 
@@ -322,6 +324,8 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
             "boundary": match &plan.boundary {
                 Boundary::Box => "box",
                 Boundary::Polytope(_) => "polytope",
+                Boundary::Hull => "hull",
+                Boundary::PerStep(_) => "per_step",
             },
             "samples": plan.samples,
             "seed": plan.seed,

@@ -210,6 +210,17 @@ fn every_trajectory_stays_inside_every_reachable_set() {
         let mut boundaries = vec![Boundary::Box];
         if n == 2 {
             boundaries.push(Boundary::spread(6));
+            // directions that change from step to step, as a hull boundary's do
+            let mut rng = Rng::new(1000 + seed);
+            boundaries.push(Boundary::PerStep(
+                (0..=case.horizon)
+                    .map(|_| {
+                        let pts: Vec<[f64; 2]> =
+                            (0..12).map(|_| [rng.normal(), rng.normal()]).collect();
+                        Boundary::hull_directions(&pts, 0.2)
+                    })
+                    .collect(),
+            ));
         } else if seed % 3 == 0 {
             boundaries.push(Boundary::Polytope(DMatrix::from_fn(3, n, |r, c| {
                 ((r * 7 + c * 3 + seed as usize) % 5) as f64 - 2.0 + 0.5

@@ -90,6 +90,16 @@ pub enum Boundary {
     /// Polytopes `{x | D x ≤ d}` with fixed directions `D` (`k × n`), each
     /// intersected with its bounding box (which is always computed too).
     Polytope(DMatrix<f64>),
+    /// Polytopes whose directions are the edge normals of the convex hull of
+    /// the simulated states at each step (2-D states). The directions depend
+    /// on the samples, so [`crate::execute`] resolves this to
+    /// [`Boundary::PerStep`] after its Monte Carlo run; unresolved, it acts
+    /// as [`Boundary::Box`].
+    Hull,
+    /// Polytopes with directions chosen per step: entry `t` is used for the
+    /// set at step `t` (missing entries: the box alone). Whatever the
+    /// directions, each offset is a sound bound.
+    PerStep(Vec<DMatrix<f64>>),
 }
 
 impl Boundary {
@@ -105,6 +115,81 @@ impl Boundary {
         });
         Boundary::Polytope(d)
     }
+
+    /// The directions (besides the bounding box) of the set at step `t`.
+    pub fn directions(&self, t: usize) -> Option<&DMatrix<f64>> {
+        match self {
+            Boundary::Box | Boundary::Hull => None,
+            Boundary::Polytope(d) => Some(d),
+            Boundary::PerStep(v) => v.get(t).filter(|d| d.nrows() > 0),
+        }
+    }
+
+    /// Directions from sampled points of a 2-D set: the outward unit normals
+    /// of the edges of their convex hull, counter-clockwise, leaving out an
+    /// edge whose normal is within `min_angle` radians of the last one kept.
+    /// Fewer than three points in general position give no directions.
+    pub fn hull_directions(points: &[[f64; 2]], min_angle: f64) -> DMatrix<f64> {
+        let hull = convex_hull(points);
+        let mut kept: Vec<[f64; 2]> = Vec::new();
+        if hull.len() >= 3 {
+            for i in 0..hull.len() {
+                let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
+                let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+                let len = ex.hypot(ey);
+                if len.is_nan() || len <= 0.0 {
+                    continue;
+                }
+                // counter-clockwise polygon: the outward normal is (ey, −ex)
+                let nrm = [ey / len, -ex / len];
+                let far = |m: &[f64; 2]| {
+                    let cos = (m[0] * nrm[0] + m[1] * nrm[1]).clamp(-1.0, 1.0);
+                    cos.acos() >= min_angle
+                };
+                if kept.last().is_none_or(far) && kept.first().is_none_or(far) {
+                    kept.push(nrm);
+                }
+            }
+        }
+        DMatrix::from_fn(kept.len(), 2, |r, c| kept[r][c])
+    }
+}
+
+/// The convex hull of 2-D points, counter-clockwise, without collinear points
+/// (Andrew's monotone chain).
+pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = points
+        .iter()
+        .copied()
+        .filter(|q| q[0].is_finite() && q[1].is_finite())
+        .collect();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
 }
 
 /// One propagated set and the LP solver issues met computing it.
@@ -229,31 +314,30 @@ impl ClosedLoop {
         affine_image(&self.obs_xv, &DVector::zeros(p), &x.product(&self.plant.v))
     }
 
-    /// The facet matrix of a boundary: `[I; −I]` (the bounding box), then its directions.
-    pub fn facets(&self, boundary: &Boundary) -> DMatrix<f64> {
+    /// The facet matrix of a boundary at step `t`: `[I; −I]` (the bounding
+    /// box), then its directions.
+    pub fn facets(&self, boundary: &Boundary, t: usize) -> DMatrix<f64> {
         let n = self.states();
-        let extra = match boundary {
-            Boundary::Box => 0,
-            Boundary::Polytope(d) => d.nrows(),
-        };
+        let dirs = boundary.directions(t);
+        let extra = dirs.map_or(0, DMatrix::nrows);
         let mut f = DMatrix::zeros(2 * n + extra, n);
         for i in 0..n {
             f[(i, i)] = 1.0;
             f[(n + i, i)] = -1.0;
         }
-        if let Boundary::Polytope(d) = boundary {
+        if let Some(d) = dirs {
             f.view_mut((2 * n, 0), (extra, n)).copy_from(d);
         }
         f
     }
 
-    /// The set `{x | F x ≤ ub}` for the facets of `boundary`.
-    fn region_of(&self, boundary: &Boundary, ub: &[f64]) -> Region {
+    /// The set `{x | F x ≤ ub}` for the facets of `boundary` at step `t`.
+    fn region_of(&self, boundary: &Boundary, t: usize, ub: &[f64]) -> Region {
         let n = self.states();
         let bbox = IBox::new(ub[n..2 * n].iter().map(|v| -v).collect(), ub[..n].to_vec());
-        match boundary {
-            Boundary::Box => Region::Box(bbox),
-            Boundary::Polytope(d) => Region::Polytope {
+        match boundary.directions(t) {
+            None => Region::Box(bbox),
+            Some(d) => Region::Polytope {
                 bbox,
                 rows: (0..d.nrows())
                     .map(|r| (d.row(r).iter().copied().collect(), ub[2 * n + r]))
@@ -267,7 +351,7 @@ impl ClosedLoop {
     pub fn step(&self, t: usize, x: &Region, prop: Propagator, boundary: &Boundary) -> Step {
         let bbox = x.bbox();
         let y = self.observation_box(&bbox);
-        let facets = self.facets(boundary);
+        let facets = self.facets(boundary, t + 1);
         let mut extra = None;
         let bound = match prop {
             Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp => {
@@ -310,7 +394,7 @@ impl ClosedLoop {
             issues.extend(more);
         }
         Step {
-            set: self.region_of(boundary, &ub),
+            set: self.region_of(boundary, t + 1, &ub),
             issues,
         }
     }
@@ -520,7 +604,6 @@ impl ClosedLoop {
     ) -> Vec<Step> {
         let n = self.states();
         let p = self.plant.obs.ncols();
-        let facets = self.facets(boundary);
         let mut steps = vec![Step {
             set: x0.clone(),
             issues: Vec::new(),
@@ -548,7 +631,7 @@ impl ClosedLoop {
             };
             let over_xt = self.back_step(
                 t,
-                &LinearUpper::of_spec(facets.clone()),
+                &LinearUpper::of_spec(self.facets(boundary, t + 1)),
                 &analysis,
                 &boxes[t],
             );
@@ -563,7 +646,7 @@ impl ClosedLoop {
                 .zip(&through)
                 .map(|(a, b)| a.min(*b))
                 .collect();
-            let mut set = self.region_of(boundary, &ub);
+            let mut set = self.region_of(boundary, t + 1, &ub);
             if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
                 set = set.intersect(p);
             }
@@ -585,5 +668,51 @@ impl ClosedLoop {
             bound = self.back_step(r, &bound, &analyses[r], &boxes[r]);
         }
         bound
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn convex_hull_of_a_square_with_inner_and_edge_points() {
+        let pts = [
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [0.5, 0.0],
+            [1.0, 1.0],
+            [0.0, 1.0],
+            [0.5, 0.5],
+            [1.0, 1.0],
+        ];
+        let h = convex_hull(&pts);
+        assert_eq!(h, vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
+        let d = Boundary::hull_directions(&pts, 0.1);
+        let rows: Vec<[f64; 2]> = (0..d.nrows()).map(|r| [d[(r, 0)], d[(r, 1)]]).collect();
+        assert_eq!(rows, vec![[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]]);
+    }
+
+    #[test]
+    fn hull_directions_are_thinned_and_degenerate_hulls_give_none() {
+        // a regular 100-gon: normals 3.6° apart, kept at least 10° apart
+        let pts: Vec<[f64; 2]> = (0..100)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 100.0;
+                [a.cos(), a.sin()]
+            })
+            .collect();
+        let d = Boundary::hull_directions(&pts, 10f64.to_radians());
+        assert!(d.nrows() >= 30 && d.nrows() <= 36, "{}", d.nrows());
+        for r in 0..d.nrows() {
+            let next = (r + 1) % d.nrows();
+            let cos = d.row(r).dot(&d.row(next));
+            assert!(cos.acos() >= 10f64.to_radians() - 1e-12);
+        }
+        // collinear points and a single point have no area
+        let line = [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]];
+        assert_eq!(Boundary::hull_directions(&line, 0.1).nrows(), 0);
+        assert_eq!(Boundary::hull_directions(&[[1.0, 2.0]], 0.1).nrows(), 0);
+        assert_eq!(Boundary::hull_directions(&[], 0.1).nrows(), 0);
     }
 }

@@ -116,7 +116,7 @@ const PROPAGATORS: [&str; 6] = [
 ];
 const PLANNED_PROPAGATORS: [&str; 1] = ["reach_sdp_unrolled"];
 const PARTITIONERS: [&str; 5] = ["none", "uniform", "sg", "gsg", "property"];
-const BOUNDARIES: [&str; 2] = ["box", "polytope"];
+const BOUNDARIES: [&str; 3] = ["box", "hull", "polytope"];
 
 struct Ctx {
     diags: Vec<Diagnostic>,
@@ -1108,6 +1108,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         .as_ref()
         .map(|(_, n)| Partitioner::Uniform(vec![1; *n]));
     let mut boundary = Some(Boundary::Box);
+    let mut hull_span = None;
     let mut guided_span = None;
     let mut sdp_span = None;
     let mut samples = DEFAULT_SAMPLES;
@@ -1263,22 +1264,35 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                                 .hint("write `boundary polytope 8` (evenly spread, 2-D states) or `boundary polytope [[1, 1], [1, -1]]`"),
                         );
                         boundary = None;
+                    } else if b.node == "hull" {
+                        match state.as_ref().map(|(_, n)| *n) {
+                            Some(2) | None => {
+                                boundary = Some(Boundary::Hull);
+                                hull_span = Some(b.span);
+                            }
+                            Some(n) => {
+                                cx.err(
+                                    Diagnostic::new(
+                                        Code::Boundary,
+                                        b.span,
+                                        format!("a convex-hull boundary needs a 2-D state, but the state has {n} components"),
+                                    )
+                                    .label("2-D only")
+                                    .hint("use `boundary box` or `boundary polytope [[…], …]` with explicit directions"),
+                                );
+                                boundary = None;
+                            }
+                        }
                     } else if b.node != "box" {
-                        let planned = b.node == "hull";
                         let mut d = Diagnostic::new(
                             Code::UnknownName,
                             b.span,
                             format!("unknown boundary `{}`", b.node),
                         )
-                        .label(if planned {
-                            "not available in this version"
-                        } else {
-                            "not a boundary shape"
-                        });
-                        d = match (planned, did_you_mean(&b.node, BOUNDARIES)) {
-                            (true, _) => d.hint("convex-hull boundaries are planned; available: box, polytope K, polytope [[…], …]"),
-                            (false, Some(s)) => d.hint(format!("did you mean `{s}`?")),
-                            (false, None) => d.hint("available: box, polytope K, polytope [[…], …]"),
+                        .label("not a boundary shape");
+                        d = match did_you_mean(&b.node, BOUNDARIES) {
+                            Some(s) => d.hint(format!("did you mean `{s}`?")),
+                            None => d.hint("available: box, hull, polytope K, polytope [[…], …]"),
                         };
                         cx.err(d);
                         boundary = None;
@@ -1322,6 +1336,17 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 .hint("use `reach_lp` or `crown_unrolled`, which handle tanh and sigmoid"),
             );
         }
+    }
+    if let (Some(span), true) = (hull_span, samples == 0) {
+        cx.err(
+            Diagnostic::new(
+                Code::Boundary,
+                span,
+                "a convex-hull boundary takes its directions from Monte Carlo samples, but `samples` is 0",
+            )
+            .label("no samples to shape it")
+            .hint("draw samples (e.g. `samples 1000`) or use `boundary polytope 8`"),
+        );
     }
     if let (Some((g, span)), true) = (guided_span, samples == 0) {
         if g != Guide::Property {

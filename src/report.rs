@@ -55,7 +55,8 @@ fn partition_text(plan: &Plan, out: &Outcome) -> String {
                 "time" => "time budget spent".to_string(),
                 _ => "stopped".to_string(),
             };
-            format!("{} partition ({cells} cells, {why})", guide.name())
+            let noun = if cells == 1 { "cell" } else { "cells" };
+            format!("{} partition ({cells} {noun}, {why})", guide.name())
         }
     }
 }

@@ -12,8 +12,13 @@
 //! * Monte Carlo runs first, so the property-guided partitioner knows which
 //!   properties are already decided before it spends any propagator call.
 
+use nalgebra::DMatrix;
+
 use crate::analysis::closed_loop::{Boundary, Propagator, Step};
 use crate::analysis::partition::{outside, refine, Budget, Strategy};
+use crate::analysis::shape::{
+    convex_hull, excess, extent_of_points, support_of_points, HULL_MIN_ANGLE,
+};
 use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
 use crate::lp;
 use crate::rng::Rng;
@@ -250,22 +255,27 @@ struct MonteCarlo {
     sampled: Vec<Option<IBox>>,
     /// (depth of violation, sample index, step) per property
     worst: Vec<Option<(f64, usize, usize)>>,
-    /// the simulated 2-D states per step, kept only for a hull boundary
+    /// the simulated 2-D states per step (only their convex hull once there
+    /// are many), kept for hull and polytope boundaries of 2-D states
     points: Vec<Vec<[f64; 2]>>,
 }
 
 fn monte_carlo(plan: &Plan) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
-    let keep = plan.boundary == Boundary::Hull;
+    let keep = plan.boundary != Boundary::Box && plan.closed_loop.states() == 2;
     let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
     for k in 0..plan.samples {
         let Some(tr) = simulate(plan, k) else {
             continue;
         };
         for (t, x) in tr.states.iter().enumerate() {
-            if keep && x.len() == 2 {
+            if keep {
                 points[t].push([x[0], x[1]]);
+                // supports of a point set are those of its hull: bounded memory
+                if points[t].len() > 4096 {
+                    points[t] = convex_hull(&points[t]);
+                }
             }
             let p = IBox::point(x);
             sampled[t] = Some(match &sampled[t] {
@@ -310,6 +320,18 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
     }
 }
 
+/// The offsets of a set along its facets: `[hi, −lo]` of the bounding box,
+/// then a polytope's rows.
+fn offsets(r: &Region) -> Vec<f64> {
+    let b = r.bbox();
+    let mut v = b.hi.clone();
+    v.extend(b.lo.iter().map(|l| -l));
+    if let Region::Polytope { rows, .. } = r {
+        v.extend(rows.iter().map(|(_, h)| *h));
+    }
+    v
+}
+
 /// Whether a margin proves the property.
 fn proves(prop: &Property, margin: f64) -> bool {
     match &prop.kind {
@@ -334,10 +356,6 @@ fn cell_region(initial: &Region, cell: &IBox) -> Region {
     }
 }
 
-/// The smallest angle between two directions of a hull boundary (7.5°): at
-/// most 48 directions per step, however many samples.
-pub const HULL_MIN_ANGLE: f64 = std::f64::consts::TAU / 48.0;
-
 /// Execute a plan. `elapsed` returns the seconds since the run started; it
 /// is consulted only by a partitioner with a time budget.
 pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
@@ -359,6 +377,21 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
         plan
     };
     let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
+
+    // SG/GSG scores of 2-D polytope and hull boundaries: how far a cell's
+    // facets leave the sampled states' facets, per step
+    let shaped: Vec<(DMatrix<f64>, Vec<f64>, Vec<f64>)> = mc
+        .points
+        .iter()
+        .enumerate()
+        .map(|(t, p)| {
+            let f = plan.closed_loop.facets(&plan.boundary, t);
+            let pts: Vec<Vec<f64>> = p.iter().map(|q| q.to_vec()).collect();
+            let s = support_of_points(&f, &pts);
+            let w = extent_of_points(&f, &pts);
+            (f, s, w)
+        })
+        .collect();
 
     // ---- partition and propagate ----
     let calls: usize;
@@ -419,9 +452,19 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                         let sets = propagate_cell(plan, &region, parent.and_then(|p| p.as_deref()));
                         let score = match guide {
                             Guide::Sg | Guide::Gsg => (0..=plan.horizon)
-                                .map(|t| match &mc.sampled[t] {
-                                    Some(h) => outside(&sets[t].set.bbox(), h),
-                                    None => f64::INFINITY,
+                                .map(|t| match (&mc.sampled[t], shaped.get(t)) {
+                                    (Some(_), Some((f, s, w))) => {
+                                        let b = offsets(&sets[t].set);
+                                        // step 0 is the cell itself, not a boundary shape
+                                        if t > 0 && b.len() == f.nrows() {
+                                            excess(&b, s, w)
+                                        } else {
+                                            let k = 2 * f.ncols();
+                                            excess(&b[..k], &s[..k], &w[..k])
+                                        }
+                                    }
+                                    (Some(h), None) => outside(&sets[t].set.bbox(), h),
+                                    (None, _) => f64::INFINITY,
                                 })
                                 .fold(0.0, f64::max),
                             Guide::Property => plan

@@ -327,3 +327,106 @@ fn linear_bounds_hold_pointwise() {
         }
     }
 }
+
+#[test]
+fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
+    use ravel::analysis::open_loop::{output_set, sample_inputs, Partitioner};
+    use ravel::analysis::partition::{Budget, Strategy};
+    use ravel::analysis::shape::Shape;
+    let guided = |strategy, calls| Partitioner::Guided {
+        strategy,
+        budget: Budget {
+            calls,
+            min_size: 1.0 / 64.0,
+            seconds: None,
+        },
+    };
+    for seed in 0..24u64 {
+        let mut rng = Rng::new(7000 + seed);
+        let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
+        let n = 1 + rng.below(3);
+        let m = 1 + rng.below(3);
+        let net = random_network(&mut rng, n, m, act);
+        let lo: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 0.0)).collect();
+        let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(0.2, 1.5)).collect();
+        let input = IBox::new(lo, hi);
+        let inputs = sample_inputs(&input, 64, seed);
+        let mut shapes = vec![Shape::LowerBounds, Shape::Box, Shape::Hull];
+        shapes.push(Shape::Polytope(DMatrix::from_fn(3, m, |_, _| rng.normal())));
+        let points: Vec<Vec<f64>> = (0..400).map(|_| sample_point(&mut rng, &input)).collect();
+        for mode in [Mode::Ibp, Mode::Crown] {
+            for shape in &shapes {
+                let whole = output_set(
+                    &net,
+                    &input,
+                    mode,
+                    shape,
+                    &Partitioner::Uniform(vec![1; n]),
+                    &inputs,
+                    &|| 0.0,
+                );
+                let few = output_set(
+                    &net,
+                    &input,
+                    mode,
+                    shape,
+                    &guided(Strategy::Gsg, 6),
+                    &inputs,
+                    &|| 0.0,
+                );
+                for part in [
+                    Partitioner::Uniform(vec![3; n]),
+                    guided(Strategy::Sg, 24),
+                    guided(Strategy::Gsg, 24),
+                ] {
+                    let out = output_set(&net, &input, mode, shape, &part, &inputs, &|| 0.0);
+                    let label = format!("seed {seed} {mode:?} {shape:?} {part:?}");
+                    assert_eq!(out.directions, whole.directions, "{label}");
+                    // every output inside the union and inside its own cell's set
+                    for x in &points {
+                        let y = DVector::from_vec(net.forward(x));
+                        let d = &out.directions * &y;
+                        for k in 0..d.len() {
+                            let tol = 1e-12 * (1.0 + d[k].abs());
+                            assert!(d[k] <= out.offsets[k] + tol, "{label}: row {k}");
+                            assert!(d[k] <= whole.offsets[k] + tol, "{label}: row {k} (whole)");
+                        }
+                        let cell = out
+                            .cells
+                            .iter()
+                            .find(|(c, _)| c.contains_point(x))
+                            .expect("cells cover the input");
+                        for k in 0..d.len() {
+                            assert!(d[k] <= cell.1[k] + 1e-12 * (1.0 + d[k].abs()), "{label}");
+                        }
+                    }
+                    // never looser than no partition; the sampled offsets are below
+                    for k in 0..out.offsets.len() {
+                        assert!(out.offsets[k] <= whole.offsets[k], "{label}: row {k}");
+                        assert!(out.sampled[k] <= out.offsets[k], "{label}: row {k}");
+                    }
+                    // a larger GSG budget never loosens the union
+                    if part == guided(Strategy::Gsg, 24) {
+                        for k in 0..out.offsets.len() {
+                            assert!(out.offsets[k] <= few.offsets[k], "{label}: row {k}");
+                        }
+                    }
+                }
+                if *shape == Shape::LowerBounds {
+                    assert!(whole.bbox().is_none());
+                    let lb = whole.lower_bounds();
+                    for x in &points {
+                        let y = net.forward(x);
+                        assert!(y
+                            .iter()
+                            .zip(&lb)
+                            .all(|(y, l)| *y >= *l - 1e-12 * (1.0 + y.abs())));
+                    }
+                } else {
+                    let b = whole.bbox().expect("box rows");
+                    assert_eq!(whole.lower_bounds(), b.lo);
+                }
+            }
+        }
+    }
+}

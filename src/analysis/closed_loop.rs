@@ -15,11 +15,12 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::crown::{affine_image, Analysis, LinearUpper, Mode};
-use super::partition::{outside, refine, Budget, Strategy};
+use super::open_loop;
+use super::partition::{Budget, Strategy};
 use super::sdp;
+use super::shape::Shape;
 use crate::nn::Network;
 use crate::num::{gamma, slack, sum_upper};
-use crate::rng::Rng;
 use crate::sets::{IBox, Region};
 
 /// A linear plant with bounded noise.
@@ -125,71 +126,11 @@ impl Boundary {
         }
     }
 
-    /// Directions from sampled points of a 2-D set: the outward unit normals
-    /// of the edges of their convex hull, counter-clockwise, leaving out an
-    /// edge whose normal is within `min_angle` radians of the last one kept.
-    /// Fewer than three points in general position give no directions.
+    /// Directions from sampled points of a 2-D set (see
+    /// [`super::shape::hull_directions`]).
     pub fn hull_directions(points: &[[f64; 2]], min_angle: f64) -> DMatrix<f64> {
-        let hull = convex_hull(points);
-        let mut kept: Vec<[f64; 2]> = Vec::new();
-        if hull.len() >= 3 {
-            for i in 0..hull.len() {
-                let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
-                let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
-                let len = ex.hypot(ey);
-                if len.is_nan() || len <= 0.0 {
-                    continue;
-                }
-                // counter-clockwise polygon: the outward normal is (ey, −ex)
-                let nrm = [ey / len, -ex / len];
-                let far = |m: &[f64; 2]| {
-                    let cos = (m[0] * nrm[0] + m[1] * nrm[1]).clamp(-1.0, 1.0);
-                    cos.acos() >= min_angle
-                };
-                if kept.last().is_none_or(far) && kept.first().is_none_or(far) {
-                    kept.push(nrm);
-                }
-            }
-        }
-        DMatrix::from_fn(kept.len(), 2, |r, c| kept[r][c])
+        super::shape::hull_directions(points, min_angle)
     }
-}
-
-/// The convex hull of 2-D points, counter-clockwise, without collinear points
-/// (Andrew's monotone chain).
-pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
-    let mut p: Vec<[f64; 2]> = points
-        .iter()
-        .copied()
-        .filter(|q| q[0].is_finite() && q[1].is_finite())
-        .collect();
-    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
-        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    };
-    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for &q in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(q);
-        }
-        hull.pop();
-    }
-    hull
 }
 
 /// One propagated set and the LP solver issues met computing it.
@@ -499,44 +440,21 @@ impl ClosedLoop {
 
     /// The control box over `y` by IBP on a simulation-guided partition of `y`.
     fn sg_ibp_control(&self, y: &IBox) -> IBox {
-        let mut rng = Rng::new(0x5EED);
-        let mut hull: Option<IBox> = None;
-        for k in 0..SG_SAMPLES {
-            let p: Vec<f64> = (0..y.dim())
-                .map(|i| {
-                    if k < 2 {
-                        if k == 0 {
-                            y.lo[i]
-                        } else {
-                            y.hi[i]
-                        }
-                    } else {
-                        rng.uniform(y.lo[i], y.hi[i])
-                    }
-                })
-                .collect();
-            let u = IBox::point(&self.net.forward(&p));
-            hull = Some(hull.map_or(u.clone(), |h| h.hull(&u)));
-        }
-        let hull = hull.unwrap_or_else(|| y.clone());
-        let r = refine(
+        let inputs = open_loop::sample_inputs(y, SG_SAMPLES, 0x5EED);
+        let out = open_loop::output_set(
+            &self.net,
             y,
-            Strategy::Sg,
-            &SG_BUDGET,
-            &mut |c, parent| {
-                let mut b = Analysis::new(&self.net, c, Mode::Ibp).output_box(Mode::Ibp);
-                if let Some(p) = parent {
-                    b = b.intersect(p);
-                }
-                let s = outside(&b, &hull);
-                (b, s)
+            Mode::Ibp,
+            &Shape::Box,
+            &open_loop::Partitioner::Guided {
+                strategy: Strategy::Sg,
+                budget: SG_BUDGET,
             },
-            &mut |_| false,
+            &inputs,
             &|| 0.0,
         );
-        let mut leaves = r.leaves.into_iter();
-        let first = leaves.next().map(|l| l.value).unwrap_or(hull);
-        leaves.fold(first, |h, l| h.hull(&l.value))
+        out.bbox()
+            .unwrap_or_else(|| Analysis::new(&self.net, y, Mode::Ibp).output_box(Mode::Ibp))
     }
 
     /// `F (A x + B u + c + w)` bounded linearly in `x`, over `u ∈ U`, `w ∈ W`.
@@ -668,51 +586,5 @@ impl ClosedLoop {
             bound = self.back_step(r, &bound, &analyses[r], &boxes[r]);
         }
         bound
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn convex_hull_of_a_square_with_inner_and_edge_points() {
-        let pts = [
-            [0.0, 0.0],
-            [1.0, 0.0],
-            [0.5, 0.0],
-            [1.0, 1.0],
-            [0.0, 1.0],
-            [0.5, 0.5],
-            [1.0, 1.0],
-        ];
-        let h = convex_hull(&pts);
-        assert_eq!(h, vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
-        let d = Boundary::hull_directions(&pts, 0.1);
-        let rows: Vec<[f64; 2]> = (0..d.nrows()).map(|r| [d[(r, 0)], d[(r, 1)]]).collect();
-        assert_eq!(rows, vec![[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]]);
-    }
-
-    #[test]
-    fn hull_directions_are_thinned_and_degenerate_hulls_give_none() {
-        // a regular 100-gon: normals 3.6° apart, kept at least 10° apart
-        let pts: Vec<[f64; 2]> = (0..100)
-            .map(|k| {
-                let a = std::f64::consts::TAU * k as f64 / 100.0;
-                [a.cos(), a.sin()]
-            })
-            .collect();
-        let d = Boundary::hull_directions(&pts, 10f64.to_radians());
-        assert!(d.nrows() >= 30 && d.nrows() <= 36, "{}", d.nrows());
-        for r in 0..d.nrows() {
-            let next = (r + 1) % d.nrows();
-            let cos = d.row(r).dot(&d.row(next));
-            assert!(cos.acos() >= 10f64.to_radians() - 1e-12);
-        }
-        // collinear points and a single point have no area
-        let line = [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]];
-        assert_eq!(Boundary::hull_directions(&line, 0.1).nrows(), 0);
-        assert_eq!(Boundary::hull_directions(&[[1.0, 2.0]], 0.1).nrows(), 0);
-        assert_eq!(Boundary::hull_directions(&[], 0.1).nrows(), 0);
     }
 }

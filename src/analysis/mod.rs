@@ -2,6 +2,8 @@
 
 pub mod closed_loop;
 pub mod crown;
+pub mod open_loop;
 pub mod partition;
 pub mod relax;
 pub mod sdp;
+pub mod shape;

@@ -381,6 +381,10 @@ impl<'a> StepSdp<'a> {
         let settings = match DefaultSettingsBuilder::default()
             .verbose(false)
             .max_iter(100)
+            // faer's supernodal LDL: about 5× faster than QDLDL on the dense
+            // KKT blocks of larger PSD cones; one thread keeps it deterministic
+            .direct_solve_method("faer".into())
+            .max_threads(1)
             .build()
         {
             Ok(s) => s,

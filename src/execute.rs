@@ -256,14 +256,29 @@ struct MonteCarlo {
     /// (depth of violation, sample index, step) per property
     worst: Vec<Option<(f64, usize, usize)>>,
     /// the simulated 2-D states per step (only their convex hull once there
-    /// are many), kept for hull and polytope boundaries of 2-D states
+    /// are many), kept for a hull boundary
     points: Vec<Vec<[f64; 2]>>,
+    /// for a polytope boundary: per step, the largest and smallest value of
+    /// each facet direction (box rows first) over the simulated states
+    facet_range: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 fn monte_carlo(plan: &Plan) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
-    let keep = plan.boundary != Boundary::Box && plan.closed_loop.states() == 2;
+    let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
+    let fixed = matches!(plan.boundary, Boundary::Polytope(_))
+        .then(|| plan.closed_loop.facets(&plan.boundary, 0));
+    let mut facet_range: Vec<(Vec<f64>, Vec<f64>)> = match &fixed {
+        Some(f) => vec![
+            (
+                vec![f64::NEG_INFINITY; f.nrows()],
+                vec![f64::INFINITY; f.nrows()]
+            );
+            plan.horizon + 1
+        ],
+        None => Vec::new(),
+    };
     let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
     for k in 0..plan.samples {
         let Some(tr) = simulate(plan, k) else {
@@ -275,6 +290,14 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
                 // supports of a point set are those of its hull: bounded memory
                 if points[t].len() > 4096 {
                     points[t] = convex_hull(&points[t]);
+                }
+            }
+            if let Some(f) = &fixed {
+                let (hi, lo) = &mut facet_range[t];
+                for k in 0..f.nrows() {
+                    let v: f64 = f.row(k).iter().zip(x).map(|(a, b)| a * b).sum();
+                    hi[k] = hi[k].max(v);
+                    lo[k] = lo[k].min(v);
                 }
             }
             let p = IBox::point(x);
@@ -317,6 +340,7 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
         sampled,
         worst,
         points,
+        facet_range,
     }
 }
 
@@ -378,20 +402,30 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
     };
     let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
 
-    // SG/GSG scores of 2-D polytope and hull boundaries: how far a cell's
-    // facets leave the sampled states' facets, per step
-    let shaped: Vec<(DMatrix<f64>, Vec<f64>, Vec<f64>)> = mc
-        .points
-        .iter()
-        .enumerate()
-        .map(|(t, p)| {
-            let f = plan.closed_loop.facets(&plan.boundary, t);
-            let pts: Vec<Vec<f64>> = p.iter().map(|q| q.to_vec()).collect();
-            let s = support_of_points(&f, &pts);
-            let w = extent_of_points(&f, &pts);
-            (f, s, w)
-        })
-        .collect();
+    // SG/GSG scores of polytope and hull boundaries: how far a cell's facets
+    // leave the sampled states' facets, per step
+    let shaped: Vec<(DMatrix<f64>, Vec<f64>, Vec<f64>)> = if mc.facet_range.is_empty() {
+        mc.points
+            .iter()
+            .enumerate()
+            .map(|(t, p)| {
+                let f = plan.closed_loop.facets(&plan.boundary, t);
+                let pts: Vec<Vec<f64>> = p.iter().map(|q| q.to_vec()).collect();
+                let s = support_of_points(&f, &pts);
+                let w = extent_of_points(&f, &pts);
+                (f, s, w)
+            })
+            .collect()
+    } else {
+        mc.facet_range
+            .iter()
+            .enumerate()
+            .map(|(t, (hi, lo))| {
+                let w = hi.iter().zip(lo).map(|(h, l)| h - l).collect();
+                (plan.closed_loop.facets(&plan.boundary, t), hi.clone(), w)
+            })
+            .collect()
+    };
 
     // ---- partition and propagate ----
     let calls: usize;

@@ -6,6 +6,7 @@ pub mod check;
 pub mod cli;
 pub mod diag;
 pub mod execute;
+pub mod expm;
 pub mod lower;
 pub mod lp;
 pub mod nn;

@@ -79,7 +79,17 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
     let mut timing = String::new();
     if let Some(dt) = plan.dt {
-        timing += &format!(", continuous time, dt {} (zero-order hold)", num(dt));
+        let err = plan.closed_loop.plant.err.as_ref().map_or(0.0, |e| {
+            e.a.iter()
+                .chain(e.b.iter())
+                .chain(e.c.iter())
+                .fold(0.0f64, |a, v| a.max(*v))
+        });
+        timing += &format!(
+            ", continuous time, dt {} (zero-order hold, entries enclosed to ±{})",
+            num(dt),
+            num(err)
+        );
     }
     if plan.closed_loop.is_time_varying() {
         timing += ", time-varying";
@@ -310,6 +320,10 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "control": { "name": plan.control_name, "dim": plan.closed_loop.plant.b.ncols() },
         "controller": { "path": plan.controller_path, "network": plan.network_summary },
         "horizon": plan.horizon,
+        "dt": plan.dt.map(f),
+        "model_error": plan.closed_loop.plant.err.as_ref().map(|e| {
+            f(e.a.iter().chain(e.b.iter()).chain(e.c.iter()).fold(0.0f64, |a, v| a.max(*v)))
+        }),
         "analysis": {
             "propagator": plan.propagator.name(),
             "partitioner": match &plan.partitioner {

@@ -5,7 +5,7 @@
 //! time-varying plants.
 
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
+use ravel::analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
 use ravel::analysis::crown::{Analysis, Mode};
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
@@ -98,8 +98,23 @@ fn random_case(seed: u64) -> Case {
         ))
     };
     let varying = seed % 5 == 2;
+    // uncertain A, B, c (as a discretised continuous-time plant has)
+    let uncertain = seed % 6 == 1;
+    let err = uncertain.then(|| ModelError {
+        a: a.map(|x| x.abs() * 0.05 + 0.01),
+        b: b.map(|x| x.abs() * 0.05 + 0.01),
+        c: c.map(|x| x.abs() * 0.05 + 0.01),
+    });
     let horizon = 4;
-    let plant = Plant { a, b, c, obs, w, v };
+    let plant = Plant {
+        a,
+        b,
+        c,
+        obs,
+        w,
+        v,
+        err,
+    };
     let plants: Vec<Plant> = if varying {
         (0..horizon)
             .map(|_| {
@@ -114,7 +129,7 @@ fn random_case(seed: u64) -> Case {
         vec![plant]
     };
     let label = format!(
-        "seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited} ball={ball} varying={varying}"
+        "seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited} ball={ball} varying={varying} uncertain={uncertain}"
     );
     Case {
         cl: ClosedLoop::time_varying(plants, net),
@@ -190,6 +205,29 @@ fn initial_point(rng: &mut Rng, x0: &Region) -> Vec<f64> {
     }
 }
 
+/// `next + ΔA x + ΔB u + Δc` for a random model error within `e` (each entry
+/// at its lower or upper bound with probability ¼ each, else uniform).
+fn perturbed(rng: &mut Rng, e: &ModelError, x: &[f64], u: &[f64], next: Vec<f64>) -> Vec<f64> {
+    let mut pick = |r: f64| match rng.below(4) {
+        0 => -r,
+        1 => r,
+        _ => rng.uniform(-r, r),
+    };
+    next.iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let mut s = *v + pick(e.c[i]);
+            for (j, xj) in x.iter().enumerate() {
+                s += pick(e.a[(i, j)]) * xj;
+            }
+            for (j, uj) in u.iter().enumerate() {
+                s += pick(e.b[(i, j)]) * uj;
+            }
+            s
+        })
+        .collect()
+}
+
 fn sample_point(rng: &mut Rng, b: &IBox) -> Vec<f64> {
     (0..b.dim())
         .map(|i| match rng.below(4) {
@@ -263,7 +301,11 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                         if t < case.horizon {
                             let w = sample_point(&mut rng, &case.cl.plant.w);
                             let v = sample_point(&mut rng, &case.cl.plant.v);
-                            x = case.cl.simulate(t, &x, &w, &v).1;
+                            let (u, next) = case.cl.simulate(t, &x, &w, &v);
+                            x = match &case.cl.plant_at(t).err {
+                                Some(e) => perturbed(&mut rng, e, &x, &u, next),
+                                None => next,
+                            };
                         }
                     }
                 }

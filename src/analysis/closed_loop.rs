@@ -38,6 +38,22 @@ pub struct Plant {
     pub w: IBox,
     /// Sensor noise box (`p`).
     pub v: IBox,
+    /// How far the true `A`, `B`, `c` may be from the stored ones (a
+    /// continuous-time plant's discretisation error); `None`: exact.
+    pub err: Option<ModelError>,
+}
+
+/// Entrywise bounds `|A_true − A| ≤ a`, `|B_true − B| ≤ b`, `|c_true − c| ≤ c`.
+/// Every propagator adds `Σ_j |f_j|·δ_j` to a facet `f`'s bound, with
+/// `δ = a·|x|max + b·|u|max + c` over the step's state and control boxes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelError {
+    /// Bound on the state matrix's error (`n × n`).
+    pub a: DMatrix<f64>,
+    /// Bound on the input matrix's error (`n × m`).
+    pub b: DMatrix<f64>,
+    /// Bound on the constant input's error (`n`).
+    pub c: DVector<f64>,
 }
 
 /// How one closed-loop step is over-approximated.
@@ -249,6 +265,33 @@ impl ClosedLoop {
         (u, next.as_slice().to_vec())
     }
 
+    /// `δ = err.a·|x|max + err.b·|u|max + err.c` for step `t`, rounded up
+    /// (`None` for an exact plant).
+    fn model_delta(&self, t: usize, x: &IBox, u_abs: &[f64]) -> Option<Vec<f64>> {
+        let e = self.plant_at(t).err.as_ref()?;
+        let x_abs = x.abs_max();
+        Some(
+            (0..e.a.nrows())
+                .map(|i| {
+                    sum_upper(
+                        (0..e.a.ncols())
+                            .map(|j| e.a[(i, j)] * x_abs[j])
+                            .chain((0..e.b.ncols()).map(|j| e.b[(i, j)] * u_abs[j]))
+                            .chain([e.c[i]]),
+                    )
+                })
+                .collect(),
+        )
+    }
+
+    /// Raise each row `r`'s offset by `Σ_j |rows_rj|·δ_j` (the model error).
+    fn add_model_error(offsets: &mut [f64], rows: &DMatrix<f64>, delta: &[f64]) {
+        for (r, o) in offsets.iter_mut().enumerate() {
+            let extra = sum_upper((0..rows.ncols()).map(|j| rows[(r, j)].abs() * delta[j]));
+            *o = sum_upper([*o, extra]);
+        }
+    }
+
     /// The box of possible observations for states in `x`.
     pub fn observation_box(&self, x: &IBox) -> IBox {
         let p = self.plant.obs.ncols();
@@ -380,6 +423,11 @@ impl ClosedLoop {
         let h_max = prog.last_hidden_max();
         let x_max = bbox.abs_max();
         let h_off = prog.last_hidden();
+        let model_delta = self.plant_at(t).err.as_ref().and_then(|_| {
+            let u = Analysis::new(&self.net, &self.observation_box(&bbox), Mode::Ibp)
+                .output_box(Mode::Ibp);
+            self.model_delta(t, &bbox, &u.abs_max())
+        });
         let mut out = Vec::with_capacity(facets.nrows());
         let mut issues = Vec::new();
         for r in 0..facets.nrows() {
@@ -429,6 +477,13 @@ impl ClosedLoop {
                         ),
                     ]),
             );
+            let konst = match &model_delta {
+                Some(delta) => sum_upper([
+                    konst,
+                    sum_upper(c.iter().zip(delta).map(|(f, d)| f.abs() * d)),
+                ]),
+                None => konst,
+            };
             let last = prog.dim() - 1;
             phi[last] = konst;
             let b = prog.bound(&phi);
@@ -462,9 +517,13 @@ impl ClosedLoop {
         let n = self.states();
         let xuw = x.product(u).product(&self.plant.w);
         let d = self.at(t);
-        LinearUpper::of_spec(facets)
+        let mut bound = LinearUpper::of_spec(facets.clone())
             .through_affine(&d.dyn_xuw, &d.plant.c, &xuw.abs_max())
-            .split_concretize(n, &u.product(&self.plant.w))
+            .split_concretize(n, &u.product(&self.plant.w));
+        if let Some(delta) = self.model_delta(t, x, &u.abs_max()) {
+            Self::add_model_error(&mut bound.offset, &facets, &delta);
+        }
+        bound
     }
 
     /// One step of back-substitution (the tutorial's Lemma on bounds of
@@ -502,7 +561,11 @@ impl ClosedLoop {
             let row: Vec<f64> = mb_abs.row(r).iter().copied().collect();
             control.offset[r] = sum_upper([control.offset[r], slack(k, &row, &u_abs)]);
         }
-        direct.add(&control, &abs_x)
+        let mut out = direct.add(&control, &abs_x);
+        if let Some(delta) = self.model_delta(t, x, &u_abs) {
+            Self::add_model_error(&mut out.offset, &bound.coef, &delta);
+        }
+        out
     }
 
     /// The unrolled propagator: reachable sets of steps `0..=horizon` from

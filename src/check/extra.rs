@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::Ctx;
-use crate::analysis::closed_loop::{Boundary, Plant};
+use crate::analysis::closed_loop::{Boundary, ModelError, Plant};
 use crate::analysis::partition::Budget;
 use crate::diag::{did_you_mean, Code, Diagnostic};
 use crate::lp;
@@ -382,7 +382,10 @@ impl Ctx {
 /// Exact zero-order-hold discretisation of `ẋ = A x + B u + c` over `dt`:
 /// `exp([[A, B, c], [0, 0, 0]]·dt) = [[A_d, B_d, c_d], [0, I, 0…]]`, so
 /// `A_d = e^{A dt}` and `B_d`, `c_d` are the input integrals `∫₀^dt e^{Aτ} dτ · (B, c)`.
-/// `None` when the exponential is not finite.
+/// The exponential is enclosed rigorously ([`crate::expm`]), including the
+/// rounding of `big·dt`; the enclosure's radius becomes the plant's
+/// [`ModelError`], which every propagator adds to its bounds.
+/// `None` when the exponential cannot be enclosed (overflow).
 pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
     let n = plant.a.nrows();
     let m = plant.b.ncols();
@@ -391,8 +394,14 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
     big.view_mut((0, 0), (n, n)).copy_from(&plant.a);
     big.view_mut((0, n), (n, m)).copy_from(&plant.b);
     big.view_mut((0, n + m), (n, 1)).copy_from(&plant.c);
-    let e = (big * dt).exp();
-    if e.iter().any(|v| !v.is_finite()) {
+    // M = fl(big·dt) is off by at most u·|big·dt| per entry; with Δ = M − big·dt,
+    // ‖e^{M−Δ} − e^M‖∞ ≤ ‖Δ‖∞·e^{‖M‖∞+‖Δ‖∞}, which bounds every entry
+    let scaled = &big * dt;
+    let delta = (crate::expm::norm_inf(&scaled) * crate::num::U * 1.0001).next_up();
+    let (e, mut err) = crate::expm::expm_enclosure(&scaled)?;
+    let perturb = delta * (crate::expm::norm_inf(&scaled) + delta).exp() * 1.0001;
+    err.add_scalar_mut(perturb);
+    if e.iter().chain(err.iter()).any(|v| !v.is_finite()) {
         return None;
     }
     Some(Plant {
@@ -402,6 +411,11 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
         obs: plant.obs.clone(),
         w: plant.w.clone(),
         v: plant.v.clone(),
+        err: Some(ModelError {
+            a: err.view((0, 0), (n, n)).into_owned(),
+            b: err.view((0, n), (n, m)).into_owned(),
+            c: DVector::from_iterator(n, err.view((0, n + m), (n, 1)).iter().copied()),
+        }),
     })
 }
 
@@ -419,11 +433,18 @@ mod tests {
             obs: DMatrix::identity(2, 2),
             w: IBox::new(vec![0.0; 2], vec![0.0; 2]),
             v: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+            err: None,
         };
         let d = zero_order_hold(&p, 0.5).expect("finite");
-        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
-        assert!(close(d.a[(0, 1)], 0.5) && close(d.a[(0, 0)], 1.0) && close(d.a[(1, 0)], 0.0));
-        assert!(close(d.b[(0, 0)], 0.125) && close(d.b[(1, 0)], 0.5));
-        assert!(close(d.c[0], -0.25) && close(d.c[1], -1.0));
+        let e = d
+            .err
+            .as_ref()
+            .expect("a discretised plant carries its error");
+        // exact values inside the enclosure, whose radius is a few ulps of the entries
+        let within = |x: f64, want: f64, r: f64| (x - want).abs() <= r && r < 1e-13;
+        assert!(within(d.a[(0, 1)], 0.5, e.a[(0, 1)]) && within(d.a[(0, 0)], 1.0, e.a[(0, 0)]));
+        assert!(within(d.a[(1, 0)], 0.0, e.a[(1, 0)]) && within(d.a[(1, 1)], 1.0, e.a[(1, 1)]));
+        assert!(within(d.b[(0, 0)], 0.125, e.b[(0, 0)]) && within(d.b[(1, 0)], 0.5, e.b[(1, 0)]));
+        assert!(within(d.c[0], -0.25, e.c[0]) && within(d.c[1], -1.0, e.c[1]));
     }
 }

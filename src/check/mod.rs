@@ -900,6 +900,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                         obs: obs.clone(),
                         w: w.clone(),
                         v: v.clone(),
+                        err: None,
                     })
                     .collect::<Vec<Plant>>(),
             );

@@ -18,7 +18,7 @@ pub enum Storage {
     RawF64,
     /// float64 in the typed `double_data` field.
     DoubleData,
-    /// float32 in an external data file (see [`GraphBuilder::external`]).
+    /// float32 in an external data file (see [`GraphBuilder::external_file`]).
     External,
 }
 

@@ -51,6 +51,7 @@ fn partition_text(plan: &Plan, out: &Outcome) -> String {
         Partitioner::Guided { guide, budget } => {
             let why = match out.partition_stop {
                 "done" => "every cell settled".to_string(),
+                "calls" if budget.calls == 1 => "budget of 1 cell evaluation spent".to_string(),
                 "calls" => format!("budget of {} cell evaluations spent", budget.calls),
                 "time" => "time budget spent".to_string(),
                 _ => "stopped".to_string(),

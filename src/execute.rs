@@ -15,9 +15,9 @@
 use nalgebra::DMatrix;
 
 use crate::analysis::closed_loop::{Boundary, Propagator, Step};
-use crate::analysis::partition::{outside, refine, Budget, Strategy};
+use crate::analysis::partition::{refine, Budget, Strategy};
 use crate::analysis::shape::{
-    convex_hull, excess, extent_of_points, support_of_points, HULL_MIN_ANGLE,
+    convex_hull, excess, extent_of_points, hull_directions, support_of_points, HULL_MIN_ANGLE,
 };
 use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
 use crate::lp;
@@ -344,6 +344,10 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
     }
 }
 
+/// The facets of one step (rows), the sampled states' largest value along
+/// each, and the samples' extent along each.
+type Sampled = (DMatrix<f64>, Vec<f64>, Vec<f64>);
+
 /// The offsets of a set along its facets: `[hi, −lo]` of the bounding box,
 /// then a polytope's rows.
 fn offsets(r: &Region) -> Vec<f64> {
@@ -391,7 +395,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
             boundary: Boundary::PerStep(
                 mc.points
                     .iter()
-                    .map(|p| Boundary::hull_directions(p, HULL_MIN_ANGLE))
+                    .map(|p| hull_directions(p, HULL_MIN_ANGLE))
                     .collect(),
             ),
             ..plan.clone()
@@ -402,30 +406,31 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
     };
     let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
 
-    // SG/GSG scores of polytope and hull boundaries: how far a cell's facets
-    // leave the sampled states' facets, per step
-    let shaped: Vec<(DMatrix<f64>, Vec<f64>, Vec<f64>)> = if mc.facet_range.is_empty() {
-        mc.points
-            .iter()
-            .enumerate()
-            .map(|(t, p)| {
-                let f = plan.closed_loop.facets(&plan.boundary, t);
+    // SG/GSG scores: how far a cell's facets (box rows first) leave the
+    // sampled states' range along the same directions, per step
+    let shaped: Vec<Option<Sampled>> = (0..=plan.horizon)
+        .map(|t| {
+            let sampled = mc.sampled[t].as_ref()?;
+            let f = plan.closed_loop.facets(&plan.boundary, t);
+            let (s, w) = if let Some(p) = mc.points.get(t) {
                 let pts: Vec<Vec<f64>> = p.iter().map(|q| q.to_vec()).collect();
-                let s = support_of_points(&f, &pts);
-                let w = extent_of_points(&f, &pts);
-                (f, s, w)
-            })
-            .collect()
-    } else {
-        mc.facet_range
-            .iter()
-            .enumerate()
-            .map(|(t, (hi, lo))| {
-                let w = hi.iter().zip(lo).map(|(h, l)| h - l).collect();
-                (plan.closed_loop.facets(&plan.boundary, t), hi.clone(), w)
-            })
-            .collect()
-    };
+                (support_of_points(&f, &pts), extent_of_points(&f, &pts))
+            } else if let Some((hi, lo)) = mc.facet_range.get(t) {
+                (hi.clone(), hi.iter().zip(lo).map(|(h, l)| h - l).collect())
+            } else {
+                let width: Vec<f64> = sampled
+                    .hi
+                    .iter()
+                    .zip(&sampled.lo)
+                    .map(|(h, l)| h - l)
+                    .collect();
+                let mut s = sampled.hi.clone();
+                s.extend(sampled.lo.iter().map(|l| -l));
+                (s, [width.clone(), width].concat())
+            };
+            Some((f, s, w))
+        })
+        .collect();
 
     // ---- partition and propagate ----
     let calls: usize;
@@ -486,8 +491,8 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                         let sets = propagate_cell(plan, &region, parent.and_then(|p| p.as_deref()));
                         let score = match guide {
                             Guide::Sg | Guide::Gsg => (0..=plan.horizon)
-                                .map(|t| match (&mc.sampled[t], shaped.get(t)) {
-                                    (Some(_), Some((f, s, w))) => {
+                                .map(|t| match &shaped[t] {
+                                    Some((f, s, w)) => {
                                         let b = offsets(&sets[t].set);
                                         // step 0 is the cell itself, not a boundary shape
                                         if t > 0 && b.len() == f.nrows() {
@@ -497,8 +502,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                                             excess(&b[..k], &s[..k], &w[..k])
                                         }
                                     }
-                                    (Some(h), None) => outside(&sets[t].set.bbox(), h),
-                                    (None, _) => f64::INFINITY,
+                                    None => f64::INFINITY,
                                 })
                                 .fold(0.0, f64::max),
                             Guide::Property => plan

@@ -56,7 +56,7 @@ pub fn sum_lower<I: IntoIterator<Item = f64>>(terms: I) -> f64 {
 }
 
 /// `a·x` where `x` may be infinite and `a` may be zero: zero times anything is zero.
-fn mul0(a: f64, x: f64) -> f64 {
+pub fn mul0(a: f64, x: f64) -> f64 {
     if a == 0.0 {
         0.0
     } else {

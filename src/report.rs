@@ -6,7 +6,7 @@
 
 use serde_json::{json, Value};
 
-use crate::analysis::closed_loop::Boundary;
+use crate::analysis::closed_loop::{Boundary, ModelError};
 use crate::execute::{Outcome, Status, Trajectory};
 use crate::lower::{Partitioner, Plan};
 use crate::sets::{IBox, Region};
@@ -80,12 +80,12 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
     let mut timing = String::new();
     if let Some(dt) = plan.dt {
-        let err = plan.closed_loop.plant.err.as_ref().map_or(0.0, |e| {
-            e.a.iter()
-                .chain(e.b.iter())
-                .chain(e.c.iter())
-                .fold(0.0f64, |a, v| a.max(*v))
-        });
+        let err = plan
+            .closed_loop
+            .plant
+            .err
+            .as_ref()
+            .map_or(0.0, ModelError::max);
         timing += &format!(
             ", continuous time, dt {} (zero-order hold, entries enclosed to ±{})",
             num(dt),
@@ -322,9 +322,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "controller": { "path": plan.controller_path, "network": plan.network_summary },
         "horizon": plan.horizon,
         "dt": plan.dt.map(f),
-        "model_error": plan.closed_loop.plant.err.as_ref().map(|e| {
-            f(e.a.iter().chain(e.b.iter()).chain(e.c.iter()).fold(0.0f64, |a, v| a.max(*v)))
-        }),
+        "model_error": plan.closed_loop.plant.err.as_ref().map(|e| f(e.max())),
         "analysis": {
             "propagator": plan.propagator.name(),
             "partitioner": match &plan.partitioner {

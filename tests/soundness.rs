@@ -255,7 +255,7 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                     .map(|_| {
                         let pts: Vec<[f64; 2]> =
                             (0..12).map(|_| [rng.normal(), rng.normal()]).collect();
-                        Boundary::hull_directions(&pts, 0.2)
+                        ravel::analysis::shape::hull_directions(&pts, 0.2)
                     })
                     .collect(),
             ));

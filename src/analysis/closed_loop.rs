@@ -20,7 +20,7 @@ use super::partition::{Budget, Strategy};
 use super::sdp;
 use super::shape::Shape;
 use crate::nn::Network;
-use crate::num::{gamma, slack, sum_upper};
+use crate::num::{gamma, mul0, slack, sum_upper};
 use crate::sets::{IBox, Region};
 
 /// A linear plant with bounded noise.
@@ -54,6 +54,17 @@ pub struct ModelError {
     pub b: DMatrix<f64>,
     /// Bound on the constant input's error (`n`).
     pub c: DVector<f64>,
+}
+
+impl ModelError {
+    /// The largest entry of the three bounds.
+    pub fn max(&self) -> f64 {
+        self.a
+            .iter()
+            .chain(self.b.iter())
+            .chain(self.c.iter())
+            .fold(0.0, |m, v| m.max(*v))
+    }
 }
 
 /// How one closed-loop step is over-approximated.
@@ -140,12 +151,6 @@ impl Boundary {
             Boundary::Polytope(d) => Some(d),
             Boundary::PerStep(v) => v.get(t).filter(|d| d.nrows() > 0),
         }
-    }
-
-    /// Directions from sampled points of a 2-D set (see
-    /// [`super::shape::hull_directions`]).
-    pub fn hull_directions(points: &[[f64; 2]], min_angle: f64) -> DMatrix<f64> {
-        super::shape::hull_directions(points, min_angle)
     }
 }
 
@@ -275,8 +280,8 @@ impl ClosedLoop {
                 .map(|i| {
                     sum_upper(
                         (0..e.a.ncols())
-                            .map(|j| e.a[(i, j)] * x_abs[j])
-                            .chain((0..e.b.ncols()).map(|j| e.b[(i, j)] * u_abs[j]))
+                            .map(|j| mul0(e.a[(i, j)], x_abs[j]))
+                            .chain((0..e.b.ncols()).map(|j| mul0(e.b[(i, j)], u_abs[j])))
                             .chain([e.c[i]]),
                     )
                 })
@@ -287,7 +292,7 @@ impl ClosedLoop {
     /// Raise each row `r`'s offset by `Σ_j |rows_rj|·δ_j` (the model error).
     fn add_model_error(offsets: &mut [f64], rows: &DMatrix<f64>, delta: &[f64]) {
         for (r, o) in offsets.iter_mut().enumerate() {
-            let extra = sum_upper((0..rows.ncols()).map(|j| rows[(r, j)].abs() * delta[j]));
+            let extra = sum_upper((0..rows.ncols()).map(|j| mul0(rows[(r, j)].abs(), delta[j])));
             *o = sum_upper([*o, extra]);
         }
     }
@@ -480,7 +485,7 @@ impl ClosedLoop {
             let konst = match &model_delta {
                 Some(delta) => sum_upper([
                     konst,
-                    sum_upper(c.iter().zip(delta).map(|(f, d)| f.abs() * d)),
+                    sum_upper(c.iter().zip(delta).map(|(f, d)| mul0(f.abs(), *d))),
                 ]),
                 None => konst,
             };

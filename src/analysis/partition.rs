@@ -12,9 +12,10 @@
 //!
 //! A cell is bisected along the dimension that is widest relative to the
 //! root box (two children per split, so the cost stays linear in the state
-//! dimension). The score function decides what "worst" means: distance
-//! outside the sampled hull for SG/GSG, the negative property margin for the
-//! property-guided closed-loop partitioner.
+//! dimension). The score function decides what "worst" means: how far a
+//! bound leaves the sampled outputs for SG/GSG ([`super::shape::excess`]),
+//! the negative property margin for the property-guided closed-loop
+//! partitioner.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -222,17 +223,6 @@ pub fn refine<T>(
         calls,
         stop,
     }
-}
-
-/// How far `b` sticks out of `hull`, relative to the hull's width per
-/// dimension (0 when inside): the SG/GSG score of a bound.
-pub fn outside(b: &IBox, hull: &IBox) -> f64 {
-    (0..b.dim())
-        .map(|i| {
-            let w = (hull.hi[i] - hull.lo[i]).max(1e-12);
-            ((b.hi[i] - hull.hi[i]).max(hull.lo[i] - b.lo[i]).max(0.0)) / w
-        })
-        .fold(0.0, f64::max)
 }
 
 #[cfg(test)]

@@ -656,3 +656,88 @@ impl ClosedLoop {
         bound
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::{Activation, Layer};
+    use crate::rng::Rng;
+
+    /// The Reach-SDP facet bounds alone (before they meet Reach-LP's) must
+    /// cover a plant whose matrices are only known up to a model error.
+    #[test]
+    fn reach_sdp_bounds_cover_the_model_error() {
+        let net = Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(3, 2, &[1.0, -0.5, 0.3, 0.8, -0.7, 0.2]),
+                    b: DVector::from_column_slice(&[0.1, -0.2, 0.05]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 3, &[0.6, -0.9, 0.4]),
+                    b: DVector::from_column_slice(&[0.0]),
+                },
+            ],
+        );
+        let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.5, 0.0, 1.0]);
+        let b = DMatrix::from_row_slice(2, 1, &[0.1, 0.5]);
+        let err = ModelError {
+            a: DMatrix::from_element(2, 2, 0.05),
+            b: DMatrix::from_element(2, 1, 0.05),
+            c: DVector::from_element(2, 0.05),
+        };
+        let zero = IBox::new(vec![0.0; 2], vec![0.0; 2]);
+        let plant = Plant {
+            a,
+            b,
+            c: DVector::zeros(2),
+            obs: DMatrix::identity(2, 2),
+            w: zero.clone(),
+            v: zero,
+            err: Some(err.clone()),
+        };
+        let cl = ClosedLoop::new(plant, net);
+        let x = IBox::new(vec![1.0, -1.0], vec![2.0, 0.5]);
+        let facets = cl.facets(&Boundary::spread(6), 1);
+        let (ub, issues) = cl.reach_sdp(0, &Region::Box(x.clone()), &facets);
+        assert!(issues.is_empty(), "{issues:?}");
+        let mut rng = Rng::new(3);
+        let mut worst = vec![f64::NEG_INFINITY; facets.nrows()];
+        for _ in 0..4000 {
+            let s: Vec<f64> = (0..2).map(|i| rng.uniform(x.lo[i], x.hi[i])).collect();
+            let (u, next) = cl.simulate(0, &s, &[0.0, 0.0], &[0.0, 0.0]);
+            // the model error at its worst for a random sign pattern
+            let sign = |rng: &mut Rng| if rng.below(2) == 0 { -1.0 } else { 1.0 };
+            let y: Vec<f64> = (0..2)
+                .map(|i| {
+                    next[i]
+                        + sign(&mut rng) * err.c[i]
+                        + (0..2)
+                            .map(|j| sign(&mut rng) * err.a[(i, j)] * s[j])
+                            .sum::<f64>()
+                        + sign(&mut rng) * err.b[(i, 0)] * u[0]
+                })
+                .collect();
+            for (k, w) in worst.iter_mut().enumerate() {
+                let v = facets[(k, 0)] * y[0] + facets[(k, 1)] * y[1];
+                assert!(v <= ub[k], "facet {k}: {v} > {}", ub[k]);
+                *w = w.max(v);
+            }
+        }
+        // the term matters here: without it, some facet would be violated
+        let nominal = ClosedLoop::new(
+            Plant {
+                err: None,
+                ..cl.plant.clone()
+            },
+            cl.net.clone(),
+        );
+        let (plain, _) = nominal.reach_sdp(0, &Region::Box(x), &facets);
+        assert!(
+            plain.iter().zip(&worst).any(|(p, w)| w > p),
+            "the sampled model errors should exceed the nominal bound somewhere"
+        );
+    }
+}

@@ -28,10 +28,6 @@ use ravel::analysis::partition::Budget;
 use ravel::execute::execute;
 use ravel::lower::{lower, Guide, Partitioner};
 
-fn read(p: &Path) -> Result<Vec<u8>, String> {
-    std::fs::read(p).map_err(|e| e.to_string())
-}
-
 /// One row of the table: a name, a propagator, a partitioner and the samples
 /// the method itself needs (0 unless simulation-guided).
 struct Method {
@@ -143,8 +139,12 @@ fn main() {
     ] {
         let path = root.join(spec);
         let source = std::fs::read_to_string(&path).expect("spec");
-        let mut checked =
-            ravel::front_end(&source, path.parent().expect("dir"), &read).expect("valid spec");
+        let mut checked = ravel::front_end(
+            &source,
+            path.parent().expect("dir"),
+            &ravel::cli::read_request,
+        )
+        .expect("valid spec");
 
         // the reference hull: 10 000 simulated trajectories
         checked.samples = 10_000;

@@ -51,6 +51,22 @@ enum Format {
     Json,
 }
 
+/// Write to standard output; `Err(())` when it is closed (e.g. piped into
+/// `head`), which ends the run quietly with [`exit::BROKEN_PIPE`].
+fn out(text: &str) -> Result<(), ()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    writeln!(o, "{text}")
+        .and_then(|_| o.flush())
+        .map_err(|_| ())
+}
+
+/// Write to standard error, ignoring a closed stream (nothing else can be done).
+fn err(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().lock().write_all(text.as_bytes());
+}
+
 /// Exit codes (documented in the README).
 pub mod exit {
     /// Every property of every spec VERIFIED.
@@ -61,10 +77,56 @@ pub mod exit {
     pub const INPUT_ERROR: u8 = 2;
     /// Some property UNSURE, none FALSIFIED.
     pub const UNSURE: u8 = 3;
+    /// Standard output was closed before the report was written (128 + SIGPIPE, as shells report it).
+    pub const BROKEN_PIPE: u8 = 141;
 }
 
-fn read_file(path: &Path) -> Result<Vec<u8>, String> {
-    std::fs::read(path).map_err(|e| e.to_string())
+/// Read a file the front end asks for ([`crate::ReadRequest`]): only a
+/// regular file (a FIFO, device or folder is refused without blocking: it is
+/// opened non-blocking and inspected before any read), at most
+/// `max_bytes` bytes, and, for external data, only if its real path (symbolic
+/// links resolved) lies inside the requested folder.
+pub fn read_request(req: &crate::ReadRequest) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = opts.open(&req.path).map_err(|e| e.to_string())?;
+    let meta = file.metadata().map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a folder"
+        } else {
+            "a special file (FIFO, device or socket)"
+        };
+        return Err(format!("it is {kind}, not a regular file"));
+    }
+    if let Some(dir) = &req.inside {
+        let real = std::fs::canonicalize(&req.path).map_err(|e| e.to_string())?;
+        let root = std::fs::canonicalize(dir).map_err(|e| e.to_string())?;
+        if !real.starts_with(&root) {
+            return Err(
+                "it resolves (through a symbolic link) to a file outside the controller's folder"
+                    .into(),
+            );
+        }
+    }
+    if req.whole && meta.len() > req.max_bytes {
+        return Err(format!(
+            "it has {} bytes, more than the limit of {}",
+            meta.len(),
+            req.max_bytes
+        ));
+    }
+    let mut buf = Vec::with_capacity(meta.len().min(req.max_bytes).min(1 << 26) as usize);
+    file.take(req.max_bytes)
+        .read_to_end(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf)
 }
 
 /// A spec's source and the result of its front end.
@@ -75,12 +137,18 @@ struct Loaded {
 }
 
 fn load(path: &Path) -> Result<Loaded, String> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read spec `{name}`: {e}"))?;
+    let name = crate::diag::sanitize(&path.display().to_string());
+    let bytes = read_request(&crate::ReadRequest {
+        path: path.to_path_buf(),
+        inside: None,
+        max_bytes: crate::limits::MAX_SPEC_BYTES,
+        whole: true,
+    })
+    .map_err(|e| format!("cannot read spec `{name}`: {e}"))?;
     let source =
         String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let result = crate::front_end(&source, dir, &read_file);
+    let result = crate::front_end(&source, dir, &read_request);
     Ok(Loaded {
         name,
         source,
@@ -99,12 +167,22 @@ fn diag_json(name: &str, source: &str, diags: &[Diagnostic]) -> Value {
     json!({ "spec": name, "verdict": "ERROR", "errors": errors })
 }
 
-/// 1-based line and column (in characters) of a byte offset.
+/// 1-based line and column (in characters) of a byte offset; lines end at
+/// LF, CRLF or a lone CR.
 pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
-    let offset = offset.min(source.len());
+    let mut offset = offset.min(source.len());
+    while !source.is_char_boundary(offset) {
+        offset -= 1;
+    }
     let before = &source[..offset];
-    let line = before.matches('\n').count() + 1;
-    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    let line = before.matches('\n').count() + before.matches('\r').count()
+        - before.matches("\r\n").count()
+        + 1;
+    let col = before
+        .rsplit(['\n', '\r'])
+        .next()
+        .map_or(0, |l| l.chars().count())
+        + 1;
     (line, col)
 }
 
@@ -130,14 +208,18 @@ pub fn main() -> ExitCode {
             for path in &specs {
                 match load(path) {
                     Err(msg) => {
-                        eprintln!("error: {msg}");
+                        err(&format!("error: {msg}\n"));
                         code = exit::INPUT_ERROR;
                     }
                     Ok(l) => match &l.result {
-                        Ok(_) => println!("ok: {}", l.name),
+                        Ok(_) => {
+                            if out(&format!("ok: {}", l.name)).is_err() {
+                                return ExitCode::from(exit::BROKEN_PIPE);
+                            }
+                        }
                         Err(d) => {
-                            eprint!("{}", render(d, &l.name, &l.source, width, color));
-                            eprintln!("{}: {} error(s)", l.name, d.len());
+                            err(&render(d, &l.name, &l.source, width, color));
+                            err(&format!("{}: {} error(s)\n", l.name, d.len()));
                             code = exit::INPUT_ERROR;
                         }
                     },
@@ -160,7 +242,7 @@ pub fn main() -> ExitCode {
                     Err(msg) => {
                         input_error = true;
                         match format {
-                            Format::Text => eprintln!("error: {msg}"),
+                            Format::Text => err(&format!("error: {msg}\n")),
                             Format::Json => results.push(json!({ "spec": path.display().to_string(), "verdict": "ERROR", "errors": [{ "code": null, "message": msg }] })),
                         }
                         continue;
@@ -172,8 +254,8 @@ pub fn main() -> ExitCode {
                         input_error = true;
                         match format {
                             Format::Text => {
-                                eprint!("{}", render(&d, &l.name, &l.source, width, color));
-                                eprintln!("{}: {} error(s)", l.name, d.len());
+                                err(&render(&d, &l.name, &l.source, width, color));
+                                err(&format!("{}: {} error(s)\n", l.name, d.len()));
                             }
                             Format::Json => results.push(diag_json(&l.name, &l.source, &d)),
                         }
@@ -188,7 +270,10 @@ pub fn main() -> ExitCode {
                 match format {
                     Format::Text => {
                         let t = (!no_timing).then_some(ms);
-                        println!("{}", crate::report::text(&l.name, &plan, &outcome, t));
+                        let text = crate::report::text(&l.name, &plan, &outcome, t);
+                        if out(&text).is_err() {
+                            return ExitCode::from(exit::BROKEN_PIPE);
+                        }
                     }
                     Format::Json => results.push(crate::report::json(
                         &l.name,
@@ -205,7 +290,9 @@ pub fn main() -> ExitCode {
             };
             if format == Format::Json {
                 let doc = json!({ "schema": crate::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall, "results": results });
-                println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
+                if out(&serde_json::to_string_pretty(&doc).unwrap_or_default()).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
+                }
             }
             ExitCode::from(if input_error {
                 exit::INPUT_ERROR

@@ -55,6 +55,8 @@ pub enum Code {
     Budget,
     /// E0215: Reach-SDP requested for a network with non-ReLU activations.
     SdpActivation,
+    /// E0216: a number, size or count beyond ravel's documented limits.
+    Limit,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -75,7 +77,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 30] = [
+    pub const ALL: [Code; 31] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -98,6 +100,7 @@ impl Code {
         Code::TimeStep,
         Code::Budget,
         Code::SdpActivation,
+        Code::Limit,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -133,6 +136,7 @@ impl Code {
             Code::TimeStep => "E0213",
             Code::Budget => "E0214",
             Code::SdpActivation => "E0215",
+            Code::Limit => "E0216",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",
@@ -280,6 +284,60 @@ pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, colo
     out
 }
 
+/// Untrusted text (an ONNX op type, tensor or node name, a file path)
+/// made safe to show: control characters, bidirectional overrides and other
+/// invisible format characters are written as `\u{…}` escapes, and text
+/// longer than 80 characters is cut in the middle with `…`.
+pub fn sanitize(s: &str) -> String {
+    const KEEP: usize = 80;
+    let escaped: Vec<String> = s
+        .chars()
+        .map(|c| {
+            let invisible = c.is_control()
+                || matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{feff}');
+            if invisible {
+                format!("\\u{{{:x}}}", c as u32)
+            } else {
+                c.to_string()
+            }
+        })
+        .collect();
+    if escaped.len() <= KEEP {
+        escaped.concat()
+    } else {
+        let head = escaped[..KEEP / 2].concat();
+        let tail = escaped[escaped.len() - KEEP / 2..].concat();
+        format!("{head}…{tail}")
+    }
+}
+
+/// A number written compactly for a message: at most about a dozen
+/// characters whatever its magnitude (`1e300`, not 301 digits).
+pub fn compact(x: f64) -> String {
+    let plain = format!("{x}");
+    if plain.len() <= 12 {
+        plain
+    } else if (1e-4..1e7).contains(&x.abs()) {
+        let f = format!("{x:.6}");
+        f.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        let e = format!("{x:e}");
+        // shorten the mantissa to 6 significant digits
+        match e.split_once('e') {
+            Some((m, exp)) if m.len() > 8 => {
+                let m: f64 = m.parse().unwrap_or(0.0);
+                format!(
+                    "{}e{exp}",
+                    format!("{m:.5}")
+                        .trim_end_matches('0')
+                        .trim_end_matches('.')
+                )
+            }
+            _ => e,
+        }
+    }
+}
+
 /// The closest candidate to `name` by edit distance, if it is close enough to be a likely typo.
 pub fn did_you_mean<'a>(
     name: &str,
@@ -313,6 +371,29 @@ fn edit_distance(a: &str, b: &str) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn untrusted_text_is_escaped_and_shortened() {
+        assert_eq!(sanitize("Relu"), "Relu");
+        assert_eq!(
+            sanitize("\u{1b}[2J\nverdict: VERIFIED"),
+            "\\u{1b}[2J\\u{a}verdict: VERIFIED"
+        );
+        assert_eq!(sanitize("a\u{202e}b"), "a\\u{202e}b");
+        let long = "x".repeat(500);
+        assert_eq!(sanitize(&long).chars().count(), 81);
+        assert!(!sanitize("\u{7f}\u{9b}").chars().any(char::is_control));
+    }
+
+    #[test]
+    fn numbers_are_compact() {
+        assert_eq!(compact(0.5), "0.5");
+        assert_eq!(compact(1e300), "1e300");
+        assert_eq!(compact(-2.5e-300), "-2.5e-300");
+        assert_eq!(compact(1.0 / 3.0), "0.333333");
+        assert_eq!(compact(1.0 / 3.0e9), "3.33333e-10");
+        assert!(compact(f64::MAX).len() <= 14);
+    }
 
     #[test]
     fn suggestions() {

@@ -15,10 +15,11 @@
 use nalgebra::DMatrix;
 
 use crate::analysis::closed_loop::{Boundary, Propagator, Step};
-use crate::analysis::partition::{refine, Budget, Strategy};
+use crate::analysis::partition::{refine, Budget, Stop, Strategy};
 use crate::analysis::shape::{
     convex_hull, excess, extent_of_points, hull_directions, support_of_points, HULL_MIN_ANGLE,
 };
+use crate::issue::Issue;
 use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
 use crate::lp;
 use crate::rng::Rng;
@@ -46,6 +47,25 @@ impl Status {
     }
 }
 
+/// Which kind of property a result is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// A goal: the final reachable set lies in a set.
+    Goal,
+    /// An avoid set: no reachable set touches it at its steps.
+    Avoid,
+}
+
+impl Kind {
+    /// The keyword used in specs and reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Kind::Goal => "goal",
+            Kind::Avoid => "avoid",
+        }
+    }
+}
+
 /// A concrete closed-loop trajectory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
@@ -64,8 +84,8 @@ pub struct Trajectory {
 pub struct PropertyResult {
     /// The property's name.
     pub name: String,
-    /// `goal` or `avoid`.
-    pub kind: &'static str,
+    /// Goal or avoid.
+    pub kind: Kind,
     /// The verdict.
     pub status: Status,
     /// VERIFIED/UNSURE: the certified margin (containment margin for a goal,
@@ -76,6 +96,9 @@ pub struct PropertyResult {
     pub step: usize,
     /// The counterexample (FALSIFIED only).
     pub counterexample: Option<Trajectory>,
+    /// UNSURE only: the first step (at or before the property's last step)
+    /// at which a reachable set's bounds overflowed `f64`, if one did.
+    pub overflow: Option<usize>,
 }
 
 /// Everything execution found.
@@ -83,12 +106,12 @@ pub struct PropertyResult {
 pub struct Outcome {
     /// The partition cells of the initial set (as boxes: the cell's bounding box).
     pub partition: Vec<IBox>,
-    /// How the partitioner stopped: `"grid"`, or `"done"`, `"calls"`, `"time"`, `"stopped"`.
-    pub partition_stop: &'static str,
+    /// How the partitioner stopped.
+    pub partition_stop: Stop,
     /// `cells[c][t]`: the set of cell `c` at step `t`.
     pub cells: Vec<Vec<Region>>,
     /// LP solver statuses that forced a fallback bound, with the step (sorted, unique).
-    pub solver_issues: Vec<(usize, &'static str)>,
+    pub solver_issues: Vec<(usize, Issue)>,
     /// The bounding box of all cells per step.
     pub reach: Vec<IBox>,
     /// The bounding box of the simulated states per step (if any samples).
@@ -99,6 +122,9 @@ pub struct Outcome {
     pub verdict: Status,
     /// Number of closed-loop propagator calls.
     pub propagator_calls: usize,
+    /// The first step at which some cell's bounds overflowed `f64` (its
+    /// set, and every later one, is then the whole space).
+    pub overflow: Option<usize>,
 }
 
 /// Tolerance for calling a simulated violation genuine: simulations run in
@@ -123,13 +149,35 @@ pub fn propagate_cell(plan: &Plan, cell: &Region, parent: Option<&[Step]>) -> Ve
         issues: Vec::new(),
     });
     for t in 0..plan.horizon {
+        if steps[t].is_overflow() {
+            // nothing bounded is left to propagate: every later set is ℝⁿ too
+            steps.push(Step::overflowed(cl.states(), Vec::new()));
+            continue;
+        }
         let mut next = cl.step(t, &steps[t].set, plan.propagator, &plan.boundary);
         if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
-            next.set = next.set.intersect(&p.set);
+            if !next.is_overflow() {
+                next.set = next.set.intersect(&p.set);
+            }
         }
         steps.push(next);
     }
     steps
+}
+
+/// The first step whose set overflowed, if any.
+fn first_overflow(sets: &[Step]) -> Option<usize> {
+    sets.iter().position(Step::is_overflow)
+}
+
+/// A margin that is NaN (an overflow inside a margin computation) proves
+/// nothing: it becomes `−∞`.
+fn sane(m: f64) -> f64 {
+    if m.is_nan() {
+        f64::NEG_INFINITY
+    } else {
+        m
+    }
 }
 
 /// Whether a cell is certainly empty (a polytope cell of a polytope initial set).
@@ -143,19 +191,31 @@ fn certainly_empty(cell: &Region) -> bool {
 }
 
 /// A certified margin of one property on one cell's sets, with the step it
-/// refers to and whether an LP solver issue weakened it.
+/// refers to and whether an LP solver issue weakened it. A set that
+/// overflowed gives the margin `−∞` at its step (never a proof); so does a
+/// margin computation that produced NaN.
 fn cell_margin(prop: &Property, sets: &[Step]) -> (f64, usize, bool) {
     match &prop.kind {
         PropertyKind::Goal(g) => {
             let t = sets.len() - 1;
+            if sets[t].is_overflow() {
+                return (f64::NEG_INFINITY, t, false);
+            }
             let (m, issue) = containment_margin(g, &sets[t].set);
-            (m, t, issue || !sets[t].issues.is_empty())
+            (sane(m), t, issue || !sets[t].issues.is_empty())
         }
         PropertyKind::Avoid { members, steps } => {
             let mut best = (f64::INFINITY, steps.0, false);
             for (t, step) in sets.iter().enumerate().take(steps.1 + 1).skip(steps.0) {
+                if step.is_overflow() {
+                    if best.0 > f64::NEG_INFINITY {
+                        best = (f64::NEG_INFINITY, t, best.2);
+                    }
+                    break;
+                }
                 for m in members {
                     let (s, issue) = separation_margin(m, &step.set);
+                    let s = sane(s);
                     let issue = issue || !step.issues.is_empty();
                     if s < best.0 || (issue && !best.2 && s <= best.0) {
                         best = (s, t, issue || best.2);
@@ -284,7 +344,14 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
         let Some(tr) = simulate(plan, k) else {
             continue;
         };
-        for (t, x) in tr.states.iter().enumerate() {
+        // states from the first non-finite one on are not real states (the
+        // simulation overflowed): they neither shape sets nor falsify anything
+        let valid = tr
+            .states
+            .iter()
+            .position(|x| !x.iter().all(|v| v.is_finite()))
+            .unwrap_or(tr.states.len());
+        for (t, x) in tr.states.iter().enumerate().take(valid) {
             if keep {
                 points[t].push([x[0], x[1]]);
                 // supports of a point set are those of its hull: bounded memory
@@ -308,20 +375,28 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
         }
         for (i, prop) in plan.properties.iter().enumerate() {
             let found = match &prop.kind {
+                PropertyKind::Goal(_) if valid <= plan.horizon => None,
                 PropertyKind::Goal(g) => {
                     let x = &tr.states[plan.horizon];
                     let rhs = g.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
                     let outside = -g.depth(x);
-                    (outside > tolerance(x, rhs)).then_some((outside, plan.horizon))
+                    (outside.is_finite() && outside > tolerance(x, rhs))
+                        .then_some((outside, plan.horizon))
                 }
                 PropertyKind::Avoid { members, steps } => {
                     let mut best: Option<(f64, usize)> = None;
-                    for t in steps.0..=steps.1 {
+                    for t in steps.0..=steps.1.min(valid.saturating_sub(1)) {
+                        if t >= valid {
+                            break;
+                        }
                         let x = &tr.states[t];
                         for m in members {
                             let rhs = m.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
                             let inside = m.depth(x);
-                            if inside > tolerance(x, rhs) && best.is_none_or(|b| inside > b.0) {
+                            if inside.is_finite()
+                                && inside > tolerance(x, rhs)
+                                && best.is_none_or(|b| inside > b.0)
+                            {
                                 best = Some((inside, t));
                             }
                         }
@@ -434,15 +509,20 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
 
     // ---- partition and propagate ----
     let calls: usize;
-    let (partition, cells, partition_stop): (Vec<IBox>, Vec<Vec<Step>>, &'static str) =
+    let (partition, cells, partition_stop): (Vec<IBox>, Vec<Vec<Step>>, Stop) =
         match &plan.partitioner {
             Partitioner::Uniform(grid) => {
-                let regions: Vec<Region> = plan
-                    .initial
-                    .grid(grid)
-                    .into_iter()
-                    .filter(|c| !certainly_empty(c))
-                    .collect();
+                // one cell is the initial set itself (a ball keeps its
+                // closed-form support function instead of its bounding box)
+                let regions: Vec<Region> = if grid.iter().all(|k| *k == 1) {
+                    vec![plan.initial.clone()]
+                } else {
+                    plan.initial
+                        .grid(grid)
+                        .into_iter()
+                        .filter(|c| !certainly_empty(c))
+                        .collect()
+                };
                 let regions = if regions.is_empty() {
                     vec![plan.initial.clone()]
                 } else {
@@ -455,7 +535,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     .iter()
                     .map(|c| propagate_cell(plan, c, root.as_deref()))
                     .collect();
-                (regions.iter().map(Region::bbox).collect(), sets, "grid")
+                (regions.iter().map(Region::bbox).collect(), sets, Stop::Grid)
             }
             Partitioner::Guided { guide, budget } => {
                 let strategy = match guide {
@@ -522,7 +602,6 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                         };
                         (Some(sets), score)
                     },
-                    &mut |_| false,
                     elapsed,
                 );
                 calls = r.calls;
@@ -550,7 +629,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                 .fold(cells[0][t].set.bbox(), |h, c| h.hull(&c[t].set.bbox()))
         })
         .collect();
-    let mut solver_issues: Vec<(usize, &'static str)> = cells
+    let mut solver_issues: Vec<(usize, Issue)> = cells
         .iter()
         .flat_map(|c| {
             c.iter()
@@ -567,8 +646,8 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
         .zip(&mc.worst)
         .map(|(prop, worst)| {
             let kind = match prop.kind {
-                PropertyKind::Goal(_) => "goal",
-                PropertyKind::Avoid { .. } => "avoid",
+                PropertyKind::Goal(_) => Kind::Goal,
+                PropertyKind::Avoid { .. } => Kind::Avoid,
             };
             let mut margin = f64::INFINITY;
             let mut step = match &prop.kind {
@@ -576,15 +655,19 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                 PropertyKind::Avoid { steps, .. } => steps.0,
             };
             let mut issue = false;
+            let mut overflow: Option<usize> = None;
             for c in &cells {
                 let (m, t, i) = cell_margin(prop, c);
                 issue |= i;
-                if m < margin {
-                    margin = m;
+                if m < margin || m.is_nan() {
+                    margin = sane(m);
                     step = t;
                 }
+                if let Some(o) = first_overflow(c).filter(|o| *o <= prop.last_step()) {
+                    overflow = Some(overflow.map_or(o, |p| p.min(o)));
+                }
             }
-            let proven = proves(prop, margin) && !issue;
+            let proven = proves(prop, margin) && !issue && overflow.is_none();
             match worst {
                 // A genuine counterexample always wins; a proof next to one would be a soundness bug.
                 Some((depth, k, t)) => {
@@ -596,6 +679,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                         margin: -depth,
                         step: *t,
                         counterexample: simulate(plan, *k),
+                        overflow: None,
                     }
                 }
                 None => PropertyResult {
@@ -609,10 +693,12 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     margin,
                     step,
                     counterexample: None,
+                    overflow,
                 },
             }
         })
         .collect();
+    let overflow = cells.iter().filter_map(|c| first_overflow(c)).min();
     let verdict = properties
         .iter()
         .map(|p| p.status)
@@ -631,5 +717,6 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
         properties,
         verdict,
         propagator_calls: calls * plan.horizon,
+        overflow,
     }
 }

@@ -7,6 +7,8 @@ pub mod cli;
 pub mod diag;
 pub mod execute;
 pub mod expm;
+pub mod issue;
+pub mod limits;
 pub mod lower;
 pub mod lp;
 pub mod nn;
@@ -17,31 +19,71 @@ pub mod rng;
 pub mod sets;
 pub mod syntax;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use check::{Checked, ControllerFile};
 use diag::Diagnostic;
 
+/// One file the front end asks the caller to read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ReadRequest {
+    /// The file.
+    pub path: PathBuf,
+    /// When set, the file (after resolving symbolic links) must lie inside
+    /// this folder: external-data files must stay in the controller's folder.
+    pub inside: Option<PathBuf>,
+    /// Read at most this many bytes from the start: more than this is never
+    /// needed (a larger controller file is an error; an external-data file
+    /// is read only as far as the model's tensors need).
+    pub max_bytes: u64,
+    /// Whether a file longer than `max_bytes` is an error (the controller)
+    /// or simply read up to `max_bytes` (external data).
+    pub whole: bool,
+}
+
+/// How the front end reads files; the library does no IO of its own. The CLI
+/// passes [`cli::read_request`], which reads regular files only; tests may
+/// pass anything.
+pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, String>;
+
 /// The front end: parse and check a spec, reading its controller (and any
 /// external-data files) through `read`, relative to `spec_dir`.
 ///
-/// The library performs no IO of its own: `read` is the caller's. The CLI
-/// passes a file-system reader; tests may pass anything.
-pub fn front_end(
-    source: &str,
-    spec_dir: &Path,
-    read: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
-) -> Result<Checked, Vec<Diagnostic>> {
+/// External-data locations are checked before anything is read: each must
+/// be a plain relative path inside the controller's folder (no `..`, not
+/// absolute), each distinct file is read once, and only as many bytes as
+/// the tensors stored in it need (their total is limited, see
+/// [`limits::MAX_CONTROLLER_BYTES`]).
+pub fn front_end(source: &str, spec_dir: &Path, read: Reader) -> Result<Checked, Vec<Diagnostic>> {
     let spec = syntax::parse(source)?;
     let controller = check::controller_path(&spec).map(|p| {
         let path = spec_dir.join(&p.node);
-        let bytes = read(&path);
+        let bytes = read(&ReadRequest {
+            path: path.clone(),
+            inside: None,
+            max_bytes: limits::MAX_CONTROLLER_BYTES,
+            whole: true,
+        });
         let mut external = onnx::ExternalFiles::new();
         if let Ok(b) = &bytes {
-            let dir = path.parent().unwrap_or(spec_dir);
-            for loc in onnx::external_locations(b) {
-                let data = read(&dir.join(&loc));
-                external.insert(loc, data);
+            let dir = match path.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            let mut total = 0u64;
+            for req in onnx::external_requests(b) {
+                total = total.saturating_add(req.bytes);
+                let data = if total > limits::MAX_CONTROLLER_BYTES {
+                    Err("the external data of this model exceeds 512 MiB".to_string())
+                } else {
+                    read(&ReadRequest {
+                        path: dir.join(&req.location),
+                        inside: Some(dir.clone()),
+                        max_bytes: req.bytes,
+                        whole: false,
+                    })
+                };
+                external.insert(req.location, data);
             }
         }
         ControllerFile { bytes, external }

@@ -1,8 +1,9 @@
 //! Lowering: a [`Checked`] spec → an analysis [`Plan`]. Cannot fail.
 //!
 //! Lowering decides *what* to compute: it appends the control saturation to
-//! the network, splits the initial set into partition cells, and turns goal
-//! and avoid sets into properties over the steps they constrain.
+//! the network, assembles the closed loop, keeps the partitioner (the cells
+//! themselves are made by [`crate::execute`], which may refine them), and
+//! turns goal and avoid sets into properties over the steps they constrain.
 
 use crate::analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
 use crate::analysis::partition::Budget;
@@ -68,6 +69,16 @@ pub struct Property {
     pub name: String,
     /// What it demands.
     pub kind: PropertyKind,
+}
+
+impl Property {
+    /// The last step the property constrains (the horizon for a goal).
+    pub fn last_step(&self) -> usize {
+        match &self.kind {
+            PropertyKind::Goal(_) => usize::MAX,
+            PropertyKind::Avoid { steps, .. } => steps.1,
+        }
+    }
 }
 
 /// Everything the executor needs, as plain data.

@@ -14,10 +14,9 @@
 //! UNSURE verdict.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 
+use crate::issue::{Backend, Issue};
 use crate::num::{dot_box_lower, gamma, sum_lower, sum_upper, ETA};
 
 /// A certified bound from one LP.
@@ -27,25 +26,7 @@ pub struct LpBound {
     pub value: f64,
     /// `None` when the solver certified an optimum; otherwise the solver
     /// status that made `value` fall back to the box bound.
-    pub issue: Option<&'static str>,
-}
-
-/// The name of a status that is not trusted, or `None` for a trusted one.
-/// Exhaustive on purpose: a new status in a new clarabel must be classified here.
-fn untrusted(status: SolverStatus) -> Option<&'static str> {
-    match status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => None,
-        SolverStatus::Unsolved => Some("unsolved"),
-        SolverStatus::PrimalInfeasible => Some("primal infeasible"),
-        SolverStatus::DualInfeasible => Some("dual infeasible"),
-        SolverStatus::AlmostPrimalInfeasible => Some("almost primal infeasible"),
-        SolverStatus::AlmostDualInfeasible => Some("almost dual infeasible"),
-        SolverStatus::MaxIterations => Some("iteration limit"),
-        SolverStatus::MaxTime => Some("time limit"),
-        SolverStatus::NumericalError => Some("numerical error"),
-        SolverStatus::InsufficientProgress => Some("insufficient progress"),
-        SolverStatus::CallbackTerminated => Some("terminated"),
-    }
+    pub issue: Option<Issue>,
 }
 
 /// A certified lower bound of `min qᵀx` subject to `rows` (`aᵣ·x ≤ bᵣ`) and
@@ -96,7 +77,7 @@ pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> 
         Err(_) => {
             return LpBound {
                 value: fallback,
-                issue: Some("bad solver settings"),
+                issue: Some(Issue::BadSettings(Backend::Lp)),
             }
         }
     };
@@ -106,12 +87,12 @@ pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> 
         Err(_) => {
             return LpBound {
                 value: fallback,
-                issue: Some("rejected problem data"),
+                issue: Some(Issue::RejectedData(Backend::Lp)),
             }
         }
     };
     solver.solve();
-    if let Some(issue) = untrusted(solver.solution.status) {
+    if let Some(issue) = Issue::from_status(Backend::Lp, solver.solution.status) {
         return LpBound {
             value: fallback,
             issue: Some(issue),

@@ -7,7 +7,8 @@
 use serde_json::{json, Value};
 
 use crate::analysis::closed_loop::{Boundary, ModelError};
-use crate::execute::{Outcome, Status, Trajectory};
+use crate::analysis::partition::Stop;
+use crate::execute::{Kind, Outcome, Status, Trajectory};
 use crate::lower::{Partitioner, Plan};
 use crate::sets::{IBox, Region};
 
@@ -50,11 +51,10 @@ fn partition_text(plan: &Plan, out: &Outcome) -> String {
         Partitioner::Uniform(grid) => format!("uniform partition {grid:?} ({cells} cells)"),
         Partitioner::Guided { guide, budget } => {
             let why = match out.partition_stop {
-                "done" => "every cell settled".to_string(),
-                "calls" if budget.calls == 1 => "budget of 1 cell evaluation spent".to_string(),
-                "calls" => format!("budget of {} cell evaluations spent", budget.calls),
-                "time" => "time budget spent".to_string(),
-                _ => "stopped".to_string(),
+                Stop::Done | Stop::Grid => "every cell settled".to_string(),
+                Stop::Calls if budget.calls == 1 => "budget of 1 cell evaluation spent".to_string(),
+                Stop::Calls => format!("budget of {} cell evaluations spent", budget.calls),
+                Stop::Time => "time budget spent".to_string(),
             };
             let noun = if cells == 1 { "cell" } else { "cells" };
             format!("{} partition ({cells} {noun}, {why})", guide.name())
@@ -112,7 +112,8 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     };
     s += &format!(
         "  controller  {} ({}{sat})\n",
-        plan.controller_path, plan.network_summary
+        crate::diag::sanitize(&plan.controller_path),
+        plan.network_summary
     );
     s += &format!(
         "  analysis    {}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
@@ -157,6 +158,11 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
             list.join(", ")
         );
     }
+    if let Some(t) = out.overflow {
+        s += &format!(
+            "  bounds overflowed at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
+        );
+    }
     s += "\n  properties\n";
     let no_witness = |what: &str| {
         if plan.samples == 0 {
@@ -168,13 +174,13 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     let width = out
         .properties
         .iter()
-        .map(|p| p.name.len() + p.kind.len() + 1)
+        .map(|p| p.name.len() + p.kind.as_str().len() + 1)
         .max()
         .unwrap_or(0);
     for p in &out.properties {
-        let label = format!("{} {}", p.kind, p.name);
+        let label = format!("{} {}", p.kind.as_str(), p.name);
         let why = match (p.status, p.kind) {
-            (Status::Verified, "goal") => format!(
+            (Status::Verified, Kind::Goal) => format!(
                 "every reachable box at step {} is inside, margin {}",
                 p.step,
                 num(p.margin)
@@ -184,7 +190,12 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 num(p.margin),
                 p.step
             ),
-            (Status::Unsure, "goal") => format!(
+            (Status::Unsure, _) if p.overflow.is_some() => format!(
+                "bounds overflowed at step {}: the reachable set no longer fits in f64 numbers, so nothing is proven from there on; {}",
+                p.overflow.unwrap_or_default(),
+                no_witness(if p.kind == Kind::Goal { "misses" } else { "enters" })
+            ),
+            (Status::Unsure, Kind::Goal) => format!(
                 "the reachable box at step {} sticks out by {}; {}",
                 p.step,
                 num(-p.margin),
@@ -196,7 +207,7 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 num(p.margin),
                 no_witness("enters")
             ),
-            (Status::Falsified, "goal") => format!(
+            (Status::Falsified, Kind::Goal) => format!(
                 "a trajectory ends {} outside at step {}",
                 num(-p.margin),
                 p.step
@@ -305,11 +316,12 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         .map(|p| {
             json!({
                 "name": p.name,
-                "kind": p.kind,
+                "kind": p.kind.as_str(),
                 "status": p.status.as_str(),
                 "margin": f(p.margin),
                 "step": p.step,
                 "counterexample": p.counterexample.as_ref().map(traj_json),
+                "overflow_step": p.overflow,
             })
         })
         .collect();
@@ -333,7 +345,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 Partitioner::Uniform(grid) => json!(grid),
                 Partitioner::Guided { .. } => Value::Null,
             },
-            "partition_stop": out.partition_stop,
+            "partition_stop": out.partition_stop.as_str(),
             "cells": out.partition.len(),
             "boundary": match &plan.boundary {
                 Boundary::Box => "box",
@@ -348,7 +360,8 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "final_error": final_error(out).map(f),
         "properties": props,
         "propagator_calls": out.propagator_calls,
-        "solver_issues": out.solver_issues.iter().map(|(t, i)| json!({ "step": t, "status": i })).collect::<Vec<_>>(),
+        "solver_issues": out.solver_issues.iter().map(|(t, i)| json!({ "step": t, "status": i.as_str() })).collect::<Vec<_>>(),
+        "overflow_step": out.overflow,
     });
     if let Some(ms) = timing_ms {
         v["time_ms"] = json!(ms);

@@ -33,8 +33,17 @@ impl Rng {
     }
 
     /// Uniform in `[lo, hi]` (returns `lo` when the interval is a point).
+    /// Never panics: with a NaN or infinite end the result may be NaN or
+    /// infinite, which callers check (`f64::clamp` would panic instead).
     pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo + (hi - lo) * self.unit()).clamp(lo, hi)
+        let v = lo + (hi - lo) * self.unit();
+        if v < lo {
+            lo
+        } else if v > hi {
+            hi
+        } else {
+            v
+        }
     }
 
     /// Uniform integer in `0..n` (`n > 0`).

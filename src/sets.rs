@@ -29,6 +29,16 @@ impl IBox {
         self.lo.len()
     }
 
+    /// The whole space `ℝⁿ`: what a bound that overflowed is replaced by.
+    pub fn whole(n: usize) -> IBox {
+        IBox::new(vec![f64::NEG_INFINITY; n], vec![f64::INFINITY; n])
+    }
+
+    /// Whether every bound is a finite number (no NaN, no ±∞).
+    pub fn is_finite(&self) -> bool {
+        self.lo.iter().chain(&self.hi).all(|v| v.is_finite())
+    }
+
     /// Largest absolute value of each coordinate.
     pub fn abs_max(&self) -> Vec<f64> {
         self.lo
@@ -260,6 +270,23 @@ impl Region {
                     .map(|(c, r)| num::sum_upper([*c, *r]))
                     .collect(),
             ),
+        }
+    }
+
+    /// Whether every number defining the set is finite. Reachable sets
+    /// that are not were produced by an overflow (see [`crate::execute`]).
+    pub fn is_finite(&self) -> bool {
+        match self {
+            Region::Box(b) => b.is_finite(),
+            Region::Polytope { bbox, rows } => {
+                bbox.is_finite()
+                    && rows
+                        .iter()
+                        .all(|(a, h)| h.is_finite() && a.iter().all(|v| v.is_finite()))
+            }
+            Region::Ball { center, radius, .. } => {
+                center.iter().chain(radius).all(|v| v.is_finite())
+            }
         }
     }
 

@@ -11,11 +11,9 @@ fn read_model(name: &str) -> ravel::onnx::Controller {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
     let bytes = std::fs::read(dir.join(format!("{name}.onnx"))).expect("model exists");
     let mut ext = ExternalFiles::new();
-    for loc in ravel::onnx::external_locations(&bytes) {
-        ext.insert(
-            loc.clone(),
-            std::fs::read(dir.join(&loc)).map_err(|e| e.to_string()),
-        );
+    for req in ravel::onnx::external_requests(&bytes) {
+        let data = std::fs::read(dir.join(&req.location)).map_err(|e| e.to_string());
+        ext.insert(req.location, data);
     }
     load(&bytes, &ext).expect("model loads")
 }
@@ -104,8 +102,8 @@ fn every_storage_and_layer_form_round_trips() {
                 g.unary("Identity");
                 let (model, data) = g.finish(1);
                 let mut ext = ExternalFiles::new();
-                for loc in ravel::onnx::external_locations(&model) {
-                    ext.insert(loc, Ok(data.clone()));
+                for req in ravel::onnx::external_requests(&model) {
+                    ext.insert(req.location, Ok(data.clone()));
                 }
                 let c = load(&model, &ext)
                     .unwrap_or_else(|e| panic!("{storage:?} keras={keras}: {e:?}"));
@@ -177,6 +175,10 @@ fn gemm_attributes_are_honoured() {
             output: vec![vi("y")],
             name: None,
         }),
+        opset_import: vec![ravel::onnx::proto::OperatorSetIdProto {
+            domain: Some(String::new()),
+            version: Some(17),
+        }],
         ..Default::default()
     };
     let c = load(&model.encode_to_vec(), &ExternalFiles::new()).expect("loads");

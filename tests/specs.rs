@@ -13,10 +13,6 @@ use std::path::Path;
 
 use ravel::diag::render;
 
-fn read(path: &Path) -> Result<Vec<u8>, String> {
-    std::fs::read(path).map_err(|e| e.to_string())
-}
-
 fn expect_header(source: &str) -> Vec<String> {
     let line = source.lines().next().unwrap_or_default();
     let rest = line
@@ -75,14 +71,17 @@ fn valid_specs() {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
         let expect = expect_header(&source);
-        let checked =
-            match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
-                Ok(c) => c,
-                Err(d) => panic!(
-                    "{name} is a valid spec but has diagnostics:\n{}",
-                    render(&d, &name, &source, 100, false)
-                ),
-            };
+        let checked = match ravel::front_end(
+            &source,
+            path.parent().expect("spec has a folder"),
+            &ravel::cli::read_request,
+        ) {
+            Ok(c) => c,
+            Err(d) => panic!(
+                "{name} is a valid spec but has diagnostics:\n{}",
+                render(&d, &name, &source, 100, false)
+            ),
+        };
         let plan = ravel::lower::lower(&checked);
         let outcome = ravel::execute::execute(&plan, &|| 0.0);
         // every simulated state lies in the reachable set's bounding box
@@ -116,11 +115,14 @@ fn invalid_specs() {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
         let expect: BTreeSet<String> = expect_header(&source).into_iter().collect();
-        let diags =
-            match ravel::front_end(&source, path.parent().expect("spec has a folder"), &read) {
-                Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
-                Err(d) => d,
-            };
+        let diags = match ravel::front_end(
+            &source,
+            path.parent().expect("spec has a folder"),
+            &ravel::cli::read_request,
+        ) {
+            Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
+            Err(d) => d,
+        };
         let codes: BTreeSet<String> = diags.iter().map(|d| d.code.as_str().to_string()).collect();
         assert_eq!(
             codes, expect,

@@ -16,14 +16,11 @@ use ravel::execute::{execute, propagate_cell};
 use ravel::lower::{lower, Partitioner, Plan};
 use ravel::sets::{IBox, Region};
 
-fn read(p: &Path) -> Result<Vec<u8>, String> {
-    std::fs::read(p).map_err(|e| e.to_string())
-}
-
 fn plan(spec: &str, prop: Propagator, partitioner: Partitioner, boundary: Boundary) -> Plan {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(spec);
     let src = std::fs::read_to_string(&path).expect("spec");
-    let mut c = ravel::front_end(&src, path.parent().expect("dir"), &read).expect("valid spec");
+    let mut c = ravel::front_end(&src, path.parent().expect("dir"), &ravel::cli::read_request)
+        .expect("valid spec");
     c.propagator = prop;
     c.partitioner = partitioner;
     c.boundary = boundary;
@@ -172,4 +169,41 @@ fn table_two_errors_come_in_the_tutorials_order() {
         "unrolled {unrolled} vs Reach-LP {reach_lp}"
     );
     assert!(unrolled < 2.0, "unrolled CROWN final-step error {unrolled}");
+}
+
+/// A ball initial set without partition is bounded in closed form (its
+/// support function), not as its bounding box: every method's sets are
+/// inside those of the bounding box, and strictly tighter at the end.
+#[test]
+fn balls_without_partition_beat_their_bounding_box() {
+    for prop in [Propagator::ReachLp, Propagator::CrownUnrolled] {
+        let p = plan(
+            "specs/double_integrator_ball.ravel",
+            prop,
+            Partitioner::Uniform(vec![1, 1]),
+            Boundary::Box,
+        );
+        assert!(matches!(p.initial, Region::Ball { .. }));
+        let boxed = Plan {
+            initial: Region::Box(p.initial.bbox()),
+            ..p.clone()
+        };
+        let ball = execute(&p, &|| 0.0);
+        let bbox = execute(&boxed, &|| 0.0);
+        for t in 1..ball.reach.len() {
+            assert!(
+                bbox.reach[t].contains_box(&ball.reach[t]),
+                "{prop:?} step {t}: {:?} not inside {:?}",
+                ball.reach[t],
+                bbox.reach[t]
+            );
+        }
+        let last = ball.reach.len() - 1;
+        assert!(
+            ball.reach[last].volume() < bbox.reach[last].volume() * 0.99,
+            "{prop:?}: the ball's final box {:?} is no tighter than the bounding box's {:?}",
+            ball.reach[last],
+            bbox.reach[last]
+        );
+    }
 }

@@ -19,6 +19,7 @@ use super::open_loop;
 use super::partition::{Budget, Strategy};
 use super::sdp;
 use super::shape::Shape;
+use crate::issue::Issue;
 use crate::nn::Network;
 use crate::num::{gamma, mul0, slack, sum_upper};
 use crate::sets::{IBox, Region};
@@ -157,10 +158,33 @@ impl Boundary {
 /// One propagated set and the LP solver issues met computing it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Step {
-    /// The reachable set.
+    /// The reachable set. Not finite ([`Region::is_finite`]) exactly when a
+    /// bound overflowed: it is then the whole space, and so is every later
+    /// step's set.
     pub set: Region,
     /// Solver statuses that forced a fallback bound (empty when all certified).
-    pub issues: Vec<&'static str>,
+    pub issues: Vec<Issue>,
+}
+
+impl Step {
+    /// The step of a set whose bounds overflowed: the whole space `ℝⁿ`
+    /// (trivially sound), recognisable by not being finite.
+    pub fn overflowed(n: usize, issues: Vec<Issue>) -> Step {
+        Step {
+            set: Region::Box(IBox::whole(n)),
+            issues,
+        }
+    }
+
+    /// Whether this step's bounds overflowed.
+    pub fn is_overflow(&self) -> bool {
+        !self.set.is_finite()
+    }
+}
+
+/// Whether every entry is finite.
+fn all_finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
 }
 
 /// Monte Carlo samples and cell budget of the SG-IBP control bound.
@@ -338,8 +362,15 @@ impl ClosedLoop {
     /// An over-approximation of the set of states at step `t + 1` for states
     /// in `x` at step `t`.
     pub fn step(&self, t: usize, x: &Region, prop: Propagator, boundary: &Boundary) -> Step {
+        let n = self.states();
         let bbox = x.bbox();
         let y = self.observation_box(&bbox);
+        // Every intermediate result is checked for finiteness before it is
+        // used: a NaN that met `min`/`max` could otherwise turn into a finite,
+        // wrong bound. Any non-finite value makes the whole step an overflow.
+        if !(x.is_finite() && y.is_finite()) {
+            return Step::overflowed(n, Vec::new());
+        }
         let facets = self.facets(boundary, t + 1);
         let mut extra = None;
         let bound = match prop {
@@ -349,38 +380,56 @@ impl ClosedLoop {
                 // intersected with IBP, which Reach-LP's per-facet bound is not)
                 let analysis = Analysis::new(&self.net, &y, Mode::Crown);
                 let u = analysis.output_box(Mode::Crown);
+                if !(analysis.is_finite() && u.is_finite()) {
+                    return Step::overflowed(n, Vec::new());
+                }
                 let (separate, more) = self
                     .push_control_box(t, facets.clone(), &bbox, &u)
                     .concretize_region(x);
                 extra = Some((separate, more));
                 self.back_step(t, &LinearUpper::of_spec(facets.clone()), &analysis, &bbox)
             }
-            Propagator::IbpSeparate => {
-                let u = Analysis::new(&self.net, &y, Mode::Ibp).output_box(Mode::Ibp);
-                self.push_control_box(t, facets.clone(), &bbox, &u)
-            }
-            Propagator::CrownSeparate => {
-                let u = Analysis::new(&self.net, &y, Mode::Crown).output_box(Mode::Crown);
-                self.push_control_box(t, facets.clone(), &bbox, &u)
-            }
-            Propagator::SgIbpSeparate => {
-                let u = self.sg_ibp_control(&y);
-                self.push_control_box(t, facets.clone(), &bbox, &u)
+            Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
+                let u = match prop {
+                    Propagator::IbpSeparate => {
+                        let a = Analysis::new(&self.net, &y, Mode::Ibp);
+                        a.is_finite().then(|| a.output_box(Mode::Ibp))
+                    }
+                    Propagator::CrownSeparate => {
+                        let a = Analysis::new(&self.net, &y, Mode::Crown);
+                        a.is_finite().then(|| a.output_box(Mode::Crown))
+                    }
+                    _ => self.sg_ibp_control(&y),
+                };
+                match u.filter(IBox::is_finite) {
+                    Some(u) => self.push_control_box(t, facets.clone(), &bbox, &u),
+                    None => return Step::overflowed(n, Vec::new()),
+                }
             }
         };
         let (mut ub, mut issues) = bound.concretize_region(x);
+        if !all_finite(&ub) {
+            return Step::overflowed(n, issues);
+        }
         if let Some((other, more)) = extra {
+            issues.extend(more);
+            if !all_finite(&other) {
+                return Step::overflowed(n, issues);
+            }
             for (u, o) in ub.iter_mut().zip(other) {
                 *u = u.min(o);
             }
-            issues.extend(more);
         }
         if prop == Propagator::ReachSdp {
             let (sdp, more) = self.reach_sdp(t, x, &facets);
+            issues.extend(more);
+            // +∞ is a facet the SDP could not bound (reported as an issue); NaN is an overflow
+            if sdp.iter().any(|v| v.is_nan()) {
+                return Step::overflowed(n, issues);
+            }
             for (u, s) in ub.iter_mut().zip(sdp) {
                 *u = u.min(s);
             }
-            issues.extend(more);
         }
         Step {
             set: self.region_of(boundary, t + 1, &ub),
@@ -392,12 +441,7 @@ impl ClosedLoop {
     /// [`super::sdp`]); `+∞` where the solver's answer was not usable, and the
     /// issue is reported. A network that is not ReLU-only gives `+∞` everywhere
     /// (`check` rejects that combination).
-    fn reach_sdp(
-        &self,
-        t: usize,
-        x: &Region,
-        facets: &DMatrix<f64>,
-    ) -> (Vec<f64>, Vec<&'static str>) {
+    fn reach_sdp(&self, t: usize, x: &Region, facets: &DMatrix<f64>) -> (Vec<f64>, Vec<Issue>) {
         let n = self.states();
         let p = self.plant.obs.ncols();
         let bbox = x.bbox();
@@ -405,7 +449,7 @@ impl ClosedLoop {
         let Some(merged) = sdp::merge(&self.net, &self.obs_xv, &xi) else {
             return (
                 vec![f64::INFINITY; facets.nrows()],
-                vec!["SDP needs a ReLU network"],
+                vec![Issue::SdpNeedsRelu],
             );
         };
         let rows: Vec<(Vec<f64>, f64)> = match x {
@@ -498,8 +542,9 @@ impl ClosedLoop {
         (out, issues)
     }
 
-    /// The control box over `y` by IBP on a simulation-guided partition of `y`.
-    fn sg_ibp_control(&self, y: &IBox) -> IBox {
+    /// The control box over `y` by IBP on a simulation-guided partition of
+    /// `y`; `None` when a bound overflowed.
+    fn sg_ibp_control(&self, y: &IBox) -> Option<IBox> {
         let inputs = open_loop::sample_inputs(y, SG_SAMPLES, 0x5EED);
         let out = open_loop::output_set(
             &self.net,
@@ -513,8 +558,13 @@ impl ClosedLoop {
             &inputs,
             &|| 0.0,
         );
-        out.bbox()
-            .unwrap_or_else(|| Analysis::new(&self.net, y, Mode::Ibp).output_box(Mode::Ibp))
+        match out.bbox() {
+            Some(b) => Some(b),
+            None => {
+                let a = Analysis::new(&self.net, y, Mode::Ibp);
+                a.is_finite().then(|| a.output_box(Mode::Ibp))
+            }
+        }
     }
 
     /// `F (A x + B u + c + w)` bounded linearly in `x`, over `u ∈ U`, `w ∈ W`.
@@ -615,6 +665,9 @@ impl ClosedLoop {
                 };
                 Analysis::with_hook(&self.net, &y, Mode::Crown, Some(&hook))
             };
+            if !(y.is_finite() && analysis.is_finite()) {
+                break;
+            }
             let over_xt = self.back_step(
                 t,
                 &LinearUpper::of_spec(self.facets(boundary, t + 1)),
@@ -627,6 +680,11 @@ impl ClosedLoop {
             let (through, more) = over_x0.concretize_region(x0);
             issues.extend(more);
             issues.extend(hook_issues.into_inner());
+            // an overflow in either bound makes this step and all later ones unbounded
+            if !(all_finite(&one_step) && all_finite(&through)) {
+                steps.push(Step::overflowed(n, issues));
+                break;
+            }
             let ub: Vec<f64> = one_step
                 .iter()
                 .zip(&through)
@@ -638,6 +696,9 @@ impl ClosedLoop {
             }
             boxes.push(set.bbox());
             steps.push(Step { set, issues });
+        }
+        while steps.len() <= horizon {
+            steps.push(Step::overflowed(n, Vec::new()));
         }
         steps
     }

@@ -13,6 +13,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::relax::{image, relax, Relax};
+use crate::issue::Issue;
 use crate::nn::{Layer, Network};
 use crate::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper, U};
 use crate::sets::{IBox, Region};
@@ -100,7 +101,7 @@ impl LinearUpper {
 
     /// Certified upper bounds of each row over a region, and the solver
     /// issues met (each bound is valid regardless; see [`crate::lp`]).
-    pub fn concretize_region(&self, region: &Region) -> (Vec<f64>, Vec<&'static str>) {
+    pub fn concretize_region(&self, region: &Region) -> (Vec<f64>, Vec<Issue>) {
         if let Region::Box(b) = region {
             return (self.concretize(b), Vec::new());
         }
@@ -273,6 +274,14 @@ impl<'a> Analysis<'a> {
             a.relax.push(rel);
         }
         a
+    }
+
+    /// Whether every intermediate bound is finite. An analysis that is not
+    /// (its input or weights too large for `f64`) must not be used: the
+    /// propagators check this and report an overflow instead.
+    pub fn is_finite(&self) -> bool {
+        self.boxes.iter().all(IBox::is_finite)
+            && self.scales.iter().flatten().all(|v| v.is_finite())
     }
 
     /// The bounds of the value before every layer (`boxes()[0]` is the input box).

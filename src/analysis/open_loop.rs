@@ -17,7 +17,7 @@
 use nalgebra::DMatrix;
 
 use super::crown::{Analysis, Mode};
-use super::partition::{refine, Budget, Strategy};
+use super::partition::{refine, Budget, Stop, Strategy};
 use super::shape::{excess, extent_of_points, support_of_box, support_of_points, Shape};
 use crate::nn::Network;
 use crate::rng::Rng;
@@ -52,8 +52,8 @@ pub struct OutputSet {
     pub cells: Vec<(IBox, Vec<f64>)>,
     /// Cells bounded (including parents and the whole box).
     pub calls: usize,
-    /// Why partitioning stopped (`"grid"` for uniform grids).
-    pub stop: &'static str,
+    /// Why partitioning stopped.
+    pub stop: Stop,
 }
 
 impl OutputSet {
@@ -138,12 +138,12 @@ pub fn output_set(
             None => b.to_vec(),
         }
     };
-    let (cells, calls, stop): (Vec<(IBox, Vec<f64>)>, usize, &'static str) = match partitioner {
+    let (cells, calls, stop): (Vec<(IBox, Vec<f64>)>, usize, Stop) = match partitioner {
         Partitioner::Uniform(grid) => {
             let root = cell_offsets(net, input, mode, &directions);
             let boxes = input.grid(grid);
             if boxes.len() <= 1 {
-                (vec![(input.clone(), root)], 1, "grid")
+                (vec![(input.clone(), root)], 1, Stop::Grid)
             } else {
                 let n = boxes.len() + 1;
                 let cells = boxes
@@ -153,7 +153,7 @@ pub fn output_set(
                         (c, b)
                     })
                     .collect();
-                (cells, n, "grid")
+                (cells, n, Stop::Grid)
             }
         }
         Partitioner::Guided { strategy, budget } => {
@@ -166,7 +166,6 @@ pub fn output_set(
                     let s = excess(&b, &sampled, &extent);
                     (b, s)
                 },
-                &mut |_| false,
                 elapsed,
             );
             let cells = r.leaves.into_iter().map(|l| (l.cell, l.value)).collect();

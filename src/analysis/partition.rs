@@ -42,6 +42,31 @@ pub struct Budget {
     pub seconds: Option<f64>,
 }
 
+/// Why a partition has the cells it has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// A uniform grid: the cells were fixed in advance.
+    Grid,
+    /// Refinement ended: every cell settled (nothing left to gain, or too small to split).
+    Done,
+    /// The call budget was spent.
+    Calls,
+    /// The time budget (or the run's time limit) was spent.
+    Time,
+}
+
+impl Stop {
+    /// The name used in the JSON report.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stop::Grid => "grid",
+            Stop::Done => "done",
+            Stop::Calls => "calls",
+            Stop::Time => "time",
+        }
+    }
+}
+
 /// A final cell with its evaluation and score.
 #[derive(Clone, Debug)]
 pub struct Leaf<T> {
@@ -60,8 +85,8 @@ pub struct Refined<T> {
     pub leaves: Vec<Leaf<T>>,
     /// Evaluations made.
     pub calls: usize,
-    /// Why it stopped: `"done"`, `"calls"`, `"time"` or `"stopped"`.
-    pub stop: &'static str,
+    /// Why it stopped: [`Stop::Done`], [`Stop::Calls`] or [`Stop::Time`].
+    pub stop: Stop,
 }
 
 struct Queued<T> {
@@ -121,21 +146,18 @@ pub fn bisect(cell: &IBox, root: &IBox, min_size: f64) -> Option<(IBox, IBox)> {
 
 /// Refine `root` with `eval` (which returns a value and its score; it is
 /// handed the parent cell's value, so a child can be kept inside its parent).
-/// `stop_all` is asked after every evaluation whether the whole search can
-/// end (the property-guided partitioner ends when the verdict is decided).
 /// `elapsed` returns seconds since the start (only called with a time budget).
 pub fn refine<T>(
     root: &IBox,
     strategy: Strategy,
     budget: &Budget,
     eval: &mut CellEval<T>,
-    stop_all: &mut dyn FnMut(&T) -> bool,
     elapsed: &dyn Fn() -> f64,
 ) -> Refined<T> {
     let mut calls = 0usize;
     let mut order = 0usize;
     let mut done: Vec<Leaf<T>> = Vec::new();
-    let mut stop = "done";
+    let mut stop = Stop::Done;
     let (v, score) = eval(root, None);
     calls += 1;
     let first = Leaf {
@@ -143,7 +165,6 @@ pub fn refine<T>(
         value: v,
         score,
     };
-    let halt = stop_all(&first.value);
     let mut heap = BinaryHeap::new();
     let mut stack = Vec::new();
     match strategy {
@@ -154,13 +175,7 @@ pub fn refine<T>(
         }),
         Strategy::Sg => stack.push(first),
     }
-    if halt {
-        stop = "stopped";
-    }
     loop {
-        if stop != "done" {
-            break;
-        }
         let leaf = match strategy {
             Strategy::Gsg => match heap.pop() {
                 Some(q) => q.leaf,
@@ -180,12 +195,12 @@ pub fn refine<T>(
             continue;
         }
         if calls + 2 > budget.calls {
-            stop = "calls";
+            stop = Stop::Calls;
             done.push(leaf);
             break;
         }
         if budget.seconds.is_some_and(|s| elapsed() >= s) {
-            stop = "time";
+            stop = Stop::Time;
             done.push(leaf);
             break;
         }
@@ -197,7 +212,6 @@ pub fn refine<T>(
             let (v, score) = eval(&c, Some(&leaf.value));
             calls += 1;
             order += 1;
-            let halt = stop_all(&v);
             let l = Leaf {
                 cell: c,
                 value: v,
@@ -210,9 +224,6 @@ pub fn refine<T>(
                     leaf: l,
                 }),
                 Strategy::Sg => stack.push(l),
-            }
-            if halt {
-                stop = "stopped";
             }
         }
     }
@@ -252,7 +263,6 @@ mod tests {
                 strategy,
                 &budget,
                 &mut |c, _| ((), c.hi[0] - 0.3),
-                &mut |_| false,
                 &|| 0.0,
             );
             assert!(r.calls <= 21, "{strategy:?}: {}", r.calls);
@@ -274,10 +284,9 @@ mod tests {
             Strategy::Gsg,
             &budget,
             &mut |c, _| ((), c.hi[0] - c.lo[0] - 0.25),
-            &mut |_| false,
             &|| 0.0,
         );
-        assert_eq!(r.stop, "done");
+        assert_eq!(r.stop, Stop::Done);
         assert_eq!(r.leaves.len(), 4);
         assert!(r.leaves.iter().all(|l| l.score <= 0.0));
     }

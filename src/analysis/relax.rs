@@ -72,7 +72,7 @@ fn relax_relu(l: f64, u: f64) -> Relax {
         // supremum over [l, u] is at an endpoint, whatever rounding α carries.
         let a = u / (u - l);
         let a = if a.is_finite() {
-            a.clamp(0.0, 1.0)
+            clamp_safe(a, 0.0, 1.0)
         } else {
             0.0
         };
@@ -171,7 +171,7 @@ fn sup_gap(act: Activation, a: f64, l: f64, u: f64) -> f64 {
     if u > 0.0 {
         // concave piece: g(z) ≤ g(s) + g'(s)(z − s) for every s in the piece
         let p = l.max(0.0);
-        let s = stationary(act, a).clamp(p, u);
+        let s = clamp_safe(stationary(act, a), p, u);
         let (f, e) = value(act, s);
         let g = gap_upper(f, e, a, s);
         let t = tangent_term(act, a, s, [p - s, u - s], true);
@@ -194,7 +194,7 @@ fn inf_gap(act: Activation, a: f64, l: f64, u: f64) -> f64 {
     if l < 0.0 {
         // convex piece: g(z) ≥ g(s) + g'(s)(z − s)
         let q = u.min(0.0);
-        let s = (-stationary(act, a)).clamp(l, q);
+        let s = clamp_safe(-stationary(act, a), l, q);
         let (f, e) = value(act, s);
         let g = gap_lower(f, e, a, s);
         let t = tangent_term(act, a, s, [l - s, q - s], false);
@@ -235,6 +235,19 @@ fn relax_smooth(act: Activation, l: f64, u: f64) -> Relax {
     let bu = sup_gap(act, au, l, u);
     let bl = inf_gap(act, al, l, u);
     Relax { al, bl, au, bu }
+}
+
+/// `x` clamped to `[lo, hi]` without `f64::clamp`'s panic on NaN ends or
+/// `lo > hi` (possible only for bounds that overflowed, which the callers
+/// of the propagators detect and refuse to use).
+fn clamp_safe(x: f64, lo: f64, hi: f64) -> f64 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
 }
 
 #[cfg(test)]

@@ -28,12 +28,11 @@
 //! SDP bound: the caller keeps its Reach-LP bound and reports the issue.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
 use super::crown::{Analysis, Mode};
+use crate::issue::{Backend, Issue};
 use crate::nn::{Activation, Layer, Network};
 use crate::num::{gamma, sum_upper, U};
 use crate::sets::IBox;
@@ -193,7 +192,7 @@ pub struct SdpBound {
     /// A certified upper bound of the facet (`+∞` when there is none).
     pub value: f64,
     /// The solver status when it was not trusted.
-    pub issue: Option<&'static str>,
+    pub issue: Option<Issue>,
 }
 
 /// The data of one step's SDPs, shared by all facets.
@@ -388,19 +387,19 @@ impl<'a> StepSdp<'a> {
             .build()
         {
             Ok(s) => s,
-            Err(_) => return none("bad solver settings"),
+            Err(_) => return none(Issue::BadSettings(Backend::Sdp)),
         };
         let mut solver = match DefaultSolver::new(&p, &q, &a, &bvec, &cones, settings) {
             Ok(s) => s,
-            Err(_) => return none("rejected problem data"),
+            Err(_) => return none(Issue::RejectedData(Backend::Sdp)),
         };
         solver.solve();
-        if let Some(issue) = untrusted(solver.solution.status) {
+        if let Some(issue) = Issue::from_status(Backend::Sdp, solver.solution.status) {
             return none(issue);
         }
         let x = &solver.solution.x;
         if x.iter().any(|v| !v.is_finite()) {
-            return none("non-finite solution");
+            return none(Issue::NonFiniteSolution);
         }
         // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
         let d = x[0];
@@ -447,7 +446,7 @@ impl<'a> StepSdp<'a> {
             .copied()
             .fold(f64::NEG_INFINITY, f64::max);
         if !lam.is_finite() {
-            return none("eigenvalues not finite");
+            return none(Issue::NonFiniteEigenvalues);
         }
         let lam_bound = sum_upper([lam, err_f, 100.0 * n as f64 * U * norm_f]);
         let value = sum_upper([d, lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12)]);
@@ -478,26 +477,10 @@ impl<'a> StepSdp<'a> {
     }
 }
 
-fn none(issue: &'static str) -> SdpBound {
+fn none(issue: Issue) -> SdpBound {
     SdpBound {
         value: f64::INFINITY,
         issue: Some(issue),
-    }
-}
-
-fn untrusted(status: SolverStatus) -> Option<&'static str> {
-    match status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => None,
-        SolverStatus::Unsolved => Some("SDP unsolved"),
-        SolverStatus::PrimalInfeasible => Some("SDP primal infeasible"),
-        SolverStatus::DualInfeasible => Some("SDP dual infeasible"),
-        SolverStatus::AlmostPrimalInfeasible => Some("SDP almost primal infeasible"),
-        SolverStatus::AlmostDualInfeasible => Some("SDP almost dual infeasible"),
-        SolverStatus::MaxIterations => Some("SDP iteration limit"),
-        SolverStatus::MaxTime => Some("SDP time limit"),
-        SolverStatus::NumericalError => Some("SDP numerical error"),
-        SolverStatus::InsufficientProgress => Some("SDP insufficient progress"),
-        SolverStatus::CallbackTerminated => Some("SDP terminated"),
     }
 }
 

@@ -19,9 +19,6 @@ pub const DEFAULT_BUDGET: Budget = Budget {
     seconds: None,
 };
 
-/// Most propagator calls a budget may allow.
-const MAX_CALLS: f64 = 1_000_000.0;
-
 impl Ctx {
     /// A polytope initial set: it must be bounded and not empty. Its bounding
     /// box comes from `2n` certified LP bounds inside a large box; a bound
@@ -259,10 +256,10 @@ impl Ctx {
             };
             match k.node.as_str() {
                 "calls" => {
-                    if !((1.0..=MAX_CALLS).contains(&x) && x.fract() == 0.0) {
+                    if !((1.0..=crate::limits::MAX_CALLS as f64).contains(&x) && x.fract() == 0.0) {
                         bad(
                             self,
-                            "must be a whole number of cell evaluations from 1 to 1000000",
+                            "must be a whole number of cell evaluations from 1 to 100000",
                             "e.g. `calls 200`",
                         );
                         ok = false;

@@ -13,7 +13,11 @@ use nalgebra::{DMatrix, DVector};
 mod extra;
 
 use crate::analysis::closed_loop::{Boundary, Plant, Propagator};
-use crate::diag::{did_you_mean, Code, Diagnostic};
+use crate::diag::{compact, did_you_mean, Code, Diagnostic};
+use crate::limits::{
+    within, MAX_CELLS, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SAMPLES, MAX_SIMULATED_STEPS,
+    MAX_STORED_NUMBERS,
+};
 use crate::lower::{Guide, Partitioner};
 use crate::onnx::{self, Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
@@ -25,18 +29,12 @@ pub use extra::{zero_order_hold, DEFAULT_BUDGET};
 pub struct ControllerFile {
     /// The file's bytes, or the read error's message.
     pub bytes: Result<Vec<u8>, String>,
-    /// External-data files referenced by the model (see [`onnx::external_locations`]).
+    /// External-data files referenced by the model (see [`onnx::external_requests`]).
     pub external: ExternalFiles,
 }
 
 /// Defaults of the analysis block.
 pub const DEFAULT_SAMPLES: usize = 1000;
-/// Largest accepted number of Monte Carlo samples.
-pub const MAX_SAMPLES: u64 = 10_000_000;
-/// Largest accepted number of partition cells.
-pub const MAX_CELLS: usize = 1_000_000;
-/// Largest accepted horizon.
-pub const MAX_HORIZON: u64 = 100_000;
 
 /// A goal property.
 #[derive(Clone, Debug, PartialEq)]
@@ -141,6 +139,18 @@ impl Ctx {
                 Diagnostic::new(Code::NonFinite, x.span, "number is not finite")
                     .label("this overflows f64")
                     .hint("numbers must lie within about ±1.8e308"),
+            );
+            return 0.0;
+        }
+        if x.node.abs() > MAX_MAGNITUDE {
+            self.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    x.span,
+                    format!("{} is too large to analyse", compact(x.node)),
+                )
+                .label("beyond ±1e15")
+                .hint("numbers in a spec must lie within ±1e15; rescale the units, or leave a set component out to leave it unbounded"),
             );
             return 0.0;
         }
@@ -270,11 +280,15 @@ impl Ctx {
             );
             return None;
         }
-        if n.node > 100_000 {
+        if n.node > MAX_DIM {
             self.err(
-                Diagnostic::new(Code::Zero, n.span, format!("{what} is unreasonably large"))
-                    .label("more than 100000")
-                    .hint("ravel analyses small control systems"),
+                Diagnostic::new(
+                    Code::Limit,
+                    n.span,
+                    format!("{what} exceeds the limit of {MAX_DIM}"),
+                )
+                .label(format!("more than {MAX_DIM}"))
+                .hint("ravel analyses control systems with at most 1000 states, controls or observations"),
             );
             return None;
         }
@@ -371,7 +385,11 @@ impl Ctx {
                 Diagnostic::new(
                     Code::EmptyInterval,
                     i.span,
-                    format!("interval [{}, {}] is empty", i.lo.node, i.hi.node),
+                    format!(
+                        "interval [{}, {}] is empty",
+                        compact(i.lo.node),
+                        compact(i.hi.node)
+                    ),
                 )
                 .label("lower end exceeds upper end")
                 .hint("write intervals as [lower, upper]"),
@@ -915,7 +933,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 Diagnostic::new(
                     Code::ControllerUnreadable,
                     path.span,
-                    format!("controller `{}` was not read", path.node),
+                    format!(
+                        "controller `{}` was not read",
+                        crate::diag::sanitize(&path.node)
+                    ),
                 )
                 .label("not available")
                 .hint("the controller file must be readable next to the spec"),
@@ -925,7 +946,11 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                     Diagnostic::new(
                         Code::ControllerUnreadable,
                         path.span,
-                        format!("cannot read controller `{}`: {msg}", path.node),
+                        format!(
+                            "cannot read controller `{}`: {}",
+                            crate::diag::sanitize(&path.node),
+                            crate::diag::sanitize(msg)
+                        ),
                     )
                     .label("this file")
                     .hint("paths are relative to the spec file's folder"),
@@ -1216,19 +1241,17 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                             );
                             partition = None;
                         } else {
-                            let total = ks.iter().try_fold(1usize, |acc, k| {
-                                acc.checked_mul(k.node as usize).filter(|t| *t <= MAX_CELLS)
-                            });
-                            match total {
-                                Some(_) => {
+                            let counts: Vec<u64> = ks.iter().map(|k| k.node).collect();
+                            match within(&counts, MAX_CELLS) {
+                                true => {
                                     partition = Some(Partitioner::Uniform(
                                         ks.iter().map(|k| k.node as usize).collect(),
                                     ))
                                 }
-                                None => {
+                                false => {
                                     cx.err(
                                         Diagnostic::new(
-                                            Code::Partition,
+                                            Code::Limit,
                                             st.span,
                                             format!("the grid has more than {MAX_CELLS} cells"),
                                         )
@@ -1303,7 +1326,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                     if s.node > MAX_SAMPLES {
                         cx.err(
                             Diagnostic::new(
-                                Code::Zero,
+                                Code::Limit,
                                 s.span,
                                 format!("more than {MAX_SAMPLES} samples"),
                             )
@@ -1396,7 +1419,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 Diagnostic::new(
                     Code::TimeStep,
                     time_span.unwrap_or(whole),
-                    format!("e^(A·{dt}) overflows"),
+                    format!("e^(A·{}) overflows", compact(dt)),
                 )
                 .label("time step too large for these dynamics")
                 .hint("use a smaller dt"),
@@ -1404,6 +1427,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
     let dt = time.ok().flatten();
+    if let (Some(h), Some((_, n))) = (horizon, &state) {
+        let span = horizons.first().map_or(whole, |h| h.span);
+        sizes(&mut cx, span, h, *n, samples, partition.as_ref());
+    }
 
     if !cx.diags.is_empty() {
         cx.diags
@@ -1462,5 +1489,40 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         )
         .label("here")
         .hint("see docs/language.md")]),
+    }
+}
+
+/// The limits on products of sizes (see [`crate::limits`]): simulated steps
+/// and stored set bounds, reported at the horizon.
+fn sizes(cx: &mut Ctx, span: Span, h: usize, n: usize, samples: usize, part: Option<&Partitioner>) {
+    let (h, n, samples) = (h as u64, n as u64, samples as u64);
+    if !within(&[samples, h], MAX_SIMULATED_STEPS) {
+        cx.err(
+            Diagnostic::new(
+                Code::Limit,
+                span,
+                format!("{samples} samples over {h} steps exceed the limit of {MAX_SIMULATED_STEPS} simulated steps"),
+            )
+            .label("too many simulated steps")
+            .hint("draw fewer samples or use a shorter horizon"),
+        );
+    }
+    let cells = match part {
+        Some(Partitioner::Uniform(grid)) => grid.iter().map(|k| *k as u64).collect::<Vec<_>>(),
+        Some(Partitioner::Guided { budget, .. }) => vec![budget.calls as u64],
+        None => vec![1],
+    };
+    let mut factors = cells;
+    factors.extend([h + 1, n]);
+    if !within(&factors, MAX_STORED_NUMBERS) {
+        cx.err(
+            Diagnostic::new(
+                Code::Limit,
+                span,
+                format!("the partition's cells over {h} steps would store more than {MAX_STORED_NUMBERS} bounds"),
+            )
+            .label("too many cells × steps")
+            .hint("use fewer cells (or a smaller call budget) or a shorter horizon"),
+        );
     }
 }

@@ -21,11 +21,16 @@ use std::collections::{BTreeMap, HashMap};
 use nalgebra::{DMatrix, DVector};
 use prost::Message;
 
+use crate::diag::sanitize;
+use crate::limits::{
+    MAX_CONTROLLER_BYTES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS, MAX_TENSOR_ELEMENTS, MAX_WIDTH,
+};
 use crate::nn::{Activation, Layer, Network};
 use proto::{dtype, AttributeProto, ModelProto, NodeProto, TensorProto};
 
-/// Contents of external-data files, by the `location` written in the model.
-/// A read failure is kept as its message so the checker can report it.
+/// Contents of external-data files, by their normalised location (see
+/// [`normalise_location`]). A read failure is kept as its message so the
+/// checker can report it.
 pub type ExternalFiles = BTreeMap<String, Result<Vec<u8>, String>>;
 
 /// What went wrong while loading a controller.
@@ -73,25 +78,62 @@ pub struct Controller {
     pub outputs: usize,
 }
 
-/// The `location`s of external-data files referenced by the model, so the caller can read them.
-/// Undecodable bytes give an empty list (the error is reported by [`load`]).
-pub fn external_locations(bytes: &[u8]) -> Vec<String> {
+/// An external-data file the loader will need: its normalised location
+/// (relative to the model's folder, without `.` components) and how many
+/// bytes from its start the model's tensors need (the largest
+/// `offset + length` over the tensors stored in it, each length being what
+/// the tensor's declared shape and type need).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExternalRequest {
+    /// The normalised location.
+    pub location: String,
+    /// Bytes needed from the start of the file.
+    pub bytes: u64,
+}
+
+/// A tensor's `location` as a plain relative path inside the model's
+/// folder: `/`-separated normal components (`.` components dropped, so `./x`
+/// and `x` are one file). `None` for an absolute path, a `..` component, a
+/// backslash, a NUL, or nothing left.
+pub fn normalise_location(location: &str) -> Option<String> {
+    if location.starts_with('/') || location.contains('\\') || location.contains('\0') {
+        return None;
+    }
+    let mut parts = Vec::new();
+    for c in location.split('/') {
+        match c {
+            "" | "." => {}
+            ".." => return None,
+            // a Windows drive prefix such as `C:` is not a plain name either
+            c if c.contains(':') => return None,
+            c => parts.push(c),
+        }
+    }
+    (!parts.is_empty()).then(|| parts.join("/"))
+}
+
+/// The external-data files the model's tensors use, each once, with the
+/// number of bytes needed from each, so the caller reads no file outside the
+/// model's folder and nothing beyond what the declared shapes need.
+/// Tensors whose location, offset, length or shape is invalid are left out:
+/// [`load`] reports them. Undecodable bytes give an empty list.
+pub fn external_requests(bytes: &[u8]) -> Vec<ExternalRequest> {
     let Ok(model) = ModelProto::decode(bytes) else {
         return Vec::new();
     };
-    let mut out = Vec::new();
+    let mut need: BTreeMap<String, u64> = BTreeMap::new();
     let mut visit = |t: &TensorProto| {
-        if t.data_location == Some(1) {
-            for e in &t.external_data {
-                if e.key.as_deref() == Some("location") {
-                    if let Some(v) = &e.value {
-                        if !out.contains(v) {
-                            out.push(v.clone());
-                        }
-                    }
-                }
-            }
+        if t.data_location != Some(1) {
+            return;
         }
+        let Ok(ext) = external_entry(t) else {
+            return;
+        };
+        let Some(end) = ext.offset.checked_add(ext.length) else {
+            return;
+        };
+        let e = need.entry(ext.location).or_insert(0);
+        *e = (*e).max(end);
     };
     if let Some(g) = &model.graph {
         g.initializer.iter().for_each(&mut visit);
@@ -103,35 +145,96 @@ pub fn external_locations(bytes: &[u8]) -> Vec<String> {
             }
         }
     }
-    out
+    need.into_iter()
+        .map(|(location, bytes)| ExternalRequest { location, bytes })
+        .collect()
 }
 
-/// A constant tensor.
-#[derive(Clone, Debug)]
-struct Tensor {
-    dims: Vec<usize>,
-    data: Vec<f64>,
+/// Where a tensor's external data is: normalised location, offset, and the
+/// length its declared shape and type need.
+struct ExternalEntry {
+    location: String,
+    offset: u64,
+    length: u64,
 }
 
-fn node_label(n: &NodeProto) -> String {
-    let op = n.op_type.clone().unwrap_or_default();
-    match n.name.as_deref() {
-        Some(name) if !name.is_empty() => format!("node '{name}' ({op})"),
-        _ => format!(
-            "the {op} node producing '{}'",
-            n.output.first().cloned().unwrap_or_default()
-        ),
-    }
-}
-
-fn tensor_name(t: &TensorProto) -> String {
-    t.name.clone().unwrap_or_else(|| "<unnamed>".into())
-}
-
-/// Decode a tensor's values to f64 (integers are converted too).
-fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, OnnxError> {
+/// Validate a tensor's external-data entry before anything is read.
+fn external_entry(t: &TensorProto) -> Result<ExternalEntry, OnnxError> {
     let name = tensor_name(t);
-    let mut dims = Vec::with_capacity(t.dims.len());
+    let (numel, width) = tensor_size(t)?;
+    let needed = numel
+        .checked_mul(width as u64)
+        .filter(|b| *b <= MAX_CONTROLLER_BYTES);
+    let Some(needed) = needed else {
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            format!("tensor '{name}' is too large"),
+            "ravel reads controllers of at most 512 MiB",
+        ));
+    };
+    let mut location = None;
+    let (mut offset, mut length) = (0u64, None);
+    for e in &t.external_data {
+        let v = e.value.clone().unwrap_or_default();
+        let number = |what: &str| {
+            v.trim().parse::<u64>().map_err(|_| {
+                err(
+                    OnnxErrorKind::ExternalData,
+                    format!(
+                        "tensor '{name}' has an external-data {what} '{}' that is not a byte count",
+                        sanitize(&v)
+                    ),
+                    "re-export the model with its data file",
+                )
+            })
+        };
+        match e.key.as_deref() {
+            Some("location") => location = Some(v.clone()),
+            Some("offset") => offset = number("offset")?,
+            Some("length") => length = Some(number("length")?),
+            _ => {}
+        }
+    }
+    let Some(raw) = location else {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!("tensor '{name}' is external but has no location"),
+            "re-export the model with its data file",
+        ));
+    };
+    let Some(location) = normalise_location(&raw) else {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!(
+                "external data location '{}' of tensor '{name}' is not a file inside the controller's folder",
+                sanitize(&raw)
+            ),
+            "external data must be a relative path without `..` next to the .onnx file; re-export the model",
+        ));
+    };
+    if let Some(l) = length {
+        if l != needed {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!(
+                    "tensor '{name}' declares {l} bytes of external data but its shape needs {needed}"
+                ),
+                "the .data file does not belong to this model: re-export both together",
+            ));
+        }
+    }
+    Ok(ExternalEntry {
+        location,
+        offset,
+        length: needed,
+    })
+}
+
+/// A tensor's number of elements (checked against the limits, without
+/// overflow) and the width in bytes of its element type.
+fn tensor_size(t: &TensorProto) -> Result<(u64, usize), OnnxError> {
+    let name = tensor_name(t);
+    let mut numel = 1u64;
     for &d in &t.dims {
         if d < 0 {
             return Err(err(
@@ -140,9 +243,20 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
                 "re-export the model",
             ));
         }
-        dims.push(d as usize);
+        numel = numel
+            .checked_mul(d as u64)
+            .filter(|n| *n <= MAX_TENSOR_ELEMENTS)
+            .ok_or_else(|| {
+                err(
+                    OnnxErrorKind::Malformed,
+                    format!(
+                        "tensor '{name}' has more than {MAX_TENSOR_ELEMENTS} elements (shape {:?})",
+                        t.dims
+                    ),
+                    "ravel verifies controllers of at most 16777216 weights per tensor",
+                )
+            })?;
     }
-    let numel: usize = dims.iter().product();
     let dt = t.data_type.unwrap_or(0);
     let width = match dt {
         dtype::FLOAT | dtype::INT32 => 4,
@@ -158,8 +272,44 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
             ))
         }
     };
+    Ok((numel, width))
+}
+
+/// A constant tensor.
+#[derive(Clone, Debug)]
+struct Tensor {
+    dims: Vec<usize>,
+    data: Vec<f64>,
+}
+
+fn node_label(n: &NodeProto) -> String {
+    let op = sanitize(n.op_type.as_deref().unwrap_or_default());
+    match n.name.as_deref() {
+        Some(name) if !name.is_empty() => format!("node '{}' ({op})", sanitize(name)),
+        _ => format!(
+            "the {op} node producing '{}'",
+            sanitize(n.output.first().map_or("", String::as_str))
+        ),
+    }
+}
+
+/// The tensor's name, made safe to show.
+fn tensor_name(t: &TensorProto) -> String {
+    t.name
+        .as_deref()
+        .map_or_else(|| "<unnamed>".into(), sanitize)
+}
+
+/// Decode a tensor's values to f64 (integers are converted too).
+fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, OnnxError> {
+    let name = tensor_name(t);
+    let (numel, width) = tensor_size(t)?;
+    // tensor_size bounds every dimension and their product
+    let dims: Vec<usize> = t.dims.iter().map(|d| *d as usize).collect();
+    let numel = numel as usize;
+    let dt = t.data_type.unwrap_or(0);
     let raw: Option<Vec<u8>> = if t.data_location == Some(1) {
-        Some(read_external(t, &name, external)?)
+        Some(read_external(t, external)?)
     } else {
         t.raw_data.clone()
     };
@@ -223,55 +373,44 @@ fn dtype_name(d: i32) -> &'static str {
     }
 }
 
-fn read_external(
-    t: &TensorProto,
-    name: &str,
-    external: &ExternalFiles,
-) -> Result<Vec<u8>, OnnxError> {
-    let mut location = None;
-    let (mut offset, mut length) = (0usize, None);
-    for e in &t.external_data {
-        let v = e.value.clone().unwrap_or_default();
-        match e.key.as_deref() {
-            Some("location") => location = Some(v),
-            Some("offset") => offset = v.parse().unwrap_or(usize::MAX),
-            Some("length") => length = Some(v.parse().unwrap_or(usize::MAX)),
-            _ => {}
-        }
-    }
-    let Some(location) = location else {
-        return Err(err(
-            OnnxErrorKind::ExternalData,
-            format!("tensor '{name}' is external but has no location"),
-            "re-export the model with its data file",
-        ));
-    };
-    let bytes = match external.get(&location) {
+fn read_external(t: &TensorProto, external: &ExternalFiles) -> Result<Vec<u8>, OnnxError> {
+    let name = tensor_name(t);
+    let ext = external_entry(t)?;
+    let shown = sanitize(&ext.location);
+    let bytes = match external.get(&ext.location) {
         Some(Ok(b)) => b,
         Some(Err(msg)) => {
             return Err(err(
                 OnnxErrorKind::ExternalData,
-                format!("cannot read external data file '{location}' of tensor '{name}': {msg}"),
-                "keep the .data file next to the .onnx file",
+                format!(
+                    "cannot read external data file '{shown}' of tensor '{name}': {}",
+                    sanitize(msg)
+                ),
+                "keep the .data file next to the .onnx file, as a regular file",
             ))
         }
         None => {
             return Err(err(
                 OnnxErrorKind::ExternalData,
-                format!("external data file '{location}' of tensor '{name}' was not provided"),
+                format!("external data file '{shown}' of tensor '{name}' was not provided"),
                 "keep the .data file next to the .onnx file",
             ))
         }
     };
-    let end = match length {
-        Some(l) => offset.checked_add(l),
-        None => Some(bytes.len()),
-    };
-    match end {
-        Some(end) if offset <= end && end <= bytes.len() => Ok(bytes[offset..end].to_vec()),
-        _ => Err(err(
+    let range = usize::try_from(ext.offset).ok().and_then(|o| {
+        let end = o.checked_add(usize::try_from(ext.length).ok()?)?;
+        bytes.get(o..end)
+    });
+    match range {
+        Some(r) => Ok(r.to_vec()),
+        None => Err(err(
             OnnxErrorKind::ExternalData,
-            format!("external data of tensor '{name}' (offset {offset}) runs past the end of '{location}' ({} bytes)", bytes.len()),
+            format!(
+                "external data of tensor '{name}' ({} bytes at offset {}) runs past the end of '{shown}' ({} bytes)",
+                ext.length,
+                ext.offset,
+                bytes.len()
+            ),
             "the .data file does not belong to this model: re-export both together",
         )),
     }
@@ -365,6 +504,21 @@ impl Lowering {
         self.layers.push(Layer::Affine { w, b });
     }
 
+    /// Refuse a layer wider than [`MAX_WIDTH`] before it is built.
+    fn check_width(n: &NodeProto, width: usize) -> Result<(), OnnxError> {
+        if width as u64 > MAX_WIDTH {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} has width {width}, more than ravel's limit of {MAX_WIDTH}",
+                    node_label(n)
+                ),
+                "ravel verifies controllers whose layers have at most 4096 neurons",
+            ));
+        }
+        Ok(())
+    }
+
     fn add_bias(&mut self, bias: DVector<f64>) {
         if let Some(Layer::Affine { b, .. }) = self.layers.last_mut() {
             if b.iter().all(|v| *v == 0.0) && b.len() == bias.len() {
@@ -387,7 +541,7 @@ impl Lowering {
                 format!(
                     "{} is in operator domain '{}'",
                     node_label(n),
-                    n.domain.clone().unwrap_or_default()
+                    sanitize(n.domain.as_deref().unwrap_or_default())
                 ),
                 format!("ravel supports the default ONNX domain: {SUPPORTED_OPS}"),
             ));
@@ -402,7 +556,7 @@ impl Lowering {
                 )
             })?;
             let t = tensor_values(t, &ExternalFiles::new())?;
-            check_finite(&format!("constant '{out}'"), &t)?;
+            check_finite(&format!("constant '{}'", sanitize(&out)), &t)?;
             self.consts.insert(out, t);
             return Ok(());
         }
@@ -414,7 +568,7 @@ impl Lowering {
                 format!(
                     "{} does not consume the running value '{}'",
                     node_label(n),
-                    self.current
+                    sanitize(&self.current)
                 ),
                 "export a plain feed-forward network on one input (constant folding on)",
             ));
@@ -435,7 +589,11 @@ impl Lowering {
                 let bt = self.consts.get(&bname).cloned().ok_or_else(|| {
                     err(
                         OnnxErrorKind::Unsupported,
-                        format!("{} has a non-constant weight '{bname}'", node_label(n)),
+                        format!(
+                            "{} has a non-constant weight '{}'",
+                            node_label(n),
+                            sanitize(&bname)
+                        ),
                         "weights must be initializers",
                     )
                 })?;
@@ -451,6 +609,7 @@ impl Lowering {
                     ));
                 }
                 let (r, c) = (bt.dims[0], bt.dims[1]);
+                Self::check_width(n, r.max(c))?;
                 let m = DMatrix::from_row_slice(r, c, &bt.data);
                 let alpha = attr_f(n, "alpha", 1.0);
                 let beta = attr_f(n, "beta", 1.0);
@@ -479,7 +638,11 @@ impl Lowering {
                     let ct = self.consts.get(cname).cloned().ok_or_else(|| {
                         err(
                             OnnxErrorKind::Unsupported,
-                            format!("{} has a non-constant bias '{cname}'", node_label(n)),
+                            format!(
+                                "{} has a non-constant bias '{}'",
+                                node_label(n),
+                                sanitize(cname)
+                            ),
                             "biases must be initializers",
                         )
                     })?;
@@ -500,6 +663,7 @@ impl Lowering {
                         "export Linear layers as x @ W",
                     ));
                 }
+                Self::check_width(n, t.dims[0].max(t.dims[1]))?;
                 let w = DMatrix::from_row_slice(t.dims[0], t.dims[1], &t.data).transpose();
                 self.expect_width(n, w.ncols())?;
                 let outputs = w.nrows();
@@ -508,6 +672,7 @@ impl Lowering {
             "Add" | "Sub" | "Mul" | "Div" => {
                 let (t, const_first) = self.const_operand(n)?;
                 let v = self.broadcast(n, &t)?;
+                Self::check_width(n, v.len())?;
                 let w = v.len();
                 match (op.as_str(), const_first) {
                     ("Add", _) => self.add_bias(v),
@@ -555,8 +720,9 @@ impl Lowering {
                 return Err(err(
                     OnnxErrorKind::Unsupported,
                     format!(
-                        "{} uses operator '{other}', which ravel does not support",
-                        node_label(n)
+                        "{} uses operator '{}', which ravel does not support",
+                        node_label(n),
+                        sanitize(other)
                     ),
                     format!("supported operators: {SUPPORTED_OPS}"),
                 ))
@@ -595,7 +761,30 @@ fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
             "the training diverged or the export is corrupt; retrain or re-export",
         ));
     }
+    if let Some(i) = t.data.iter().position(|v| v.abs() > MAX_MAGNITUDE) {
+        return Err(err(
+            OnnxErrorKind::NonFinite,
+            format!(
+                "{what} holds {} at flat index {i}, beyond the magnitudes ravel analyses (±1e15)",
+                crate::diag::compact(t.data[i])
+            ),
+            "the training diverged or the export is corrupt; retrain or re-export",
+        ));
+    }
     Ok(())
+}
+
+/// A prost decode error, cut to its first and last frames: a deeply nested
+/// message otherwise names every enclosing field.
+fn decode_message(e: &prost::DecodeError) -> String {
+    let full = e.to_string();
+    let parts: Vec<&str> = full.split(": ").collect();
+    let short = if parts.len() > 4 {
+        format!("{}: {}: …: {}", parts[0], parts[1], parts[parts.len() - 1])
+    } else {
+        full
+    };
+    sanitize(&short)
 }
 
 /// Decode an ONNX model and lower it to a network.
@@ -603,10 +792,17 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
     let model = ModelProto::decode(bytes).map_err(|e| {
         err(
             OnnxErrorKind::Decode,
-            format!("the file is not a valid ONNX model ({e})"),
-            "check that the path points to an .onnx file exported by PyTorch, Keras or similar",
+            format!("the file is not a valid ONNX model ({})", decode_message(&e)),
+            "check that the path points to an .onnx file exported by PyTorch, Keras or similar, and that it is complete",
         )
     })?;
+    if model.opset_import.is_empty() {
+        return Err(err(
+            OnnxErrorKind::Decode,
+            "the file has no opset_import: it is truncated or not an ONNX model",
+            "every ONNX exporter writes the operator set version; re-export or re-copy the file",
+        ));
+    }
     let graph = model.graph.as_ref().ok_or_else(|| {
         err(
             OnnxErrorKind::Decode,
@@ -614,6 +810,27 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             "check that the path points to an .onnx file",
         )
     })?;
+    if graph.node.len() > MAX_NODES {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph has {} nodes, more than ravel's limit of {MAX_NODES}",
+                graph.node.len()
+            ),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
+    let mut parameters = 0u64;
+    for t in &graph.initializer {
+        parameters = parameters.saturating_add(tensor_size(t)?.0);
+    }
+    if parameters > MAX_PARAMETERS {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the controller has {parameters} weights, more than ravel's limit of {MAX_PARAMETERS}"),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
     let mut consts = HashMap::new();
     for t in &graph.initializer {
         let name = tensor_name(t);
@@ -646,9 +863,20 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             // the product of the fixed dimensions; symbolic ones (batch) count as 1
             s.dim
                 .iter()
-                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as usize)
-                .product::<usize>()
+                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as u64)
+                .try_fold(1u64, |a, d| a.checked_mul(d).filter(|p| *p <= MAX_WIDTH))
         });
+    let declared = match declared {
+        Some(None) => {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("the graph input is wider than ravel's limit of {MAX_WIDTH}"),
+                "ravel verifies controllers with at most 4096 inputs",
+            ))
+        }
+        Some(Some(w)) => Some(w as usize),
+        None => None,
+    };
     let mut low = Lowering {
         consts,
         current: input.name.clone().unwrap_or_default(),
@@ -667,8 +895,9 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         return Err(err(
             OnnxErrorKind::Unsupported,
             format!(
-                "the graph output '{output}' is not the end of the layer chain ('{}')",
-                low.current
+                "the graph output '{}' is not the end of the layer chain ('{}')",
+                sanitize(&output),
+                sanitize(&low.current)
             ),
             "export the controller with a single output",
         ));

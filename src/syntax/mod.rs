@@ -104,10 +104,40 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
     };
     let mut names: Vec<&str> = expected.iter().filter_map(rule_name).collect();
     names.dedup();
+    // a character that can never start or continue a token (a non-ASCII
+    // letter in a name, a stray control character): point at it alone
+    // (pest reports the start of the statement that failed, so the rest of
+    // its line is searched, up to a comment or a string)
+    let rest = &source[pos..];
+    let line_end = rest.find(['\n', '\r', '"']).unwrap_or(rest.len());
+    let line = &rest[..line_end];
+    let line = &line[..line.find("//").unwrap_or(line.len())];
+    let line = &line[..line.find("/*").unwrap_or(line.len())];
+    let bad = line
+        .char_indices()
+        .find(|(_, c)| !c.is_ascii() || (c.is_control() && *c != '\t'));
+    if let Some((off, c)) = bad {
+        let at = pos + off;
+        let shown = crate::diag::sanitize(&c.to_string());
+        let (message, hint) = if c.is_alphanumeric() {
+            (
+                format!("`{shown}` cannot appear in a name"),
+                "names are ASCII: letters, digits and `_`, starting with a letter or `_`",
+            )
+        } else {
+            (
+                format!("unexpected character `{shown}` (U+{:04X})", c as u32),
+                "outside comments and strings, specs use ASCII characters only",
+            )
+        };
+        return Diagnostic::new(Code::Syntax, Span::new(at, at + c.len_utf8()), message)
+            .label("not allowed here")
+            .hint(hint);
+    }
     let found = source[pos..]
         .split_whitespace()
         .next()
-        .map(|t| t.chars().take(20).collect::<String>());
+        .map(|t| crate::diag::sanitize(&t.chars().take(20).collect::<String>()));
     let message = match &found {
         Some(t) => format!("unexpected `{t}`"),
         None => "unexpected end of file".to_string(),

@@ -1,0 +1,53 @@
+//! ravel's documented limits (docs/language.md, "Limits"), in one place.
+//!
+//! They are chosen so that an accepted spec fits in memory on a small
+//! machine: the largest allocations of an accepted spec are a plant matrix
+//! (at most `MAX_DIM²` numbers, 8 MB), the controller's weights (at most
+//! `MAX_PARAMETERS` numbers, 128 MB, and as many bytes read from files), and
+//! the stored reachable sets (at most `MAX_STORED_NUMBERS` bounds, 320 MB
+//! with both ends); together well under 1 GiB. Every size is checked with
+//! overflow-safe arithmetic before anything of that size is allocated.
+//! Magnitudes are limited so that sums and products of a few accepted
+//! numbers stay far from the `f64` range; whatever still overflows during
+//! an analysis is caught where it is produced and reported as UNSURE.
+
+/// Largest absolute value of a number in a spec (matrices, sets, noise,
+/// limits, `dt`) and of a controller weight.
+pub const MAX_MAGNITUDE: f64 = 1e15;
+/// Largest state, control or observation dimension, and `eye`/`zeros` size.
+pub const MAX_DIM: u64 = 1000;
+/// Largest horizon.
+pub const MAX_HORIZON: u64 = 10_000;
+/// Largest number of Monte Carlo samples.
+pub const MAX_SAMPLES: u64 = 1_000_000;
+/// Largest number of simulated steps, `samples × horizon`.
+pub const MAX_SIMULATED_STEPS: u64 = 50_000_000;
+/// Largest number of cells of a uniform grid.
+pub const MAX_CELLS: u64 = 100_000;
+/// Largest call budget of a guided partitioner.
+pub const MAX_CALLS: u64 = 100_000;
+/// Largest number of stored set bounds, `cells × (horizon + 1) × state dimension`
+/// (for a guided partitioner, `calls` stands for `cells`).
+pub const MAX_STORED_NUMBERS: u64 = 20_000_000;
+/// Largest size of a spec file in bytes.
+pub const MAX_SPEC_BYTES: u64 = 16 << 20;
+/// Largest size of a controller file, and of all its external data together, in bytes.
+pub const MAX_CONTROLLER_BYTES: u64 = 512 << 20;
+/// Largest number of elements of one ONNX tensor.
+pub const MAX_TENSOR_ELEMENTS: u64 = 1 << 24;
+/// Largest number of weights of a controller, all tensors together.
+pub const MAX_PARAMETERS: u64 = 1 << 24;
+/// Largest width of a controller layer (its input included).
+pub const MAX_WIDTH: u64 = 4096;
+/// Largest number of nodes of an ONNX graph.
+pub const MAX_NODES: usize = 4096;
+
+/// `a × b × …` if it does not overflow `u64`.
+pub fn product(factors: &[u64]) -> Option<u64> {
+    factors.iter().try_fold(1u64, |acc, f| acc.checked_mul(*f))
+}
+
+/// `product(factors) ≤ limit`, false on overflow.
+pub fn within(factors: &[u64], limit: u64) -> bool {
+    product(factors).is_some_and(|p| p <= limit)
+}

@@ -1,0 +1,129 @@
+//! Overflow never decides a verdict: on plants whose true states (and so
+//! every sound bound) leave the range of `f64`, every propagator × boundary
+//! × partitioner answers UNSURE and names the step where bounds overflowed;
+//! it never reports VERIFIED for a false goal nor FALSIFIED from a
+//! trajectory whose states are not numbers.
+
+use std::path::Path;
+
+use ravel::analysis::closed_loop::Propagator;
+use ravel::execute::{execute, Status};
+use ravel::lower::lower;
+
+/// `x⁺ = 1e9·x + B u`: from `x[0] ∈ [1, 2]` the true states pass 1e300 at
+/// step 34 and stay positive, so the goal (near the origin, at the horizon)
+/// is false and the avoid set (`x[0] ≤ −1`) is never entered.
+fn spec(propagator: &str, boundary: &str, partitioner: &str, horizon: usize) -> String {
+    format!(
+        r#"
+system blowup {{
+    state x[2]
+    control u[1]
+    A = [[1e9, 0], [0, 1e9]]
+    B = [[0.5], [1]]
+    u in box([-1, 1])
+}}
+controller "models/double_integrator.onnx"
+initial X0 = box(x[0] in [1, 2], x[1] in [-0.25, 0.25])
+goal G = box(x[0] in [-1.5, 2.0], x[1] in [-1.5, 0.5])
+avoid negative = {{ x[0] <= -1 }}
+horizon {horizon}
+analysis {{
+    propagator {propagator}
+    partitioner {partitioner}
+    boundary {boundary}
+    samples 64
+}}
+"#
+    )
+}
+
+fn run(src: &str) -> ravel::execute::Outcome {
+    let checked = ravel::front_end(
+        src,
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+        &ravel::cli::read_request,
+    )
+    .unwrap_or_else(|d| panic!("spec does not check: {d:?}\n{src}"));
+    let plan = lower(&checked);
+    execute(&plan, &|| 0.0)
+}
+
+#[test]
+fn every_method_answers_unsure_with_the_overflow_step() {
+    let boundaries = ["box", "polytope 8", "hull"];
+    let partitioners = [
+        "none",
+        "uniform [2, 2]",
+        "gsg (calls 6)",
+        "sg (calls 6)",
+        "property (calls 6)",
+    ];
+    for prop in Propagator::ALL {
+        for boundary in boundaries {
+            for part in partitioners {
+                // Reach-SDP is slow: one partitioner besides none is enough for it
+                if prop == Propagator::ReachSdp && !matches!(part, "none" | "uniform [2, 2]") {
+                    continue;
+                }
+                let src = spec(prop.name(), boundary, part, 40);
+                let out = run(&src);
+                let what = format!("{} / {boundary} / {part}", prop.name());
+                let overflow = out
+                    .overflow
+                    .unwrap_or_else(|| panic!("{what}: no overflow reported"));
+                assert!(overflow <= 40, "{what}: overflow step {overflow}");
+                for p in &out.properties {
+                    assert_eq!(
+                        p.status,
+                        Status::Unsure,
+                        "{what}: {} is {:?}",
+                        p.name,
+                        p.status
+                    );
+                    assert!(p.overflow.is_some(), "{what}: {} names no overflow", p.name);
+                    assert!(!p.margin.is_nan(), "{what}: NaN margin");
+                }
+                for (t, b) in out.reach.iter().enumerate() {
+                    assert!(
+                        b.lo.iter().chain(&b.hi).all(|v| !v.is_nan()),
+                        "{what}: NaN bound at step {t}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Before the overflow the same loop is falsified by a real trajectory (the
+/// goal is checked at the horizon, which is still representable).
+#[test]
+fn a_goal_missed_before_the_overflow_is_still_falsified() {
+    for prop in ["reach_lp", "crown_unrolled", "ibp_separate"] {
+        let out = run(&spec(prop, "box", "none", 3));
+        assert_eq!(out.overflow, None, "{prop}");
+        assert_eq!(out.properties[0].status, Status::Falsified, "{prop}");
+        let tr = out.properties[0]
+            .counterexample
+            .as_ref()
+            .expect("trajectory");
+        assert!(tr.states.iter().flatten().all(|v| v.is_finite()));
+    }
+}
+
+/// An avoid property whose steps all come before the overflow is still
+/// proven; the goal at the horizon, after it, is not.
+#[test]
+fn properties_before_the_overflow_are_still_proven() {
+    let src = spec("reach_lp", "box", "none", 40).replace(
+        "avoid negative = { x[0] <= -1 }",
+        "avoid negative = { x[0] <= -1 } at steps [1, 5]",
+    );
+    let out = run(&src);
+    assert!(out.overflow.is_some());
+    let goal = &out.properties[0];
+    let avoid = &out.properties[1];
+    assert_eq!(goal.status, Status::Unsure);
+    assert_eq!(avoid.status, Status::Verified, "{avoid:?}");
+    assert_eq!(avoid.overflow, None);
+}

@@ -42,7 +42,51 @@ enum Cmd {
         /// Include timing in JSON output.
         #[arg(long)]
         timing: bool,
+        /// Stop each spec's analysis after this many seconds, soundly: what
+        /// is not finished is UNSURE and the report says so.
+        #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+        time_limit: Option<f64>,
     },
+}
+
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err("expected a non-negative number of seconds".into()),
+    }
+}
+
+/// A progress line on standard error (only when it is a terminal), redrawn
+/// at most four times a second and erased when the spec is done.
+struct ProgressLine<'a> {
+    name: &'a str,
+    started: Instant,
+    last: std::cell::Cell<f64>,
+}
+
+impl ProgressLine<'_> {
+    fn show(&self, p: crate::execute::Progress) {
+        let now = self.started.elapsed().as_secs_f64();
+        if now - self.last.get() < 0.25 || now < 0.5 {
+            return;
+        }
+        self.last.set(now);
+        let what = match p.phase {
+            crate::execute::Phase::Sampling => "simulating",
+            crate::execute::Phase::Cells => "propagating cell",
+        };
+        let of = p.total.map_or(String::new(), |t| format!(" of {t}"));
+        err(&format!(
+            "\r\x1b[2K{}: {what} {}{of} ({now:.0} s)",
+            self.name, p.done
+        ));
+    }
+
+    fn clear(&self) {
+        if self.last.get() > 0.0 {
+            err("\r\x1b[2K");
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -232,7 +276,9 @@ pub fn main() -> ExitCode {
             format,
             no_timing,
             timing,
+            time_limit,
         } => {
+            let show_progress = std::io::stderr().is_terminal();
             let mut worst: Option<Status> = None;
             let mut input_error = false;
             let mut results = Vec::new();
@@ -264,7 +310,24 @@ pub fn main() -> ExitCode {
                 };
                 let started = Instant::now();
                 let plan = crate::lower::lower(&checked);
-                let outcome = crate::execute::execute(&plan, &|| started.elapsed().as_secs_f64());
+                let line = ProgressLine {
+                    name: &l.name,
+                    started,
+                    last: std::cell::Cell::new(0.0),
+                };
+                let outcome = crate::execute::execute_with(
+                    &plan,
+                    &crate::execute::Control {
+                        elapsed: &|| started.elapsed().as_secs_f64(),
+                        time_limit,
+                        progress: &|p| {
+                            if show_progress {
+                                line.show(p);
+                            }
+                        },
+                    },
+                );
+                line.clear();
                 let ms = started.elapsed().as_secs_f64() * 1e3;
                 worst = worst.max(Some(outcome.verdict));
                 match format {

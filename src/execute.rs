@@ -14,7 +14,7 @@
 
 use nalgebra::DMatrix;
 
-use crate::analysis::closed_loop::{Boundary, Propagator, Step};
+use crate::analysis::closed_loop::{Boundary, Cut, Propagator, Step};
 use crate::analysis::partition::{refine, Budget, Stop, Strategy};
 use crate::analysis::shape::{
     convex_hull, excess, extent_of_points, hull_directions, support_of_points, HULL_MIN_ANGLE,
@@ -97,8 +97,8 @@ pub struct PropertyResult {
     /// The counterexample (FALSIFIED only).
     pub counterexample: Option<Trajectory>,
     /// UNSURE only: the first step (at or before the property's last step)
-    /// at which a reachable set's bounds overflowed `f64`, if one did.
-    pub overflow: Option<usize>,
+    /// whose set is not a computed bound, and why (overflow or time limit).
+    pub cut: Option<(usize, Cut)>,
 }
 
 /// Everything execution found.
@@ -122,9 +122,13 @@ pub struct Outcome {
     pub verdict: Status,
     /// Number of closed-loop propagator calls.
     pub propagator_calls: usize,
-    /// The first step at which some cell's bounds overflowed `f64` (its
-    /// set, and every later one, is then the whole space).
-    pub overflow: Option<usize>,
+    /// The first step at which some cell's set is not a computed bound
+    /// (its bounds overflowed, or the time limit stopped the analysis): that
+    /// set and every later one of the cell are the whole space.
+    pub cut: Option<(usize, Cut)>,
+    /// Monte Carlo samples actually drawn (fewer than planned only when the
+    /// time limit stopped sampling).
+    pub samples_drawn: usize,
 }
 
 /// Tolerance for calling a simulated violation genuine: simulations run in
@@ -138,25 +142,45 @@ fn tolerance(x: &[f64], rhs_scale: f64) -> f64 {
 /// cell containing this one), every set is intersected with the parent's, so
 /// a partition is never looser than the cell it refines.
 pub fn propagate_cell(plan: &Plan, cell: &Region, parent: Option<&[Step]>) -> Vec<Step> {
+    propagate_cell_until(plan, cell, parent, &|| false)
+}
+
+/// [`propagate_cell`], asking `stop` before each step whether the time is
+/// up; the steps left are then [`Step::timed_out`] (the whole space).
+pub fn propagate_cell_until(
+    plan: &Plan,
+    cell: &Region,
+    parent: Option<&[Step]>,
+    stop: &dyn Fn() -> bool,
+) -> Vec<Step> {
     let cl = &plan.closed_loop;
+    let n = cl.states();
     if plan.propagator == Propagator::CrownUnrolled {
         let parent: Option<Vec<Region>> = parent.map(|p| p.iter().map(|s| s.set.clone()).collect());
-        return cl.unrolled(cell, plan.horizon, &plan.boundary, parent.as_deref());
+        return cl.unrolled(cell, plan.horizon, &plan.boundary, parent.as_deref(), stop);
     }
     let mut steps = Vec::with_capacity(plan.horizon + 1);
-    steps.push(Step {
-        set: cell.clone(),
-        issues: Vec::new(),
-    });
+    steps.push(Step::new(cell.clone(), Vec::new()));
     for t in 0..plan.horizon {
-        if steps[t].is_overflow() {
+        match steps[t].cut() {
             // nothing bounded is left to propagate: every later set is ℝⁿ too
-            steps.push(Step::overflowed(cl.states(), Vec::new()));
-            continue;
+            Some(Cut::Overflow) => {
+                steps.push(Step::overflowed(n, Vec::new()));
+                continue;
+            }
+            Some(Cut::TimeLimit) => {
+                steps.push(Step::timed_out(n));
+                continue;
+            }
+            None if stop() => {
+                steps.push(Step::timed_out(n));
+                continue;
+            }
+            None => {}
         }
         let mut next = cl.step(t, &steps[t].set, plan.propagator, &plan.boundary);
         if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
-            if !next.is_overflow() {
+            if next.cut().is_none() {
                 next.set = next.set.intersect(&p.set);
             }
         }
@@ -165,9 +189,11 @@ pub fn propagate_cell(plan: &Plan, cell: &Region, parent: Option<&[Step]>) -> Ve
     steps
 }
 
-/// The first step whose set overflowed, if any.
-fn first_overflow(sets: &[Step]) -> Option<usize> {
-    sets.iter().position(Step::is_overflow)
+/// The first step whose set is not a computed bound, and why.
+fn first_cut(sets: &[Step]) -> Option<(usize, Cut)> {
+    sets.iter()
+        .enumerate()
+        .find_map(|(t, s)| s.cut().map(|c| (t, c)))
 }
 
 /// A margin that is NaN (an overflow inside a margin computation) proves
@@ -198,7 +224,7 @@ fn cell_margin(prop: &Property, sets: &[Step]) -> (f64, usize, bool) {
     match &prop.kind {
         PropertyKind::Goal(g) => {
             let t = sets.len() - 1;
-            if sets[t].is_overflow() {
+            if sets[t].cut().is_some() {
                 return (f64::NEG_INFINITY, t, false);
             }
             let (m, issue) = containment_margin(g, &sets[t].set);
@@ -207,7 +233,7 @@ fn cell_margin(prop: &Property, sets: &[Step]) -> (f64, usize, bool) {
         PropertyKind::Avoid { members, steps } => {
             let mut best = (f64::INFINITY, steps.0, false);
             for (t, step) in sets.iter().enumerate().take(steps.1 + 1).skip(steps.0) {
-                if step.is_overflow() {
+                if step.cut().is_some() {
                     if best.0 > f64::NEG_INFINITY {
                         best = (f64::NEG_INFINITY, t, best.2);
                     }
@@ -321,9 +347,11 @@ struct MonteCarlo {
     /// for a polytope boundary: per step, the largest and smallest value of
     /// each facet direction (box rows first) over the simulated states
     facet_range: Vec<(Vec<f64>, Vec<f64>)>,
+    /// samples drawn (fewer than planned when the time limit stopped sampling)
+    drawn: usize,
 }
 
-fn monte_carlo(plan: &Plan) -> MonteCarlo {
+fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
     let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
@@ -340,7 +368,19 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
         None => Vec::new(),
     };
     let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
+    let mut drawn = 0;
     for k in 0..plan.samples {
+        if k % 64 == 0 {
+            if ctl.out_of_time() {
+                break;
+            }
+            (ctl.progress)(Progress {
+                phase: Phase::Sampling,
+                done: k,
+                total: Some(plan.samples),
+            });
+        }
+        drawn += 1;
         let Some(tr) = simulate(plan, k) else {
             continue;
         };
@@ -416,6 +456,7 @@ fn monte_carlo(plan: &Plan) -> MonteCarlo {
         worst,
         points,
         facet_range,
+        drawn,
     }
 }
 
@@ -459,10 +500,64 @@ fn cell_region(initial: &Region, cell: &IBox) -> Region {
     }
 }
 
-/// Execute a plan. `elapsed` returns the seconds since the run started; it
-/// is consulted only by a partitioner with a time budget.
+/// What the caller lets execution know and do while it runs (the library
+/// has no clock and no terminal of its own).
+pub struct Control<'a> {
+    /// Seconds since the run started.
+    pub elapsed: &'a dyn Fn() -> f64,
+    /// Stop after this many seconds, soundly: samples not drawn are not
+    /// drawn, steps not propagated are the whole space ([`Cut::TimeLimit`]),
+    /// and every property depending on them is UNSURE.
+    pub time_limit: Option<f64>,
+    /// Told now and then what is being done (for a progress line).
+    pub progress: &'a dyn Fn(Progress),
+}
+
+impl Control<'_> {
+    fn out_of_time(&self) -> bool {
+        self.time_limit.is_some_and(|l| (self.elapsed)() >= l)
+    }
+}
+
+/// What execution is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// Monte Carlo simulation.
+    Sampling,
+    /// Propagating partition cells.
+    Cells,
+}
+
+/// A progress report: `done` of `total` items of a phase.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Progress {
+    /// The phase.
+    pub phase: Phase,
+    /// Items finished.
+    pub done: usize,
+    /// Items planned, when known (a guided partitioner's is its call budget at most).
+    pub total: Option<usize>,
+}
+
+/// Execute a plan with no time limit and no progress reports. `elapsed`
+/// returns the seconds since the run started; it is consulted only by a
+/// partitioner with a time budget.
 pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
-    let mc = monte_carlo(plan);
+    execute_with(
+        plan,
+        &Control {
+            elapsed,
+            time_limit: None,
+            progress: &|_| {},
+        },
+    )
+}
+
+/// Execute a plan under a [`Control`].
+pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
+    let elapsed = ctl.elapsed;
+    let stop = || ctl.out_of_time();
+    let mc = monte_carlo(plan, ctl);
     // a hull boundary takes its directions from the samples of each step
     let resolved;
     let plan = if plan.boundary == Boundary::Hull {
@@ -529,11 +624,20 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     regions
                 };
                 // the whole initial set first: every cell is kept inside it
-                let root = (regions.len() > 1).then(|| propagate_cell(plan, &plan.initial, None));
+                let root = (regions.len() > 1)
+                    .then(|| propagate_cell_until(plan, &plan.initial, None, &stop));
                 calls = regions.len() + usize::from(root.is_some());
                 let sets = regions
                     .iter()
-                    .map(|c| propagate_cell(plan, c, root.as_deref()))
+                    .enumerate()
+                    .map(|(i, c)| {
+                        (ctl.progress)(Progress {
+                            phase: Phase::Cells,
+                            done: i,
+                            total: Some(regions.len()),
+                        });
+                        propagate_cell_until(plan, c, root.as_deref(), &stop)
+                    })
                     .collect();
                 (regions.iter().map(Region::bbox).collect(), sets, Stop::Grid)
             }
@@ -543,7 +647,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     Guide::Gsg | Guide::Property => Strategy::Gsg,
                 };
                 // nothing left to decide: one call for the report's sets
-                let budget = if *guide == Guide::Property && !undecided.iter().any(|u| *u) {
+                let mut budget = if *guide == Guide::Property && !undecided.iter().any(|u| *u) {
                     Budget {
                         calls: 1,
                         ..*budget
@@ -551,6 +655,11 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                 } else {
                     *budget
                 };
+                // the run's time limit bounds the refinement too
+                if let Some(limit) = ctl.time_limit {
+                    budget.seconds = Some(budget.seconds.map_or(limit, |s| s.min(limit)));
+                }
+                let evaluated = std::cell::Cell::new(0usize);
                 let root = plan.initial.bbox();
                 let r = refine(
                     &root,
@@ -559,16 +668,21 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     &mut |c, parent: Option<&Option<Vec<Step>>>| {
                         let region = cell_region(&plan.initial, c);
                         if certainly_empty(&region) {
-                            let sets = vec![
-                                Step {
-                                    set: region,
-                                    issues: Vec::new()
-                                };
-                                plan.horizon + 1
-                            ];
+                            let sets = vec![Step::new(region, Vec::new()); plan.horizon + 1];
                             return (Some(sets), f64::NEG_INFINITY);
                         }
-                        let sets = propagate_cell(plan, &region, parent.and_then(|p| p.as_deref()));
+                        (ctl.progress)(Progress {
+                            phase: Phase::Cells,
+                            done: evaluated.get(),
+                            total: Some(budget.calls),
+                        });
+                        evaluated.set(evaluated.get() + 1);
+                        let sets = propagate_cell_until(
+                            plan,
+                            &region,
+                            parent.and_then(|p| p.as_deref()),
+                            &stop,
+                        );
                         let score = match guide {
                             Guide::Sg | Guide::Gsg => (0..=plan.horizon)
                                 .map(|t| match &shaped[t] {
@@ -655,7 +769,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                 PropertyKind::Avoid { steps, .. } => steps.0,
             };
             let mut issue = false;
-            let mut overflow: Option<usize> = None;
+            let mut cut: Option<(usize, Cut)> = None;
             for c in &cells {
                 let (m, t, i) = cell_margin(prop, c);
                 issue |= i;
@@ -663,11 +777,13 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     margin = sane(m);
                     step = t;
                 }
-                if let Some(o) = first_overflow(c).filter(|o| *o <= prop.last_step()) {
-                    overflow = Some(overflow.map_or(o, |p| p.min(o)));
+                if let Some(o) = first_cut(c).filter(|o| o.0 <= prop.last_step()) {
+                    if cut.is_none_or(|p| o.0 < p.0) {
+                        cut = Some(o);
+                    }
                 }
             }
-            let proven = proves(prop, margin) && !issue && overflow.is_none();
+            let proven = proves(prop, margin) && !issue && cut.is_none();
             match worst {
                 // A genuine counterexample always wins; a proof next to one would be a soundness bug.
                 Some((depth, k, t)) => {
@@ -679,7 +795,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                         margin: -depth,
                         step: *t,
                         counterexample: simulate(plan, *k),
-                        overflow: None,
+                        cut: None,
                     }
                 }
                 None => PropertyResult {
@@ -693,12 +809,15 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
                     margin,
                     step,
                     counterexample: None,
-                    overflow,
+                    cut,
                 },
             }
         })
         .collect();
-    let overflow = cells.iter().filter_map(|c| first_overflow(c)).min();
+    let cut = cells
+        .iter()
+        .filter_map(|c| first_cut(c))
+        .min_by_key(|(t, _)| *t);
     let verdict = properties
         .iter()
         .map(|p| p.status)
@@ -717,6 +836,7 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
         properties,
         verdict,
         propagator_calls: calls * plan.horizon,
-        overflow,
+        cut,
+        samples_drawn: mc.drawn,
     }
 }

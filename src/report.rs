@@ -6,7 +6,7 @@
 
 use serde_json::{json, Value};
 
-use crate::analysis::closed_loop::{Boundary, ModelError};
+use crate::analysis::closed_loop::{Boundary, Cut, ModelError};
 use crate::analysis::partition::Stop;
 use crate::execute::{Kind, Outcome, Status, Trajectory};
 use crate::lower::{Partitioner, Plan};
@@ -158,9 +158,23 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
             list.join(", ")
         );
     }
-    if let Some(t) = out.overflow {
+    match out.cut {
+        Some((t, Cut::Overflow)) => {
+            s += &format!(
+                "  bounds overflowed at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
+            );
+        }
+        Some((t, Cut::TimeLimit)) => {
+            s += &format!(
+                "  the time limit stopped the analysis at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
+            );
+        }
+        None => {}
+    }
+    if out.samples_drawn < plan.samples {
         s += &format!(
-            "  bounds overflowed at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
+            "  the time limit stopped Monte Carlo after {} of {} samples\n",
+            out.samples_drawn, plan.samples
         );
     }
     s += "\n  properties\n";
@@ -190,11 +204,21 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 num(p.margin),
                 p.step
             ),
-            (Status::Unsure, _) if p.overflow.is_some() => format!(
-                "bounds overflowed at step {}: the reachable set no longer fits in f64 numbers, so nothing is proven from there on; {}",
-                p.overflow.unwrap_or_default(),
-                no_witness(if p.kind == Kind::Goal { "misses" } else { "enters" })
-            ),
+            (Status::Unsure, _) if p.cut.is_some() => {
+                let (t, cut) = p.cut.unwrap_or((0, Cut::Overflow));
+                let what = match cut {
+                    Cut::Overflow => format!("bounds overflowed at step {t}: the reachable set no longer fits in f64 numbers"),
+                    Cut::TimeLimit => format!("the time limit stopped the analysis at step {t}"),
+                };
+                format!(
+                    "{what}, so nothing is proven from there on; {}",
+                    no_witness(if p.kind == Kind::Goal {
+                        "misses"
+                    } else {
+                        "enters"
+                    })
+                )
+            }
             (Status::Unsure, Kind::Goal) => format!(
                 "the reachable box at step {} sticks out by {}; {}",
                 p.step,
@@ -286,6 +310,10 @@ fn box_json(b: &IBox) -> Value {
     json!({ "lo": b.lo.iter().map(|v| f(*v)).collect::<Vec<_>>(), "hi": b.hi.iter().map(|v| f(*v)).collect::<Vec<_>>() })
 }
 
+fn cut_json((step, cut): (usize, Cut)) -> Value {
+    json!({ "step": step, "cause": cut.as_str() })
+}
+
 fn traj_json(t: &Trajectory) -> Value {
     json!({
         "states": t.states,
@@ -321,7 +349,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
                 "margin": f(p.margin),
                 "step": p.step,
                 "counterexample": p.counterexample.as_ref().map(traj_json),
-                "overflow_step": p.overflow,
+                "unfinished": p.cut.map(cut_json),
             })
         })
         .collect();
@@ -361,7 +389,8 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "properties": props,
         "propagator_calls": out.propagator_calls,
         "solver_issues": out.solver_issues.iter().map(|(t, i)| json!({ "step": t, "status": i.as_str() })).collect::<Vec<_>>(),
-        "overflow_step": out.overflow,
+        "unfinished": out.cut.map(cut_json),
+        "samples_drawn": out.samples_drawn,
     });
     if let Some(ms) = timing_ms {
         v["time_ms"] = json!(ms);

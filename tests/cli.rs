@@ -169,3 +169,75 @@ fn counterexamples_are_real_trajectories() {
         "ends outside G: {last:?}"
     );
 }
+
+/// A closed standard output ends the run quietly: no panic message, exit
+/// code 141 (or 0 if everything was written before the pipe closed).
+#[test]
+fn a_closed_pipe_ends_the_run_quietly() {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .args([
+            "verify",
+            "specs/quadrotor_partitioned.ravel",
+            "--format",
+            "json",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("exits");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        matches!(out.status.code(), Some(141) | Some(0)),
+        "{:?}",
+        out.status
+    );
+}
+
+#[test]
+fn a_time_limit_stops_soundly() {
+    let (code, out, _) = ravel(&[
+        "verify",
+        "specs/double_integrator.ravel",
+        "--time-limit",
+        "0",
+        "--no-timing",
+    ]);
+    assert_eq!(code, 3, "{out}");
+    assert!(
+        out.contains("the time limit stopped the analysis at step 1"),
+        "{out}"
+    );
+    assert!(out.contains("after 0 of 2000 samples"), "{out}");
+    for bad in ["-1", "nan", "inf", "soon"] {
+        assert_eq!(
+            ravel(&[
+                "verify",
+                "specs/double_integrator.ravel",
+                "--time-limit",
+                bad
+            ])
+            .0,
+            2,
+            "{bad}"
+        );
+    }
+    let (code, out, _) = ravel(&[
+        "verify",
+        "specs/double_integrator.ravel",
+        "--time-limit",
+        "0",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(code, 3);
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let r = &v["results"][0];
+    assert_eq!(r["unfinished"]["cause"], "time_limit");
+    assert_eq!(r["properties"][0]["unfinished"]["step"], 1);
+    assert_eq!(r["samples_drawn"], 0);
+}

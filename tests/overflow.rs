@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use ravel::analysis::closed_loop::Propagator;
+use ravel::analysis::closed_loop::{Cut, Propagator};
 use ravel::execute::{execute, Status};
 use ravel::lower::lower;
 
@@ -69,9 +69,10 @@ fn every_method_answers_unsure_with_the_overflow_step() {
                 let src = spec(prop.name(), boundary, part, 40);
                 let out = run(&src);
                 let what = format!("{} / {boundary} / {part}", prop.name());
-                let overflow = out
-                    .overflow
+                let (overflow, cause) = out
+                    .cut
                     .unwrap_or_else(|| panic!("{what}: no overflow reported"));
+                assert_eq!(cause, Cut::Overflow, "{what}");
                 assert!(overflow <= 40, "{what}: overflow step {overflow}");
                 for p in &out.properties {
                     assert_eq!(
@@ -81,7 +82,7 @@ fn every_method_answers_unsure_with_the_overflow_step() {
                         p.name,
                         p.status
                     );
-                    assert!(p.overflow.is_some(), "{what}: {} names no overflow", p.name);
+                    assert!(p.cut.is_some(), "{what}: {} names no overflow", p.name);
                     assert!(!p.margin.is_nan(), "{what}: NaN margin");
                 }
                 for (t, b) in out.reach.iter().enumerate() {
@@ -101,7 +102,7 @@ fn every_method_answers_unsure_with_the_overflow_step() {
 fn a_goal_missed_before_the_overflow_is_still_falsified() {
     for prop in ["reach_lp", "crown_unrolled", "ibp_separate"] {
         let out = run(&spec(prop, "box", "none", 3));
-        assert_eq!(out.overflow, None, "{prop}");
+        assert_eq!(out.cut, None, "{prop}");
         assert_eq!(out.properties[0].status, Status::Falsified, "{prop}");
         let tr = out.properties[0]
             .counterexample
@@ -120,10 +121,62 @@ fn properties_before_the_overflow_are_still_proven() {
         "avoid negative = { x[0] <= -1 } at steps [1, 5]",
     );
     let out = run(&src);
-    assert!(out.overflow.is_some());
+    assert!(out.cut.is_some());
     let goal = &out.properties[0];
     let avoid = &out.properties[1];
     assert_eq!(goal.status, Status::Unsure);
     assert_eq!(avoid.status, Status::Verified, "{avoid:?}");
-    assert_eq!(avoid.overflow, None);
+    assert_eq!(avoid.cut, None);
+}
+
+/// A time limit that is already spent stops every method soundly: no
+/// samples, every step after the initial set is the whole space, every
+/// property UNSURE naming the time limit.
+#[test]
+fn a_spent_time_limit_leaves_everything_unsure() {
+    use ravel::execute::{execute_with, Control};
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator.ravel"),
+    )
+    .expect("spec")
+    .replace("\"../models/", "\"models/");
+    for prop in Propagator::ALL {
+        for part in [
+            "none",
+            "uniform [2, 2]",
+            "gsg (calls 6)",
+            "property (calls 6)",
+        ] {
+            let src = src
+                .replace(
+                    "propagator  reach_lp",
+                    &format!("propagator {}", prop.name()),
+                )
+                .replace("partitioner none", &format!("partitioner {part}"));
+            let checked = ravel::front_end(
+                &src,
+                Path::new(env!("CARGO_MANIFEST_DIR")),
+                &ravel::cli::read_request,
+            )
+            .expect("valid");
+            let plan = lower(&checked);
+            let out = execute_with(
+                &plan,
+                &Control {
+                    elapsed: &|| 1.0,
+                    time_limit: Some(0.5),
+                    progress: &|_| {},
+                },
+            );
+            let what = format!("{} / {part}", prop.name());
+            assert_eq!(out.samples_drawn, 0, "{what}");
+            assert_eq!(out.cut, Some((1, Cut::TimeLimit)), "{what}");
+            for p in &out.properties {
+                assert_eq!(p.status, Status::Unsure, "{what}: {}", p.name);
+                assert_eq!(p.cut.map(|c| c.1), Some(Cut::TimeLimit), "{what}");
+            }
+            let text = ravel::report::text("s", &plan, &out, None);
+            assert!(text.contains("time limit"), "{text}");
+        }
+    }
 }

@@ -148,7 +148,7 @@ fn reach(
 ) -> Vec<Region> {
     if prop == Propagator::CrownUnrolled {
         return cl
-            .unrolled(x0, horizon, boundary, None)
+            .unrolled(x0, horizon, boundary, None, &|| false)
             .into_iter()
             .map(|s| s.set)
             .collect();

@@ -155,30 +155,71 @@ impl Boundary {
     }
 }
 
+/// Why a step's set is the whole space instead of a computed bound.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cut {
+    /// A bound overflowed `f64` (or was NaN) at this step.
+    Overflow,
+    /// The run's time limit stopped the propagation before this step.
+    TimeLimit,
+}
+
+impl Cut {
+    /// The name used in the JSON report.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Cut::Overflow => "overflow",
+            Cut::TimeLimit => "time_limit",
+        }
+    }
+}
+
 /// One propagated set and the LP solver issues met computing it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Step {
-    /// The reachable set. Not finite ([`Region::is_finite`]) exactly when a
-    /// bound overflowed: it is then the whole space, and so is every later
-    /// step's set.
+    /// The reachable set: the whole space when `cut` is set (and then for
+    /// every later step too).
     pub set: Region,
     /// Solver statuses that forced a fallback bound (empty when all certified).
     pub issues: Vec<Issue>,
+    /// Why the set is the whole space, if it is.
+    pub cut: Option<Cut>,
 }
 
 impl Step {
+    /// A computed set.
+    pub fn new(set: Region, issues: Vec<Issue>) -> Step {
+        Step {
+            set,
+            issues,
+            cut: None,
+        }
+    }
+
     /// The step of a set whose bounds overflowed: the whole space `ℝⁿ`
-    /// (trivially sound), recognisable by not being finite.
+    /// (trivially sound).
     pub fn overflowed(n: usize, issues: Vec<Issue>) -> Step {
         Step {
             set: Region::Box(IBox::whole(n)),
             issues,
+            cut: Some(Cut::Overflow),
         }
     }
 
-    /// Whether this step's bounds overflowed.
-    pub fn is_overflow(&self) -> bool {
-        !self.set.is_finite()
+    /// A step the time limit left uncomputed: the whole space `ℝⁿ`.
+    pub fn timed_out(n: usize) -> Step {
+        Step {
+            set: Region::Box(IBox::whole(n)),
+            issues: Vec::new(),
+            cut: Some(Cut::TimeLimit),
+        }
+    }
+
+    /// Why this step's set is not a computed bound, if it is not. A set
+    /// that is not finite counts as an overflow whatever produced it.
+    pub fn cut(&self) -> Option<Cut> {
+        self.cut
+            .or_else(|| (!self.set.is_finite()).then_some(Cut::Overflow))
     }
 }
 
@@ -431,10 +472,7 @@ impl ClosedLoop {
                 *u = u.min(s);
             }
         }
-        Step {
-            set: self.region_of(boundary, t + 1, &ub),
-            issues,
-        }
+        Step::new(self.region_of(boundary, t + 1, &ub), issues)
     }
 
     /// Reach-SDP bounds of every facet for states in `x` at step `t` (see
@@ -631,22 +669,28 @@ impl ClosedLoop {
     /// quadratic in the horizon, not exponential.
     /// With `parent` (the sets of a cell containing `x0`, same boundary), each
     /// set is also intersected with the parent's set of the same step.
+    /// `stop` is asked before each step whether to stop (a time limit); the
+    /// remaining steps are then [`Step::timed_out`].
     pub fn unrolled(
         &self,
         x0: &Region,
         horizon: usize,
         boundary: &Boundary,
         parent: Option<&[Region]>,
+        stop: &dyn Fn() -> bool,
     ) -> Vec<Step> {
         let n = self.states();
         let p = self.plant.obs.ncols();
-        let mut steps = vec![Step {
-            set: x0.clone(),
-            issues: Vec::new(),
-        }];
+        let mut steps = vec![Step::new(x0.clone(), Vec::new())];
         let mut boxes = vec![x0.bbox()];
         let mut analyses: Vec<Analysis> = Vec::with_capacity(horizon);
         for t in 0..horizon {
+            if stop() {
+                while steps.len() <= horizon {
+                    steps.push(Step::timed_out(n));
+                }
+                break;
+            }
             let y = self.observation_box(&boxes[t]);
             let hook_issues = std::cell::RefCell::new(Vec::new());
             let analysis = {
@@ -695,7 +739,7 @@ impl ClosedLoop {
                 set = set.intersect(p);
             }
             boxes.push(set.bbox());
-            steps.push(Step { set, issues });
+            steps.push(Step::new(set, issues));
         }
         while steps.len() <= horizon {
             steps.push(Step::overflowed(n, Vec::new()));

@@ -913,6 +913,26 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             "give the graph input a static shape",
         ));
     };
+    // alpha, beta and Div by small constants can scale weights past the
+    // checked initializers: the network itself must be within the limits
+    for l in &low.layers {
+        if let Layer::Affine { w, b } = l {
+            if let Some(v) = w
+                .iter()
+                .chain(b.iter())
+                .find(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
+            {
+                return Err(err(
+                    OnnxErrorKind::NonFinite,
+                    format!(
+                        "a weight of the network is {} after its scaling (Gemm alpha/beta, Mul, Div), beyond the magnitudes ravel analyses (±1e15)",
+                        crate::diag::compact(*v)
+                    ),
+                    "check the normalisation constants and Gemm attributes; re-export the model",
+                ));
+            }
+        }
+    }
     let net = Network::new(inputs, low.layers);
     let outputs = net.outputs();
     Ok(Controller {

@@ -271,10 +271,11 @@ pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, colo
         .with_width(width)
         .with_links(false);
     let mut out = String::new();
+    let shown = displayable(source);
     for d in diags {
         let report = Report {
             d,
-            src: NamedSource::new(name, source.to_string()),
+            src: NamedSource::new(sanitize(name), shown.clone()),
         };
         if handler.render_report(&mut out, &report).is_err() {
             out.push_str(&format!("error[{}]: {}\n", d.code.as_str(), d.message));
@@ -309,6 +310,29 @@ pub fn sanitize(s: &str) -> String {
         let tail = escaped[escaped.len() - KEEP / 2..].concat();
         format!("{head}…{tail}")
     }
+}
+
+/// The source as it may be shown on a terminal: control and invisible
+/// format characters (other than line breaks and tabs) are replaced by
+/// placeholders of the same UTF-8 length, so every span still points at the
+/// same bytes.
+fn displayable(source: &str) -> String {
+    source
+        .chars()
+        .map(|c| {
+            let invisible = (c.is_control() && !matches!(c, '\n' | '\r' | '\t'))
+                || matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{feff}');
+            if !invisible {
+                return c.to_string();
+            }
+            match c.len_utf8() {
+                1 => "?".to_string(),
+                2 => "\u{bf}".to_string(),
+                3 => "\u{fffd}".to_string(),
+                n => "?".repeat(n),
+            }
+        })
+        .collect()
 }
 
 /// A number written compactly for a message: at most about a dozen

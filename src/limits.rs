@@ -4,8 +4,7 @@
 //! machine: the largest allocations of an accepted spec are a plant matrix
 //! (at most `MAX_DIM²` numbers, 8 MB), the controller's weights (at most
 //! `MAX_PARAMETERS` numbers, 128 MB, and as many bytes read from files), and
-//! the stored reachable sets (at most `MAX_STORED_NUMBERS` bounds, 320 MB
-//! with both ends); together well under 1 GiB. Every size is checked with
+//! the stored reachable sets (at most `MAX_STORED_NUMBERS` numbers, 160 MB); together well under 1 GiB. Every size is checked with
 //! overflow-safe arithmetic before anything of that size is allocated.
 //! Magnitudes are limited so that sums and products of a few accepted
 //! numbers stay far from the `f64` range; whatever still overflows during
@@ -26,8 +25,9 @@ pub const MAX_SIMULATED_STEPS: u64 = 50_000_000;
 pub const MAX_CELLS: u64 = 100_000;
 /// Largest call budget of a guided partitioner.
 pub const MAX_CALLS: u64 = 100_000;
-/// Largest number of stored set bounds, `cells × (horizon + 1) × state dimension`
-/// (for a guided partitioner, `calls` stands for `cells`).
+/// Largest number of stored set bounds, `cells × (horizon + 1) × numbers per
+/// set`, where a set has `2n` box bounds and `n + 1` numbers per boundary
+/// direction (for a guided partitioner, `calls` stands for `cells`).
 pub const MAX_STORED_NUMBERS: u64 = 20_000_000;
 /// Largest size of a spec file in bytes.
 pub const MAX_SPEC_BYTES: u64 = 16 << 20;

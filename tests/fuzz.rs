@@ -193,7 +193,7 @@ fn fuzz_front_end() {
     let mut findings = Vec::new();
     let mut cases = 0usize;
     let mut accepted = 0usize;
-    while Instant::now() < deadline {
+    while Instant::now() < deadline && findings.len() < 20 {
         let seed = &seeds[rng.below(seeds.len())];
         let input = mutate(&mut rng, &seeds, seed, true);
         let Ok(source) = String::from_utf8(input.clone()) else {
@@ -253,7 +253,7 @@ fn fuzz_onnx_loader() {
     let mut rng = Rng::new(0x0DD5);
     let mut findings = Vec::new();
     let (mut cases, mut accepted) = (0usize, 0usize);
-    while Instant::now() < deadline {
+    while Instant::now() < deadline && findings.len() < 20 {
         let seed = &seeds[rng.below(seeds.len())];
         let input = mutate(&mut rng, &seeds, seed, false);
         cases += 1;

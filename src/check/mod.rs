@@ -1429,7 +1429,20 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let dt = time.ok().flatten();
     if let (Some(h), Some((_, n))) = (horizon, &state) {
         let span = horizons.first().map_or(whole, |h| h.span);
-        sizes(&mut cx, span, h, *n, samples, partition.as_ref());
+        let directions = match &boundary {
+            Some(Boundary::Polytope(d)) => d.nrows(),
+            Some(Boundary::Hull) => 48,
+            _ => 0,
+        };
+        sizes(
+            &mut cx,
+            span,
+            h,
+            *n,
+            directions,
+            samples,
+            partition.as_ref(),
+        );
     }
 
     if !cx.diags.is_empty() {
@@ -1493,9 +1506,19 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
 }
 
 /// The limits on products of sizes (see [`crate::limits`]): simulated steps
-/// and stored set bounds, reported at the horizon.
-fn sizes(cx: &mut Ctx, span: Span, h: usize, n: usize, samples: usize, part: Option<&Partitioner>) {
-    let (h, n, samples) = (h as u64, n as u64, samples as u64);
+/// and stored set bounds (a set has `2n` box bounds and `n + 1` numbers per
+/// boundary direction), reported at the horizon.
+fn sizes(
+    cx: &mut Ctx,
+    span: Span,
+    h: usize,
+    n: usize,
+    directions: usize,
+    samples: usize,
+    part: Option<&Partitioner>,
+) {
+    let (h, samples) = (h as u64, samples as u64);
+    let n = 2 * n as u64 + directions as u64 * (n as u64 + 1);
     if !within(&[samples, h], MAX_SIMULATED_STEPS) {
         cx.err(
             Diagnostic::new(

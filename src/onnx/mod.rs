@@ -78,6 +78,16 @@ pub struct Controller {
     pub outputs: usize,
 }
 
+/// A tensor shape for a message: at most 8 dimensions are listed.
+fn shape_text<T: std::fmt::Display>(dims: &[T]) -> String {
+    let shown: Vec<String> = dims.iter().take(8).map(|d| d.to_string()).collect();
+    if dims.len() > 8 {
+        format!("[{}, … ({} dimensions)]", shown.join(", "), dims.len())
+    } else {
+        format!("[{}]", shown.join(", "))
+    }
+}
+
 /// An external-data file the loader will need: its normalised location
 /// (relative to the model's folder, without `.` components) and how many
 /// bytes from its start the model's tensors need (the largest
@@ -250,8 +260,8 @@ fn tensor_size(t: &TensorProto) -> Result<(u64, usize), OnnxError> {
                 err(
                     OnnxErrorKind::Malformed,
                     format!(
-                        "tensor '{name}' has more than {MAX_TENSOR_ELEMENTS} elements (shape {:?})",
-                        t.dims
+                        "tensor '{name}' has more than {MAX_TENSOR_ELEMENTS} elements (shape {})",
+                        shape_text(&t.dims)
                     ),
                     "ravel verifies controllers of at most 16777216 weights per tensor",
                 )
@@ -319,9 +329,9 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
                 return Err(err(
                     OnnxErrorKind::Malformed,
                     format!(
-                        "tensor '{name}' has {} bytes of data but its shape {:?} needs {}",
+                        "tensor '{name}' has {} bytes of data but its shape {} needs {}",
                         bytes.len(),
-                        dims,
+                        shape_text(&dims),
                         numel * width
                     ),
                     "re-export the model",
@@ -352,9 +362,9 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
         return Err(err(
             OnnxErrorKind::Malformed,
             format!(
-                "tensor '{name}' has {} values but its shape {:?} needs {numel}",
+                "tensor '{name}' has {} values but its shape {} needs {numel}",
                 data.len(),
-                dims
+                shape_text(&dims)
             ),
             "re-export the model",
         ));
@@ -601,9 +611,9 @@ impl Lowering {
                     return Err(err(
                         OnnxErrorKind::Malformed,
                         format!(
-                            "{} has weight of shape {:?}, expected 2-D",
+                            "{} has weight of shape {}, expected 2-D",
                             node_label(n),
-                            bt.dims
+                            shape_text(&bt.dims)
                         ),
                         "re-export the model",
                     ));

@@ -139,23 +139,31 @@ fn random_case(seed: u64) -> Case {
     }
 }
 
+/// Reachable sets of one propagator; with `alone`, its own bounds only,
+/// before any intersection with another method's.
 fn reach(
     cl: &ClosedLoop,
     x0: &Region,
     horizon: usize,
     prop: Propagator,
     boundary: &Boundary,
+    alone: bool,
 ) -> Vec<Region> {
     if prop == Propagator::CrownUnrolled {
-        return cl
-            .unrolled(x0, horizon, boundary, None, &|| false)
-            .into_iter()
-            .map(|s| s.set)
-            .collect();
+        let steps = if alone {
+            cl.unrolled_alone(x0, horizon, boundary)
+        } else {
+            cl.unrolled(x0, horizon, boundary, None, &|| false)
+        };
+        return steps.into_iter().map(|s| s.set).collect();
     }
     let mut sets = vec![x0.clone()];
     for t in 0..horizon {
-        let next = cl.step(t, &sets[t], prop, boundary);
+        let next = if alone {
+            cl.step_alone(t, &sets[t], prop, boundary)
+        } else {
+            cl.step(t, &sets[t], prop, boundary)
+        };
         sets.push(next.set);
     }
     sets
@@ -266,7 +274,8 @@ fn every_trajectory_stays_inside_every_reachable_set() {
         }
         for boundary in &boundaries {
             for prop in PROPAGATORS {
-                let whole = reach(&case.cl, &case.x0, case.horizon, prop, boundary);
+                let whole = reach(&case.cl, &case.x0, case.horizon, prop, boundary, false);
+                let own = reach(&case.cl, &case.x0, case.horizon, prop, boundary, true);
                 // Reach-SDP solves one SDP per facet and step: its partitioned
                 // runs are left to the spec tests to keep this suite fast.
                 let parts: Vec<Vec<Region>> = if prop == Propagator::ReachSdp {
@@ -274,7 +283,7 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                 } else {
                     cells
                         .iter()
-                        .map(|c| reach(&case.cl, c, case.horizon, prop, boundary))
+                        .map(|c| reach(&case.cl, c, case.horizon, prop, boundary, false))
                         .collect()
                 };
                 let mut rng = Rng::new(seed * 7919 + 1);
@@ -290,6 +299,12 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                             "{} {prop:?} {boundary:?}: step {t} state {x:?} outside {:?}",
                             case.label,
                             whole[t]
+                        );
+                        assert!(
+                            inside(&own[t], &x),
+                            "{} {prop:?} {boundary:?} own bounds: step {t} state {x:?} outside {:?}",
+                            case.label,
+                            own[t]
                         );
                         assert!(
                             inside(&parts[cell][t], &x),
@@ -471,4 +486,132 @@ fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
             }
         }
     }
+}
+
+/// The whole pipeline from a plan: `execute` with every partitioner (uniform,
+/// SG, GSG, property-guided), box / polytope / hull boundaries, box, polytope
+/// and ball initial sets, time-varying and uncertain (continuous-time-like)
+/// plants. Every simulated trajectory (this test's own sampling and
+/// simulation) lies, at every step, in the union of the cells' sets.
+#[test]
+fn every_trajectory_stays_inside_what_execute_reports() {
+    use ravel::analysis::partition::Budget;
+    use ravel::execute::execute;
+    use ravel::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
+    use ravel::sets::Polytope;
+
+    let mut checked = 0usize;
+    for seed in 0..36u64 {
+        let case = random_case(seed);
+        let n = case.x0.dim();
+        // every third box case becomes a polytope: the box cut through its centre
+        let x0 = match &case.x0 {
+            Region::Box(b) if seed % 3 == 0 => {
+                let mut a = vec![0.0; n];
+                a[0] = 1.0;
+                if n > 1 {
+                    a[1] = 0.5;
+                }
+                let c: Vec<f64> = b.lo.iter().zip(&b.hi).map(|(l, h)| 0.5 * (l + h)).collect();
+                let h = a.iter().zip(&c).map(|(a, c)| a * c).sum::<f64>() + 0.05;
+                let mut rows = Polytope::from_box(b).rows;
+                rows.push((a, h));
+                Region::Polytope {
+                    bbox: b.clone(),
+                    rows,
+                }
+            }
+            other => other.clone(),
+        };
+        let budget = Budget {
+            calls: 7,
+            min_size: 0.05,
+            seconds: None,
+        };
+        let partitioner = match seed % 4 {
+            0 => Partitioner::Uniform(vec![2; n]),
+            1 => Partitioner::Guided {
+                guide: Guide::Sg,
+                budget,
+            },
+            2 => Partitioner::Guided {
+                guide: Guide::Gsg,
+                budget,
+            },
+            _ => Partitioner::Guided {
+                guide: Guide::Property,
+                budget,
+            },
+        };
+        let boundary = match (n, seed % 3) {
+            (2, 0) => Boundary::Hull,
+            (2, 1) => Boundary::spread(8),
+            _ => Boundary::Box,
+        };
+        let b0 = x0.bbox();
+        // a goal the loop may or may not meet: the property-guided partitioner has work
+        let goal = Polytope::from_box(&IBox::new(
+            b0.lo.iter().map(|l| l - 0.5).collect(),
+            b0.hi.iter().map(|h| h + 0.5).collect(),
+        ));
+        for prop in PROPAGATORS {
+            if prop == Propagator::ReachSdp && seed % 6 != 0 {
+                continue;
+            }
+            let plan = Plan {
+                system: "random".into(),
+                state_name: "x".into(),
+                control_name: "u".into(),
+                controller_path: String::new(),
+                network_summary: String::new(),
+                closed_loop: case.cl.clone(),
+                dt: None,
+                limits: None,
+                initial: x0.clone(),
+                initial_name: "X0".into(),
+                partitioner: partitioner.clone(),
+                boundary: boundary.clone(),
+                horizon: case.horizon,
+                propagator: prop,
+                properties: vec![Property {
+                    name: "G".into(),
+                    kind: PropertyKind::Goal(goal.clone()),
+                }],
+                samples: 200,
+                seed,
+            };
+            let out = execute(&plan, &|| 0.0);
+            let what = format!(
+                "{} {prop:?} {:?} {:?}",
+                case.label, plan.partitioner, plan.boundary
+            );
+            let mut rng = Rng::new(seed * 104_729 + 17);
+            let mut tried = 0;
+            while tried < 60 {
+                let mut x = initial_point(&mut rng, &case.x0);
+                if !x0.contains_point(&x) {
+                    continue; // outside the polytope cut
+                }
+                tried += 1;
+                for t in 0..=case.horizon {
+                    assert!(
+                        out.cells.iter().any(|c| inside(&c[t], &x)),
+                        "{what}: step {t} state {x:?} outside every cell (bounding box {:?})",
+                        out.reach[t]
+                    );
+                    checked += 1;
+                    if t < case.horizon {
+                        let w = sample_point(&mut rng, &case.cl.plant.w);
+                        let v = sample_point(&mut rng, &case.cl.plant.v);
+                        let (u, next) = case.cl.simulate(t, &x, &w, &v);
+                        x = match &case.cl.plant_at(t).err {
+                            Some(e) => perturbed(&mut rng, e, &x, &u, next),
+                            None => next,
+                        };
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 30_000, "only {checked} states were checked");
 }

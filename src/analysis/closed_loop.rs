@@ -403,6 +403,25 @@ impl ClosedLoop {
     /// An over-approximation of the set of states at step `t + 1` for states
     /// in `x` at step `t`.
     pub fn step(&self, t: usize, x: &Region, prop: Propagator, boundary: &Boundary) -> Step {
+        self.step_with(t, x, prop, boundary, false)
+    }
+
+    /// The propagator's own bound of one step, before it is intersected
+    /// with another method's (Reach-LP without CL-CROWN, Reach-SDP without
+    /// Reach-LP; facets the SDP could not bound are `+∞`). For soundness
+    /// tests: no error term of one method can hide behind another's bound.
+    pub fn step_alone(&self, t: usize, x: &Region, prop: Propagator, boundary: &Boundary) -> Step {
+        self.step_with(t, x, prop, boundary, true)
+    }
+
+    fn step_with(
+        &self,
+        t: usize,
+        x: &Region,
+        prop: Propagator,
+        boundary: &Boundary,
+        alone: bool,
+    ) -> Step {
         let n = self.states();
         let bbox = x.bbox();
         let y = self.observation_box(&bbox);
@@ -424,10 +443,12 @@ impl ClosedLoop {
                 if !(analysis.is_finite() && u.is_finite()) {
                     return Step::overflowed(n, Vec::new());
                 }
-                let (separate, more) = self
-                    .push_control_box(t, facets.clone(), &bbox, &u)
-                    .concretize_region(x);
-                extra = Some((separate, more));
+                if !alone {
+                    let (separate, more) = self
+                        .push_control_box(t, facets.clone(), &bbox, &u)
+                        .concretize_region(x);
+                    extra = Some((separate, more));
+                }
                 self.back_step(t, &LinearUpper::of_spec(facets.clone()), &analysis, &bbox)
             }
             Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
@@ -468,8 +489,12 @@ impl ClosedLoop {
             if sdp.iter().any(|v| v.is_nan()) {
                 return Step::overflowed(n, issues);
             }
-            for (u, s) in ub.iter_mut().zip(sdp) {
-                *u = u.min(s);
+            if alone {
+                ub = sdp;
+            } else {
+                for (u, s) in ub.iter_mut().zip(sdp) {
+                    *u = u.min(s);
+                }
             }
         }
         Step::new(self.region_of(boundary, t + 1, &ub), issues)
@@ -679,6 +704,25 @@ impl ClosedLoop {
         parent: Option<&[Region]>,
         stop: &dyn Fn() -> bool,
     ) -> Vec<Step> {
+        self.unrolled_with(x0, horizon, boundary, parent, stop, false)
+    }
+
+    /// The unrolled propagator's own bounds: every set bounded through the
+    /// unrolled loop back to `x0` only, never intersected with a one-step
+    /// Reach-LP bound (for soundness tests).
+    pub fn unrolled_alone(&self, x0: &Region, horizon: usize, boundary: &Boundary) -> Vec<Step> {
+        self.unrolled_with(x0, horizon, boundary, None, &|| false, true)
+    }
+
+    fn unrolled_with(
+        &self,
+        x0: &Region,
+        horizon: usize,
+        boundary: &Boundary,
+        parent: Option<&[Region]>,
+        stop: &dyn Fn() -> bool,
+        alone: bool,
+    ) -> Vec<Step> {
         let n = self.states();
         let p = self.plant.obs.ncols();
         let mut steps = vec![Step::new(x0.clone(), Vec::new())];
@@ -729,11 +773,15 @@ impl ClosedLoop {
                 steps.push(Step::overflowed(n, issues));
                 break;
             }
-            let ub: Vec<f64> = one_step
-                .iter()
-                .zip(&through)
-                .map(|(a, b)| a.min(*b))
-                .collect();
+            let ub: Vec<f64> = if alone {
+                through
+            } else {
+                one_step
+                    .iter()
+                    .zip(&through)
+                    .map(|(a, b)| a.min(*b))
+                    .collect()
+            };
             let mut set = self.region_of(boundary, t + 1, &ub);
             if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
                 set = set.intersect(p);

@@ -31,28 +31,127 @@ impl Ctx {
         role: &str,
     ) -> Option<Region> {
         let n = p.rows.first().map_or(0, |r| r.0.len());
-        let scale = p.rows.iter().fold(1.0f64, |a, r| a.max(r.1.abs()));
-        let big = 1e6 * scale;
-        let lo = vec![-big; n];
-        let hi = vec![big; n];
-        let empty = lp::separation(&[], &p.rows, &lo, &hi);
-        if empty.value > 0.0 {
-            self.err(
-                Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is empty"))
-                    .label("no state satisfies every inequality")
-                    .hint("check the directions of `<=` and `>=`"),
-            );
-            return None;
-        }
-        let mut bb_lo = vec![0.0; n];
-        let mut bb_hi = vec![0.0; n];
+        // Boundedness does not depend on the scale of the rows: a non-empty
+        // P is bounded iff its recession cone {d | H d ≤ 0} is {0}, decided
+        // on the unit box with every row normalised (so tiny coefficients or
+        // a large right-hand side cannot mislead it).
+        let unit: Vec<(Vec<f64>, f64)> = p
+            .rows
+            .iter()
+            .filter_map(|(a, _)| {
+                let norm = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                (norm > 0.0).then(|| (a.iter().map(|v| v / norm).collect(), 0.0))
+            })
+            .collect();
+        let (ulo, uhi) = (vec![-1.0; n], vec![1.0; n]);
         for i in 0..n {
-            let mut e = vec![0.0; n];
-            e[i] = 1.0;
-            let up = lp::maximize(&e, &p.rows, &lo, &hi);
-            e[i] = -1.0;
-            let down = lp::maximize(&e, &p.rows, &lo, &hi);
-            if let Some(issue) = up.issue.or(down.issue) {
+            for sign in [1.0, -1.0] {
+                let mut e = vec![0.0; n];
+                e[i] = sign;
+                let r = lp::maximize(&e, &unit, &ulo, &uhi);
+                // the cone is {0} (every maximum is 0) or contains a
+                // direction scaled to reach 1 in some ±e_i: the
+                // threshold ½ is far from both, whatever the LP's accuracy
+                if r.issue.is_none() && r.value < 0.5 {
+                    continue;
+                }
+                let d = if r.issue.is_some() {
+                    Diagnostic::new(
+                        Code::EmptyOrUnbounded,
+                        span,
+                        format!(
+                            "{role} could not be bounded (LP solver: {})",
+                            r.issue.map_or("", |i| i.as_str())
+                        ),
+                    )
+                    .label("bounding box unknown")
+                    .hint("the inequalities may be nearly parallel; rescale them or use a box")
+                } else {
+                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
+                        .label(format!(
+                            "component {i} has no finite {} bound",
+                            if sign > 0.0 { "upper" } else { "lower" }
+                        ))
+                        .hint("add inequalities that bound every component, or use a box")
+                };
+                self.err(d);
+                return None;
+            }
+        }
+        // The polytope is bounded: find a box B whose bounds the LP bounds
+        // of P ∩ B stay strictly inside; then P ⊆ B (P is convex, so a point
+        // of P outside B would put a point of P ∩ B on B's boundary).
+        let scale = p.rows.iter().fold(1.0f64, |m, (a, h)| {
+            let norm = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if norm > 0.0 {
+                m.max(h.abs() / norm)
+            } else {
+                m
+            }
+        });
+        // Rows are scaled by powers of two (exactly: the same set) so their
+        // largest coefficient is in [½, 1); single-variable rows give exact
+        // intervals, which bound those components without any LP and keep
+        // the LPs well scaled when the set lies far from the origin.
+        let rows: Vec<(Vec<f64>, f64)> = p.rows.iter().map(|(a, h)| pow2_scaled(a, *h)).collect();
+        let mut fixed_lo = vec![f64::NEG_INFINITY; n];
+        let mut fixed_hi = vec![f64::INFINITY; n];
+        for (a, h) in &rows {
+            let mut nz = a.iter().enumerate().filter(|(_, v)| **v != 0.0);
+            if let (Some((i, &c)), None) = (nz.next(), nz.next()) {
+                // c·x_i ≤ h with c a power-of-two multiple: h / c rounded outward
+                let q = h / c;
+                if c > 0.0 {
+                    fixed_hi[i] = fixed_hi[i].min(q.next_up());
+                } else {
+                    fixed_lo[i] = fixed_lo[i].max(q.next_down());
+                }
+            }
+        }
+        let p = Polytope { rows };
+        let mut big = 1e3 * scale;
+        let last = 1e18 * scale;
+        loop {
+            let at_last = big * 1e3 > last;
+            let lo: Vec<f64> = fixed_lo
+                .iter()
+                .map(|l| if l.is_finite() { *l } else { -big })
+                .collect();
+            let hi: Vec<f64> = fixed_hi
+                .iter()
+                .map(|h| if h.is_finite() { *h } else { big })
+                .collect();
+            if lp::separation(&[], &p.rows, &lo, &hi).value > 0.0 {
+                // P ∩ B is empty: P is empty, or lies beyond B
+                if at_last {
+                    self.err(
+                        Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is empty"))
+                            .label("no state satisfies every inequality")
+                            .hint("check the directions of `<=` and `>=`"),
+                    );
+                    return None;
+                }
+                big *= 1e3;
+                continue;
+            }
+            let mut bb_lo = vec![0.0; n];
+            let mut bb_hi = vec![0.0; n];
+            let mut inside = true;
+            let mut issue = None;
+            for i in 0..n {
+                let mut e = vec![0.0; n];
+                e[i] = 1.0;
+                let up = lp::maximize(&e, &p.rows, &lo, &hi);
+                e[i] = -1.0;
+                let down = lp::maximize(&e, &p.rows, &lo, &hi);
+                issue = issue.or(up.issue).or(down.issue);
+                // a fixed side is a constraint of P itself: nothing to check there
+                inside &= (fixed_hi[i].is_finite() || up.value < 0.5 * big)
+                    && (fixed_lo[i].is_finite() || down.value < 0.5 * big);
+                bb_hi[i] = up.value;
+                bb_lo[i] = -down.value;
+            }
+            if let Some(issue) = issue {
                 self.err(
                     Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} could not be bounded (LP solver: {issue})"))
                         .label("bounding box unknown")
@@ -60,31 +159,22 @@ impl Ctx {
                 );
                 return None;
             }
-            if up.value >= 0.5 * big || -down.value <= -0.5 * big {
+            if inside {
+                return Some(Region::Polytope {
+                    bbox: IBox::new(bb_lo, bb_hi),
+                    rows: p.rows,
+                });
+            }
+            if at_last {
                 self.err(
-                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
-                        .label(format!(
-                            "component {i} has no finite {} bound",
-                            if up.value >= 0.5 * big {
-                                "upper"
-                            } else {
-                                "lower"
-                            }
-                        ))
-                        .hint("add inequalities that bound every component, or use a box"),
+                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} could not be bounded"))
+                        .label("bounding box unknown")
+                        .hint("the inequalities are badly scaled or nearly parallel; rescale them or use a box"),
                 );
                 return None;
             }
-            bb_hi[i] = up.value;
-            bb_lo[i] = -down.value;
+            big *= 1e3;
         }
-        if empty.issue.is_none() && empty.value == 0.0 {
-            // flat: fine for the analysis, but the sampler finds no state in it
-        }
-        Some(Region::Polytope {
-            bbox: IBox::new(bb_lo, bb_hi),
-            rows: p.rows,
-        })
     }
 
     /// An ℓp ball with per-dimension radii.
@@ -443,5 +533,31 @@ mod tests {
         assert!(within(d.a[(1, 0)], 0.0, e.a[(1, 0)]) && within(d.a[(1, 1)], 1.0, e.a[(1, 1)]));
         assert!(within(d.b[(0, 0)], 0.125, e.b[(0, 0)]) && within(d.b[(1, 0)], 0.5, e.b[(1, 0)]));
         assert!(within(d.c[0], -0.25, e.c[0]) && within(d.c[1], -1.0, e.c[1]));
+    }
+}
+
+/// A row `a·x ≤ h` multiplied by the power of two that brings its largest
+/// coefficient into `[½, 1)`: exact in binary floating point, so the set is
+/// unchanged (barring overflow or underflow, which the magnitude limits on
+/// spec numbers rule out).
+fn pow2_scaled(a: &[f64], h: f64) -> (Vec<f64>, f64) {
+    let m = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return (a.to_vec(), h);
+    }
+    let k = m.log2().floor() as i32 + 1;
+    let f = 2f64.powi(-k);
+    let scaled: Vec<f64> = a.iter().map(|v| v * f).collect();
+    let hs = h * f;
+    // exact only without overflow and without underflow into subnormals
+    let exact = hs.is_finite()
+        && (h == 0.0 || hs.abs() >= f64::MIN_POSITIVE)
+        && a.iter()
+            .zip(&scaled)
+            .all(|(v, w)| *v == 0.0 || (w.is_finite() && w.abs() >= f64::MIN_POSITIVE));
+    if exact {
+        (scaled, hs)
+    } else {
+        (a.to_vec(), h)
     }
 }

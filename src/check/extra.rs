@@ -506,6 +506,32 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
     })
 }
 
+/// A row `a·x ≤ h` multiplied by the power of two that brings its largest
+/// coefficient into `[½, 1)`: exact in binary floating point, so the set is
+/// unchanged (barring overflow or underflow, which the magnitude limits on
+/// spec numbers rule out).
+fn pow2_scaled(a: &[f64], h: f64) -> (Vec<f64>, f64) {
+    let m = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return (a.to_vec(), h);
+    }
+    let k = m.log2().floor() as i32 + 1;
+    let f = 2f64.powi(-k);
+    let scaled: Vec<f64> = a.iter().map(|v| v * f).collect();
+    let hs = h * f;
+    // exact only without overflow and without underflow into subnormals
+    let exact = hs.is_finite()
+        && (h == 0.0 || hs.abs() >= f64::MIN_POSITIVE)
+        && a.iter()
+            .zip(&scaled)
+            .all(|(v, w)| *v == 0.0 || (w.is_finite() && w.abs() >= f64::MIN_POSITIVE));
+    if exact {
+        (scaled, hs)
+    } else {
+        (a.to_vec(), h)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -533,31 +559,5 @@ mod tests {
         assert!(within(d.a[(1, 0)], 0.0, e.a[(1, 0)]) && within(d.a[(1, 1)], 1.0, e.a[(1, 1)]));
         assert!(within(d.b[(0, 0)], 0.125, e.b[(0, 0)]) && within(d.b[(1, 0)], 0.5, e.b[(1, 0)]));
         assert!(within(d.c[0], -0.25, e.c[0]) && within(d.c[1], -1.0, e.c[1]));
-    }
-}
-
-/// A row `a·x ≤ h` multiplied by the power of two that brings its largest
-/// coefficient into `[½, 1)`: exact in binary floating point, so the set is
-/// unchanged (barring overflow or underflow, which the magnitude limits on
-/// spec numbers rule out).
-fn pow2_scaled(a: &[f64], h: f64) -> (Vec<f64>, f64) {
-    let m = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if m == 0.0 || !m.is_finite() {
-        return (a.to_vec(), h);
-    }
-    let k = m.log2().floor() as i32 + 1;
-    let f = 2f64.powi(-k);
-    let scaled: Vec<f64> = a.iter().map(|v| v * f).collect();
-    let hs = h * f;
-    // exact only without overflow and without underflow into subnormals
-    let exact = hs.is_finite()
-        && (h == 0.0 || hs.abs() >= f64::MIN_POSITIVE)
-        && a.iter()
-            .zip(&scaled)
-            .all(|(v, w)| *v == 0.0 || (w.is_finite() && w.abs() >= f64::MIN_POSITIVE));
-    if exact {
-        (scaled, hs)
-    } else {
-        (a.to_vec(), h)
     }
 }

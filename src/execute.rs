@@ -553,32 +553,39 @@ pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
     )
 }
 
-/// Execute a plan under a [`Control`].
-pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
-    let elapsed = ctl.elapsed;
-    let stop = || ctl.out_of_time();
-    let mc = monte_carlo(plan, ctl);
-    // a hull boundary takes its directions from the samples of each step
-    let resolved;
-    let plan = if plan.boundary == Boundary::Hull {
-        resolved = Plan {
-            boundary: Boundary::PerStep(
-                mc.points
-                    .iter()
-                    .map(|p| hull_directions(p, HULL_MIN_ANGLE))
-                    .collect(),
-            ),
-            ..plan.clone()
-        };
-        &resolved
-    } else {
-        plan
-    };
-    let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
+/// The cells of a partition and their sets over the horizon.
+struct Partitioned {
+    /// Each cell's bounding box.
+    cells: Vec<IBox>,
+    /// `sets[c][t]`: the set of cell `c` at step `t`.
+    sets: Vec<Vec<Step>>,
+    /// Why the partition has these cells.
+    stop: Stop,
+    /// Cells propagated (a refinement's parents and a grid's root included).
+    calls: usize,
+}
 
-    // SG/GSG scores: how far a cell's facets (box rows first) leave the
-    // sampled states' range along the same directions, per step
-    let shaped: Vec<Option<Sampled>> = (0..=plan.horizon)
+/// A hull boundary takes its directions from the samples of each step;
+/// every other boundary is used as it is.
+fn resolve_boundary<'p>(plan: &'p Plan, mc: &MonteCarlo) -> std::borrow::Cow<'p, Plan> {
+    if plan.boundary != Boundary::Hull {
+        return std::borrow::Cow::Borrowed(plan);
+    }
+    std::borrow::Cow::Owned(Plan {
+        boundary: Boundary::PerStep(
+            mc.points
+                .iter()
+                .map(|p| hull_directions(p, HULL_MIN_ANGLE))
+                .collect(),
+        ),
+        ..plan.clone()
+    })
+}
+
+/// SG/GSG scores' reference: per step, the facets, how far the sampled
+/// states reach along each (box rows first) and their extent.
+fn sampled_shapes(plan: &Plan, mc: &MonteCarlo) -> Vec<Option<Sampled>> {
+    (0..=plan.horizon)
         .map(|t| {
             let sampled = mc.sampled[t].as_ref()?;
             let f = plan.closed_loop.facets(&plan.boundary, t);
@@ -600,162 +607,157 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
             };
             Some((f, s, w))
         })
-        .collect();
+        .collect()
+}
 
-    // ---- partition and propagate ----
-    let calls: usize;
-    let (partition, cells, partition_stop): (Vec<IBox>, Vec<Vec<Step>>, Stop) =
-        match &plan.partitioner {
-            Partitioner::Uniform(grid) => {
-                // one cell is the initial set itself (a ball keeps its
-                // closed-form support function instead of its bounding box)
-                let regions: Vec<Region> = if grid.iter().all(|k| *k == 1) {
-                    vec![plan.initial.clone()]
-                } else {
-                    plan.initial
-                        .grid(grid)
-                        .into_iter()
-                        .filter(|c| !certainly_empty(c))
-                        .collect()
-                };
-                let regions = if regions.is_empty() {
-                    vec![plan.initial.clone()]
-                } else {
-                    regions
-                };
-                // the whole initial set first: every cell is kept inside it
-                let root = (regions.len() > 1)
-                    .then(|| propagate_cell_until(plan, &plan.initial, None, &stop));
-                calls = regions.len() + usize::from(root.is_some());
-                let sets = regions
-                    .iter()
-                    .enumerate()
-                    .map(|(i, c)| {
-                        (ctl.progress)(Progress {
-                            phase: Phase::Cells,
-                            done: i,
-                            total: Some(regions.len()),
-                        });
-                        propagate_cell_until(plan, c, root.as_deref(), &stop)
-                    })
-                    .collect();
-                (regions.iter().map(Region::bbox).collect(), sets, Stop::Grid)
-            }
-            Partitioner::Guided { guide, budget } => {
-                let strategy = match guide {
-                    Guide::Sg => Strategy::Sg,
-                    Guide::Gsg | Guide::Property => Strategy::Gsg,
-                };
-                // nothing left to decide: one call for the report's sets
-                let mut budget = if *guide == Guide::Property && !undecided.iter().any(|u| *u) {
-                    Budget {
-                        calls: 1,
-                        ..*budget
-                    }
-                } else {
-                    *budget
-                };
-                // the run's time limit bounds the refinement too
-                if let Some(limit) = ctl.time_limit {
-                    budget.seconds = Some(budget.seconds.map_or(limit, |s| s.min(limit)));
-                }
-                let evaluated = std::cell::Cell::new(0usize);
-                let root = plan.initial.bbox();
-                let r = refine(
-                    &root,
-                    strategy,
-                    &budget,
-                    &mut |c, parent: Option<&Option<Vec<Step>>>| {
-                        let region = cell_region(&plan.initial, c);
-                        if certainly_empty(&region) {
-                            let sets = vec![Step::new(region, Vec::new()); plan.horizon + 1];
-                            return (Some(sets), f64::NEG_INFINITY);
-                        }
-                        (ctl.progress)(Progress {
-                            phase: Phase::Cells,
-                            done: evaluated.get(),
-                            total: Some(budget.calls),
-                        });
-                        evaluated.set(evaluated.get() + 1);
-                        let sets = propagate_cell_until(
-                            plan,
-                            &region,
-                            parent.and_then(|p| p.as_deref()),
-                            &stop,
-                        );
-                        let score = match guide {
-                            Guide::Sg | Guide::Gsg => (0..=plan.horizon)
-                                .map(|t| match &shaped[t] {
-                                    Some((f, s, w)) => {
-                                        let b = offsets(&sets[t].set);
-                                        // step 0 is the cell itself, not a boundary shape
-                                        if t > 0 && b.len() == f.nrows() {
-                                            excess(&b, s, w)
-                                        } else {
-                                            let k = 2 * f.ncols();
-                                            excess(&b[..k], &s[..k], &w[..k])
-                                        }
-                                    }
-                                    None => f64::INFINITY,
-                                })
-                                .fold(0.0, f64::max),
-                            Guide::Property => plan
-                                .properties
-                                .iter()
-                                .zip(&undecided)
-                                .filter(|(_, u)| **u)
-                                .map(|(p, _)| {
-                                    let (m, _, issue) = cell_margin(p, &sets);
-                                    if proves(p, m) && !issue {
-                                        -1.0
-                                    } else {
-                                        (-m).max(0.0) + f64::MIN_POSITIVE
-                                    }
-                                })
-                                .fold(-1.0, f64::max),
-                        };
-                        (Some(sets), score)
-                    },
-                    elapsed,
-                );
-                calls = r.calls;
-                let mut leaves = r.leaves;
-                // deterministic order: by cell position
-                leaves.sort_by(|a, b| {
-                    a.cell
-                        .lo
-                        .iter()
-                        .zip(&b.cell.lo)
-                        .map(|(x, y)| x.total_cmp(y))
-                        .find(|o| o.is_ne())
-                        .unwrap_or(std::cmp::Ordering::Equal)
-                });
-                let part = leaves.iter().map(|l| l.cell.clone()).collect();
-                let sets = leaves.into_iter().filter_map(|l| l.value).collect();
-                (part, sets, r.stop)
-            }
-        };
-    let reach: Vec<IBox> = (0..=plan.horizon)
-        .map(|t| {
-            cells
-                .iter()
-                .skip(1)
-                .fold(cells[0][t].set.bbox(), |h, c| h.hull(&c[t].set.bbox()))
-        })
-        .collect();
-    let mut solver_issues: Vec<(usize, Issue)> = cells
+/// A uniform grid over the initial set, each cell propagated (inside the
+/// whole set's sets when there are several).
+fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned {
+    let stop = || ctl.out_of_time();
+    // one cell is the initial set itself (a ball keeps its
+    // closed-form support function instead of its bounding box)
+    let regions: Vec<Region> = if grid.iter().all(|k| *k == 1) {
+        vec![plan.initial.clone()]
+    } else {
+        plan.initial
+            .grid(grid)
+            .into_iter()
+            .filter(|c| !certainly_empty(c))
+            .collect()
+    };
+    let regions = if regions.is_empty() {
+        vec![plan.initial.clone()]
+    } else {
+        regions
+    };
+    // the whole initial set first: every cell is kept inside it
+    let root = (regions.len() > 1).then(|| propagate_cell_until(plan, &plan.initial, None, &stop));
+    let calls = regions.len() + usize::from(root.is_some());
+    let sets = regions
         .iter()
-        .flat_map(|c| {
-            c.iter()
-                .enumerate()
-                .flat_map(|(t, s)| s.issues.iter().map(move |i| (t, *i)))
+        .enumerate()
+        .map(|(i, c)| {
+            (ctl.progress)(Progress {
+                phase: Phase::Cells,
+                done: i,
+                total: Some(regions.len()),
+            });
+            propagate_cell_until(plan, c, root.as_deref(), &stop)
         })
         .collect();
-    solver_issues.sort();
-    solver_issues.dedup();
+    Partitioned {
+        cells: regions.iter().map(Region::bbox).collect(),
+        sets,
+        stop: Stop::Grid,
+        calls,
+    }
+}
 
-    let properties: Vec<PropertyResult> = plan
-        .properties
+/// Guided refinement of the initial set (SG, GSG or property-guided).
+fn partition_guided(
+    plan: &Plan,
+    guide: Guide,
+    budget: Budget,
+    shaped: &[Option<Sampled>],
+    undecided: &[bool],
+    ctl: &Control,
+) -> Partitioned {
+    let stop = || ctl.out_of_time();
+    let strategy = match guide {
+        Guide::Sg => Strategy::Sg,
+        Guide::Gsg | Guide::Property => Strategy::Gsg,
+    };
+    // nothing left to decide: one call for the report's sets
+    let mut budget = if guide == Guide::Property && !undecided.iter().any(|u| *u) {
+        Budget { calls: 1, ..budget }
+    } else {
+        budget
+    };
+    // the run's time limit bounds the refinement too
+    if let Some(limit) = ctl.time_limit {
+        budget.seconds = Some(budget.seconds.map_or(limit, |s| s.min(limit)));
+    }
+    let evaluated = std::cell::Cell::new(0usize);
+    let root = plan.initial.bbox();
+    let r = refine(
+        &root,
+        strategy,
+        &budget,
+        &mut |c, parent: Option<&Option<Vec<Step>>>| {
+            let region = cell_region(&plan.initial, c);
+            if certainly_empty(&region) {
+                let sets = vec![Step::new(region, Vec::new()); plan.horizon + 1];
+                return (Some(sets), f64::NEG_INFINITY);
+            }
+            (ctl.progress)(Progress {
+                phase: Phase::Cells,
+                done: evaluated.get(),
+                total: Some(budget.calls),
+            });
+            evaluated.set(evaluated.get() + 1);
+            let sets =
+                propagate_cell_until(plan, &region, parent.and_then(|p| p.as_deref()), &stop);
+            let score = match guide {
+                Guide::Sg | Guide::Gsg => (0..=plan.horizon)
+                    .map(|t| match &shaped[t] {
+                        Some((f, s, w)) => {
+                            let b = offsets(&sets[t].set);
+                            // step 0 is the cell itself, not a boundary shape
+                            if t > 0 && b.len() == f.nrows() {
+                                excess(&b, s, w)
+                            } else {
+                                let k = 2 * f.ncols();
+                                excess(&b[..k], &s[..k], &w[..k])
+                            }
+                        }
+                        None => f64::INFINITY,
+                    })
+                    .fold(0.0, f64::max),
+                Guide::Property => plan
+                    .properties
+                    .iter()
+                    .zip(undecided)
+                    .filter(|(_, u)| **u)
+                    .map(|(p, _)| {
+                        let (m, _, issue) = cell_margin(p, &sets);
+                        if proves(p, m) && !issue {
+                            -1.0
+                        } else {
+                            (-m).max(0.0) + f64::MIN_POSITIVE
+                        }
+                    })
+                    .fold(-1.0, f64::max),
+            };
+            (Some(sets), score)
+        },
+        ctl.elapsed,
+    );
+    let mut leaves = r.leaves;
+    // deterministic order: by cell position
+    leaves.sort_by(|a, b| {
+        a.cell
+            .lo
+            .iter()
+            .zip(&b.cell.lo)
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let part = leaves.iter().map(|l| l.cell.clone()).collect();
+    let sets = leaves.into_iter().filter_map(|l| l.value).collect();
+    Partitioned {
+        cells: part,
+        sets,
+        stop: r.stop,
+        calls: r.calls,
+    }
+}
+
+/// The verdict of every property: FALSIFIED by a sampled counterexample,
+/// VERIFIED by certified margins on every cell (no solver issue, no cut
+/// step), UNSURE otherwise.
+fn verdicts(plan: &Plan, cells: &[Vec<Step>], mc: &MonteCarlo) -> Vec<PropertyResult> {
+    plan.properties
         .iter()
         .zip(&mc.worst)
         .map(|(prop, worst)| {
@@ -770,7 +772,7 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
             };
             let mut issue = false;
             let mut cut: Option<(usize, Cut)> = None;
-            for c in &cells {
+            for c in cells {
                 let (m, t, i) = cell_margin(prop, c);
                 issue |= i;
                 if m < margin || m.is_nan() {
@@ -813,7 +815,42 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
                 },
             }
         })
+        .collect()
+}
+
+/// Execute a plan under a [`Control`]: Monte Carlo, then the partition and
+/// propagation, then the verdicts.
+pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
+    let mc = monte_carlo(plan, ctl);
+    let plan = &*resolve_boundary(plan, &mc);
+    let part = match &plan.partitioner {
+        Partitioner::Uniform(grid) => partition_uniform(plan, grid, ctl),
+        Partitioner::Guided { guide, budget } => {
+            let shaped = sampled_shapes(plan, &mc);
+            let undecided: Vec<bool> = mc.worst.iter().map(Option::is_none).collect();
+            partition_guided(plan, *guide, *budget, &shaped, &undecided, ctl)
+        }
+    };
+    let cells = part.sets;
+    let reach: Vec<IBox> = (0..=plan.horizon)
+        .map(|t| {
+            cells
+                .iter()
+                .skip(1)
+                .fold(cells[0][t].set.bbox(), |h, c| h.hull(&c[t].set.bbox()))
+        })
         .collect();
+    let mut solver_issues: Vec<(usize, Issue)> = cells
+        .iter()
+        .flat_map(|c| {
+            c.iter()
+                .enumerate()
+                .flat_map(|(t, s)| s.issues.iter().map(move |i| (t, *i)))
+        })
+        .collect();
+    solver_issues.sort();
+    solver_issues.dedup();
+    let properties = verdicts(plan, &cells, &mc);
     let cut = cells
         .iter()
         .filter_map(|c| first_cut(c))
@@ -824,8 +861,8 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         .max()
         .unwrap_or(Status::Verified);
     Outcome {
-        partition,
-        partition_stop,
+        partition: part.cells,
+        partition_stop: part.stop,
         cells: cells
             .into_iter()
             .map(|c| c.into_iter().map(|s| s.set).collect())
@@ -835,7 +872,7 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         sampled: mc.sampled,
         properties,
         verdict,
-        propagator_calls: calls * plan.horizon,
+        propagator_calls: part.calls * plan.horizon,
         cut,
         samples_drawn: mc.drawn,
     }

@@ -7,6 +7,7 @@ pub mod cli;
 pub mod diag;
 pub mod execute;
 pub mod expm;
+pub mod ir;
 pub mod issue;
 pub mod limits;
 pub mod lower;

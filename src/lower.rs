@@ -6,47 +6,10 @@
 //! turns goal and avoid sets into properties over the steps they constrain.
 
 use crate::analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
-use crate::analysis::partition::Budget;
 use crate::check::Checked;
+pub use crate::ir::{Guide, Partitioner};
 use crate::nn::Layer;
 use crate::sets::{IBox, Polytope, Region};
-
-/// What guides a refining partitioner.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Guide {
-    /// Simulation-guided: refine cells whose sets leave the sampled hull, depth first.
-    Sg,
-    /// Greedy simulation-guided: refine the cell that sticks out furthest first.
-    Gsg,
-    /// Property-guided: refine the cell with the worst unproven property margin
-    /// first; stop when every cell is proven or the verdict is decided.
-    Property,
-}
-
-impl Guide {
-    /// The spec-language name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Guide::Sg => "sg",
-            Guide::Gsg => "gsg",
-            Guide::Property => "property",
-        }
-    }
-}
-
-/// How the initial set is split.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Partitioner {
-    /// A uniform grid (all ones: no partition).
-    Uniform(Vec<usize>),
-    /// Refinement by bisection, guided and budgeted.
-    Guided {
-        /// What decides which cell to split.
-        guide: Guide,
-        /// When to stop.
-        budget: Budget,
-    },
-}
 
 /// What a property demands.
 #[derive(Clone, Debug, PartialEq)]

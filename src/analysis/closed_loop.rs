@@ -98,6 +98,11 @@ impl Propagator {
         Propagator::SgIbpSeparate,
     ];
 
+    /// The propagator with this spec-language name.
+    pub fn from_name(name: &str) -> Option<Propagator> {
+        Propagator::ALL.into_iter().find(|p| p.name() == name)
+    }
+
     /// The spec-language name.
     pub fn name(self) -> &'static str {
         match self {

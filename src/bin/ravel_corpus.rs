@@ -1004,6 +1004,12 @@ fn onnx(dir: &Path) -> usize {
             "an offset that is not a number",
         ),
         (
+            "external_offset_beyond_limit",
+            "offset",
+            "629145600",
+            "an offset beyond 512 MiB (found by the fuzzer)",
+        ),
+        (
             "external_offset_negative",
             "offset",
             "-8",

@@ -46,9 +46,7 @@ impl Ctx {
         let (ulo, uhi) = (vec![-1.0; n], vec![1.0; n]);
         for i in 0..n {
             for sign in [1.0, -1.0] {
-                let mut e = vec![0.0; n];
-                e[i] = sign;
-                let r = lp::maximize(&e, &unit, &ulo, &uhi);
+                let r = lp::maximize(&axis(n, i, sign), &unit, &ulo, &uhi);
                 // the cone is {0} (every maximum is 0) or contains a
                 // direction scaled to reach 1 in some ±e_i: the
                 // threshold ½ is far from both, whatever the LP's accuracy
@@ -102,9 +100,11 @@ impl Ctx {
                 // c·x_i ≤ h with c a power-of-two multiple: h / c rounded outward
                 let q = h / c;
                 if c > 0.0 {
-                    fixed_hi[i] = fixed_hi[i].min(q.next_up());
-                } else {
-                    fixed_lo[i] = fixed_lo[i].max(q.next_down());
+                    if let Some(f) = fixed_hi.get_mut(i) {
+                        *f = f.min(q.next_up());
+                    }
+                } else if let Some(f) = fixed_lo.get_mut(i) {
+                    *f = f.max(q.next_down());
                 }
             }
         }
@@ -134,22 +134,19 @@ impl Ctx {
                 big *= 1e3;
                 continue;
             }
-            let mut bb_lo = vec![0.0; n];
-            let mut bb_hi = vec![0.0; n];
+            let mut bb_lo = Vec::with_capacity(n);
+            let mut bb_hi = Vec::with_capacity(n);
             let mut inside = true;
             let mut issue = None;
-            for i in 0..n {
-                let mut e = vec![0.0; n];
-                e[i] = 1.0;
-                let up = lp::maximize(&e, &p.rows, &lo, &hi);
-                e[i] = -1.0;
-                let down = lp::maximize(&e, &p.rows, &lo, &hi);
+            for (i, (flo, fhi)) in fixed_lo.iter().zip(&fixed_hi).enumerate() {
+                let up = lp::maximize(&axis(n, i, 1.0), &p.rows, &lo, &hi);
+                let down = lp::maximize(&axis(n, i, -1.0), &p.rows, &lo, &hi);
                 issue = issue.or(up.issue).or(down.issue);
                 // a fixed side is a constraint of P itself: nothing to check there
-                inside &= (fixed_hi[i].is_finite() || up.value < 0.5 * big)
-                    && (fixed_lo[i].is_finite() || down.value < 0.5 * big);
-                bb_hi[i] = up.value;
-                bb_lo[i] = -down.value;
+                inside &= (fhi.is_finite() || up.value < 0.5 * big)
+                    && (flo.is_finite() || down.value < 0.5 * big);
+                bb_hi.push(up.value);
+                bb_lo.push(-down.value);
             }
             if let Some(issue) = issue {
                 self.err(
@@ -304,7 +301,7 @@ impl Ctx {
                     &format!("one direction per row, {n} columns (one per component of `{name}`)"),
                 )?;
                 for (r, row) in rows.iter().enumerate() {
-                    if (0..n).all(|c| m[(r, c)] == 0.0) {
+                    if m.row(r).iter().all(|v| *v == 0.0) {
                         self.err(
                             Diagnostic::new(
                                 Code::Boundary,
@@ -506,6 +503,11 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
     })
 }
 
+/// The vector `sign·eᵢ` of length `n`.
+fn axis(n: usize, i: usize, sign: f64) -> Vec<f64> {
+    (0..n).map(|j| if j == i { sign } else { 0.0 }).collect()
+}
+
 /// A row `a·x ≤ h` multiplied by the power of two that brings its largest
 /// coefficient into `[½, 1)`: exact in binary floating point, so the set is
 /// unchanged (barring overflow or underflow, which the magnitude limits on
@@ -533,6 +535,7 @@ fn pow2_scaled(a: &[f64], h: f64) -> (Vec<f64>, f64) {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

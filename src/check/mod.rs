@@ -6,20 +6,26 @@
 //! the controller's sizes against the plant. It never stops at the first
 //! problem: all diagnostics are collected and returned sorted by position.
 
+// Untrusted data flows through here: no unwraps, no panicking indexing.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
 use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
+mod analysis;
+mod controller;
 mod extra;
+mod sets;
+mod system;
 
 use crate::analysis::closed_loop::{Boundary, Plant, Propagator};
-use crate::diag::{compact, did_you_mean, Code, Diagnostic};
+use crate::diag::{compact, Code, Diagnostic};
+use crate::ir::{Guide, Partitioner};
 use crate::limits::{
-    within, MAX_CELLS, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SAMPLES, MAX_SIMULATED_STEPS,
-    MAX_STORED_NUMBERS,
+    within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SIMULATED_STEPS, MAX_STORED_NUMBERS,
 };
-use crate::lower::{Guide, Partitioner};
-use crate::onnx::{self, Controller, ExternalFiles, OnnxErrorKind};
+use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
 use crate::syntax::ast::*;
 pub use extra::{zero_order_hold, DEFAULT_BUDGET};
@@ -104,17 +110,14 @@ pub fn controller_path(spec: &Spec) -> Option<&Spanned<String>> {
     })
 }
 
-const PROPAGATORS: [&str; 6] = [
-    "reach_lp",
-    "reach_sdp",
-    "crown_unrolled",
-    "crown_separate",
-    "ibp_separate",
-    "sg_ibp_separate",
-];
 const PLANNED_PROPAGATORS: [&str; 1] = ["reach_sdp_unrolled"];
-const PARTITIONERS: [&str; 5] = ["none", "uniform", "sg", "gsg", "property"];
-const BOUNDARIES: [&str; 3] = ["box", "hull", "polytope"];
+/// Every partitioner keyword: `none`, `uniform`, then the guides.
+fn partitioner_names() -> Vec<&'static str> {
+    let mut v = vec!["none", "uniform"];
+    v.extend(Guide::ALL.iter().map(|g| g.name()));
+    v
+}
+pub(super) const BOUNDARIES: [&str; 3] = ["box", "hull", "polytope"];
 
 struct Ctx {
     diags: Vec<Diagnostic>,
@@ -174,7 +177,9 @@ impl Ctx {
     fn eval(&mut self, v: &Spanned<Value>, name: &str) -> Option<Mat> {
         match &v.node {
             Value::Matrix(rows) => {
-                let cols = rows[0].node.len();
+                // the grammar admits no empty matrix; an empty one is a 0 × 0 matrix
+                let (cols, first_span) =
+                    rows.first().map_or((0, v.span), |r| (r.node.len(), r.span));
                 let mut ok = true;
                 for r in rows.iter().skip(1) {
                     if r.node.len() != cols {
@@ -185,7 +190,7 @@ impl Ctx {
                                 format!("rows of `{name}` have different lengths"),
                             )
                             .label(format!("this row has {} entries", r.node.len()))
-                            .related(rows[0].span, format!("the first row has {cols}"))
+                            .related(first_span, format!("the first row has {cols}"))
                             .hint("every row of a matrix needs the same number of entries"),
                         );
                         ok = false;
@@ -453,12 +458,11 @@ impl Ctx {
                     );
                     ok = false;
                 }
-                for (k, iv) in ivs.iter().enumerate().take(dim) {
+                for (((iv, l), h), s) in ivs.iter().zip(&mut lo).zip(&mut hi).zip(&mut seen) {
                     match self.interval(iv) {
-                        Some((l, h)) => {
-                            lo[k] = l;
-                            hi[k] = h;
-                            seen[k] = Some(iv.span);
+                        Some(v) => {
+                            (*l, *h) = v;
+                            *s = Some(iv.span);
                         }
                         None => ok = false,
                     }
@@ -470,27 +474,33 @@ impl Ctx {
                     let v = self.interval(iv);
                     match (k, v) {
                         (Some(k), Some((l, h))) => {
-                            if let Some(first) = seen[k] {
-                                self.duplicate(
-                                    &format!("the interval of `{name}[{k}]`"),
-                                    first,
-                                    c.span,
-                                );
-                                ok = false;
+                            // `component` returned k < dim
+                            if let (Some(sk), Some(lk), Some(hk)) =
+                                (seen.get_mut(k), lo.get_mut(k), hi.get_mut(k))
+                            {
+                                if let Some(first) = *sk {
+                                    self.duplicate(
+                                        &format!("the interval of `{name}[{k}]`"),
+                                        first,
+                                        c.span,
+                                    );
+                                    ok = false;
+                                }
+                                (*lk, *hk) = (l, h);
+                                *sk = Some(c.span);
                             }
-                            lo[k] = l;
-                            hi[k] = h;
-                            seen[k] = Some(c.span);
                         }
                         _ => ok = false,
                     }
                 }
                 if complete && ok {
-                    let missing: Vec<String> = (0..dim)
-                        .filter(|k| seen[*k].is_none())
-                        .map(|k| format!("{name}[{k}]"))
+                    let missing: Vec<String> = seen
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, s)| s.is_none())
+                        .map(|(k, _)| format!("{name}[{k}]"))
                         .collect();
-                    if !missing.is_empty() {
+                    if let Some(first) = missing.first() {
                         self.err(
                             Diagnostic::new(
                                 Code::SetKind,
@@ -498,7 +508,7 @@ impl Ctx {
                                 format!("{role} leaves {} unbounded", missing.join(", ")),
                             )
                             .label("every component needs an interval")
-                            .hint(format!("add `{} in [lo, hi]`", missing[0])),
+                            .hint(format!("add `{first} in [lo, hi]`")),
                         );
                         ok = false;
                     }
@@ -519,8 +529,8 @@ impl Ctx {
                     span: comp.span,
                 };
                 let coef = self.finite(&coef_s);
-                match self.component(comp, name, dim) {
-                    Some(k) => row[k] += coef,
+                match self.component(comp, name, dim).and_then(|k| row.get_mut(k)) {
+                    Some(r) => *r += coef,
                     None => ok = false,
                 }
             }
@@ -592,12 +602,48 @@ fn onnx_code(kind: OnnxErrorKind) -> Code {
     }
 }
 
-/// Check a parsed spec. `controller` is the controller file as read by the caller
-/// (`None` if the spec names none or it was not read).
-pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked, Vec<Diagnostic>> {
-    let mut cx = Ctx { diags: Vec::new() };
-    let whole = Span::new(0, 0);
+/// The horizon: at least 1, at most [`MAX_HORIZON`].
+fn horizon(cx: &mut Ctx, h: Option<&Spanned<u64>>) -> Option<usize> {
+    let mut horizon = None;
+    if let Some(h) = h {
+        if h.node < 1 {
+            cx.err(
+                Diagnostic::new(Code::Horizon, h.span, "the horizon must be at least 1")
+                    .label("zero steps")
+                    .hint("write `horizon N` with N ≥ 1"),
+            );
+        } else if h.node > MAX_HORIZON {
+            cx.err(
+                Diagnostic::new(
+                    Code::Horizon,
+                    h.span,
+                    format!("the horizon exceeds {MAX_HORIZON}"),
+                )
+                .label("too many steps")
+                .hint("use a shorter horizon"),
+            );
+        } else {
+            horizon = Some(h.node as usize);
+        }
+    }
 
+    horizon
+}
+
+/// The top-level items of a spec, by kind (duplicates and missing
+/// required items are reported while collecting).
+struct Items<'a> {
+    systems: Vec<&'a System>,
+    controllers: Vec<&'a Spanned<String>>,
+    initials: Vec<&'a SetDef>,
+    goals: Vec<&'a SetDef>,
+    avoids: Vec<&'a AvoidDef>,
+    horizons: Vec<&'a Spanned<u64>>,
+    analyses: Vec<&'a Analysis>,
+}
+
+fn items<'a>(cx: &mut Ctx, spec: &'a Spec) -> Items<'a> {
+    let whole = Span::new(0, 0);
     // ---- collect top-level items, reporting duplicates ----
     let mut systems: Vec<&System> = Vec::new();
     let mut controllers: Vec<&Spanned<String>> = Vec::new();
@@ -637,8 +683,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             analyses.iter().map(|a| a.span).collect(),
         ),
     ] {
-        for s in spans.iter().skip(1) {
-            cx.duplicate(what, spans[0], *s);
+        if let Some((first, rest)) = spans.split_first() {
+            for s in rest {
+                cx.duplicate(what, *first, *s);
+            }
         }
     }
     // set names are unique across initial, goal and avoid sets
@@ -669,679 +717,75 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     };
     if systems.is_empty() {
         missing(
-            &mut cx,
+            cx,
             "system",
             "`system NAME { state x[n] control u[m] A = … B = … }`",
         );
     }
     if controllers.is_empty() {
-        missing(
-            &mut cx,
-            "controller",
-            "`controller \"path/to/policy.onnx\"`",
-        );
+        missing(cx, "controller", "`controller \"path/to/policy.onnx\"`");
     }
     if initials.is_empty() {
-        missing(
-            &mut cx,
-            "initial set",
-            "`initial X0 = box(x[0] in [lo, hi], …)`",
-        );
+        missing(cx, "initial set", "`initial X0 = box(x[0] in [lo, hi], …)`");
     }
     if horizons.is_empty() {
-        missing(&mut cx, "horizon", "`horizon N`");
+        missing(cx, "horizon", "`horizon N`");
     }
     if goals.is_empty() && avoids.is_empty() {
         missing(
-            &mut cx,
+            cx,
             "property to verify (goal or avoid set)",
             "`goal G = box(…)` or `avoid A = { … }`",
         );
     }
 
-    // ---- the system ----
-    let sys = systems.first().copied();
-    let mut state: Option<(String, usize)> = None;
-    let mut control: Option<(String, usize)> = None;
-    let mut assigns: BTreeMap<&str, (&Spanned<Value>, Span)> = BTreeMap::new();
-    let mut bounds: Vec<(&Spanned<String>, &Spanned<BoxSet>)> = Vec::new();
-    let mut time_span = None;
-    let mut time: Result<Option<f64>, ()> = Ok(None);
-    if let Some(sys) = sys {
-        let mut state_span = None;
-        let mut control_span = None;
-        for st in &sys.stmts {
-            match st {
-                SystemStmt::State { name, dim, span } => {
-                    if let Some(first) = state_span {
-                        cx.duplicate("the state", first, *span);
-                    } else {
-                        state_span = Some(*span);
-                        state = cx
-                            .positive(dim, "the state dimension")
-                            .map(|d| (name.node.clone(), d));
-                    }
-                }
-                SystemStmt::Control { name, dim, span } => {
-                    if let Some(first) = control_span {
-                        cx.duplicate("the control", first, *span);
-                    } else {
-                        control_span = Some(*span);
-                        control = cx
-                            .positive(dim, "the control dimension")
-                            .map(|d| (name.node.clone(), d));
-                    }
-                }
-                SystemStmt::Assign { name, value, .. } => {
-                    const KNOWN: [&str; 4] = ["A", "B", "C", "c"];
-                    if !KNOWN.contains(&name.node.as_str()) {
-                        let mut d = Diagnostic::new(
-                            Code::UnknownName,
-                            name.span,
-                            format!("unknown plant parameter `{}`", name.node),
-                        )
-                        .label("not a plant parameter");
-                        d = match did_you_mean(&name.node, KNOWN) {
-                            Some(s) => d.hint(format!("did you mean `{s}`? The plant is x' = A x + B u + c + w, y = Cᵀ x + v")),
-                            None => d.hint("the plant is x' = A x + B u + c + w, y = Cᵀ x + v: define A, B and optionally c and C"),
-                        };
-                        cx.err(d);
-                    } else if let Some((_, first)) = assigns.get(name.node.as_str()) {
-                        cx.duplicate(&format!("`{}`", name.node), *first, name.span);
-                    } else {
-                        assigns.insert(&name.node, (value, name.span));
-                    }
-                }
-                SystemStmt::Bound { name, set, .. } => bounds.push((name, set)),
-                SystemStmt::Time { kind, dt, span } => {
-                    if let Some(first) = time_span {
-                        cx.duplicate("the time declaration", first, *span);
-                    } else {
-                        time_span = Some(*span);
-                        time = cx.time_decl(kind, dt, *span);
-                    }
-                }
-            }
-        }
-        if let (Some((xn, _)), Some((un, _)), Some(ss), Some(cs)) =
-            (&state, &control, state_span, control_span)
-        {
-            if xn == un {
-                cx.duplicate(&format!("the name `{xn}`"), ss, cs);
-            }
-        }
-        for (decl, span) in [(&state, state_span), (&control, control_span)] {
-            if let (Some((name, _)), Some(span)) = (decl, span) {
-                if name == "w" || name == "v" {
-                    cx.err(
-                        Diagnostic::new(
-                            Code::Duplicate,
-                            span,
-                            format!(
-                                "the name `{name}` is reserved for {} noise",
-                                if name == "w" { "process" } else { "sensor" }
-                            ),
-                        )
-                        .label("reserved name")
-                        .hint("`w` and `v` name the process and sensor noise; choose another name"),
-                    );
-                }
-            }
-        }
-        if state_span.is_none() {
-            cx.err(
-                Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")
-                    .label("in this system")
-                    .hint("add `state x[n]`"),
-            );
-        }
-        if control_span.is_none() {
-            cx.err(
-                Diagnostic::new(
-                    Code::Missing,
-                    sys.name.span,
-                    "the system declares no control",
-                )
-                .label("in this system")
-                .hint("add `control u[m]`"),
-            );
-        }
-        for req in ["A", "B"] {
-            if !assigns.contains_key(req) {
-                cx.err(
-                    Diagnostic::new(
-                        Code::Missing,
-                        sys.name.span,
-                        format!("the system does not define `{req}`"),
-                    )
-                    .label("in this system")
-                    .hint(format!("add `{req} = [[…], …]`")),
-                );
-            }
-        }
+    Items {
+        systems,
+        controllers,
+        initials,
+        goals,
+        avoids,
+        horizons,
+        analyses,
     }
+}
 
-    let mut plant: Option<Vec<Plant>> = None;
-    let mut per_step_lists: Vec<(usize, Span)> = Vec::new();
-    let mut limits = None;
-    let mut p_dim = None;
-    if let (Some((xn, n)), Some((un, m))) = (&state, &control) {
-        let (n, m) = (*n, *m);
-        let a = assigns.get("A").and_then(|(v, _)| {
-            per_step(&mut cx, v, &mut |cx, v| {
-                cx.matrix(
-                    v,
-                    "A",
-                    n,
-                    Some(n),
-                    &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
-                )
-            })
-        });
-        let b = assigns.get("B").and_then(|(v, _)| {
-            per_step(&mut cx, v, &mut |cx, v| {
-                cx.matrix(
-                    v,
-                    "B",
-                    n,
-                    Some(m),
-                    &format!("B is n × m: {n} states by {m} controls"),
-                )
-            })
-        });
-        let c = match assigns.get("c") {
-            Some((v, _)) => per_step(&mut cx, v, &mut |cx, v| {
-                cx.vector(v, "c", n, &format!("c has one entry per state ({n})"))
-            }),
-            None => Some((vec![DVector::zeros(n)], None)),
-        };
-        let obs = match assigns.get("C") {
-            Some((v, _)) => cx.matrix(
-                v,
-                "C",
-                n,
-                None,
-                &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
-            ),
-            None => Some(DMatrix::identity(n, n)),
-        };
-        let p = obs.as_ref().map(|o| o.ncols());
-        p_dim = p;
-        let mut w = Some(IBox::new(vec![0.0; n], vec![0.0; n]));
-        let mut v = p.map(|p| IBox::new(vec![0.0; p], vec![0.0; p]));
-        let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
-        for (name, set) in &bounds {
-            let key = name.node.as_str();
-            if let Some(first) = seen.get(key) {
-                cx.duplicate(&format!("the bound on `{key}`"), *first, name.span);
-                continue;
-            }
-            seen.insert(key, name.span);
-            if key == "w" {
-                w = cx.box_set(set, "w", n, true, "the process noise box");
-            } else if key == "v" {
-                match p {
-                    Some(p) => v = cx.box_set(set, "v", p, true, "the sensor noise box"),
-                    None => v = None,
-                }
-            } else if key == un {
-                limits = cx.box_set(set, un, m, true, "the control limit box");
-            } else {
-                let cands = ["w", "v", un.as_str()];
-                let mut d = Diagnostic::new(
-                    Code::UnknownName,
-                    name.span,
-                    format!("unknown bounded quantity `{key}`"),
-                )
-                .label("not a noise or control name");
-                d = match did_you_mean(key, cands) {
-                    Some(s) => d.hint(format!("did you mean `{s}`? Bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
-                    None => d.hint(format!("bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
-                };
-                cx.err(d);
-            }
-        }
-        if let (Some(a), Some(b), Some(c), Some(obs), Some(w), Some(v)) = (a, b, c, obs, w, v) {
-            for (list, span) in [(a.0.len(), a.1), (b.0.len(), b.1), (c.0.len(), c.1)] {
-                if let Some(span) = span {
-                    per_step_lists.push((list, span));
-                }
-            }
-            let len = a.0.len().max(b.0.len()).max(c.0.len());
-            let pick = |k: usize, l: usize| k.min(l - 1);
-            plant = Some(
-                (0..len)
-                    .map(|k| Plant {
-                        a: a.0[pick(k, a.0.len())].clone(),
-                        b: b.0[pick(k, b.0.len())].clone(),
-                        c: c.0[pick(k, c.0.len())].clone(),
-                        obs: obs.clone(),
-                        w: w.clone(),
-                        v: v.clone(),
-                        err: None,
-                    })
-                    .collect::<Vec<Plant>>(),
-            );
-        }
-    }
+/// Check a parsed spec. `controller` is the controller file as read by the caller
+/// (`None` if the spec names none or it was not read).
+pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked, Vec<Diagnostic>> {
+    let mut cx = Ctx { diags: Vec::new() };
+    let cx = &mut cx;
+    let whole = Span::new(0, 0);
+    let it = items(cx, spec);
+    let sp = system::system(cx, &it.systems);
+    let pp = system::plant(cx, &sp);
+    let ctrl = controller::controller(
+        cx,
+        it.controllers.first().copied(),
+        controller,
+        pp.p_dim,
+        sp.assigns.contains_key("C"),
+        &sp.control,
+    );
+    let horizon = horizon(cx, it.horizons.first().copied());
+    let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
+    let an = analysis::analysis(cx, &it.analyses, &sp.state);
+    let (sys, state, control, time, time_span) =
+        (sp.sys, sp.state, sp.control, sp.time, sp.time_span);
+    let (mut plant, per_step_lists, limits) = (pp.plant, pp.per_step_lists, pp.limits);
+    let (initial, goal, avoid_specs) = (sets.initial, sets.goal, sets.avoids);
+    let (propagator, partition, boundary) = (an.propagator, an.partition, an.boundary);
+    let (hull_span, guided_span, sdp_span, samples, seed) = (
+        an.hull_span,
+        an.guided_span,
+        an.sdp_span,
+        an.samples,
+        an.seed,
+    );
+    let horizons = &it.horizons;
+    let controllers = &it.controllers;
 
-    // ---- the controller ----
-    let mut ctrl = None;
-    if let Some(path) = controllers.first() {
-        match controller {
-            None => cx.err(
-                Diagnostic::new(
-                    Code::ControllerUnreadable,
-                    path.span,
-                    format!(
-                        "controller `{}` was not read",
-                        crate::diag::sanitize(&path.node)
-                    ),
-                )
-                .label("not available")
-                .hint("the controller file must be readable next to the spec"),
-            ),
-            Some(file) => match &file.bytes {
-                Err(msg) => cx.err(
-                    Diagnostic::new(
-                        Code::ControllerUnreadable,
-                        path.span,
-                        format!(
-                            "cannot read controller `{}`: {}",
-                            crate::diag::sanitize(&path.node),
-                            crate::diag::sanitize(msg)
-                        ),
-                    )
-                    .label("this file")
-                    .hint("paths are relative to the spec file's folder"),
-                ),
-                Ok(bytes) => match onnx::load(bytes, &file.external) {
-                    Err(e) => cx.err(
-                        Diagnostic::new(onnx_code(e.kind), path.span, e.message)
-                            .label("in this controller")
-                            .hint(e.hint),
-                    ),
-                    Ok(c) => {
-                        if let Some(p) = p_dim {
-                            if c.inputs != p {
-                                let what = if assigns.contains_key("C") {
-                                    format!("C has {p} columns")
-                                } else {
-                                    format!("without C the controller sees the full state ({p})")
-                                };
-                                cx.err(
-                                    Diagnostic::new(Code::ControllerInputs, path.span, format!("the controller takes {} inputs but observations have {p} components", c.inputs))
-                                        .label(format!("{} inputs", c.inputs))
-                                        .hint(format!("{what}; the controller's input size must match")),
-                                );
-                            }
-                        }
-                        if let Some((un, m)) = &control {
-                            if c.outputs != *m {
-                                cx.err(
-                                    Diagnostic::new(Code::ControllerOutputs, path.span, format!("the controller has {} outputs but `{un}` has {m} components", c.outputs))
-                                        .label(format!("{} outputs", c.outputs))
-                                        .hint(format!("declare `control {un}[{}]` or use a controller with {m} outputs", c.outputs)),
-                                );
-                            }
-                        }
-                        ctrl = Some(c);
-                    }
-                },
-            },
-        }
-    }
-
-    // ---- horizon ----
-    let mut horizon = None;
-    if let Some(h) = horizons.first() {
-        if h.node < 1 {
-            cx.err(
-                Diagnostic::new(Code::Horizon, h.span, "the horizon must be at least 1")
-                    .label("zero steps")
-                    .hint("write `horizon N` with N ≥ 1"),
-            );
-        } else if h.node > MAX_HORIZON {
-            cx.err(
-                Diagnostic::new(
-                    Code::Horizon,
-                    h.span,
-                    format!("the horizon exceeds {MAX_HORIZON}"),
-                )
-                .label("too many steps")
-                .hint("use a shorter horizon"),
-            );
-        } else {
-            horizon = Some(h.node as usize);
-        }
-    }
-
-    // ---- sets ----
-    let mut initial = None;
-    let mut goal = None;
-    let mut avoid_specs = Vec::new();
-    if let Some((xn, n)) = &state {
-        if let Some(init) = initials.first() {
-            let members = &init.set.node.members;
-            if members.len() > 1 {
-                cx.err(
-                    Diagnostic::new(
-                        Code::SetKind,
-                        init.set.span,
-                        "the initial set cannot be a union",
-                    )
-                    .label("a union")
-                    .hint("verify each part in its own spec, or use the bounding box"),
-                );
-            } else {
-                match &members[0].node {
-                    SetAtom::Box(b) => {
-                        let sb = Spanned {
-                            node: b.clone(),
-                            span: members[0].span,
-                        };
-                        initial = cx
-                            .box_set(&sb, xn, *n, true, "the initial set")
-                            .map(|b| (init.name.node.clone(), Region::Box(b)));
-                    }
-                    SetAtom::Polytope(cs) => {
-                        initial = cx
-                            .polytope(cs, xn, *n)
-                            .and_then(|p| {
-                                cx.bounded_polytope(p, members[0].span, "the initial set")
-                            })
-                            .map(|r| (init.name.node.clone(), r));
-                    }
-                    SetAtom::Ball(b) => {
-                        initial = cx
-                            .ball(b, members[0].span, xn, *n)
-                            .map(|r| (init.name.node.clone(), r));
-                    }
-                }
-            }
-        }
-        if let Some(g) = goals.first() {
-            let members = &g.set.node.members;
-            if members.len() > 1 {
-                cx.err(
-                    Diagnostic::new(Code::SetKind, g.set.span, "the goal cannot be a union")
-                        .label("a union")
-                        .hint("the final reachable set must lie in one box or polytope"),
-                );
-            } else if let Some(p) = cx.set_atom(&members[0], xn, *n, "the goal") {
-                goal = Some(GoalDef {
-                    name: g.name.node.clone(),
-                    set: p,
-                });
-            }
-        }
-        for a in &avoids {
-            let members: Vec<Option<Polytope>> = a
-                .set
-                .node
-                .members
-                .iter()
-                .map(|m| cx.set_atom(m, xn, *n, "the avoid set"))
-                .collect();
-            let steps = match (&a.steps, horizon) {
-                (None, Some(h)) => Some((0, h)),
-                (Some(s), h) => {
-                    let (lo, hi) = s.node;
-                    if lo > hi {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::StepRange,
-                                s.span,
-                                format!("step range [{lo}, {hi}] is empty"),
-                            )
-                            .label("first step after last")
-                            .hint("write `at steps [first, last]`"),
-                        );
-                        None
-                    } else if h.is_some_and(|h| hi as usize > h) {
-                        let h = h.unwrap_or(0);
-                        cx.err(
-                            Diagnostic::new(
-                                Code::StepRange,
-                                s.span,
-                                format!("step {hi} is beyond the horizon {h}"),
-                            )
-                            .label("beyond the horizon")
-                            .hint(format!("steps run from 0 (the initial set) to {h}")),
-                        );
-                        None
-                    } else {
-                        Some((lo as usize, hi as usize))
-                    }
-                }
-                (None, None) => None,
-            };
-            if members.iter().all(Option::is_some) {
-                if let Some(steps) = steps {
-                    avoid_specs.push(AvoidSpec {
-                        name: a.name.node.clone(),
-                        members: members.into_iter().flatten().collect(),
-                        steps,
-                    });
-                }
-            }
-        }
-    }
-
-    // ---- analysis ----
-    let mut propagator = Some(Propagator::ReachLp);
-    let mut partition: Option<Partitioner> = state
-        .as_ref()
-        .map(|(_, n)| Partitioner::Uniform(vec![1; *n]));
-    let mut boundary = Some(Boundary::Box);
-    let mut hull_span = None;
-    let mut guided_span = None;
-    let mut sdp_span = None;
-    let mut samples = DEFAULT_SAMPLES;
-    let mut seed = 0u64;
-    if let Some(an) = analyses.first() {
-        let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
-        for st in &an.stmts {
-            let key = match &st.node {
-                AnalysisStmt::Propagator(_) => "propagator",
-                AnalysisStmt::Partitioner(_)
-                | AnalysisStmt::Uniform(_)
-                | AnalysisStmt::Guided { .. } => "partitioner",
-                AnalysisStmt::Boundary(_) | AnalysisStmt::BoundaryPolytope(_) => "boundary",
-                AnalysisStmt::Samples(_) => "samples",
-                AnalysisStmt::Seed(_) => "seed",
-            };
-            if let Some(first) = seen.get(key) {
-                cx.duplicate(&format!("`{key}`"), *first, st.span);
-                continue;
-            }
-            seen.insert(key, st.span);
-            match &st.node {
-                AnalysisStmt::Propagator(p) => {
-                    propagator = match p.node.as_str() {
-                        "reach_lp" => Some(Propagator::ReachLp),
-                        "crown_unrolled" => Some(Propagator::CrownUnrolled),
-                        "crown_separate" => Some(Propagator::CrownSeparate),
-                        "ibp_separate" => Some(Propagator::IbpSeparate),
-                        "sg_ibp_separate" => Some(Propagator::SgIbpSeparate),
-                        "reach_sdp" => {
-                            sdp_span = Some(p.span);
-                            Some(Propagator::ReachSdp)
-                        }
-                        other => {
-                            let planned = PLANNED_PROPAGATORS.contains(&other);
-                            let mut d = Diagnostic::new(
-                                Code::UnknownName,
-                                p.span,
-                                format!("unknown propagator `{other}`"),
-                            )
-                            .label(if planned {
-                                "not available in this version"
-                            } else {
-                                "not a propagator"
-                            });
-                            let list = PROPAGATORS.join(", ");
-                            d = match (planned, did_you_mean(other, PROPAGATORS)) {
-                                (true, _) => d.hint(format!("`{other}` is planned but not implemented yet; available: {list}")),
-                                (false, Some(s)) => d.hint(format!("did you mean `{s}`? Available: {list}")),
-                                (false, None) => d.hint(format!("available: {list}")),
-                            };
-                            cx.err(d);
-                            None
-                        }
-                    }
-                }
-                AnalysisStmt::Partitioner(p) => {
-                    if p.node != "none" {
-                        let mut d = Diagnostic::new(
-                            Code::UnknownName,
-                            p.span,
-                            format!("unknown partitioner `{}`", p.node),
-                        )
-                        .label("not a partitioner");
-                        d = match did_you_mean(&p.node, PARTITIONERS) {
-                            Some(s) => d.hint(format!(
-                                "did you mean `{s}`? Available: none, uniform [k, …], sg, gsg, property"
-                            )),
-                            None => d.hint(
-                                "available: none, uniform [k, …], sg, gsg, property (each with an optional budget)",
-                            ),
-                        };
-                        cx.err(d);
-                    }
-                }
-                AnalysisStmt::Uniform(ks) => {
-                    if let Some((xn, n)) = &state {
-                        if ks.len() != *n {
-                            cx.err(
-                                Diagnostic::new(
-                                    Code::Partition,
-                                    st.span,
-                                    format!(
-                                        "the grid has {} counts but `{xn}` has {n} components",
-                                        ks.len()
-                                    ),
-                                )
-                                .label(format!("{} count(s)", ks.len()))
-                                .hint(format!(
-                                    "give one cell count per state component, e.g. uniform [{}]",
-                                    vec!["2"; *n].join(", ")
-                                )),
-                            );
-                            partition = None;
-                        } else if let Some(k) = ks.iter().find(|k| k.node == 0) {
-                            cx.err(
-                                Diagnostic::new(
-                                    Code::Partition,
-                                    k.span,
-                                    "a grid needs at least one cell per dimension",
-                                )
-                                .label("zero cells")
-                                .hint("use 1 to leave a dimension unsplit"),
-                            );
-                            partition = None;
-                        } else {
-                            let counts: Vec<u64> = ks.iter().map(|k| k.node).collect();
-                            match within(&counts, MAX_CELLS) {
-                                true => {
-                                    partition = Some(Partitioner::Uniform(
-                                        ks.iter().map(|k| k.node as usize).collect(),
-                                    ))
-                                }
-                                false => {
-                                    cx.err(
-                                        Diagnostic::new(
-                                            Code::Limit,
-                                            st.span,
-                                            format!("the grid has more than {MAX_CELLS} cells"),
-                                        )
-                                        .label("too many cells")
-                                        .hint("use fewer cells per dimension"),
-                                    );
-                                    partition = None;
-                                }
-                            }
-                        }
-                    }
-                }
-                AnalysisStmt::Guided { guide, budget } => {
-                    let g = match guide.node.as_str() {
-                        "sg" => Guide::Sg,
-                        "gsg" => Guide::Gsg,
-                        _ => Guide::Property,
-                    };
-                    guided_span = Some((g, st.span));
-                    partition = cx
-                        .budget(budget)
-                        .map(|budget| Partitioner::Guided { guide: g, budget });
-                }
-                AnalysisStmt::BoundaryPolytope(v) => {
-                    if let Some((xn, n)) = &state {
-                        boundary = cx.boundary_polytope(v, xn, *n);
-                    }
-                }
-                AnalysisStmt::Boundary(b) => {
-                    if b.node == "polytope" {
-                        cx.err(
-                            Diagnostic::new(Code::Boundary, b.span, "a polytope boundary needs its directions")
-                                .label("no directions")
-                                .hint("write `boundary polytope 8` (evenly spread, 2-D states) or `boundary polytope [[1, 1], [1, -1]]`"),
-                        );
-                        boundary = None;
-                    } else if b.node == "hull" {
-                        match state.as_ref().map(|(_, n)| *n) {
-                            Some(2) | None => {
-                                boundary = Some(Boundary::Hull);
-                                hull_span = Some(b.span);
-                            }
-                            Some(n) => {
-                                cx.err(
-                                    Diagnostic::new(
-                                        Code::Boundary,
-                                        b.span,
-                                        format!("a convex-hull boundary needs a 2-D state, but the state has {n} components"),
-                                    )
-                                    .label("2-D only")
-                                    .hint("use `boundary box` or `boundary polytope [[…], …]` with explicit directions"),
-                                );
-                                boundary = None;
-                            }
-                        }
-                    } else if b.node != "box" {
-                        let mut d = Diagnostic::new(
-                            Code::UnknownName,
-                            b.span,
-                            format!("unknown boundary `{}`", b.node),
-                        )
-                        .label("not a boundary shape");
-                        d = match did_you_mean(&b.node, BOUNDARIES) {
-                            Some(s) => d.hint(format!("did you mean `{s}`?")),
-                            None => d.hint("available: box, hull, polytope K, polytope [[…], …]"),
-                        };
-                        cx.err(d);
-                        boundary = None;
-                    }
-                }
-                AnalysisStmt::Samples(s) => {
-                    if s.node > MAX_SAMPLES {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::Limit,
-                                s.span,
-                                format!("more than {MAX_SAMPLES} samples"),
-                            )
-                            .label("too many")
-                            .hint("use fewer samples"),
-                        );
-                    } else {
-                        samples = s.node as usize;
-                    }
-                }
-                AnalysisStmt::Seed(s) => seed = s.node,
-            }
-        }
-    }
-
+    // ---- checks that combine sections ----
     if let (Some(span), Some(c)) = (sdp_span, &ctrl) {
         if let Some(act) = c.net.layers.iter().find_map(|l| match l {
             crate::nn::Layer::Act(a) if *a != crate::nn::Activation::Relu => Some(*a),
@@ -1434,75 +878,44 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             Some(Boundary::Hull) => 48,
             _ => 0,
         };
-        sizes(
-            &mut cx,
-            span,
-            h,
-            *n,
-            directions,
-            samples,
-            partition.as_ref(),
-        );
+        sizes(cx, span, h, *n, directions, samples, partition.as_ref());
     }
 
     if !cx.diags.is_empty() {
         cx.diags
             .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
-        return Err(cx.diags);
+        return Err(std::mem::take(&mut cx.diags));
     }
-    // Everything below was produced without diagnostics, so each value is present.
-    match (
-        sys,
-        state,
-        control,
-        plant,
-        ctrl,
-        initial,
-        horizon,
-        propagator,
-        partition,
-        boundary,
-        controllers.first(),
-    ) {
-        (
-            Some(sys),
-            Some(state),
-            Some(control),
-            Some(plant),
-            Some(controller),
-            Some(initial),
-            Some(horizon),
-            Some(propagator),
-            Some(partitioner),
-            Some(boundary),
-            Some(path),
-        ) => Ok(Checked {
-            system: sys.name.node.clone(),
-            state,
-            control,
-            plants: plant,
+    // Every part was produced without diagnostics, so each one is present;
+    // a missing one here would be a checker bug, reported rather than a panic.
+    let assembled = (|| {
+        Some(Checked {
+            system: sys?.name.node.clone(),
+            state: state?,
+            control: control?,
+            plants: plant?,
             dt,
             limits,
-            controller_path: path.node.clone(),
-            controller,
-            initial,
+            controller_path: controllers.first()?.node.clone(),
+            controller: ctrl?,
+            initial: initial?,
             goal,
             avoids: avoid_specs,
-            horizon,
-            propagator,
-            partitioner,
-            boundary,
+            horizon: horizon?,
+            propagator: propagator?,
+            partitioner: partition?,
+            boundary: boundary?,
             samples,
             seed,
-        }),
-        _ => Err(vec![Diagnostic::new(
-            Code::Missing,
-            whole,
-            "the spec is incomplete",
-        )
-        .label("here")
-        .hint("see docs/language.md")]),
-    }
+        })
+    })();
+    assembled.ok_or_else(|| {
+        vec![
+            Diagnostic::new(Code::Missing, whole, "the spec is incomplete")
+                .label("here")
+                .hint("see docs/language.md"),
+        ]
+    })
 }
 
 /// The limits on products of sizes (see [`crate::limits`]): simulated steps

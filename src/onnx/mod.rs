@@ -13,6 +13,9 @@
 //! constant `c` is read as multiplication by the f64 nearest to `1/c`, and a
 //! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64.
 
+// Untrusted data flows through here: no unwraps, no panicking indexing.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
 pub mod build;
 pub mod proto;
 
@@ -222,6 +225,18 @@ fn external_entry(t: &TensorProto) -> Result<ExternalEntry, OnnxError> {
             "external data must be a relative path without `..` next to the .onnx file; re-export the model",
         ));
     };
+    if offset
+        .checked_add(needed)
+        .is_none_or(|end| end > MAX_CONTROLLER_BYTES)
+    {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!(
+                "external data of tensor '{name}' ends beyond 512 MiB (offset {offset}, {needed} bytes)"
+            ),
+            "ravel reads at most 512 MiB of external data; re-export the model",
+        ));
+    }
     if let Some(l) = length {
         if l != needed {
             return Err(err(
@@ -337,19 +352,24 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
                     "re-export the model",
                 ));
             }
-            bytes
-                .chunks_exact(width)
-                .map(|c| match dt {
-                    dtype::FLOAT => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
-                    dtype::INT32 => i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
-                    dtype::DOUBLE => {
-                        f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])
-                    }
-                    _ => {
-                        i64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f64
-                    }
-                })
-                .collect()
+            match dt {
+                dtype::FLOAT => bytes
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes(le(c)) as f64)
+                    .collect(),
+                dtype::INT32 => bytes
+                    .chunks_exact(4)
+                    .map(|c| i32::from_le_bytes(le(c)) as f64)
+                    .collect(),
+                dtype::DOUBLE => bytes
+                    .chunks_exact(8)
+                    .map(|c| f64::from_le_bytes(le(c)))
+                    .collect(),
+                _ => bytes
+                    .chunks_exact(8)
+                    .map(|c| i64::from_le_bytes(le(c)) as f64)
+                    .collect(),
+            }
         }
         None => match dt {
             dtype::FLOAT => t.float_data.iter().map(|v| *v as f64).collect(),
@@ -370,6 +390,16 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
         ));
     }
     Ok(Tensor { dims, data })
+}
+
+/// The first `N` bytes of a chunk (chunks come from `chunks_exact(N)`, so
+/// they have exactly `N`; a shorter one would give zeros, never a panic).
+fn le<const N: usize>(c: &[u8]) -> [u8; N] {
+    let mut a = [0u8; N];
+    for (d, s) in a.iter_mut().zip(c) {
+        *d = *s;
+    }
+    a
 }
 
 fn dtype_name(d: i32) -> &'static str {
@@ -462,7 +492,13 @@ impl Lowering {
                 "re-export the model",
             ));
         }
-        let (a, b) = (&n.input[0], &n.input[1]);
+        let (Some(a), Some(b)) = (n.input.first(), n.input.get(1)) else {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} needs two inputs", node_label(n)),
+                "re-export the model",
+            ));
+        };
         if a == &self.current {
             self.consts.get(b).cloned().map(|t| (t, false))
         } else if b == &self.current {
@@ -493,7 +529,10 @@ impl Lowering {
     fn broadcast(&self, n: &NodeProto, t: &Tensor) -> Result<DVector<f64>, OnnxError> {
         let w = self.width()?;
         if t.data.len() == 1 {
-            Ok(DVector::from_element(w, t.data[0]))
+            Ok(DVector::from_element(
+                w,
+                t.data.first().copied().unwrap_or(0.0),
+            ))
         } else if t.data.len() == w {
             Ok(DVector::from_column_slice(&t.data))
         } else {
@@ -618,7 +657,13 @@ impl Lowering {
                         "re-export the model",
                     ));
                 }
-                let (r, c) = (bt.dims[0], bt.dims[1]);
+                let &[r, c] = bt.dims.as_slice() else {
+                    return Err(err(
+                        OnnxErrorKind::Malformed,
+                        format!("{} has a weight that is not 2-D", node_label(n)),
+                        "re-export the model",
+                    ));
+                };
                 Self::check_width(n, r.max(c))?;
                 let m = DMatrix::from_row_slice(r, c, &bt.data);
                 let alpha = attr_f(n, "alpha", 1.0);
@@ -673,8 +718,15 @@ impl Lowering {
                         "export Linear layers as x @ W",
                     ));
                 }
-                Self::check_width(n, t.dims[0].max(t.dims[1]))?;
-                let w = DMatrix::from_row_slice(t.dims[0], t.dims[1], &t.data).transpose();
+                let &[r, c] = t.dims.as_slice() else {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} must multiply by a 2-D constant", node_label(n)),
+                        "export Linear layers as x @ W",
+                    ));
+                };
+                Self::check_width(n, r.max(c))?;
+                let w = DMatrix::from_row_slice(r, c, &t.data).transpose();
                 self.expect_width(n, w.ncols())?;
                 let outputs = w.nrows();
                 self.push_affine(w, DVector::zeros(outputs));
@@ -761,22 +813,24 @@ impl Lowering {
 }
 
 fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
-    if let Some(i) = t.data.iter().position(|v| !v.is_finite()) {
+    if let Some((i, v)) = t.data.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(err(
             OnnxErrorKind::NonFinite,
-            format!(
-                "{what} holds a non-finite value ({}) at flat index {i}",
-                t.data[i]
-            ),
+            format!("{what} holds a non-finite value ({v}) at flat index {i}"),
             "the training diverged or the export is corrupt; retrain or re-export",
         ));
     }
-    if let Some(i) = t.data.iter().position(|v| v.abs() > MAX_MAGNITUDE) {
+    if let Some((i, v)) = t
+        .data
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.abs() > MAX_MAGNITUDE)
+    {
         return Err(err(
             OnnxErrorKind::NonFinite,
             format!(
                 "{what} holds {} at flat index {i}, beyond the magnitudes ravel analyses (±1e15)",
-                crate::diag::compact(t.data[i])
+                crate::diag::compact(*v)
             ),
             "the training diverged or the export is corrupt; retrain or re-export",
         ));
@@ -790,7 +844,10 @@ fn decode_message(e: &prost::DecodeError) -> String {
     let full = e.to_string();
     let parts: Vec<&str> = full.split(": ").collect();
     let short = if parts.len() > 4 {
-        format!("{}: {}: …: {}", parts[0], parts[1], parts[parts.len() - 1])
+        match (parts.first(), parts.get(1), parts.last()) {
+            (Some(a), Some(b), Some(z)) => format!("{a}: {b}: …: {z}"),
+            _ => full,
+        }
     } else {
         full
     };
@@ -863,7 +920,13 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             "export the controller with a single input tensor",
         ));
     }
-    let input = data_inputs[0];
+    let [input] = data_inputs.as_slice() else {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            "the graph needs exactly one data input",
+            "export the controller with a single input tensor",
+        ));
+    };
     let declared = input
         .r#type
         .as_ref()

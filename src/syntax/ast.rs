@@ -85,32 +85,47 @@ pub struct System {
 pub enum SystemStmt {
     /// `state x[n]`
     State {
+        /// The state vector's name.
         name: Spanned<String>,
+        /// Its dimension.
         dim: Spanned<u64>,
+        /// The whole statement.
         span: Span,
     },
     /// `control u[m]`
     Control {
+        /// The control vector's name.
         name: Spanned<String>,
+        /// Its dimension.
         dim: Spanned<u64>,
+        /// The whole statement.
         span: Span,
     },
     /// `NAME in box(…)`
     Bound {
+        /// The bounded quantity (`w`, `v` or the control).
         name: Spanned<String>,
+        /// The box.
         set: Spanned<BoxSet>,
+        /// The whole statement.
         span: Span,
     },
     /// `NAME = value`
     Assign {
+        /// The parameter (`A`, `B`, `c` or `C`).
         name: Spanned<String>,
+        /// The value.
         value: Spanned<Value>,
+        /// The whole statement.
         span: Span,
     },
     /// `time continuous dt 0.1` / `time discrete`
     Time {
+        /// `continuous` or `discrete`.
         kind: Spanned<String>,
+        /// The time step, if given.
         dt: Option<Spanned<f64>>,
+        /// The whole statement.
         span: Span,
     },
 }

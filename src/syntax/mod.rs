@@ -13,9 +13,14 @@ use pest::Parser;
 use crate::diag::{Code, Diagnostic};
 use ast::*;
 
-#[derive(pest_derive::Parser)]
-#[grammar = "../grammar/ravel.pest"]
-struct Grammar;
+/// The pest parser generated from the grammar (its generated items carry no docs).
+#[allow(missing_docs)]
+mod generated {
+    #[derive(pest_derive::Parser)]
+    #[grammar = "../grammar/ravel.pest"]
+    pub struct Grammar;
+}
+use generated::{Grammar, Rule};
 
 type P<'a> = Pair<'a, Rule>;
 

@@ -394,8 +394,9 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
         for (t, x) in tr.states.iter().enumerate().take(valid) {
             if keep {
                 points[t].push([x[0], x[1]]);
-                // supports of a point set are those of its hull: bounded memory
-                if points[t].len() > 4096 {
+                // supports of a point set are those of its hull: memory stays
+                // within 512 points per step (8 KB; 80 MB over 10000 steps)
+                if points[t].len() > 512 {
                     points[t] = convex_hull(&points[t]);
                 }
             }

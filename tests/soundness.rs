@@ -236,6 +236,18 @@ fn perturbed(rng: &mut Rng, e: &ModelError, x: &[f64], u: &[f64], next: Vec<f64>
         .collect()
 }
 
+/// One true step from `x`: random noise in its boxes and, for an uncertain
+/// plant, random matrices within the model error.
+fn advance(rng: &mut Rng, cl: &ClosedLoop, t: usize, x: &[f64]) -> Vec<f64> {
+    let w = sample_point(rng, &cl.plant.w);
+    let v = sample_point(rng, &cl.plant.v);
+    let (u, next) = cl.simulate(t, x, &w, &v);
+    match &cl.plant_at(t).err {
+        Some(e) => perturbed(rng, e, x, &u, next),
+        None => next,
+    }
+}
+
 fn sample_point(rng: &mut Rng, b: &IBox) -> Vec<f64> {
     (0..b.dim())
         .map(|i| match rng.below(4) {
@@ -314,13 +326,7 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                         );
                         checked += 1;
                         if t < case.horizon {
-                            let w = sample_point(&mut rng, &case.cl.plant.w);
-                            let v = sample_point(&mut rng, &case.cl.plant.v);
-                            let (u, next) = case.cl.simulate(t, &x, &w, &v);
-                            x = match &case.cl.plant_at(t).err {
-                                Some(e) => perturbed(&mut rng, e, &x, &u, next),
-                                None => next,
-                            };
+                            x = advance(&mut rng, &case.cl, t, &x);
                         }
                     }
                 }
@@ -601,13 +607,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                     );
                     checked += 1;
                     if t < case.horizon {
-                        let w = sample_point(&mut rng, &case.cl.plant.w);
-                        let v = sample_point(&mut rng, &case.cl.plant.v);
-                        let (u, next) = case.cl.simulate(t, &x, &w, &v);
-                        x = match &case.cl.plant_at(t).err {
-                            Some(e) => perturbed(&mut rng, e, &x, &u, next),
-                            None => next,
-                        };
+                        x = advance(&mut rng, &case.cl, t, &x);
                     }
                 }
             }

@@ -54,16 +54,7 @@ impl Ctx {
                     continue;
                 }
                 let d = if r.issue.is_some() {
-                    Diagnostic::new(
-                        Code::EmptyOrUnbounded,
-                        span,
-                        format!(
-                            "{role} could not be bounded (LP solver: {})",
-                            r.issue.map_or("", |i| i.as_str())
-                        ),
-                    )
-                    .label("bounding box unknown")
-                    .hint("the inequalities may be nearly parallel; rescale them or use a box")
+                    not_bounded(role, span, r.issue)
                 } else {
                     Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
                         .label(format!(
@@ -124,11 +115,7 @@ impl Ctx {
             if lp::separation(&[], &p.rows, &lo, &hi).value > 0.0 {
                 // P ∩ B is empty: P is empty, or lies beyond B
                 if at_last {
-                    self.err(
-                        Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is empty"))
-                            .label("no state satisfies every inequality")
-                            .hint("check the directions of `<=` and `>=`"),
-                    );
+                    self.err(empty_set(role, span));
                     return None;
                 }
                 big *= 1e3;
@@ -148,12 +135,8 @@ impl Ctx {
                 bb_hi.push(up.value);
                 bb_lo.push(-down.value);
             }
-            if let Some(issue) = issue {
-                self.err(
-                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} could not be bounded (LP solver: {issue})"))
-                        .label("bounding box unknown")
-                        .hint("the inequalities may be nearly parallel or badly scaled; rescale them or use a box"),
-                );
+            if issue.is_some() {
+                self.err(not_bounded(role, span, issue));
                 return None;
             }
             if inside {
@@ -163,11 +146,7 @@ impl Ctx {
                 });
             }
             if at_last {
-                self.err(
-                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} could not be bounded"))
-                        .label("bounding box unknown")
-                        .hint("the inequalities are badly scaled or nearly parallel; rescale them or use a box"),
-                );
+                self.err(not_bounded(role, span, None));
                 return None;
             }
             big *= 1e3;
@@ -501,6 +480,24 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
             c: DVector::from_iterator(n, err.view((0, n + m), (n, 1)).iter().copied()),
         }),
     })
+}
+
+/// "`role` is empty".
+fn empty_set(role: &str, span: Span) -> Diagnostic {
+    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is empty"))
+        .label("no state satisfies every inequality")
+        .hint("check the directions of `<=` and `>=`")
+}
+
+/// "`role` could not be bounded", with the LP solver's issue if there was one.
+fn not_bounded(role: &str, span: Span, issue: Option<crate::issue::Issue>) -> Diagnostic {
+    let message = match issue {
+        Some(i) => format!("{role} could not be bounded (LP solver: {i})"),
+        None => format!("{role} could not be bounded"),
+    };
+    Diagnostic::new(Code::EmptyOrUnbounded, span, message)
+        .label("bounding box unknown")
+        .hint("the inequalities may be nearly parallel or badly scaled; rescale them or use a box")
 }
 
 /// The vector `sign·eᵢ` of length `n`.

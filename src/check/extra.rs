@@ -416,7 +416,10 @@ impl Ctx {
                         Diagnostic::new(
                             Code::TimeStep,
                             d.span,
-                            format!("the time step must be positive, not {}", d.node),
+                            format!(
+                                "the time step must be positive, not {}",
+                                crate::diag::compact(d.node)
+                            ),
                         )
                         .label("dt ≤ 0")
                         .hint("the controller's sampling period in seconds, e.g. `dt 0.1`"),

@@ -42,6 +42,15 @@ pub const MAX_WIDTH: u64 = 4096;
 /// Largest number of nodes of an ONNX graph.
 pub const MAX_NODES: usize = 4096;
 
+/// Largest dimension of Reach-SDP's semidefinite program (observation and
+/// state inputs, hidden and saturation neurons, plus one): Clarabel's
+/// factorisation of a PSD cone of dimension `d` holds about `(d²/2)²`
+/// numbers, 1 GB at 150.
+pub const MAX_SDP_DIM: u64 = 150;
+/// Largest `horizon × neurons` of unrolled CROWN, which keeps every step's
+/// neuron bounds and relaxations (about 60 bytes per neuron and step).
+pub const MAX_UNROLLED_NEURON_STEPS: u64 = 5_000_000;
+
 /// `a × b × …` if it does not overflow `u64`.
 pub fn product(factors: &[u64]) -> Option<u64> {
     factors.iter().try_fold(1u64, |acc, f| acc.checked_mul(*f))

@@ -542,6 +542,41 @@ fn specs(dir: &Path) -> usize {
     for (name, expect, why, text) in &targeted {
         put(name, expect, why, text);
     }
+    // a valid but wide ReLU controller: too large for Reach-SDP, and for
+    // unrolled CROWN over a long horizon
+    let mut layers = Vec::new();
+    let mut width = 2;
+    for _ in 0..3 {
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(200, width, |r, c| ((r * 7 + c * 3) % 11) as f64 * 0.01 - 0.05),
+            b: DVector::zeros(200),
+        });
+        layers.push(Layer::Act(Activation::Relu));
+        width = 200;
+    }
+    layers.push(Layer::Affine {
+        w: DMatrix::from_element(1, 200, 0.001),
+        b: DVector::zeros(1),
+    });
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.network(&Network::new(2, layers), false);
+    fs::write(dir.join("relu_600.onnx"), g.finish(1).0).expect("write");
+    let wide = BASE.replace("../../../models/double_integrator.onnx", "relu_600.onnx");
+    put(
+        "sdp_too_large",
+        "E0216",
+        "Reach-SDP on 600 ReLU neurons: a semidefinite program of dimension 610",
+        &wide.replace("reach_lp", "reach_sdp"),
+    );
+    put(
+        "unrolled_too_long",
+        "E0216",
+        "unrolled CROWN keeping 600 neurons' bounds for 10000 steps",
+        &wide
+            .replace("reach_lp", "crown_unrolled")
+            .replace("horizon 5", "horizon 10000")
+            .replace("samples     100", "samples     10"),
+    );
     count
 }
 

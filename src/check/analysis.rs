@@ -19,6 +19,8 @@ pub(super) struct AnalysisPart {
     pub hull_span: Option<Span>,
     pub guided_span: Option<(Guide, Span)>,
     pub sdp_span: Option<Span>,
+    /// Where the propagator was named (absent: the default).
+    pub propagator_span: Option<Span>,
     pub samples: usize,
     pub seed: u64,
 }
@@ -37,6 +39,7 @@ pub(super) fn analysis(
     let mut hull_span = None;
     let mut guided_span = None;
     let mut sdp_span = None;
+    let mut propagator_span = None;
     let mut samples = DEFAULT_SAMPLES;
     let mut seed = 0u64;
     if let Some(an) = analyses.first() {
@@ -63,6 +66,7 @@ pub(super) fn analysis(
                             if prop == Propagator::ReachSdp {
                                 sdp_span = Some(p.span);
                             }
+                            propagator_span = Some(p.span);
                             Some(prop)
                         }
                         None => {
@@ -246,6 +250,7 @@ pub(super) fn analysis(
         hull_span,
         guided_span,
         sdp_span,
+        propagator_span,
         samples,
         seed,
     }

@@ -23,7 +23,8 @@ use crate::analysis::closed_loop::{Boundary, Plant, Propagator};
 use crate::diag::{compact, Code, Diagnostic};
 use crate::ir::{Guide, Partitioner};
 use crate::limits::{
-    within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SIMULATED_STEPS, MAX_STORED_NUMBERS,
+    within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SDP_DIM, MAX_SIMULATED_STEPS,
+    MAX_STORED_NUMBERS, MAX_UNROLLED_NEURON_STEPS,
 };
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
@@ -775,10 +776,12 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let (mut plant, per_step_lists, limits) = (pp.plant, pp.per_step_lists, pp.limits);
     let (initial, goal, avoid_specs) = (sets.initial, sets.goal, sets.avoids);
     let (propagator, partition, boundary) = (an.propagator, an.partition, an.boundary);
-    let (hull_span, guided_span, sdp_span, samples, seed) = (
+    let p_dim = pp.p_dim;
+    let (hull_span, guided_span, sdp_span, propagator_span, samples, seed) = (
         an.hull_span,
         an.guided_span,
         an.sdp_span,
+        an.propagator_span,
         an.samples,
         an.seed,
     );
@@ -803,6 +806,46 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
                 .label("needs a ReLU network")
                 .hint("use `reach_lp` or `crown_unrolled`, which handle tanh and sigmoid"),
             );
+        }
+    }
+    if let Some(c) = &ctrl {
+        let neurons: u64 = c
+            .net
+            .layers
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| matches!(l, crate::nn::Layer::Act(_)))
+            .map(|(i, _)| c.net.width_at(i) as u64)
+            .sum();
+        let span = propagator_span.unwrap_or(whole);
+        if let (Some(Propagator::ReachSdp), Some((_, n)), Some(p)) = (propagator, &state, p_dim) {
+            // ξ = (x, v), the hidden neurons, the two saturation layers, and 1
+            let m = c.outputs as u64;
+            let dim = *n as u64 + p as u64 + neurons + 2 * m + 1;
+            if dim > MAX_SDP_DIM {
+                cx.err(
+                    Diagnostic::new(
+                        Code::Limit,
+                        span,
+                        format!("Reach-SDP would solve semidefinite programs of dimension {dim}, beyond the limit of {MAX_SDP_DIM}"),
+                    )
+                    .label("too large for Reach-SDP")
+                    .hint("use `reach_lp` or `crown_unrolled`, or a smaller controller"),
+                );
+            }
+        }
+        if let (Some(Propagator::CrownUnrolled), Some(h)) = (propagator, horizon) {
+            if !within(&[h as u64, neurons.max(1)], MAX_UNROLLED_NEURON_STEPS) {
+                cx.err(
+                    Diagnostic::new(
+                        Code::Limit,
+                        span,
+                        format!("unrolled CROWN would keep {neurons} neurons' bounds for each of {h} steps, beyond the limit of {MAX_UNROLLED_NEURON_STEPS}"),
+                    )
+                    .label("too much to keep")
+                    .hint("use a shorter horizon or `reach_lp`"),
+                );
+            }
         }
     }
     if let (Some(span), true) = (hull_span, samples == 0) {

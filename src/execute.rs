@@ -477,6 +477,57 @@ fn offsets(r: &Region) -> Vec<f64> {
     v
 }
 
+/// Whether a simulated trajectory certainly violates `prop` at `step`: its
+/// initial state and noise values lie in their sets, and the rigorous
+/// enclosure of the true trajectory from them (outward-rounded interval
+/// arithmetic, [`crate::analysis::closed_loop::ClosedLoop::enclose_step`])
+/// lies outside the goal (some goal row is violated by every point of the
+/// enclosure) or inside the avoid set at that step. The f64 simulation
+/// alone could be off by more than any fixed tolerance in an unstable or
+/// high-gain loop; this check makes FALSIFIED independent of it.
+fn certainly_violates(plan: &Plan, tr: &Trajectory, prop: &Property, step: usize) -> bool {
+    let cl = &plan.closed_loop;
+    let Some(x0) = tr.states.first() else {
+        return false;
+    };
+    if !plan.initial.contains_point(x0) {
+        return false;
+    }
+    let mut x = IBox::point(x0);
+    for t in 0..step {
+        let (Some(w), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+            return false;
+        };
+        if !(cl.plant.w.contains_point(w) && cl.plant.v.contains_point(v)) {
+            return false;
+        }
+        match cl.enclose_step(t, &x, w, v) {
+            Some(next) => x = next,
+            None => return false,
+        }
+    }
+    match &prop.kind {
+        PropertyKind::Goal(g) => g.separation_margin(&x) > 0.0,
+        PropertyKind::Avoid { members, .. } => {
+            members.iter().any(|m| m.containment_margin(&x) >= 0.0)
+        }
+    }
+}
+
+/// Keep only the sampled violations that [`certainly_violates`] confirms
+/// (before any partitioning, so a property-guided partitioner still works on
+/// a property whose violation was not confirmed).
+fn confirm(plan: &Plan, mc: &mut MonteCarlo) {
+    for (prop, worst) in plan.properties.iter().zip(mc.worst.iter_mut()) {
+        if let Some((_, k, t)) = *worst {
+            let real = simulate(plan, k).is_some_and(|tr| certainly_violates(plan, &tr, prop, t));
+            if !real {
+                *worst = None;
+            }
+        }
+    }
+}
+
 /// Whether a margin proves the property.
 fn proves(prop: &Property, margin: f64) -> bool {
     match &prop.kind {
@@ -787,17 +838,19 @@ fn verdicts(plan: &Plan, cells: &[Vec<Step>], mc: &MonteCarlo) -> Vec<PropertyRe
                 }
             }
             let proven = proves(prop, margin) && !issue && cut.is_none();
-            match worst {
+            // `confirm` kept only violations the rigorous replay confirms
+            let confirmed = worst.and_then(|(depth, k, t)| Some((depth, simulate(plan, k)?, t)));
+            match confirmed {
                 // A genuine counterexample always wins; a proof next to one would be a soundness bug.
-                Some((depth, k, t)) => {
+                Some((depth, tr, t)) => {
                     debug_assert!(!proven, "property {} proven and falsified", prop.name);
                     PropertyResult {
                         name: prop.name.clone(),
                         kind,
                         status: Status::Falsified,
                         margin: -depth,
-                        step: *t,
-                        counterexample: simulate(plan, *k),
+                        step: t,
+                        counterexample: Some(tr),
                         cut: None,
                     }
                 }
@@ -822,7 +875,8 @@ fn verdicts(plan: &Plan, cells: &[Vec<Step>], mc: &MonteCarlo) -> Vec<PropertyRe
 /// Execute a plan under a [`Control`]: Monte Carlo, then the partition and
 /// propagation, then the verdicts.
 pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
-    let mc = monte_carlo(plan, ctl);
+    let mut mc = monte_carlo(plan, ctl);
+    confirm(plan, &mut mc);
     let plan = &*resolve_boundary(plan, &mc);
     let part = match &plan.partitioner {
         Partitioner::Uniform(grid) => partition_uniform(plan, grid, ctl),

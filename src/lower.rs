@@ -92,7 +92,12 @@ fn summary(c: &Checked) -> String {
         }
     }
     parts.push(net.outputs().to_string());
-    parts.join(" → ")
+    let chain = parts.join(" → ");
+    if c.controller.notes.is_empty() {
+        chain
+    } else {
+        format!("{chain}; {}", c.controller.notes.join(", "))
+    }
 }
 
 /// Lower a checked spec to a plan.

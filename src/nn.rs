@@ -135,34 +135,69 @@ impl Network {
     /// (`lo + relu(u − lo)`, then `hi − relu(hi − ·)`), the construction of Hu et al.
     /// Every bound in `lo`/`hi` must be finite and `lo ≤ hi`.
     pub fn with_saturation(&self, lo: &[f64], hi: &[f64]) -> Network {
-        let m = lo.len();
-        let eye = DMatrix::<f64>::identity(m, m);
         let mut layers = self.layers.clone();
-        // z1 = u - lo; a1 = relu(z1) = max(u, lo) - lo
+        layers.extend(clamp_layers(lo.len(), Some(lo), Some(hi)));
+        Network::new(self.inputs, layers)
+    }
+}
+
+/// Layers computing `min(max(x, lo), hi)` exactly (either side optional) on
+/// `m` values, as affine maps and ReLUs: `max(x, lo) = relu(x − lo) + lo` and
+/// `min(y, hi) = hi − relu(hi − y)`. Every bias is a stored bound or its
+/// negation, so no rounding changes the function (a bias `hi − lo` would).
+/// Used for the spec's control limits and for ONNX `Clip`.
+pub fn clamp_layers(m: usize, lo: Option<&[f64]>, hi: Option<&[f64]>) -> Vec<Layer> {
+    let eye = DMatrix::<f64>::identity(m, m);
+    let mut layers = Vec::new();
+    if let Some(lo) = lo {
+        // a1 = relu(x − lo) = max(x, lo) − lo, then + lo
         layers.push(Layer::Affine {
             w: eye.clone(),
             b: DVector::from_iterator(m, lo.iter().map(|l| -l)),
         });
         layers.push(Layer::Act(Activation::Relu));
-        // z2 = (hi - lo) - a1 = hi - max(u, lo); a2 = relu(z2)
-        // The bias hi - lo is rounded in f64; to keep the saturated network exactly
-        // `clip(u, lo, hi)` we shift in two exact steps instead: z2 = hi - (a1 + lo).
         layers.push(Layer::Affine {
             w: eye.clone(),
             b: DVector::from_column_slice(lo),
         });
+    }
+    if let Some(hi) = hi {
+        // a2 = relu(hi − y), out = hi − a2 = min(y, hi)
         layers.push(Layer::Affine {
             w: -eye.clone(),
             b: DVector::from_column_slice(hi),
         });
         layers.push(Layer::Act(Activation::Relu));
-        // out = hi - a2 = min(hi, max(u, lo))
         layers.push(Layer::Affine {
             w: -eye,
             b: DVector::from_column_slice(hi),
         });
-        Network::new(self.inputs, layers)
     }
+    layers
+}
+
+/// Layers computing LeakyReLU with slope `alpha` on `m` values as a chain of
+/// ReLUs: `leaky(x) = relu(x) − α·relu(−x)` (exact for any α), through a
+/// layer twice as wide. Every propagator, Reach-SDP included, handles it.
+pub fn leaky_relu_layers(m: usize, alpha: f64) -> Vec<Layer> {
+    let eye = DMatrix::<f64>::identity(m, m);
+    let mut split = DMatrix::<f64>::zeros(2 * m, m);
+    split.view_mut((0, 0), (m, m)).copy_from(&eye);
+    split.view_mut((m, 0), (m, m)).copy_from(&(-&eye));
+    let mut join = DMatrix::<f64>::zeros(m, 2 * m);
+    join.view_mut((0, 0), (m, m)).copy_from(&eye);
+    join.view_mut((0, m), (m, m)).copy_from(&(&eye * -alpha));
+    vec![
+        Layer::Affine {
+            w: split,
+            b: DVector::zeros(2 * m),
+        },
+        Layer::Act(Activation::Relu),
+        Layer::Affine {
+            w: join,
+            b: DVector::zeros(m),
+        },
+    ]
 }
 
 #[cfg(test)]

@@ -194,10 +194,10 @@ fn loader_errors_name_the_problem() {
 
     let mut g = GraphBuilder::new(2, Storage::RawF32);
     g.gemm(&DMatrix::from_element(1, 2, 1.0), &DVector::zeros(1));
-    g.unary("LeakyRelu");
+    g.unary("Elu");
     let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("unsupported");
     assert_eq!(e.kind, OnnxErrorKind::Unsupported);
-    assert!(e.message.contains("LeakyRelu"), "{}", e.message);
+    assert!(e.message.contains("Elu"), "{}", e.message);
 
     let mut g = GraphBuilder::new(2, Storage::RawF32);
     g.gemm(
@@ -226,4 +226,205 @@ fn loader_errors_name_the_problem() {
     g.gemm(&DMatrix::from_element(1, 2, 1.0), &DVector::zeros(1));
     let e = load(&g.finish(1).0, &ExternalFiles::new()).expect_err("shape");
     assert_eq!(e.kind, OnnxErrorKind::Malformed);
+}
+
+/// What `torch.onnx.export` writes for saturated, leaky, batch-normalised
+/// policies loads as an exact chain: Clip (bounds as inputs, opset ≥ 11, or
+/// as attributes, older opsets), LeakyRelu, BatchNormalization in inference
+/// form, Dropout in inference mode; training-mode graphs are refused with
+/// a message that says what to do.
+#[test]
+fn exporter_ops_load_as_exact_chains() {
+    use prost::Message;
+    use ravel::onnx::build::{float_attr, int_attr};
+    use ravel::onnx::proto::{dtype, ModelProto};
+    let w1 = DMatrix::from_row_slice(3, 2, &[0.5, -0.25, 1.0, 0.75, -1.5, 0.125]);
+    let b1 = DVector::from_column_slice(&[0.25, -0.5, 0.0]);
+    let w2 = DMatrix::from_row_slice(1, 3, &[1.0, -0.5, 0.25]);
+    let b2 = DVector::from_column_slice(&[0.125]);
+    let hidden = |x: &[f64], alpha: f64| -> Vec<f64> {
+        (0..3)
+            .map(|i| {
+                let z = w1[(i, 0)] * x[0] + w1[(i, 1)] * x[1] + b1[i];
+                if z >= 0.0 {
+                    z
+                } else {
+                    alpha * z
+                }
+            })
+            .collect()
+    };
+    let out = |h: &[f64]| (0..3).map(|i| w2[(0, i)] * h[i]).sum::<f64>() + b2[0];
+    let inputs = [
+        [0.3, -0.7],
+        [-1.5, 2.0],
+        [2.0, 1.0],
+        [-3.0, -3.0],
+        [0.0, 0.0],
+    ];
+
+    // Gemm → LeakyRelu(0.125) → Gemm → Clip(min, max as inputs)
+    for opset_inputs in [true, false] {
+        let mut g = GraphBuilder::new(2, Storage::RawF32);
+        g.gemm(&w1, &b1);
+        g.node("LeakyRelu", &[], vec![float_attr("alpha", 0.125)]);
+        g.gemm(&w2, &b2);
+        if opset_inputs {
+            let lo = g.constant("min", &[], &[-0.5]);
+            let hi = g.constant("max", &[], &[0.75]);
+            g.node("Clip", &[lo, hi], vec![]);
+        } else {
+            g.node(
+                "Clip",
+                &[],
+                vec![float_attr("min", -0.5), float_attr("max", 0.75)],
+            );
+        }
+        let c = load(&g.finish(1).0, &ExternalFiles::new()).expect("loads");
+        assert_eq!((c.inputs, c.outputs), (2, 1));
+        assert!(c.notes.iter().any(|n| n.contains("clip")), "{:?}", c.notes);
+        for x in inputs {
+            let want = out(&hidden(&x, 0.125)).clamp(-0.5, 0.75);
+            let y = c.net.forward(&x)[0];
+            assert!((y - want).abs() < 1e-12, "{x:?}: {y} vs {want}");
+        }
+    }
+
+    // an explicit ±FLT_MAX bound (old opsets' default) means no bound
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(&w1, &b1);
+    g.node("LeakyRelu", &[], vec![float_attr("alpha", 0.125)]);
+    g.gemm(&w2, &b2);
+    g.node(
+        "Clip",
+        &[],
+        vec![float_attr("min", f32::MIN), float_attr("max", 0.75)],
+    );
+    let c = load(&g.finish(1).0, &ExternalFiles::new()).expect("loads");
+    for x in inputs {
+        let want = out(&hidden(&x, 0.125)).min(0.75);
+        let y = c.net.forward(&x)[0];
+        assert!((y - want).abs() < 1e-12, "{x:?}: {y} vs {want}");
+    }
+
+    // BatchNormalization after the first Gemm, then ReLU, Dropout (inference)
+    let (scale, bias, mean, var) = (
+        [2.0, 0.5, 1.0],
+        [0.1, -0.2, 0.0],
+        [0.5, -1.0, 0.25],
+        [4.0, 0.25, 1.0],
+    );
+    let eps = 1e-5f64;
+    let mut g = GraphBuilder::new(2, Storage::RawF64);
+    g.gemm(&w1, &b1);
+    let names: Vec<String> = [
+        ("scale", scale),
+        ("bias", bias),
+        ("mean", mean),
+        ("var", var),
+    ]
+    .iter()
+    .map(|(n, v)| g.constant(n, &[3], v))
+    .collect();
+    g.node(
+        "BatchNormalization",
+        &names,
+        vec![float_attr("epsilon", eps as f32)],
+    );
+    g.unary("Relu");
+    let ratio = g.constant("ratio", &[], &[0.5]);
+    g.node("Dropout", &[ratio], vec![]);
+    g.gemm(&w2, &b2);
+    let c = load(&g.finish(1).0, &ExternalFiles::new()).expect("loads");
+    let eps32 = eps as f32 as f64;
+    for x in inputs {
+        let h: Vec<f64> = (0..3)
+            .map(|i| {
+                let z = w1[(i, 0)] * x[0] + w1[(i, 1)] * x[1] + b1[i];
+                let d = scale[i] / (var[i] + eps32).sqrt();
+                (d * z + (bias[i] - mean[i] * d)).max(0.0)
+            })
+            .collect();
+        let y = c.net.forward(&x)[0];
+        assert!((y - out(&h)).abs() < 1e-12, "{x:?}: {y} vs {}", out(&h));
+    }
+
+    // training mode: Dropout with training_mode = true (a bool initializer), BatchNormalization with training_mode = 1
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(&w1, &b1);
+    let ratio = g.constant("ratio", &[], &[0.5]);
+    let flag = g.constant("training_mode", &[], &[1.0]);
+    g.node("Dropout", &[ratio, flag.clone()], vec![]);
+    g.gemm(&w2, &b2);
+    let mut m = ModelProto::decode(g.finish(1).0.as_slice()).expect("model");
+    for t in &mut m.graph.as_mut().expect("graph").initializer {
+        if t.name.as_deref() == Some(flag.as_str()) {
+            t.data_type = Some(dtype::BOOL);
+            t.raw_data = Some(vec![1]);
+        }
+    }
+    let e = load(&m.encode_to_vec(), &ExternalFiles::new()).expect_err("training dropout");
+    assert!(e.message.contains("training mode"), "{}", e.message);
+    assert!(e.hint.contains("model.eval()"), "{}", e.hint);
+
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(&w1, &b1);
+    let names: Vec<String> = [
+        ("scale", scale),
+        ("bias", bias),
+        ("mean", mean),
+        ("var", var),
+    ]
+    .iter()
+    .map(|(n, v)| g.constant(n, &[3], v))
+    .collect();
+    g.node(
+        "BatchNormalization",
+        &names,
+        vec![int_attr("training_mode", 1)],
+    );
+    let e = load(&g.finish(3).0, &ExternalFiles::new()).expect_err("training batch norm");
+    assert!(e.hint.contains("model.eval()"), "{}", e.hint);
+}
+
+/// A policy saturated in the ONNX graph (`Clip`, as `torch.clamp` exports
+/// it) is analysed exactly like the same policy saturated by the spec's
+/// control limits: the same reachable sets to the bit, the same verdicts.
+#[test]
+fn an_onnx_clip_equals_spec_saturation() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let c = read_model("double_integrator");
+    let mut g = GraphBuilder::new(2, Storage::RawF64);
+    g.network(&c.net, false);
+    g.node(
+        "Clip",
+        &[],
+        vec![
+            ravel::onnx::build::float_attr("min", -1.0),
+            ravel::onnx::build::float_attr("max", 1.0),
+        ],
+    );
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("clip");
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::write(dir.join("clipped.onnx"), g.finish(1).0).expect("write");
+    let original =
+        std::fs::read_to_string(root.join("specs/double_integrator.ravel")).expect("spec");
+    assert!(original.contains("u in box([-1, 1])"));
+    let clipped = original
+        .replace("u in box([-1, 1])", "")
+        .replace("\"../models/double_integrator.onnx\"", "\"clipped.onnx\"");
+    let run = |src: &str, dir: &std::path::Path| {
+        let c = ravel::front_end(src, dir, &ravel::cli::read_request).expect("checks");
+        let plan = ravel::lower::lower(&c);
+        ravel::execute::execute(&plan, &|| 0.0)
+    };
+    let a = run(&original, &root.join("specs"));
+    let b = run(&clipped, &dir);
+    assert_eq!(a.reach, b.reach);
+    assert_eq!(a.verdict, b.verdict);
+    let (pa, pb): (Vec<_>, Vec<_>) = (
+        a.properties.iter().map(|p| (p.status, p.margin)).collect(),
+        b.properties.iter().map(|p| (p.status, p.margin)).collect(),
+    );
+    assert_eq!(pa, pb);
 }

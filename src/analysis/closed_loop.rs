@@ -367,6 +367,38 @@ impl ClosedLoop {
         }
     }
 
+    /// A rigorous enclosure of the true next state from every state in `x`
+    /// at step `t` with the given noise values (outward-rounded interval
+    /// arithmetic through the network and the plant, plus the plant's model
+    /// error); `None` when a bound is not finite. Used to confirm that a
+    /// simulated counterexample is a real one.
+    pub fn enclose_step(&self, t: usize, x: &IBox, w: &[f64], v: &[f64]) -> Option<IBox> {
+        let p = self.plant.obs.ncols();
+        let y = affine_image(
+            &self.obs_xv,
+            &DVector::zeros(p),
+            &x.product(&IBox::point(v)),
+        );
+        let a = Analysis::new(&self.net, &y, Mode::Ibp);
+        if !(y.is_finite() && a.is_finite()) {
+            return None;
+        }
+        let u = a.output_box(Mode::Ibp);
+        let d = self.at(t);
+        let mut next = affine_image(
+            &d.dyn_xuw,
+            &d.plant.c,
+            &x.product(&u).product(&IBox::point(w)),
+        );
+        if let Some(delta) = self.model_delta(t, x, &u.abs_max()) {
+            for ((lo, hi), e) in next.lo.iter_mut().zip(next.hi.iter_mut()).zip(delta) {
+                *lo = crate::num::sum_lower([*lo, -e]);
+                *hi = sum_upper([*hi, e]);
+            }
+        }
+        next.is_finite().then_some(next)
+    }
+
     /// The box of possible observations for states in `x`.
     pub fn observation_box(&self, x: &IBox) -> IBox {
         let p = self.plant.obs.ncols();

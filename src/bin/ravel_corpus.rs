@@ -17,7 +17,7 @@ use std::path::Path;
 use nalgebra::{DMatrix, DVector};
 use prost::Message;
 use ravel::nn::{Activation, Layer, Network};
-use ravel::onnx::build::{GraphBuilder, Storage};
+use ravel::onnx::build::{float_attr, int_attr, GraphBuilder, Storage};
 use ravel::onnx::proto::{
     AttributeProto, GraphProto, ModelProto, NodeProto, StringStringEntryProto, TensorProto,
 };
@@ -548,7 +548,9 @@ fn specs(dir: &Path) -> usize {
     let mut width = 2;
     for _ in 0..3 {
         layers.push(Layer::Affine {
-            w: DMatrix::from_fn(200, width, |r, c| ((r * 7 + c * 3) % 11) as f64 * 0.01 - 0.05),
+            w: DMatrix::from_fn(200, width, |r, c| {
+                ((r * 7 + c * 3) % 11) as f64 * 0.01 - 0.05
+            }),
             b: DVector::zeros(200),
         });
         layers.push(Layer::Act(Activation::Relu));
@@ -800,7 +802,6 @@ fn onnx(dir: &Path) -> usize {
     }
     for (name, dt, what) in [
         ("float16", 10, "float16 weights"),
-        ("bool", 9, "bool weights"),
         ("string", 8, "string weights"),
         ("complex", 14, "complex weights"),
     ] {
@@ -808,7 +809,17 @@ fn onnx(dir: &Path) -> usize {
         graph(&mut m).initializer[0].data_type = Some(dt);
         put(name, "E0303", what, m.encode_to_vec());
     }
-    for op in ["LeakyRelu", "Softmax", "Conv", "Exp", "Clip"] {
+    // bool constants are read (Dropout's training flag), but a float
+    // tensor's bytes declared bool do not fit its shape
+    let mut m = raw.clone();
+    graph(&mut m).initializer[0].data_type = Some(9);
+    put(
+        "bool",
+        "E0307",
+        "float weights declared bool",
+        m.encode_to_vec(),
+    );
+    for op in ["Elu", "Softmax", "Conv", "Exp", "Softplus"] {
         let mut g = GraphBuilder::new(2, Storage::RawF32);
         g.network(&net(), false);
         g.unary(op);
@@ -818,6 +829,78 @@ fn onnx(dir: &Path) -> usize {
             &format!("the unsupported op {op}"),
             g.finish(1).0,
         );
+    }
+    // exporter ops with bad parameters
+    let bad_ops: Vec<(&str, &str, &str, Vec<u8>)> = vec![
+        ("clip_inverted", "E0307", "Clip with min above max", {
+            let mut g = GraphBuilder::new(2, Storage::RawF32);
+            g.network(&net(), false);
+            g.node(
+                "Clip",
+                &[],
+                vec![float_attr("min", 1.0), float_attr("max", -1.0)],
+            );
+            g.finish(1).0
+        }),
+        ("clip_nan", "E0306", "Clip with a NaN bound", {
+            let mut g = GraphBuilder::new(2, Storage::RawF32);
+            g.network(&net(), false);
+            let lo = g.constant("min", &[], &[f64::NAN]);
+            g.node("Clip", &[lo], vec![]);
+            g.finish(1).0
+        }),
+        ("leaky_relu_nan", "E0306", "LeakyRelu with a NaN slope", {
+            let mut g = GraphBuilder::new(2, Storage::RawF32);
+            g.network(&net(), false);
+            g.node("LeakyRelu", &[], vec![float_attr("alpha", f32::NAN)]);
+            g.finish(1).0
+        }),
+        (
+            "batchnorm_negative_variance",
+            "E0306",
+            "BatchNormalization with a negative variance",
+            {
+                let mut g = GraphBuilder::new(2, Storage::RawF32);
+                g.network(&net(), false);
+                let p: Vec<String> = [("scale", 1.0), ("bias", 0.0), ("mean", 0.0), ("var", -4.0)]
+                    .iter()
+                    .map(|(n, v)| g.constant(n, &[1], &[*v]))
+                    .collect();
+                g.node("BatchNormalization", &p, vec![]);
+                g.finish(1).0
+            },
+        ),
+        (
+            "batchnorm_training",
+            "E0303",
+            "BatchNormalization exported in training mode",
+            {
+                let mut g = GraphBuilder::new(2, Storage::RawF32);
+                g.network(&net(), false);
+                let p: Vec<String> = [("scale", 1.0), ("bias", 0.0), ("mean", 0.0), ("var", 1.0)]
+                    .iter()
+                    .map(|(n, v)| g.constant(n, &[1], &[*v]))
+                    .collect();
+                g.node("BatchNormalization", &p, vec![int_attr("training_mode", 1)]);
+                g.finish(1).0
+            },
+        ),
+        (
+            "dropout_training",
+            "E0303",
+            "Dropout exported in training mode",
+            {
+                let mut g = GraphBuilder::new(2, Storage::RawF32);
+                g.network(&net(), false);
+                let ratio = g.constant("ratio", &[], &[0.5]);
+                let flag = g.constant("training_mode", &[], &[1.0]);
+                g.node("Dropout", &[ratio, flag], vec![]);
+                g.finish(1).0
+            },
+        ),
+    ];
+    for (name, code, what, bytes) in bad_ops {
+        put(name, code, what, bytes);
     }
     let mut g = GraphBuilder::new(2, Storage::RawF32);
     g.network(&net(), false);

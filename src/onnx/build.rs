@@ -60,7 +60,8 @@ fn value_info(name: &str, dims: &[Option<i64>]) -> ValueInfoProto {
     }
 }
 
-fn int_attr(name: &str, v: i64) -> AttributeProto {
+/// An integer attribute.
+pub fn int_attr(name: &str, v: i64) -> AttributeProto {
     AttributeProto {
         name: Some(name.into()),
         i: Some(v),
@@ -69,7 +70,8 @@ fn int_attr(name: &str, v: i64) -> AttributeProto {
     }
 }
 
-fn float_attr(name: &str, v: f32) -> AttributeProto {
+/// A float attribute.
+pub fn float_attr(name: &str, v: f32) -> AttributeProto {
     AttributeProto {
         name: Some(name.into()),
         f: Some(v),

@@ -2,19 +2,22 @@
 //! to a [`Network`], and a small writer used by the model generator and tests.
 //!
 //! Supported graphs are chains on one vector input: `Gemm` (alpha, beta,
-//! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `Tanh`, `Sigmoid`,
+//! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `LeakyRelu`, `Tanh`,
+//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
 //! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
 //! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
-//! `Dropout` (inference), plus `Constant`. Weights may be float32 or float64,
-//! stored in `raw_data`, in the typed fields, or in external data files.
+//! `Dropout` (inference), plus `Constant`. Weights may be float32, float64
+//! (or integer and bool constants), stored in `raw_data`, in the typed
+//! fields, or in external data files.
 //!
 //! Semantics: the network ravel verifies is the real-arithmetic function of
-//! the stored weights (float32 values are widened to f64 exactly). `Div` by a
-//! constant `c` is read as multiplication by the f64 nearest to `1/c`, and a
-//! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64.
-
-// Untrusted data flows through here: no unwraps, no panicking indexing.
-#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+//! the stored weights (float32 values are widened to f64 exactly). `Clip`
+//! and `LeakyRelu` become ReLU layers that compute them exactly. `Div` by a
+//! constant `c` is read as multiplication by the f64 nearest to `1/c`, a
+//! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64, and
+//! `BatchNormalization` is the diagonal affine map whose coefficients
+//! `scale/√(var + ε)` and `B − mean·scale/√(var + ε)` are computed in f64
+//! (each within a few ulps of the exact value).
 
 pub mod build;
 pub mod proto;
@@ -73,6 +76,8 @@ fn err(kind: OnnxErrorKind, message: impl Into<String>, hint: impl Into<String>)
 /// A controller loaded from ONNX: the network and the declared input and output sizes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Controller {
+    /// Exporter ops rewritten into the chain (e.g. `clip [-1, 1]`), for reports.
+    pub notes: Vec<String>,
     /// The network as a chain of layers.
     pub net: Network,
     /// Number of inputs.
@@ -284,6 +289,7 @@ fn tensor_size(t: &TensorProto) -> Result<(u64, usize), OnnxError> {
     }
     let dt = t.data_type.unwrap_or(0);
     let width = match dt {
+        dtype::BOOL => 1,
         dtype::FLOAT | dtype::INT32 => 4,
         dtype::DOUBLE | dtype::INT64 => 8,
         other => {
@@ -353,6 +359,7 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
                 ));
             }
             match dt {
+                dtype::BOOL => bytes.iter().map(|b| f64::from(u8::from(*b != 0))).collect(),
                 dtype::FLOAT => bytes
                     .chunks_exact(4)
                     .map(|c| f32::from_le_bytes(le(c)) as f64)
@@ -374,7 +381,7 @@ fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, On
         None => match dt {
             dtype::FLOAT => t.float_data.iter().map(|v| *v as f64).collect(),
             dtype::DOUBLE => t.double_data.clone(),
-            dtype::INT32 => t.int32_data.iter().map(|v| *v as f64).collect(),
+            dtype::INT32 | dtype::BOOL => t.int32_data.iter().map(|v| *v as f64).collect(),
             _ => t.int64_data.iter().map(|v| *v as f64).collect(),
         },
     };
@@ -473,13 +480,15 @@ fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
 
 /// The ops ravel accepts, for hints.
 pub const SUPPORTED_OPS: &str =
-    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, Tanh, Sigmoid, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout, Constant";
+    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
 
 struct Lowering {
     consts: HashMap<String, Tensor>,
     current: String,
     width: Option<usize>,
     layers: Vec<Layer>,
+    /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
+    notes: Vec<String>,
 }
 
 impl Lowering {
@@ -769,7 +778,142 @@ impl Lowering {
             "Relu" => self.layers.push(Layer::Act(Activation::Relu)),
             "Tanh" => self.layers.push(Layer::Act(Activation::Tanh)),
             "Sigmoid" => self.layers.push(Layer::Act(Activation::Sigmoid)),
-            "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" | "Dropout" => {
+            "Clip" => {
+                let w = self.width()?;
+                // opset ≥ 11: optional constant inputs; before: attributes
+                let bound = |k: usize, name: &str| -> Result<Option<Vec<f64>>, OnnxError> {
+                    match n.input.get(k).filter(|s| !s.is_empty()) {
+                        Some(c) => {
+                            let t = self.consts.get(c).ok_or_else(|| {
+                                err(
+                                    OnnxErrorKind::Unsupported,
+                                    format!("{} has a computed {name}", node_label(n)),
+                                    "clip bounds must be constants",
+                                )
+                            })?;
+                            Ok(Some(self.broadcast(n, t)?.iter().copied().collect()))
+                        }
+                        None => Ok(attr(n, name).and_then(|a| a.f).map(|f| vec![f as f64; w])),
+                    }
+                };
+                // ±FLT_MAX (the old opsets' defaults, written out by some
+                // exporters) means no bound on that side
+                let unbounded = |v: Option<Vec<f64>>| {
+                    v.filter(|v| !v.iter().all(|x| x.abs() >= f32::MAX as f64))
+                };
+                let (lo, hi) = (unbounded(bound(1, "min")?), unbounded(bound(2, "max")?));
+                if let (Some(l), Some(h)) = (&lo, &hi) {
+                    if l.iter().zip(h).any(|(l, h)| l > h) {
+                        return Err(err(
+                            OnnxErrorKind::Malformed,
+                            format!("{} has min above max", node_label(n)),
+                            "check the clamp bounds of the exported policy",
+                        ));
+                    }
+                }
+                if lo
+                    .iter()
+                    .chain(&hi)
+                    .flatten()
+                    .any(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
+                {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!("{} has a non-finite or huge bound", node_label(n)),
+                        "clamp to finite bounds within ±1e15",
+                    ));
+                }
+                let shown = |v: &Option<Vec<f64>>| {
+                    v.as_ref()
+                        .and_then(|v| v.first())
+                        .map_or("·".to_string(), |x| crate::diag::compact(*x))
+                };
+                self.notes
+                    .push(format!("clip [{}, {}]", shown(&lo), shown(&hi)));
+                self.layers
+                    .extend(crate::nn::clamp_layers(w, lo.as_deref(), hi.as_deref()));
+            }
+            "LeakyRelu" => {
+                let w = self.width()?;
+                let alpha = attr_f(n, "alpha", 0.01);
+                if !alpha.is_finite() || alpha.abs() > MAX_MAGNITUDE {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!("{} has a non-finite slope", node_label(n)),
+                        "re-export the model",
+                    ));
+                }
+                Self::check_width(n, 2 * w)?;
+                self.notes.push(format!(
+                    "leaky_relu {} as relu pairs",
+                    crate::diag::compact(alpha)
+                ));
+                self.layers.extend(crate::nn::leaky_relu_layers(w, alpha));
+            }
+            "BatchNormalization" => {
+                let training = attr_i(n, "training_mode", 0) != 0
+                    || n.output.iter().skip(1).any(|o| !o.is_empty());
+                if training {
+                    return Err(training_mode(n));
+                }
+                let w = self.width()?;
+                let param = |k: usize| -> Result<Vec<f64>, OnnxError> {
+                    let name = n.input.get(k).cloned().unwrap_or_default();
+                    let t = self.consts.get(&name).ok_or_else(|| {
+                        err(
+                            OnnxErrorKind::Unsupported,
+                            format!(
+                                "{} has a non-constant parameter '{}'",
+                                node_label(n),
+                                sanitize(&name)
+                            ),
+                            "export in eval mode with constant folding on",
+                        )
+                    })?;
+                    Ok(self.broadcast(n, t)?.iter().copied().collect())
+                };
+                let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);
+                let eps = attr_f(n, "epsilon", 1e-5);
+                let mut diag = Vec::with_capacity(w);
+                let mut shift = Vec::with_capacity(w);
+                for (((s, b), m), v) in scale.iter().zip(&bias).zip(&mean).zip(&var) {
+                    let d = s / (v + eps).sqrt();
+                    let denominator = v + eps;
+                    if denominator.is_nan() || denominator <= 0.0 || !d.is_finite() {
+                        return Err(err(
+                            OnnxErrorKind::NonFinite,
+                            format!("{} has a non-positive variance", node_label(n)),
+                            "re-export the model",
+                        ));
+                    }
+                    diag.push(d);
+                    shift.push(b - m * d);
+                }
+                self.notes.push("batch normalisation".to_string());
+                self.push_affine(
+                    DMatrix::from_diagonal(&DVector::from_vec(diag)),
+                    DVector::from_vec(shift),
+                );
+            }
+            "Dropout" => {
+                if first != self.current {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} drops out a constant", node_label(n)),
+                        "export with constant folding on",
+                    ));
+                }
+                // opset ≥ 12: a third input `training_mode`; before 7: `is_test`
+                let training = n.input.get(2).filter(|s| !s.is_empty()).is_some_and(|t| {
+                    self.consts
+                        .get(t)
+                        .is_none_or(|c| c.data.iter().any(|v| *v != 0.0))
+                }) || attr(n, "is_test").and_then(|a| a.i) == Some(0);
+                if training {
+                    return Err(training_mode(n));
+                }
+            }
+            "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" => {
                 if first != self.current {
                     return Err(err(
                         OnnxErrorKind::Unsupported,
@@ -810,6 +954,15 @@ impl Lowering {
             }
         }
     }
+}
+
+/// A node exported in training mode (Dropout or BatchNormalization).
+fn training_mode(n: &NodeProto) -> OnnxError {
+    err(
+        OnnxErrorKind::Unsupported,
+        format!("{} was exported in training mode", node_label(n)),
+        "call model.eval() before torch.onnx.export (training-mode dropout and batch statistics are random or data-dependent)",
+    )
 }
 
 fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
@@ -955,6 +1108,7 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         current: input.name.clone().unwrap_or_default(),
         width: declared,
         layers: Vec::new(),
+        notes: Vec::new(),
     };
     for n in &graph.node {
         low.node(n)?;
@@ -1012,5 +1166,6 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         net,
         inputs,
         outputs,
+        notes: low.notes,
     })
 }

@@ -24,15 +24,24 @@ struct Cli {
 enum Cmd {
     /// Parse and check specs (and load their controllers); print diagnostics only.
     Check {
-        /// Spec files (.ravel).
+        /// Spec files (.ravel), or folders searched recursively for them.
         #[arg(required = true)]
         specs: Vec<PathBuf>,
+        /// Check each spec with this controller instead of its own (an .onnx
+        /// file, or a folder searched recursively for them); repeatable.
+        #[arg(long = "controller", value_name = "PATH")]
+        controllers: Vec<PathBuf>,
     },
     /// Check, analyse and report a verdict for each spec.
     Verify {
-        /// Spec files (.ravel).
+        /// Spec files (.ravel), or folders searched recursively for them.
         #[arg(required = true)]
         specs: Vec<PathBuf>,
+        /// Verify each spec with this controller instead of its own (an
+        /// .onnx file, or a folder searched recursively for them);
+        /// repeatable: every (spec, controller) pair is one result.
+        #[arg(long = "controller", value_name = "PATH")]
+        controllers: Vec<PathBuf>,
         /// Output format.
         #[arg(long, value_enum, default_value_t = Format::Text)]
         format: Format,
@@ -175,12 +184,85 @@ pub fn read_request(req: &crate::ReadRequest) -> Result<Vec<u8>, String> {
 
 /// A spec's source and the result of its front end.
 struct Loaded {
+    /// The spec's path (as the JSON `spec` field).
     name: String,
+    /// The spec's path, and the controller's when it was overridden (for people).
+    display: String,
     source: String,
     result: Result<crate::check::Checked, Vec<Diagnostic>>,
 }
 
-fn load(path: &Path) -> Result<Loaded, String> {
+/// Files with extension `ext` under `path` (a file is itself; a folder is
+/// searched recursively, in sorted order, without following symbolic links
+/// to folders); an error for a folder without any.
+fn expand(path: &Path, ext: &str) -> Result<Vec<PathBuf>, String> {
+    fn walk(dir: &Path, ext: &str, depth: usize, out: &mut Vec<PathBuf>) -> Result<(), String> {
+        if depth > 32 {
+            return Ok(());
+        }
+        let shown = crate::diag::sanitize(&dir.display().to_string());
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(|e| format!("cannot read folder `{shown}`: {e}"))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        for e in entries {
+            let meta = std::fs::symlink_metadata(&e).map_err(|x| x.to_string())?;
+            if meta.is_dir() {
+                walk(&e, ext, depth + 1, out)?;
+            } else if e.extension().is_some_and(|x| x == ext) {
+                out.push(e);
+            }
+        }
+        Ok(())
+    }
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut out = Vec::new();
+    walk(path, ext, 0, &mut out)?;
+    if out.is_empty() {
+        return Err(format!(
+            "no .{ext} file in folder `{}`",
+            crate::diag::sanitize(&path.display().to_string())
+        ));
+    }
+    Ok(out)
+}
+
+/// Every (spec, controller) pair the arguments name: each spec with each
+/// controller given, or with its own when none is. Errors are collected, so
+/// one bad argument never hides the others.
+fn pairs(
+    specs: &[PathBuf],
+    controllers: &[PathBuf],
+) -> (Vec<(PathBuf, Option<PathBuf>)>, Vec<String>) {
+    let mut errors = Vec::new();
+    let mut files = Vec::new();
+    for s in specs {
+        match expand(s, "ravel") {
+            Ok(v) => files.extend(v),
+            Err(e) => errors.push(e),
+        }
+    }
+    let mut ctrls = Vec::new();
+    for c in controllers {
+        match expand(c, "onnx") {
+            Ok(v) => ctrls.extend(v.into_iter().map(Some)),
+            Err(e) => errors.push(e),
+        }
+    }
+    if controllers.is_empty() {
+        ctrls.push(None);
+    }
+    let pairs = files
+        .iter()
+        .flat_map(|s| ctrls.iter().map(move |c| (s.clone(), c.clone())))
+        .collect();
+    (pairs, errors)
+}
+
+fn load_with(path: &Path, controller: Option<&Path>) -> Result<Loaded, String> {
     let name = crate::diag::sanitize(&path.display().to_string());
     let bytes = read_request(&crate::ReadRequest {
         path: path.to_path_buf(),
@@ -192,8 +274,16 @@ fn load(path: &Path) -> Result<Loaded, String> {
     let source =
         String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let result = crate::front_end(&source, dir, &read_request);
+    let result = crate::front_end_with(&source, dir, &read_request, controller);
+    let display = match controller {
+        Some(c) => format!(
+            "{name} with controller {}",
+            crate::diag::sanitize(&c.display().to_string())
+        ),
+        None => name.clone(),
+    };
     Ok(Loaded {
+        display,
         name,
         source,
         result,
@@ -247,23 +337,28 @@ pub fn main() -> ExitCode {
     let color = std::io::stderr().is_terminal();
     let width = 100;
     match cli.cmd {
-        Cmd::Check { specs } => {
+        Cmd::Check { specs, controllers } => {
             let mut code = exit::VERIFIED;
-            for path in &specs {
-                match load(path) {
+            let (pairs, errors) = pairs(&specs, &controllers);
+            for e in &errors {
+                err(&format!("error: {e}\n"));
+                code = exit::INPUT_ERROR;
+            }
+            for (path, controller) in &pairs {
+                match load_with(path, controller.as_deref()) {
                     Err(msg) => {
                         err(&format!("error: {msg}\n"));
                         code = exit::INPUT_ERROR;
                     }
                     Ok(l) => match &l.result {
                         Ok(_) => {
-                            if out(&format!("ok: {}", l.name)).is_err() {
+                            if out(&format!("ok: {}", l.display)).is_err() {
                                 return ExitCode::from(exit::BROKEN_PIPE);
                             }
                         }
                         Err(d) => {
-                            err(&render(d, &l.name, &l.source, width, color));
-                            err(&format!("{}: {} error(s)\n", l.name, d.len()));
+                            err(&render(d, &l.display, &l.source, width, color));
+                            err(&format!("{}: {} error(s)\n", l.display, d.len()));
                             code = exit::INPUT_ERROR;
                         }
                     },
@@ -273,6 +368,7 @@ pub fn main() -> ExitCode {
         }
         Cmd::Verify {
             specs,
+            controllers,
             format,
             no_timing,
             timing,
@@ -282,10 +378,23 @@ pub fn main() -> ExitCode {
             let mut worst: Option<Status> = None;
             let mut input_error = false;
             let mut results = Vec::new();
-            for path in &specs {
-                let l = match load(path) {
+            let run_started = Instant::now();
+            // (VERIFIED, FALSIFIED, UNSURE, ERROR) counts for the summary line
+            let mut counts = [0usize; 4];
+            let (pairs, errors) = pairs(&specs, &controllers);
+            for e in &errors {
+                input_error = true;
+                counts[3] += 1;
+                match format {
+                    Format::Text => err(&format!("error: {e}\n")),
+                    Format::Json => results.push(json!({ "spec": null, "verdict": "ERROR", "errors": [{ "code": null, "message": e }] })),
+                }
+            }
+            for (path, controller) in &pairs {
+                let l = match load_with(path, controller.as_deref()) {
                     Ok(l) => l,
                     Err(msg) => {
+                        counts[3] += 1;
                         input_error = true;
                         match format {
                             Format::Text => err(&format!("error: {msg}\n")),
@@ -297,13 +406,20 @@ pub fn main() -> ExitCode {
                 let checked = match l.result {
                     Ok(c) => c,
                     Err(d) => {
+                        counts[3] += 1;
                         input_error = true;
                         match format {
                             Format::Text => {
-                                err(&render(&d, &l.name, &l.source, width, color));
-                                err(&format!("{}: {} error(s)\n", l.name, d.len()));
+                                err(&render(&d, &l.display, &l.source, width, color));
+                                err(&format!("{}: {} error(s)\n", l.display, d.len()));
                             }
-                            Format::Json => results.push(diag_json(&l.name, &l.source, &d)),
+                            Format::Json => {
+                                let mut v = diag_json(&l.name, &l.source, &d);
+                                if let Some(c) = controller {
+                                    v["controller"] = json!(c.display().to_string());
+                                }
+                                results.push(v)
+                            }
                         }
                         continue;
                     }
@@ -311,7 +427,7 @@ pub fn main() -> ExitCode {
                 let started = Instant::now();
                 let plan = crate::lower::lower(&checked);
                 let line = ProgressLine {
-                    name: &l.name,
+                    name: &l.display,
                     started,
                     last: std::cell::Cell::new(0.0),
                 };
@@ -330,10 +446,15 @@ pub fn main() -> ExitCode {
                 line.clear();
                 let ms = started.elapsed().as_secs_f64() * 1e3;
                 worst = worst.max(Some(outcome.verdict));
+                counts[match outcome.verdict {
+                    Status::Verified => 0,
+                    Status::Falsified => 1,
+                    Status::Unsure => 2,
+                }] += 1;
                 match format {
                     Format::Text => {
                         let t = (!no_timing).then_some(ms);
-                        let text = crate::report::text(&l.name, &plan, &outcome, t);
+                        let text = crate::report::text(&l.display, &plan, &outcome, t);
                         if out(&text).is_err() {
                             return ExitCode::from(exit::BROKEN_PIPE);
                         }
@@ -344,6 +465,23 @@ pub fn main() -> ExitCode {
                         &outcome,
                         timing.then_some(ms),
                     )),
+                }
+            }
+            if format == Format::Text && counts.iter().sum::<usize>() > 1 {
+                let names = ["VERIFIED", "FALSIFIED", "UNSURE", "ERROR"];
+                let parts: Vec<String> = counts
+                    .iter()
+                    .zip(names)
+                    .filter(|(n, _)| **n > 0)
+                    .map(|(n, name)| format!("{n} {name}"))
+                    .collect();
+                let time = if no_timing {
+                    String::new()
+                } else {
+                    format!(" in {:.1} s", run_started.elapsed().as_secs_f64())
+                };
+                if out(&format!("summary: {}{time}", parts.join(", "))).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
                 }
             }
             let overall = if input_error {

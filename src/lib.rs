@@ -56,9 +56,26 @@ pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, String>;
 /// the tensors stored in it need (their total is limited, see
 /// [`limits::MAX_CONTROLLER_BYTES`]).
 pub fn front_end(source: &str, spec_dir: &Path, read: Reader) -> Result<Checked, Vec<Diagnostic>> {
+    front_end_with(source, spec_dir, read, None)
+}
+
+/// [`front_end`] with the spec's controller replaced by `controller` (a
+/// path as given on the command line, not relative to the spec), as
+/// `ravel verify SPEC --controller PATH` does; the spec then need not name
+/// a controller at all.
+pub fn front_end_with(
+    source: &str,
+    spec_dir: &Path,
+    read: Reader,
+    controller: Option<&Path>,
+) -> Result<Checked, Vec<Diagnostic>> {
     let spec = syntax::parse(source)?;
-    let controller = check::controller_path(&spec).map(|p| {
-        let path = spec_dir.join(&p.node);
+    let path = match controller {
+        Some(c) => Some(c.to_path_buf()),
+        None => check::controller_path(&spec).map(|p| spec_dir.join(&p.node)),
+    };
+    let path_override = controller.map(|c| c.display().to_string());
+    let controller = path.map(|path| {
         let bytes = read(&ReadRequest {
             path: path.clone(),
             inside: None,
@@ -87,7 +104,12 @@ pub fn front_end(source: &str, spec_dir: &Path, read: Reader) -> Result<Checked,
                 external.insert(req.location, data);
             }
         }
-        ControllerFile { bytes, external }
+        ControllerFile {
+            path_override: path_override.clone(),
+            resolved: path.display().to_string(),
+            bytes,
+            external,
+        }
     });
     check::check(&spec, controller.as_ref())
 }

@@ -53,8 +53,12 @@ pub struct Plan {
     pub state_name: String,
     /// The control vector's name.
     pub control_name: String,
-    /// The controller path as written in the spec.
+    /// The controller path: as written in the spec, or as given on the command line.
     pub controller_path: String,
+    /// SHA-256 of the controller file, in hex.
+    pub controller_sha256: String,
+    /// The path the controller was read from.
+    pub controller_resolved: String,
     /// A one-line description of the network, e.g. `2 → 5 relu → 5 relu → 1`.
     pub network_summary: String,
     /// The closed loop (saturation already part of the network).
@@ -127,6 +131,8 @@ pub fn lower(c: &Checked) -> Plan {
         state_name: c.state.0.clone(),
         control_name: c.control.0.clone(),
         controller_path: c.controller_path.clone(),
+        controller_sha256: c.controller_sha256.clone(),
+        controller_resolved: c.controller_resolved.clone(),
         network_summary: summary(c),
         closed_loop: ClosedLoop::time_varying(c.plants.clone(), net),
         dt: c.dt,

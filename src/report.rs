@@ -359,7 +359,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "system": plan.system,
         "state": { "name": plan.state_name, "dim": plan.closed_loop.states() },
         "control": { "name": plan.control_name, "dim": plan.closed_loop.plant.b.ncols() },
-        "controller": { "path": plan.controller_path, "network": plan.network_summary },
+        "controller": { "path": plan.controller_path, "resolved": plan.controller_resolved, "sha256": plan.controller_sha256, "network": plan.network_summary },
         "horizon": plan.horizon,
         "dt": plan.dt.map(f),
         "model_error": plan.closed_loop.plant.err.as_ref().map(|e| f(e.max())),

@@ -241,3 +241,98 @@ fn a_time_limit_stops_soundly() {
     assert_eq!(r["properties"][0]["unfinished"]["step"], 1);
     assert_eq!(r["samples_drawn"], 0);
 }
+
+/// One spec, many controllers: every (spec, controller) pair is a result
+/// named by both, with the controller's resolved path and SHA-256; a
+/// controller that does not fit is one ERROR result among the others; a
+/// folder of specs is searched recursively; a summary line closes the text.
+#[test]
+fn one_spec_many_controllers_and_folders() {
+    let (code, out, _) = ravel(&[
+        "verify",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/double_integrator.onnx",
+        "--controller",
+        "models/double_integrator_tanh.onnx",
+        "--controller",
+        "models/quadrotor.onnx",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(code, 2, "a controller that does not fit is an input error");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let results = v["results"].as_array().expect("results");
+    assert_eq!(results.len(), 3);
+    let hashes: Vec<&str> = results
+        .iter()
+        .take(2)
+        .map(|r| r["controller"]["sha256"].as_str().expect("sha256"))
+        .collect();
+    assert!(hashes.iter().all(|h| h.len() == 64), "{hashes:?}");
+    assert_ne!(hashes[0], hashes[1]);
+    assert_eq!(
+        results[0]["controller"]["resolved"],
+        "models/double_integrator.onnx"
+    );
+    assert_eq!(results[0]["verdict"], "VERIFIED");
+    assert_eq!(results[2]["verdict"], "ERROR");
+    assert_eq!(results[2]["controller"], "models/quadrotor.onnx");
+    // the same file gives the same hash, whichever way it is named
+    let (_, own, _) = ravel(&[
+        "verify",
+        "specs/double_integrator.ravel",
+        "--format",
+        "json",
+    ]);
+    let own: serde_json::Value = serde_json::from_str(&own).expect("JSON");
+    assert_eq!(own["results"][0]["controller"]["sha256"], hashes[0]);
+    assert_eq!(
+        own["results"][0]["controller"]["resolved"],
+        "specs/../models/double_integrator.onnx"
+    );
+
+    // text: a summary line counts every pair
+    let (code, out, err) = ravel(&[
+        "verify",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/double_integrator.onnx",
+        "--controller",
+        "models/double_integrator_tanh.onnx",
+        "--no-timing",
+    ]);
+    assert_eq!(code, 3, "{err}");
+    assert!(out.contains("summary: 1 VERIFIED, 1 UNSURE\n"), "{out}");
+    assert!(
+        out.contains("with controller models/double_integrator_tanh.onnx"),
+        "{out}"
+    );
+
+    // a folder of specs (the invalid ones: every one an ERROR, none lost)
+    let (code, out, _) = ravel(&["verify", "specs/invalid", "--no-timing"]);
+    assert_eq!(code, 2);
+    let n = std::fs::read_dir("specs/invalid")
+        .map(|d| d.count())
+        .unwrap_or_else(|_| {
+            std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/specs/invalid"))
+                .expect("folder")
+                .count()
+        });
+    assert!(out.contains(&format!("summary: {n} ERROR")), "{out}");
+
+    // an empty folder and a missing controller are input errors, with a message
+    let empty = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("empty_folder");
+    std::fs::create_dir_all(&empty).expect("folder");
+    let (code, _, err) = ravel(&["verify", empty.to_str().expect("utf-8")]);
+    assert_eq!(code, 2);
+    assert!(err.contains("no .ravel file in folder"), "{err}");
+    let (code, _, err) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/no_such.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(err.contains("E0301"), "{err}");
+}

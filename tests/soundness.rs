@@ -569,6 +569,8 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 state_name: "x".into(),
                 control_name: "u".into(),
                 controller_path: String::new(),
+                controller_sha256: String::new(),
+                controller_resolved: String::new(),
                 network_summary: String::new(),
                 closed_loop: case.cl.clone(),
                 dt: None,

@@ -34,6 +34,12 @@ pub use extra::{zero_order_hold, DEFAULT_BUDGET};
 /// The controller file as read by the caller.
 #[derive(Clone, Debug)]
 pub struct ControllerFile {
+    /// The path given on the command line instead of the spec's, if any
+    /// (`ravel verify SPEC --controller PATH`); reports name this path.
+    pub path_override: Option<String>,
+    /// The path the file was read from (the spec's folder joined with the
+    /// spec's path, or the command line's path).
+    pub resolved: String,
     /// The file's bytes, or the read error's message.
     pub bytes: Result<Vec<u8>, String>,
     /// External-data files referenced by the model (see [`onnx::external_requests`]).
@@ -79,8 +85,13 @@ pub struct Checked {
     pub dt: Option<f64>,
     /// Control limits, if any.
     pub limits: Option<IBox>,
-    /// The controller's path as written.
+    /// The controller's path: as written in the spec, or as given on the
+    /// command line when it overrides the spec's.
     pub controller_path: String,
+    /// SHA-256 of the controller file's bytes, in hex.
+    pub controller_sha256: String,
+    /// The path the controller was read from.
+    pub controller_resolved: String,
     /// The loaded controller.
     pub controller: Controller,
     /// The initial set's name and region.
@@ -643,7 +654,7 @@ struct Items<'a> {
     analyses: Vec<&'a Analysis>,
 }
 
-fn items<'a>(cx: &mut Ctx, spec: &'a Spec) -> Items<'a> {
+fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
     let whole = Span::new(0, 0);
     // ---- collect top-level items, reporting duplicates ----
     let mut systems: Vec<&System> = Vec::new();
@@ -723,7 +734,7 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec) -> Items<'a> {
             "`system NAME { state x[n] control u[m] A = … B = … }`",
         );
     }
-    if controllers.is_empty() {
+    if controllers.is_empty() && !has_override {
         missing(cx, "controller", "`controller \"path/to/policy.onnx\"`");
     }
     if initials.is_empty() {
@@ -757,12 +768,25 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let mut cx = Ctx { diags: Vec::new() };
     let cx = &mut cx;
     let whole = Span::new(0, 0);
-    let it = items(cx, spec);
+    let path_override = controller.and_then(|f| f.path_override.clone());
+    let it = items(cx, spec, path_override.is_some());
+    // the controller analysed: the command line's, or the spec's
+    let effective: Option<Spanned<String>> = match (&path_override, it.controllers.first()) {
+        (Some(p), first) => Some(Spanned {
+            node: p.clone(),
+            span: first.map_or(whole, |c| c.span),
+        }),
+        (None, first) => first.map(|c| (*c).clone()),
+    };
+    let controller_sha256 = controller
+        .and_then(|f| f.bytes.as_ref().ok())
+        .map(|b| sha256_hex(b))
+        .unwrap_or_default();
     let sp = system::system(cx, &it.systems);
     let pp = system::plant(cx, &sp);
     let ctrl = controller::controller(
         cx,
-        it.controllers.first().copied(),
+        effective.as_ref(),
         controller,
         pp.p_dim,
         sp.assigns.contains_key("C"),
@@ -786,7 +810,6 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         an.seed,
     );
     let horizons = &it.horizons;
-    let controllers = &it.controllers;
 
     // ---- checks that combine sections ----
     if let (Some(span), Some(c)) = (sdp_span, &ctrl) {
@@ -939,7 +962,9 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             plants: plant?,
             dt,
             limits,
-            controller_path: controllers.first()?.node.clone(),
+            controller_path: effective?.node,
+            controller_sha256,
+            controller_resolved: controller.map(|f| f.resolved.clone()).unwrap_or_default(),
             controller: ctrl?,
             initial: initial?,
             goal,
@@ -1004,4 +1029,13 @@ fn sizes(
             .hint("use fewer cells (or a smaller call budget) or a shorter horizon"),
         );
     }
+}
+
+/// SHA-256 of `bytes` as lower-case hex.
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }

@@ -272,17 +272,66 @@ pub fn render(diags: &[Diagnostic], name: &str, source: &str, width: usize, colo
         .with_links(false);
     let mut out = String::new();
     let shown = displayable(source);
-    for d in diags {
-        let report = Report {
-            d,
-            src: NamedSource::new(sanitize(name), shown.clone()),
-        };
-        if handler.render_report(&mut out, &report).is_err() {
-            out.push_str(&format!("error[{}]: {}\n", d.code.as_str(), d.message));
+    let name = sanitize(name);
+    for d in diags.iter().take(MAX_RENDERED) {
+        // a very long source line would be printed whole for each diagnostic
+        // on it: point at it by line and column instead
+        let long_line = d
+            .span
+            .is_some_and(|s| line_around(source, s.start).len() > MAX_SHOWN_LINE);
+        if long_line {
+            out.push_str(&plain(d, &name, source));
+        } else {
+            let report = Report {
+                d,
+                src: NamedSource::new(name.clone(), shown.clone()),
+            };
+            if handler.render_report(&mut out, &report).is_err() {
+                out.push_str(&plain(d, &name, source));
+            }
         }
         out.push('\n');
     }
+    if diags.len() > MAX_RENDERED {
+        out.push_str(&format!(
+            "… and {} more diagnostics (fix the ones above first)\n",
+            diags.len() - MAX_RENDERED
+        ));
+    }
     out
+}
+
+/// Diagnostics shown in full; the rest are counted.
+const MAX_RENDERED: usize = 50;
+/// Source lines longer than this are not quoted in diagnostics.
+const MAX_SHOWN_LINE: usize = 400;
+
+/// The source line containing byte `at`.
+fn line_around(source: &str, at: usize) -> &str {
+    let mut at = at.min(source.len());
+    while !source.is_char_boundary(at) {
+        at -= 1;
+    }
+    let start = source[..at].rfind(['\n', '\r']).map_or(0, |i| i + 1);
+    let end = source[at..]
+        .find(['\n', '\r'])
+        .map_or(source.len(), |i| at + i);
+    &source[start..end]
+}
+
+/// A diagnostic without a quoted source: code, message, position, label, hint.
+fn plain(d: &Diagnostic, name: &str, source: &str) -> String {
+    let at = d.span.map_or(String::new(), |s| {
+        let before = &source[..s.start.min(source.len())];
+        let line = before.matches('\n').count() + 1;
+        let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        format!("\n   at {name}:{line}:{col}: {}", d.label)
+    });
+    let hint = d
+        .hint
+        .as_ref()
+        .map_or(String::new(), |h| format!("\n  help: {h}"));
+    format!("{}\n\n  × {}{at}{hint}\n", d.code.as_str(), d.message)
 }
 
 /// Untrusted text (an ONNX op type, tensor or node name, a file path)
@@ -407,6 +456,17 @@ mod tests {
         let long = "x".repeat(500);
         assert_eq!(sanitize(&long).chars().count(), 81);
         assert!(!sanitize("\u{7f}\u{9b}").chars().any(char::is_control));
+    }
+
+    #[test]
+    fn rendering_is_bounded() {
+        let long = format!("A = [{}]", vec!["1"; 5000].join(", "));
+        let d = Diagnostic::new(Code::Shape, Span::new(4, 10), "bad").label("here");
+        let many = vec![d; 120];
+        let out = render(&many, "s.ravel", &long, 100, false);
+        assert!(out.len() < 20_000, "{} bytes", out.len());
+        assert!(out.contains("… and 70 more diagnostics"));
+        assert!(out.contains("at s.ravel:1:5: here"));
     }
 
     #[test]

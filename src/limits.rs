@@ -51,6 +51,18 @@ pub const MAX_SDP_DIM: u64 = 150;
 /// neuron bounds and relaxations (about 60 bytes per neuron and step).
 pub const MAX_UNROLLED_NEURON_STEPS: u64 = 5_000_000;
 
+/// Largest number of numbers held by a spec's matrices and vectors together
+/// (`per_step` entries count one by one).
+pub const MAX_SPEC_NUMBERS: u64 = 10_000_000;
+/// Largest `steps × n × (n + m + 1)` of a plant (one `A`, `B`, `c` per step of
+/// a time-varying plant, and the analysis keeps block copies of each).
+pub const MAX_PLANT_NUMBERS: u64 = 5_000_000;
+/// Largest number of inequalities of one polytope.
+pub const MAX_POLYTOPE_ROWS: usize = 1000;
+/// Largest dimension of a polytope initial set (bounding it takes `4n`
+/// linear programs in `n` variables).
+pub const MAX_POLYTOPE_DIM: usize = 100;
+
 /// `a × b × …` if it does not overflow `u64`.
 pub fn product(factors: &[u64]) -> Option<u64> {
     factors.iter().try_fold(1u64, |acc, f| acc.checked_mul(*f))

@@ -18,13 +18,20 @@ fn check(file: &Path) -> (Option<i32>, String) {
         "ulimit -v 4194304 2>/dev/null; exec \"{}\" check \"$1\"",
         env!("CARGO_BIN_EXE_ravel")
     );
+    // stderr goes to a file: a pipe that nobody reads while the child runs
+    // would block a child that writes a long report
+    let log = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!(
+        "corpus-{}.stderr",
+        file.file_name().and_then(|n| n.to_str()).unwrap_or("spec")
+    ));
+    let sink = std::fs::File::create(&log).expect("log file");
     let mut child = Command::new("sh")
         .args(["-c", &script, "sh"])
         .arg(file)
         .current_dir(root())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
-        .stderr(Stdio::piped())
+        .stderr(sink)
         .spawn()
         .expect("sh runs");
     let deadline = Instant::now() + Duration::from_secs(60);
@@ -38,11 +45,9 @@ fn check(file: &Path) -> (Option<i32>, String) {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
-    let out = child.wait_with_output().expect("output");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let status = child.wait().expect("exit status");
+    let stderr = std::fs::read(&log).expect("log");
+    (status.code(), String::from_utf8_lossy(&stderr).into_owned())
 }
 
 /// `Err(why)` unless `file` is refused with every expected code.

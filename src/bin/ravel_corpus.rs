@@ -542,6 +542,56 @@ fn specs(dir: &Path) -> usize {
     for (name, expect, why, text) in &targeted {
         put(name, expect, why, text);
     }
+    // memory and time bombs that fit in a few kilobytes of text
+    let big_state = |n: usize, body: &str| {
+        format!(
+            "system bomb {{\n    state x[{n}]\n    control u[1]\n{body}}}\ncontroller \"../../../models/double_integrator.onnx\"\ninitial X0 = box(x[0] in [0.0, 1.0])\ngoal G = box(x[0] in [-1.0, 1.0])\nhorizon 5\n"
+        )
+    };
+    let eyes = ["eye(1000)"; 11].join(", ");
+    put(
+        "per_step_eyes",
+        "E0216",
+        "11 per_step copies of eye(1000): 88 MB from 130 bytes",
+        &big_state(
+            1000,
+            &format!("    A = per_step({eyes})\n    B = zeros(1000, 1)\n"),
+        ),
+    );
+    let cs = vec!["zeros(300)"; 2000].join(", ");
+    put(
+        "per_step_plants",
+        "E0216",
+        "2000 steps of a 300-state plant: every step keeps its matrices",
+        &big_state(
+            300,
+            &format!("    A = eye(300)\n    B = zeros(300, 1)\n    c = per_step({cs})\n"),
+        ),
+    );
+    let dims: Vec<String> = (0..101)
+        .map(|i| format!("x[{i}] <= 1.0, x[{i}] >= 0.0"))
+        .collect();
+    put(
+        "polytope_many_dimensions",
+        "E0216",
+        "a polytope initial set in 101 dimensions (4n linear programs to bound it)",
+        &big_state(101, "    A = eye(101)\n    B = zeros(101, 1)\n").replace(
+            "initial X0 = box(x[0] in [0.0, 1.0])",
+            &format!("initial X0 = {{ {} }}", dims.join(", ")),
+        ),
+    );
+    let rows: Vec<String> = (0..1001)
+        .map(|i| format!("{}.0 x[0] + x[1] <= 100.0", i % 7))
+        .collect();
+    put(
+        "polytope_many_rows",
+        "E0216",
+        "a polytope of 1001 inequalities",
+        &BASE.replace(
+            "avoid   overshoot = { 1.0 x[0] + 0.5 x[1] <= -2.0 } at steps [1, 5]",
+            &format!("avoid   overshoot = {{ {} }}", rows.join(", ")),
+        ),
+    );
     // a valid but wide ReLU controller: too large for Reach-SDP, and for
     // unrolled CROWN over a long horizon
     let mut layers = Vec::new();

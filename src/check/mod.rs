@@ -23,8 +23,8 @@ use crate::analysis::closed_loop::{Boundary, Plant, Propagator};
 use crate::diag::{compact, Code, Diagnostic};
 use crate::ir::{Guide, Partitioner};
 use crate::limits::{
-    within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_SDP_DIM, MAX_SIMULATED_STEPS,
-    MAX_STORED_NUMBERS, MAX_UNROLLED_NEURON_STEPS,
+    within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_POLYTOPE_ROWS, MAX_SDP_DIM,
+    MAX_SIMULATED_STEPS, MAX_SPEC_NUMBERS, MAX_STORED_NUMBERS, MAX_UNROLLED_NEURON_STEPS,
 };
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
@@ -133,6 +133,10 @@ pub(super) const BOUNDARIES: [&str; 3] = ["box", "hull", "polytope"];
 
 struct Ctx {
     diags: Vec<Diagnostic>,
+    /// Numbers held by the matrices and vectors evaluated so far (see
+    /// [`MAX_SPEC_NUMBERS`]): `per_step(eye(1000), …)` is a few bytes of
+    /// text but 8 MB per entry.
+    numbers: u64,
 }
 
 /// A matrix literal, evaluated.
@@ -187,6 +191,37 @@ impl Ctx {
     }
 
     fn eval(&mut self, v: &Spanned<Value>, name: &str) -> Option<Mat> {
+        // every size is at most MAX_DIM², so this product cannot overflow
+        let size = match &v.node {
+            Value::Eye(n) => n.node.min(MAX_DIM).pow(2),
+            Value::Zeros(n, m) => {
+                n.node.min(MAX_DIM) * m.as_ref().map_or(1, |m| m.node.min(MAX_DIM))
+            }
+            Value::Matrix(rows) => rows.iter().map(|r| r.node.len() as u64).sum(),
+            Value::Vector(xs) => xs.len() as u64,
+            Value::Scalar(_) | Value::PerStep(_) => 0,
+        };
+        let before = self.numbers;
+        self.numbers = self.numbers.saturating_add(size);
+        if self.numbers > MAX_SPEC_NUMBERS {
+            if before > MAX_SPEC_NUMBERS {
+                return None; // reported once, where the limit was passed
+            }
+            self.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    v.span,
+                    format!("the spec's matrices hold more than {MAX_SPEC_NUMBERS} numbers"),
+                )
+                .label("the limit is passed here")
+                .hint("use fewer or smaller matrices (each per_step entry counts)"),
+            );
+            return None;
+        }
+        self.eval_unchecked(v, name)
+    }
+
+    fn eval_unchecked(&mut self, v: &Spanned<Value>, name: &str) -> Option<Mat> {
         match &v.node {
             Value::Matrix(rows) => {
                 // the grammar admits no empty matrix; an empty one is a 0 × 0 matrix
@@ -517,7 +552,7 @@ impl Ctx {
                             Diagnostic::new(
                                 Code::SetKind,
                                 b.span,
-                                format!("{role} leaves {} unbounded", missing.join(", ")),
+                                format!("{role} leaves {} unbounded", name_list(&missing)),
                             )
                             .label("every component needs an interval")
                             .hint(format!("add `{first} in [lo, hi]`")),
@@ -533,6 +568,23 @@ impl Ctx {
     fn polytope(&mut self, cs: &[Constraint], name: &str, dim: usize) -> Option<Polytope> {
         let mut rows = Vec::new();
         let mut ok = true;
+        if cs.len() > MAX_POLYTOPE_ROWS {
+            if let (Some(first), Some(last)) = (cs.first(), cs.last()) {
+                self.err(
+                    Diagnostic::new(
+                        Code::Limit,
+                        Span::new(first.span.start, last.span.end),
+                        format!(
+                            "a polytope of {} inequalities, beyond the limit of {MAX_POLYTOPE_ROWS}",
+                            cs.len()
+                        ),
+                    )
+                    .label("too many inequalities")
+                    .hint("describe the set with fewer inequalities"),
+                );
+            }
+            return None;
+        }
         for c in cs {
             let mut row = vec![0.0; dim];
             for (coef, comp) in &c.terms {
@@ -765,7 +817,10 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
 /// Check a parsed spec. `controller` is the controller file as read by the caller
 /// (`None` if the spec names none or it was not read).
 pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked, Vec<Diagnostic>> {
-    let mut cx = Ctx { diags: Vec::new() };
+    let mut cx = Ctx {
+        diags: Vec::new(),
+        numbers: 0,
+    };
     let cx = &mut cx;
     let whole = Span::new(0, 0);
     let path_override = controller.and_then(|f| f.path_override.clone());
@@ -1038,4 +1093,14 @@ fn sha256_hex(bytes: &[u8]) -> String {
         .iter()
         .map(|b| format!("{b:02x}"))
         .collect()
+}
+
+/// Names for a message: all of them up to six, else the first five and a count.
+fn name_list(names: &[String]) -> String {
+    if names.len() <= 6 {
+        names.join(", ")
+    } else {
+        let shown = names.iter().take(5).cloned().collect::<Vec<_>>().join(", ");
+        format!("{shown} and {} more", names.len() - 5)
+    }
 }

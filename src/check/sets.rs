@@ -2,6 +2,7 @@
 
 use super::{AvoidSpec, Ctx, GoalDef};
 use crate::diag::{Code, Diagnostic};
+use crate::limits::MAX_POLYTOPE_DIM;
 use crate::sets::{Polytope, Region};
 use crate::syntax::ast::*;
 
@@ -47,6 +48,17 @@ pub(super) fn sets(
                         initial = cx
                             .box_set(&sb, xn, *n, true, "the initial set")
                             .map(|b| (init.name.node.clone(), Region::Box(b)));
+                    }
+                    SetAtom::Polytope(_) if *n > MAX_POLYTOPE_DIM => {
+                        cx.err(
+                            Diagnostic::new(
+                                Code::Limit,
+                                first.span,
+                                format!("a polytope initial set in {n} dimensions, beyond the limit of {MAX_POLYTOPE_DIM}"),
+                            )
+                            .label("too many dimensions for a polytope")
+                            .hint("use a box or a ball, which are bounded in closed form"),
+                        );
                     }
                     SetAtom::Polytope(cs) => {
                         initial = cx

@@ -8,6 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use super::{per_step, Ctx};
 use crate::analysis::closed_loop::Plant;
 use crate::diag::{did_you_mean, Code, Diagnostic};
+use crate::limits::{within, MAX_PLANT_NUMBERS};
 use crate::sets::IBox;
 use crate::syntax::ast::*;
 
@@ -256,6 +257,26 @@ pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
                 }
             }
             let len = a.0.len().max(b.0.len()).max(c.0.len());
+            // each step's plant holds A, B, c and a copy of C (checked before any is built)
+            let per_step = n as u64 * (n + m + 1 + obs.ncols()) as u64;
+            if !within(&[len as u64, per_step], MAX_PLANT_NUMBERS) {
+                let span = a.1.or(b.1).or(c.1).unwrap_or_else(|| Span::new(0, 0));
+                cx.err(
+                    Diagnostic::new(
+                        Code::Limit,
+                        span,
+                        format!("{len} steps of a plant with {n} states hold more than {MAX_PLANT_NUMBERS} numbers"),
+                    )
+                    .label("too large a time-varying plant")
+                    .hint("use fewer per_step entries or a smaller state"),
+                );
+                return PlantPart {
+                    plant: None,
+                    per_step_lists,
+                    limits,
+                    p_dim,
+                };
+            }
             // step k uses entry k of each list, or its last entry
             fn pick<T: Clone>(v: &[T], k: usize) -> Option<T> {
                 v.get(k).or(v.last()).cloned()

@@ -8,7 +8,8 @@
 //! RAVEL_FUZZ_SECONDS=1800 cargo test --release --test fuzz -- --ignored --nocapture
 //! ```
 //!
-//! A finding is a panic, a run over 5 s on one input, or an accepted input
+//! A finding is a panic, a run over 5 s on one input (over 20 s: a watchdog
+//! saves the input and ends the process), or an accepted input
 //! that breaks an invariant (a spec that checks must lower, a loaded network
 //! must have finite weights within the limits). Findings are written to
 //! `target/fuzz-findings/` and fail the test. Seeds are the specs under
@@ -146,6 +147,51 @@ fn mutate(rng: &mut Rng, seeds: &[Vec<u8>], input: &[u8], text: bool) -> Vec<u8>
     v
 }
 
+/// A watchdog: if one case runs for more than 20 s (a hang, which the
+/// per-case timing after the fact would never see), save its input and end
+/// the process with a failure.
+struct Watchdog {
+    /// (when the current case started, its input, whether still watching)
+    current: std::sync::Arc<std::sync::Mutex<(Instant, Vec<u8>, bool)>>,
+}
+
+impl Drop for Watchdog {
+    fn drop(&mut self) {
+        if let Ok(mut g) = self.current.lock() {
+            g.2 = false;
+        }
+    }
+}
+
+impl Watchdog {
+    fn start(kind: &'static str) -> Watchdog {
+        let current =
+            std::sync::Arc::new(std::sync::Mutex::new((Instant::now(), Vec::new(), true)));
+        let watched = current.clone();
+        std::thread::spawn(move || loop {
+            std::thread::sleep(Duration::from_secs(1));
+            let Ok(guard) = watched.lock() else {
+                return;
+            };
+            if !guard.2 {
+                return;
+            }
+            if guard.0.elapsed() > Duration::from_secs(20) {
+                let msg = report(kind, 0, &guard.1, "hang (over 20 s on one input)");
+                eprintln!("{msg}");
+                std::process::exit(1);
+            }
+        });
+        Watchdog { current }
+    }
+
+    fn case(&self, input: &[u8]) {
+        if let Ok(mut g) = self.current.lock() {
+            (g.0, g.1) = (Instant::now(), input.to_vec());
+        }
+    }
+}
+
 fn report(kind: &str, k: usize, input: &[u8], why: &str) -> String {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join("..")
@@ -189,6 +235,7 @@ fn fuzz_front_end() {
             .ok_or_else(|| "no such model".to_string())
     };
     let deadline = Instant::now() + budget();
+    let watchdog = Watchdog::start("spec");
     let mut rng = Rng::new(0xF022);
     let mut findings = Vec::new();
     let mut cases = 0usize;
@@ -200,6 +247,7 @@ fn fuzz_front_end() {
             continue;
         };
         cases += 1;
+        watchdog.case(&input);
         let started = Instant::now();
         let r = catch_unwind(AssertUnwindSafe(|| {
             match ravel::front_end(&source, Path::new("specs"), &reader) {
@@ -250,6 +298,7 @@ fn fuzz_onnx_loader() {
     let data =
         std::fs::read(root().join("models/double_integrator_external.onnx.data")).expect("data");
     let deadline = Instant::now() + budget();
+    let watchdog = Watchdog::start("onnx");
     let mut rng = Rng::new(0x0DD5);
     let mut findings = Vec::new();
     let (mut cases, mut accepted) = (0usize, 0usize);
@@ -257,6 +306,7 @@ fn fuzz_onnx_loader() {
         let seed = &seeds[rng.below(seeds.len())];
         let input = mutate(&mut rng, &seeds, seed, false);
         cases += 1;
+        watchdog.case(&input);
         let started = Instant::now();
         let r = catch_unwind(AssertUnwindSafe(|| {
             let mut ext = ExternalFiles::new();

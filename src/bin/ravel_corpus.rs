@@ -580,6 +580,15 @@ fn specs(dir: &Path) -> usize {
             &format!("initial X0 = {{ {} }}", dims.join(", ")),
         ),
     );
+    put(
+        "polytope_scale_overflow",
+        "E0210",
+        "a polytope whose extent overflows f64 (coefficients 1e-300, right-hand sides 1e15): once a hang (found by the fuzzer)",
+        &BASE.replace(
+            "initial X0 = box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])",
+            "initial X0 = { 1e-300 x[0] <= 1e15, -1e-300 x[0] <= 1e15, 1e-300 x[1] + 1e-300 x[0] <= 1e15, -1e-300 x[1] <= 1e15 }",
+        ),
+    );
     let rows: Vec<String> = (0..1001)
         .map(|i| format!("{}.0 x[0] + x[1] <= 100.0", i % 7))
         .collect();

@@ -100,10 +100,11 @@ impl Ctx {
             }
         }
         let p = Polytope { rows };
+        // boxes of 1e3·s, 1e6·s, …, 1e18·s (six tries at most, whatever the
+        // numbers: a scale that overflows makes the first try the last)
         let mut big = 1e3 * scale;
-        let last = 1e18 * scale;
-        loop {
-            let at_last = big * 1e3 > last;
+        for attempt in 0..6 {
+            let at_last = attempt == 5 || !(big * 1e3).is_finite();
             let lo: Vec<f64> = fixed_lo
                 .iter()
                 .map(|l| if l.is_finite() { *l } else { -big })
@@ -151,6 +152,8 @@ impl Ctx {
             }
             big *= 1e3;
         }
+        self.err(not_bounded(role, span, None));
+        None
     }
 
     /// An ℓp ball with per-dimension radii.

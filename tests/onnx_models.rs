@@ -315,17 +315,21 @@ fn exporter_ops_load_as_exact_chains() {
         [4.0, 0.25, 1.0],
     );
     let eps = 1e-5f64;
+    // the four parameters of a BatchNormalization node, as constants
+    let bn_params = |g: &mut GraphBuilder| -> Vec<String> {
+        [
+            ("scale", scale),
+            ("bias", bias),
+            ("mean", mean),
+            ("var", var),
+        ]
+        .iter()
+        .map(|(n, v)| g.constant(n, &[3], v))
+        .collect()
+    };
     let mut g = GraphBuilder::new(2, Storage::RawF64);
     g.gemm(&w1, &b1);
-    let names: Vec<String> = [
-        ("scale", scale),
-        ("bias", bias),
-        ("mean", mean),
-        ("var", var),
-    ]
-    .iter()
-    .map(|(n, v)| g.constant(n, &[3], v))
-    .collect();
+    let names = bn_params(&mut g);
     g.node(
         "BatchNormalization",
         &names,
@@ -369,15 +373,7 @@ fn exporter_ops_load_as_exact_chains() {
 
     let mut g = GraphBuilder::new(2, Storage::RawF32);
     g.gemm(&w1, &b1);
-    let names: Vec<String> = [
-        ("scale", scale),
-        ("bias", bias),
-        ("mean", mean),
-        ("var", var),
-    ]
-    .iter()
-    .map(|(n, v)| g.constant(n, &[3], v))
-    .collect();
+    let names = bn_params(&mut g);
     g.node(
         "BatchNormalization",
         &names,

@@ -485,7 +485,7 @@ fn offsets(r: &Region) -> Vec<f64> {
 /// enclosure) or inside the avoid set at that step. The f64 simulation
 /// alone could be off by more than any fixed tolerance in an unstable or
 /// high-gain loop; this check makes FALSIFIED independent of it.
-fn certainly_violates(plan: &Plan, tr: &Trajectory, prop: &Property, step: usize) -> bool {
+pub fn certainly_violates(plan: &Plan, tr: &Trajectory, prop: &Property, step: usize) -> bool {
     let cl = &plan.closed_loop;
     let Some(x0) = tr.states.first() else {
         return false;

@@ -180,3 +180,46 @@ fn a_spent_time_limit_leaves_everything_unsure() {
         }
     }
 }
+
+/// The rigorous replay behind FALSIFIED refuses what is not a real
+/// counterexample: the counterexample of the falsified spec is confirmed,
+/// but not once its initial state leaves X0 or a noise value leaves its box,
+/// and never for a property the trajectory satisfies.
+#[test]
+fn counterexamples_are_confirmed_only_when_real() {
+    use ravel::execute::certainly_violates;
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator_falsified.ravel"),
+    )
+    .expect("spec")
+    .replace("\"../models/", "\"models/");
+    let checked = ravel::front_end(
+        &src,
+        Path::new(env!("CARGO_MANIFEST_DIR")),
+        &ravel::cli::read_request,
+    )
+    .expect("valid");
+    let plan = lower(&checked);
+    let out = execute(&plan, &|| 0.0);
+    let goal = &out.properties[0];
+    assert_eq!(goal.status, Status::Falsified);
+    let tr = goal.counterexample.clone().expect("trajectory");
+    let prop = &plan.properties[0];
+    assert!(certainly_violates(&plan, &tr, prop, goal.step));
+    // the start moved just outside X0 (x[0] ∈ [2.5, 3])
+    let mut outside = tr.clone();
+    outside.states[0][0] = 3.5;
+    assert!(!certainly_violates(&plan, &outside, prop, goal.step));
+    // a process-noise value outside W = {0}
+    let mut noisy = tr.clone();
+    noisy.process_noise[0][0] = 1e-3;
+    assert!(!certainly_violates(&plan, &noisy, prop, goal.step));
+    // the avoid set is never entered by this trajectory
+    let avoid = &plan.properties[1];
+    for t in 1..=plan.horizon {
+        assert!(
+            !certainly_violates(&plan, &tr, avoid, t),
+            "avoid at step {t}"
+        );
+    }
+}

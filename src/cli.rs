@@ -55,6 +55,26 @@ enum Cmd {
         /// is not finished is UNSURE and the report says so.
         #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
         time_limit: Option<f64>,
+        /// Write a `ravel-certificate/1` for each result: to this file for a
+        /// single result, else into this folder (created if missing), one
+        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair.
+        #[arg(long, value_name = "PATH")]
+        certificate: Option<PathBuf>,
+    },
+    /// Re-check certificates written by `verify --certificate`, without
+    /// trusting the analysis: VALID, INVALID (with the first false claim) or
+    /// UNSUPPORTED. Exit code 0 (all valid), 1 (some invalid), 2 (some
+    /// unreadable or unsupported; takes precedence).
+    Certify {
+        /// Certificate files.
+        #[arg(required = true)]
+        certificates: Vec<PathBuf>,
+        /// The spec (default: the path recorded in the certificate).
+        #[arg(long, value_name = "PATH")]
+        spec: Option<PathBuf>,
+        /// The controller (default: the path recorded in the certificate).
+        #[arg(long, value_name = "PATH")]
+        controller: Option<PathBuf>,
     },
 }
 
@@ -320,6 +340,166 @@ pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// The certificate file name of a (spec, controller) pair in a folder.
+fn certificate_name(spec: &Path, controller: Option<&Path>) -> String {
+    let stem = |p: &Path| {
+        p.file_stem()
+            .map_or_else(|| "spec".to_string(), |s| s.to_string_lossy().into_owned())
+    };
+    match controller {
+        Some(c) => format!("{}--{}.cert.json", stem(spec), stem(c)),
+        None => format!("{}.cert.json", stem(spec)),
+    }
+}
+
+/// The first place two JSON values differ, as a path (`problem.plants[0].A[1]`).
+fn first_difference(a: &Value, b: &Value, path: &str) -> Option<String> {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x {
+                let p = format!("{path}.{k}");
+                match y.get(k) {
+                    Some(w) => {
+                        if let Some(d) = first_difference(v, w, &p) {
+                            return Some(d);
+                        }
+                    }
+                    None => return Some(p),
+                }
+            }
+            y.keys()
+                .find(|k| !x.contains_key(*k))
+                .map(|k| format!("{path}.{k}"))
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            if x.len() != y.len() {
+                return Some(format!("{path} (length {} vs {})", x.len(), y.len()));
+            }
+            x.iter()
+                .zip(y)
+                .enumerate()
+                .find_map(|(i, (v, w))| first_difference(v, w, &format!("{path}[{i}]")))
+        }
+        _ => (a != b).then(|| path.to_string()),
+    }
+}
+
+/// Check one certificate file: the exit code it earns and the text to print.
+fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (u8, String) {
+    use crate::certify::Answer;
+    let name = crate::diag::sanitize(&file.display().to_string());
+    let unreadable = |why: String| (exit::INPUT_ERROR, format!("UNREADABLE  {name}: {why}"));
+    let invalid = |why: String| (exit::FALSIFIED, format!("INVALID     {name}: {why}"));
+    let bytes = match read_request(&crate::ReadRequest {
+        path: file.to_path_buf(),
+        inside: None,
+        max_bytes: crate::limits::MAX_CONTROLLER_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => return unreadable(format!("cannot read: {e}")),
+    };
+    let cert: Value = match serde_json::from_slice(&bytes) {
+        Ok(v) => v,
+        Err(e) => return unreadable(format!("not JSON: {e}")),
+    };
+    let recorded = |key: &str| {
+        cert.get(key)
+            .and_then(|v| v.get("path"))
+            .and_then(Value::as_str)
+            .map(PathBuf::from)
+    };
+    let Some(spec_path) = spec.map(Path::to_path_buf).or_else(|| recorded("spec")) else {
+        return unreadable("no spec path recorded; pass --spec".into());
+    };
+    let Some(ctrl_path) = controller
+        .map(Path::to_path_buf)
+        .or_else(|| recorded("controller"))
+    else {
+        return unreadable("no controller path recorded; pass --controller".into());
+    };
+    let spec_name = crate::diag::sanitize(&spec_path.display().to_string());
+    let source = match read_request(&crate::ReadRequest {
+        path: spec_path.clone(),
+        inside: None,
+        max_bytes: crate::limits::MAX_SPEC_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}")),
+    };
+    let hash = |key: &str, field: &str| {
+        cert.get(key)
+            .and_then(|v| v.get(field))
+            .and_then(Value::as_str)
+            .unwrap_or("")
+            .to_string()
+    };
+    if crate::check::sha256_hex(&source) != hash("spec", "sha256") {
+        return invalid(format!(
+            "spec `{spec_name}` is not the one certified (SHA-256 differs)"
+        ));
+    }
+    let Ok(source) = String::from_utf8(source) else {
+        return unreadable(format!("spec `{spec_name}` is not UTF-8 text"));
+    };
+    let dir = spec_path.parent().unwrap_or(Path::new("."));
+    let checked = match crate::front_end_with(&source, dir, &read_request, Some(&ctrl_path)) {
+        Ok(c) => c,
+        Err(d) => {
+            return unreadable(format!(
+                "spec `{spec_name}` with controller `{}` does not check ({} error(s); run `ravel check`)",
+                crate::diag::sanitize(&ctrl_path.display().to_string()),
+                d.len()
+            ))
+        }
+    };
+    let plan = crate::lower::lower(&checked);
+    if plan.controller_sha256 != hash("controller", "sha256") {
+        return invalid("the controller file is not the one certified (SHA-256 differs)".into());
+    }
+    if crate::certificate::network_sha256(&plan.closed_loop.net)
+        != hash("controller", "network_sha256")
+    {
+        return invalid(
+            "the controller's network (external data included) is not the one certified".into(),
+        );
+    }
+    let problem = crate::certificate::problem_json(&plan);
+    if let Some(d) = first_difference(
+        &problem,
+        cert.get("problem").unwrap_or(&Value::Null),
+        "problem",
+    ) {
+        return invalid(format!(
+            "the recorded problem is not the spec's: `{}` differs",
+            crate::diag::sanitize(&d)
+        ));
+    }
+    let report = crate::certify::check(&cert, &plan.closed_loop.net);
+    let (code, head) = match &report.answer {
+        Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
+        Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),
+        Answer::Unsupported(_) => (exit::INPUT_ERROR, "UNSUPPORTED".to_string()),
+        Answer::Unreadable(_) => (exit::INPUT_ERROR, "UNREADABLE ".to_string()),
+    };
+    let mut text = format!("{head} {name} ({spec_name}");
+    if report.cells > 0 {
+        text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
+    }
+    text += ")";
+    match &report.answer {
+        Answer::Valid => {}
+        Answer::Invalid(m) | Answer::Unsupported(m) | Answer::Unreadable(m) => {
+            text += &format!("\n  {}", crate::diag::sanitize(m));
+        }
+    }
+    for p in &report.properties {
+        text += &format!("\n  {p}");
+    }
+    (code, text)
+}
+
 /// Run the CLI with the process arguments.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -366,6 +546,25 @@ pub fn main() -> ExitCode {
             }
             ExitCode::from(code)
         }
+        Cmd::Certify {
+            certificates,
+            spec,
+            controller,
+        } => {
+            let mut worst = exit::VERIFIED;
+            for file in &certificates {
+                let (code, text) = certify_one(file, spec.as_deref(), controller.as_deref());
+                if out(&text).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
+                }
+                worst = match (worst, code) {
+                    (exit::INPUT_ERROR, _) | (_, exit::INPUT_ERROR) => exit::INPUT_ERROR,
+                    (exit::FALSIFIED, _) | (_, exit::FALSIFIED) => exit::FALSIFIED,
+                    _ => exit::VERIFIED,
+                };
+            }
+            ExitCode::from(worst)
+        }
         Cmd::Verify {
             specs,
             controllers,
@@ -373,6 +572,7 @@ pub fn main() -> ExitCode {
             no_timing,
             timing,
             time_limit,
+            certificate,
         } => {
             let show_progress = std::io::stderr().is_terminal();
             let mut worst: Option<Status> = None;
@@ -382,6 +582,19 @@ pub fn main() -> ExitCode {
             // (VERIFIED, FALSIFIED, UNSURE, ERROR) counts for the summary line
             let mut counts = [0usize; 4];
             let (pairs, errors) = pairs(&specs, &controllers);
+            // one file for a single result, else a folder of them
+            let cert_dir = certificate
+                .as_ref()
+                .filter(|c| pairs.len() + errors.len() > 1 || c.is_dir());
+            if let Some(d) = cert_dir {
+                if let Err(e) = std::fs::create_dir_all(d) {
+                    err(&format!(
+                        "error: cannot create certificate folder `{}`: {e}\n",
+                        crate::diag::sanitize(&d.display().to_string())
+                    ));
+                    return ExitCode::from(exit::INPUT_ERROR);
+                }
+            }
             for e in &errors {
                 input_error = true;
                 counts[3] += 1;
@@ -445,6 +658,26 @@ pub fn main() -> ExitCode {
                 );
                 line.clear();
                 let ms = started.elapsed().as_secs_f64() * 1e3;
+                if let Some(target) = &certificate {
+                    let file = match cert_dir {
+                        Some(d) => d.join(certificate_name(path, controller.as_deref())),
+                        None => target.clone(),
+                    };
+                    let id = crate::certificate::Identity {
+                        spec_path: path.display().to_string(),
+                        spec_sha256: crate::check::sha256_hex(l.source.as_bytes()),
+                    };
+                    let cert = crate::certificate::build(&plan, &outcome, &id);
+                    let text = serde_json::to_string(&cert).unwrap_or_default();
+                    if let Err(e) = std::fs::write(&file, text + "\n") {
+                        err(&format!(
+                            "error: cannot write certificate `{}`: {e}\n",
+                            crate::diag::sanitize(&file.display().to_string())
+                        ));
+                        input_error = true;
+                        counts[3] += 1;
+                    }
+                }
                 worst = worst.max(Some(outcome.verdict));
                 counts[match outcome.verdict {
                     Status::Verified => 0,

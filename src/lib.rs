@@ -2,6 +2,8 @@
 #![deny(unsafe_code)]
 
 pub mod analysis;
+pub mod certificate;
+pub mod certify;
 pub mod check;
 pub mod cli;
 pub mod diag;

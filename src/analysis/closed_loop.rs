@@ -319,6 +319,12 @@ impl ClosedLoop {
         &self.at(t).plant
     }
 
+    /// The plants of steps `0, 1, …` (the last one is used for every later
+    /// step; a single one when time-invariant).
+    pub fn plants(&self) -> Vec<&Plant> {
+        self.dynamics.iter().map(|d| &d.plant).collect()
+    }
+
     /// Whether `A`, `B` or `c` change over time.
     pub fn is_time_varying(&self) -> bool {
         self.dynamics.len() > 1

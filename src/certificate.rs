@@ -1,0 +1,302 @@
+//! The certificate writer: a `ravel-certificate/1` document for one
+//! verified (spec, controller) pair, which [`crate::certify`] re-checks
+//! without trusting the analysis.
+//!
+//! The claimed sets are not the analysis's own sets: for every cell of the
+//! partition the writer re-derives the chain of boxes with the checker's
+//! one-step bound ([`crate::certify::bounds::Loop::step`]) and records the
+//! pre-activation bounds it used as the witness, so a correct certificate
+//! checks exactly (no rounding differences between two implementations).
+//! The writer then runs the checker on the certificate; when the checker's
+//! sets do not prove a VERIFIED property (the analysis's method was tighter:
+//! Reach-SDP, unrolled CROWN, polytope sets, a parent cell's intersection)
+//! or the evidence is of a kind the checker does not handle yet, the
+//! evidence is marked `unsupported` with the reason, and `ravel certify`
+//! answers UNSUPPORTED, never VALID. See `docs/certificates.md`.
+
+use serde_json::{json, Value};
+
+use crate::certify::bounds::{Bx, Loop, PlantRows};
+use crate::certify::{self, Answer, FORMAT};
+use crate::execute::{Outcome, Status, Trajectory};
+use crate::lower::{Plan, PropertyKind};
+use crate::nn::{Activation, Layer, Network};
+use crate::sets::{IBox, Region};
+
+/// Who made the certificate and from which files.
+#[derive(Clone, Debug)]
+pub struct Identity {
+    /// The spec's path as given on the command line.
+    pub spec_path: String,
+    /// SHA-256 of the spec's bytes.
+    pub spec_sha256: String,
+}
+
+fn rows_json(m: &nalgebra::DMatrix<f64>) -> Value {
+    Value::Array(
+        (0..m.nrows())
+            .map(|i| json!(m.row(i).iter().copied().collect::<Vec<f64>>()))
+            .collect(),
+    )
+}
+
+fn box_json(b: &IBox) -> Value {
+    json!({ "lo": b.lo, "hi": b.hi })
+}
+
+fn bx_json(b: &Bx) -> Value {
+    json!({ "lo": b.lo, "hi": b.hi })
+}
+
+fn ineq_json(rows: &[(Vec<f64>, f64)]) -> Value {
+    Value::Array(
+        rows.iter()
+            .map(|(a, b)| json!({ "a": a, "b": b }))
+            .collect(),
+    )
+}
+
+/// The problem as a certificate records it: what the checker reads, and
+/// what `ravel certify` compares with the spec's own lowering.
+pub fn problem_json(plan: &Plan) -> Value {
+    let cl = &plan.closed_loop;
+    let plants: Vec<Value> = cl
+        .plants()
+        .into_iter()
+        .map(|p| {
+            let error = match &p.err {
+                None => Value::Null,
+                Some(e) => json!({ "A": rows_json(&e.a), "B": rows_json(&e.b), "c": e.c.as_slice() }),
+            };
+            json!({ "A": rows_json(&p.a), "B": rows_json(&p.b), "c": p.c.as_slice(), "error": error })
+        })
+        .collect();
+    let initial = match &plan.initial {
+        Region::Box(b) => json!({ "box": box_json(b) }),
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => json!({ "ball": { "center": center, "radius": radius, "norm": norm.name() } }),
+        Region::Polytope { bbox, rows } => {
+            json!({ "polytope": { "bbox": box_json(bbox), "rows": ineq_json(rows) } })
+        }
+    };
+    let properties: Vec<Value> = plan
+        .properties
+        .iter()
+        .map(|p| match &p.kind {
+            PropertyKind::Goal(g) => {
+                json!({ "name": p.name, "kind": "goal", "rows": ineq_json(&g.rows) })
+            }
+            PropertyKind::Avoid { members, steps } => json!({
+                "name": p.name,
+                "kind": "avoid",
+                "steps": { "first": steps.0, "last": steps.1 },
+                "members": members.iter().map(|m| ineq_json(&m.rows)).collect::<Vec<_>>(),
+            }),
+        })
+        .collect();
+    json!({
+        "states": cl.states(),
+        "controls": cl.plant.b.ncols(),
+        "observations": cl.plant.obs.ncols(),
+        "horizon": plan.horizon,
+        "plants": plants,
+        "observation": rows_json(&cl.plant.obs),
+        "process_noise": box_json(&cl.plant.w),
+        "sensor_noise": box_json(&cl.plant.v),
+        "control_limits": plan.limits.as_ref().map(box_json),
+        "initial": initial,
+        "properties": properties,
+    })
+}
+
+/// SHA-256 of the network as analysed (every layer's numbers, saturation
+/// included): it covers external-data files, which the controller file's
+/// own hash does not.
+pub fn network_sha256(net: &Network) -> String {
+    let mut bytes = Vec::new();
+    bytes.extend((net.inputs as u64).to_le_bytes());
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w, b } => {
+                bytes.push(b'A');
+                bytes.extend((w.nrows() as u64).to_le_bytes());
+                bytes.extend((w.ncols() as u64).to_le_bytes());
+                for i in 0..w.nrows() {
+                    for j in 0..w.ncols() {
+                        bytes.extend(w[(i, j)].to_bits().to_le_bytes());
+                    }
+                }
+                for v in b.iter() {
+                    bytes.extend(v.to_bits().to_le_bytes());
+                }
+            }
+            Layer::Act(a) => {
+                bytes.push(b'S');
+                bytes.extend(a.name().as_bytes());
+            }
+        }
+    }
+    crate::check::sha256_hex(&bytes)
+}
+
+fn trajectory_json(tr: &Trajectory) -> Value {
+    json!({
+        "initial": tr.states.first(),
+        "process_noise": tr.process_noise,
+        "sensor_noise": tr.sensor_noise,
+        "controls": tr.controls,
+        "states": tr.states,
+    })
+}
+
+/// Why the VERIFIED evidence of this plan is not of a kind the checker
+/// handles, if it is not.
+fn not_checkable(plan: &Plan) -> Option<String> {
+    if !matches!(plan.initial, Region::Box(_)) {
+        return Some(
+            "the initial set is not a box; the checker handles box initial sets only".into(),
+        );
+    }
+    let acts = plan.closed_loop.net.activations();
+    if let Some(a) = acts.iter().find(|a| **a != Activation::Relu) {
+        return Some(format!(
+            "the controller has {} activations; the checker relaxes ReLU only",
+            a.name()
+        ));
+    }
+    None
+}
+
+/// The VERIFIED evidence: per cell, the chain of boxes with the witness of
+/// every step, up to `steps`.
+fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let plants: Vec<PlantRows> = cl
+        .plants()
+        .into_iter()
+        .map(|p| PlantRows {
+            a: p.a.clone(),
+            b: p.b.clone(),
+            c: p.c.as_slice().to_vec(),
+            err: p
+                .err
+                .as_ref()
+                .map(|e| (e.a.clone(), e.b.clone(), e.c.as_slice().to_vec())),
+        })
+        .collect();
+    let w = Bx {
+        lo: cl.plant.w.lo.clone(),
+        hi: cl.plant.w.hi.clone(),
+    };
+    let v = Bx {
+        lo: cl.plant.v.lo.clone(),
+        hi: cl.plant.v.hi.clone(),
+    };
+    let mut cells = Vec::with_capacity(outcome.cells.len());
+    for (c, sets) in outcome.cells.iter().enumerate() {
+        let start = sets
+            .first()
+            .map(Region::bbox)
+            .ok_or_else(|| format!("cell {c} has no sets"))?;
+        let mut set = Bx {
+            lo: start.lo.clone(),
+            hi: start.hi.clone(),
+        };
+        let mut claims = Vec::with_capacity(steps);
+        for t in 0..steps {
+            let lp = Loop {
+                plant: &plants[t.min(plants.len() - 1)],
+                obs: &cl.plant.obs,
+                w: &w,
+                v: &v,
+                net: &cl.net,
+            };
+            let (next, witness) = lp
+                .step(&set, None)
+                .map_err(|e| format!("the checker's bound of cell {c} at step {}: {e}", t + 1))?;
+            claims.push(json!({
+                "set": bx_json(&next),
+                "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
+            }));
+            set = next;
+        }
+        cells.push(json!({ "box": box_json(&start), "steps": claims }));
+    }
+    Ok(json!({ "status": "checkable", "steps": steps, "cells": cells }))
+}
+
+/// The certificate of one (spec, controller) result.
+pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
+    let verdicts: Vec<Value> = plan
+        .properties
+        .iter()
+        .zip(&outcome.properties)
+        .map(|(p, r)| {
+            let mut v =
+                json!({ "property": p.name, "kind": r.kind.as_str(), "status": r.status.as_str() });
+            if r.status == Status::Falsified {
+                v["step"] = json!(r.step);
+                v["trajectory"] = r
+                    .counterexample
+                    .as_ref()
+                    .map_or(Value::Null, trajectory_json);
+            }
+            v
+        })
+        .collect();
+    let needed = plan
+        .properties
+        .iter()
+        .zip(&outcome.properties)
+        .filter(|(_, r)| r.status == Status::Verified)
+        .map(|(p, _)| p.last_step().min(plan.horizon))
+        .max();
+    let mut cert = json!({
+        "format": FORMAT,
+        "tool": { "name": "ravel", "version": env!("CARGO_PKG_VERSION") },
+        "spec": { "path": id.spec_path, "sha256": id.spec_sha256 },
+        "controller": {
+            "path": plan.controller_resolved,
+            "sha256": plan.controller_sha256,
+            "network_sha256": network_sha256(&plan.closed_loop.net),
+        },
+        "analysis": {
+            "propagator": plan.propagator.name(),
+            "cells": outcome.partition.len(),
+        },
+        "problem": problem_json(plan),
+        "verdicts": verdicts,
+        "evidence": json!({ "status": "none" }),
+    });
+    let Some(steps) = needed else {
+        return cert;
+    };
+    let evidence = match not_checkable(plan) {
+        Some(why) => json!({ "status": "unsupported", "reason": why }),
+        None => match derive(plan, outcome, steps) {
+            Ok(ev) => ev,
+            Err(why) => json!({ "status": "unsupported", "reason": why }),
+        },
+    };
+    cert["evidence"] = evidence;
+    if cert["evidence"]["status"] == "checkable" {
+        // the checker's own sets may not prove what the analysis proved
+        let report = certify::check(&cert, &plan.closed_loop.net);
+        if let Some(why) = report.evidence_failure {
+            cert["evidence"] = json!({
+                "status": "unsupported",
+                "reason": format!(
+                    "the checker's one-step box bounds do not prove the verdict ({why}); the analysis ({}) was tighter than what the checker re-derives",
+                    plan.propagator.name()
+                ),
+            });
+        } else if let Answer::Unreadable(e) = report.answer {
+            cert["evidence"] =
+                json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+        }
+    }
+    cert
+}

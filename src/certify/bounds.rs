@@ -1,0 +1,700 @@
+//! The checker's own arithmetic: interval images, linear bounds through a
+//! ReLU network (back-substitution with relaxations built from *claimed*
+//! pre-activation bounds), and the bound of one closed-loop step on a facet.
+//!
+//! Nothing here calls the analysis: the only shared pieces are the
+//! outward-rounded sums of [`crate::num`] and the [`Network`] type the ONNX
+//! loader fills. Every quantity is an upper (or lower) bound of the exact
+//! real-arithmetic value; each rounded product and sum is covered by an
+//! explicit error term (the model of [`crate::num`]: a sum of `k` rounded
+//! terms is off by at most `γ(k)·Σ|terms|`).
+
+use crate::nn::{Activation, Layer, Network};
+use crate::num::{dot_box_lower, dot_box_upper, gamma, mul0, sum_lower, sum_upper, ETA, U};
+
+/// A box `lo ≤ x ≤ hi`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bx {
+    /// Lower ends.
+    pub lo: Vec<f64>,
+    /// Upper ends.
+    pub hi: Vec<f64>,
+}
+
+impl Bx {
+    /// The box `[x, x]`.
+    pub fn point(x: &[f64]) -> Bx {
+        Bx {
+            lo: x.to_vec(),
+            hi: x.to_vec(),
+        }
+    }
+
+    /// `max |xᵢ|` per coordinate.
+    pub fn abs_max(&self) -> Vec<f64> {
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .map(|(l, h)| l.abs().max(h.abs()))
+            .collect()
+    }
+
+    /// Whether every end is finite and `lo ≤ hi`.
+    pub fn is_proper(&self) -> bool {
+        self.lo.len() == self.hi.len()
+            && self
+                .lo
+                .iter()
+                .zip(&self.hi)
+                .all(|(l, h)| l.is_finite() && h.is_finite() && l <= h)
+    }
+
+    /// Whether `x` lies in the box (exact comparisons).
+    pub fn contains(&self, x: &[f64]) -> bool {
+        x.len() == self.lo.len()
+            && x.iter()
+                .zip(self.lo.iter().zip(&self.hi))
+                .all(|(v, (l, h))| l <= v && v <= h)
+    }
+}
+
+/// Why a bound could not be established.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Trouble {
+    /// A claimed pre-activation bound is tighter than the checker can prove.
+    Neuron {
+        /// Which activation layer (0-based, in network order).
+        layer: usize,
+        /// Which neuron.
+        neuron: usize,
+        /// The claimed interval.
+        claimed: (f64, f64),
+        /// The interval the checker proves.
+        proven: (f64, f64),
+    },
+    /// The witness does not have the network's shape.
+    Shape(String),
+    /// A number came out non-finite.
+    Overflow,
+    /// An activation the checker has no relaxation for.
+    Activation(Activation),
+}
+
+impl std::fmt::Display for Trouble {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Trouble::Neuron {
+                layer,
+                neuron,
+                claimed,
+                proven,
+            } => write!(
+                f,
+                "pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+                claimed.0, claimed.1, proven.0, proven.1
+            ),
+            Trouble::Shape(s) => write!(f, "{s}"),
+            Trouble::Overflow => write!(f, "a bound is not finite"),
+            Trouble::Activation(a) => write!(f, "no relaxation for {} activations", a.name()),
+        }
+    }
+}
+
+/// Rows `sᵣ ≤ coefᵣ·z + offᵣ`, valid for every feasible `z`.
+#[derive(Clone, Debug)]
+struct Linear {
+    coef: Vec<Vec<f64>>,
+    off: Vec<f64>,
+}
+
+/// `Σ aᵢ mᵢ` for non-negative terms, rounded up (with the error of the sum).
+fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
+    sum_upper(a.iter().zip(m).map(|(a, m)| mul0(a.abs(), *m)))
+}
+
+impl Linear {
+    /// Substitute `z = W z' + b`, where `|z'| ≤ zmax`. Each new coefficient
+    /// is a rounded `k`-term dot product, off from the exact one by at most
+    /// `γ(k)·Σ|cⱼ||Wⱼᵢ|`; that error times `|z'ᵢ|max` goes into the offset.
+    fn through_affine(
+        &self,
+        w: &nalgebra::DMatrix<f64>,
+        b: &nalgebra::DVector<f64>,
+        zmax: &[f64],
+    ) -> Linear {
+        let (k, n) = (w.nrows(), w.ncols());
+        let g = gamma(k + 1) * 1.0625;
+        let mut coef = Vec::with_capacity(self.coef.len());
+        let mut off = Vec::with_capacity(self.coef.len());
+        for (c, o) in self.coef.iter().zip(&self.off) {
+            let mut row = vec![0.0; n];
+            let mut abs = vec![0.0; n];
+            for (j, &cj) in c.iter().enumerate() {
+                if cj == 0.0 {
+                    continue;
+                }
+                for i in 0..n {
+                    let wji = w[(j, i)];
+                    row[i] += cj * wji;
+                    abs[i] += (cj * wji).abs();
+                }
+            }
+            // the accumulated |c||W| is itself rounded: the factor 1.0625 covers it
+            let err = (g * abs_dot(&abs, zmax) + (n as f64 + 2.0) * ETA).next_up();
+            let consts = c.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
+            off.push(sum_upper(consts.chain([*o, err])));
+            coef.push(row);
+        }
+        Linear { coef, off }
+    }
+
+    /// Replace `h = σ(z)` by the relaxation lines (upper line for a
+    /// non-negative coefficient, lower line otherwise); `|z| ≤ zmax`.
+    fn through_relax(&self, lines: &[Lines], zmax: &[f64]) -> Linear {
+        let mut coef = Vec::with_capacity(self.coef.len());
+        let mut off = Vec::with_capacity(self.coef.len());
+        for (c, o) in self.coef.iter().zip(&self.off) {
+            let mut row = vec![0.0; c.len()];
+            let mut terms = vec![*o];
+            let mut err = 0.0;
+            for (j, (&cj, l)) in c.iter().zip(lines).enumerate() {
+                if cj == 0.0 {
+                    continue;
+                }
+                let (a, b) = if cj >= 0.0 {
+                    (l.au, l.bu)
+                } else {
+                    (l.al, l.bl)
+                };
+                row[j] = cj * a;
+                err += (cj * a).abs() * zmax[j];
+                terms.push(mul0(cj, b));
+            }
+            terms.push((2.0 * U * err * 1.0625 + (c.len() as f64 + 2.0) * ETA).next_up());
+            off.push(sum_upper(terms));
+            coef.push(row);
+        }
+        Linear { coef, off }
+    }
+
+    /// Upper bounds of the rows over the box.
+    fn over(&self, b: &Bx) -> Vec<f64> {
+        self.coef
+            .iter()
+            .zip(&self.off)
+            .map(|(c, o)| sum_upper([dot_box_upper(c, &b.lo, &b.hi), *o]))
+            .collect()
+    }
+}
+
+/// The relaxation of one ReLU on `[l, u]`: `al·z + bl ≤ relu(z) ≤ au·z + bu`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Lines {
+    al: f64,
+    bl: f64,
+    au: f64,
+    bu: f64,
+}
+
+/// The checker's ReLU relaxation. Lower: `0` or `z` (each below `relu`
+/// everywhere), `z` when the positive side is the larger. Upper: a line of
+/// slope `a ≈ u/(u−l)` whose intercept is the certified maximum of
+/// `relu(z) − a z` over `[l, u]` (a convex function: the maximum is at an
+/// end), so the line is valid whatever rounding `a` carries.
+fn relu_lines(l: f64, u: f64) -> Lines {
+    if u <= 0.0 {
+        return Lines {
+            al: 0.0,
+            bl: 0.0,
+            au: 0.0,
+            bu: 0.0,
+        };
+    }
+    if l >= 0.0 {
+        return Lines {
+            al: 1.0,
+            bl: 0.0,
+            au: 1.0,
+            bu: 0.0,
+        };
+    }
+    let a = (u / (u - l)).clamp(0.0, 1.0);
+    let at_l = sum_upper([-(a * l)]);
+    let at_u = sum_upper([u, -(a * u)]);
+    Lines {
+        al: if u >= -l { 1.0 } else { 0.0 },
+        bl: 0.0,
+        au: a,
+        bu: at_l.max(at_u),
+    }
+}
+
+/// Certified interval image of a box under `z = W x + b`.
+pub fn affine_box(w: &nalgebra::DMatrix<f64>, b: &[f64], x: &Bx) -> Bx {
+    let mut lo = Vec::with_capacity(w.nrows());
+    let mut hi = Vec::with_capacity(w.nrows());
+    for (j, bj) in b.iter().enumerate().take(w.nrows()) {
+        let row: Vec<f64> = w.row(j).iter().copied().collect();
+        lo.push(sum_lower([dot_box_lower(&row, &x.lo, &x.hi), *bj]));
+        hi.push(sum_upper([dot_box_upper(&row, &x.lo, &x.hi), *bj]));
+    }
+    Bx { lo, hi }
+}
+
+/// Interval image of a monotone activation, rounded outward (tanh and
+/// sigmoid through the loader's evaluation error bound).
+fn act_box(act: Activation, x: &Bx) -> Bx {
+    let f = |z: f64, up: bool| -> f64 {
+        match act {
+            Activation::Relu => z.max(0.0),
+            Activation::Tanh | Activation::Sigmoid => {
+                let v = act.eval(z);
+                let e = act.eval_error(v);
+                if up {
+                    (v + e).next_up()
+                } else {
+                    (v - e).next_down()
+                }
+            }
+        }
+    };
+    Bx {
+        lo: x.lo.iter().map(|&z| f(z, false)).collect(),
+        hi: x.hi.iter().map(|&z| f(z, true)).collect(),
+    }
+}
+
+/// Interval evaluation of the network (IBP), for replaying a trajectory.
+pub fn network_box(net: &Network, y: &Bx) -> Bx {
+    let mut x = y.clone();
+    for layer in &net.layers {
+        x = match layer {
+            Layer::Affine { w, b } => affine_box(w, b.as_slice(), &x),
+            Layer::Act(a) => act_box(*a, &x),
+        };
+    }
+    x
+}
+
+/// Pre-activation bounds of every activation layer, in network order.
+pub type Witness = Vec<Bx>;
+
+/// The network over one input box, as the checker bounds it.
+pub struct NetBounds<'a> {
+    net: &'a Network,
+    /// `boxes[i]`: the value before layer `i` (`boxes[0]` is the input box).
+    boxes: Vec<Bx>,
+    /// Relaxations of activation layers (empty for affine layers).
+    lines: Vec<Vec<Lines>>,
+    /// The pre-activation bounds used (the witness).
+    pub witness: Witness,
+}
+
+impl<'a> NetBounds<'a> {
+    /// Bound `net` over `y`. With `claimed`, each activation layer's
+    /// pre-activation box must contain what the checker proves from the
+    /// previous claims (IBP intersected with back-substitution), and the
+    /// claimed box is used from then on; without, the proven box is used.
+    pub fn new(net: &'a Network, y: &Bx, claimed: Option<&[Bx]>) -> Result<NetBounds<'a>, Trouble> {
+        let mut s = NetBounds {
+            net,
+            boxes: vec![y.clone()],
+            lines: Vec::with_capacity(net.layers.len()),
+            witness: Vec::new(),
+        };
+        if !y.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let acts = net
+            .layers
+            .windows(2)
+            .filter(|w| matches!(w, [Layer::Affine { .. }, Layer::Act(_)]))
+            .count();
+        if let Some(c) = claimed {
+            if c.len() != acts {
+                return Err(Trouble::Shape(format!(
+                    "{} pre-activation boxes for {} activation layers",
+                    c.len(),
+                    acts
+                )));
+            }
+        }
+        for (i, layer) in net.layers.iter().enumerate() {
+            let cur = &s.boxes[i];
+            let (next, lines) = match layer {
+                Layer::Affine { w, b } => {
+                    let mut next = affine_box(w, b.as_slice(), cur);
+                    if matches!(net.layers.get(i + 1), Some(Layer::Act(_))) {
+                        let k = w.nrows();
+                        let mut spec = Linear {
+                            coef: Vec::with_capacity(2 * k),
+                            off: vec![0.0; 2 * k],
+                        };
+                        for sign in [1.0, -1.0] {
+                            for j in 0..k {
+                                let mut r = vec![0.0; k];
+                                r[j] = sign;
+                                spec.coef.push(r);
+                            }
+                        }
+                        let up = s.backward(spec, i + 1).over(y);
+                        for j in 0..k {
+                            next.hi[j] = next.hi[j].min(up[j]);
+                            next.lo[j] = next.lo[j].max(-up[k + j]);
+                        }
+                        if !next.is_proper() {
+                            return Err(Trouble::Overflow);
+                        }
+                        let layer_no = s.witness.len();
+                        if let Some(c) = claimed.and_then(|c| c.get(layer_no)) {
+                            if c.lo.len() != k || c.hi.len() != k {
+                                return Err(Trouble::Shape(format!(
+                                    "activation layer {layer_no}: {} bounds for {k} neurons",
+                                    c.lo.len()
+                                )));
+                            }
+                            for j in 0..k {
+                                // NaN claims fail this test too
+                                let ok = c.lo[j] <= next.lo[j] && c.hi[j] >= next.hi[j];
+                                if !ok || !c.lo[j].is_finite() || !c.hi[j].is_finite() {
+                                    return Err(Trouble::Neuron {
+                                        layer: layer_no,
+                                        neuron: j,
+                                        claimed: (c.lo[j], c.hi[j]),
+                                        proven: (next.lo[j], next.hi[j]),
+                                    });
+                                }
+                            }
+                            next = c.clone();
+                        }
+                        s.witness.push(next.clone());
+                    }
+                    (next, Vec::new())
+                }
+                Layer::Act(Activation::Relu) => {
+                    let lines = cur
+                        .lo
+                        .iter()
+                        .zip(&cur.hi)
+                        .map(|(&l, &u)| relu_lines(l, u))
+                        .collect();
+                    (act_box(Activation::Relu, cur), lines)
+                }
+                Layer::Act(a) => return Err(Trouble::Activation(*a)),
+            };
+            if !next.is_proper() {
+                return Err(Trouble::Overflow);
+            }
+            s.boxes.push(next);
+            s.lines.push(lines);
+        }
+        Ok(s)
+    }
+
+    /// Back-substitute a bound on the value before layer `end` to the input.
+    fn backward(&self, mut bound: Linear, end: usize) -> Linear {
+        for i in (0..end).rev() {
+            let zmax = self.boxes[i].abs_max();
+            bound = match &self.net.layers[i] {
+                Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
+                Layer::Act(_) => bound.through_relax(&self.lines[i], &zmax),
+            };
+        }
+        bound
+    }
+
+    /// The output box: IBP intersected with back-substitution of `±I`.
+    pub fn output(&self) -> Bx {
+        let mut out = self
+            .boxes
+            .last()
+            .cloned()
+            .unwrap_or_else(|| self.boxes[0].clone());
+        let m = out.lo.len();
+        let mut coef = Vec::with_capacity(2 * m);
+        for sign in [1.0, -1.0] {
+            for j in 0..m {
+                let mut r = vec![0.0; m];
+                r[j] = sign;
+                coef.push(r);
+            }
+        }
+        let up = self
+            .backward(
+                Linear {
+                    coef,
+                    off: vec![0.0; 2 * m],
+                },
+                self.net.layers.len(),
+            )
+            .over(&self.boxes[0]);
+        for j in 0..m {
+            out.hi[j] = out.hi[j].min(up[j]);
+            out.lo[j] = out.lo[j].max(-up[m + j]);
+        }
+        out
+    }
+
+    /// `s·π(y) ≤ g·y + h` over the input box, for one specification row `s`.
+    fn linear(&self, s: &[f64]) -> (Vec<f64>, f64) {
+        let b = self.backward(
+            Linear {
+                coef: vec![s.to_vec()],
+                off: vec![0.0],
+            },
+            self.net.layers.len(),
+        );
+        (b.coef[0].clone(), b.off[0])
+    }
+}
+
+/// One plant as the checker reads it (rows of matrices).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlantRows {
+    /// `A` (`n × n`).
+    pub a: nalgebra::DMatrix<f64>,
+    /// `B` (`n × m`).
+    pub b: nalgebra::DMatrix<f64>,
+    /// `c` (`n`).
+    pub c: Vec<f64>,
+    /// Entrywise error bounds of `A`, `B`, `c` (continuous-time plants).
+    pub err: Option<(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>, Vec<f64>)>,
+}
+
+/// The loop data one step needs.
+pub struct Loop<'a> {
+    /// The plant of this step.
+    pub plant: &'a PlantRows,
+    /// `C` (`n × p`): `y = Cᵀx + v`.
+    pub obs: &'a nalgebra::DMatrix<f64>,
+    /// Process noise box.
+    pub w: &'a Bx,
+    /// Sensor noise box.
+    pub v: &'a Bx,
+    /// The controller, saturation included.
+    pub net: &'a Network,
+}
+
+impl Loop<'_> {
+    /// The box of `Cᵀx + v` for `x ∈ x`.
+    pub fn observation(&self, x: &Bx) -> Bx {
+        let p = self.obs.ncols();
+        let mut lo = Vec::with_capacity(p);
+        let mut hi = Vec::with_capacity(p);
+        for j in 0..p {
+            let col: Vec<f64> = self.obs.column(j).iter().copied().collect();
+            lo.push(sum_lower([dot_box_lower(&col, &x.lo, &x.hi), self.v.lo[j]]));
+            hi.push(sum_upper([dot_box_upper(&col, &x.lo, &x.hi), self.v.hi[j]]));
+        }
+        Bx { lo, hi }
+    }
+
+    /// `δᵢ = Σⱼ E_A,ij |xⱼ|max + Σⱼ E_B,ij |uⱼ|max + E_c,i`, rounded up (zero for an exact plant).
+    fn model_delta(&self, xmax: &[f64], umax: &[f64]) -> Vec<f64> {
+        match &self.plant.err {
+            None => vec![0.0; self.plant.a.nrows()],
+            Some((ea, eb, ec)) => (0..ea.nrows())
+                .map(|i| {
+                    let ra: Vec<f64> = ea.row(i).iter().copied().collect();
+                    let rb: Vec<f64> = eb.row(i).iter().copied().collect();
+                    sum_upper([abs_dot(&ra, xmax), abs_dot(&rb, umax), ec[i]])
+                })
+                .collect(),
+        }
+    }
+
+    /// `fᵀM` rounded, with the per-entry error bound `γ(n)·Σ|fᵢ||Mᵢⱼ|`.
+    fn row_times(f: &[f64], m: &nalgebra::DMatrix<f64>) -> (Vec<f64>, Vec<f64>) {
+        let g = gamma(f.len() + 1) * 1.0625;
+        (0..m.ncols())
+            .map(|j| {
+                let mut s = 0.0;
+                let mut a = 0.0;
+                for (i, fi) in f.iter().enumerate() {
+                    s += fi * m[(i, j)];
+                    a += (fi * m[(i, j)]).abs();
+                }
+                (s, (g * a + (f.len() as f64 + 2.0) * ETA).next_up())
+            })
+            .unzip()
+    }
+
+    /// An upper bound of `f·x⁺` over `x ∈ x`, `w ∈ W`, `v ∈ V`, with the
+    /// network bounded over the observation box: the smaller of
+    /// (a) back-substitution of `fᵀB` through the network (Reach-LP) and
+    /// (b) `fᵀB` over the control box (the separate bound), each plus the
+    /// exact-plant terms and the model error.
+    pub fn facet_bound(&self, f: &[f64], x: &Bx, nb: &NetBounds, u: &Bx) -> f64 {
+        let xmax = x.abs_max();
+        let umax = u.abs_max();
+        let (fa, fa_err) = Self::row_times(f, &self.plant.a);
+        let (fb, fb_err) = Self::row_times(f, &self.plant.b);
+        let delta = self.model_delta(&xmax, &umax);
+        let common = sum_upper([
+            sum_upper(f.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
+            dot_box_upper(f, &self.w.lo, &self.w.hi),
+            abs_dot(&fa_err, &xmax),
+            abs_dot(&fb_err, &umax),
+            abs_dot(f, &delta),
+        ]);
+        // (b) the separate bound
+        let separate = sum_upper([
+            dot_box_upper(&fa, &x.lo, &x.hi),
+            dot_box_upper(&fb, &u.lo, &u.hi),
+            common,
+        ]);
+        // (a) fᵀB π(y) ≤ g·y + h, y = Cᵀx + v
+        let (g, h) = nb.linear(&fb);
+        let (cg, cg_err) = Self::row_times(&g, &self.obs.transpose());
+        let coef: Vec<f64> = fa.iter().zip(&cg).map(|(a, b)| a + b).collect();
+        let sum_err: Vec<f64> = coef.iter().map(|c| (c.abs() * U).next_up()).collect();
+        let reach_lp = sum_upper([
+            dot_box_upper(&coef, &x.lo, &x.hi),
+            abs_dot(&cg_err, &xmax),
+            abs_dot(&sum_err, &xmax),
+            dot_box_upper(&g, &self.v.lo, &self.v.hi),
+            h,
+            common,
+        ]);
+        let best = reach_lp.min(separate);
+        if reach_lp.is_nan() || separate.is_nan() {
+            f64::NAN
+        } else {
+            best
+        }
+    }
+
+    /// The checker's bound of the next state's box from the box `x`, with
+    /// the network witness (`claimed`) or without (then the witness used is
+    /// returned, for the certificate writer).
+    pub fn step(&self, x: &Bx, claimed: Option<&[Bx]>) -> Result<(Bx, Witness), Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let y = self.observation(x);
+        let nb = NetBounds::new(self.net, &y, claimed)?;
+        let u = nb.output();
+        if !u.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let n = x.lo.len();
+        let mut next = Bx {
+            lo: vec![0.0; n],
+            hi: vec![0.0; n],
+        };
+        let mut f = vec![0.0; n];
+        for i in 0..n {
+            f[i] = 1.0;
+            next.hi[i] = self.facet_bound(&f, x, &nb, &u);
+            f[i] = -1.0;
+            next.lo[i] = -self.facet_bound(&f, x, &nb, &u);
+            f[i] = 0.0;
+        }
+        if !next.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        Ok((next, nb.witness))
+    }
+
+    /// A rigorous enclosure of the next state from every state in `x` with
+    /// fixed noise values (interval arithmetic through network and plant,
+    /// plus the model error): for replaying a counterexample.
+    pub fn enclose(&self, x: &Bx, w: &[f64], v: &[f64]) -> Option<Bx> {
+        let vb = Bx::point(v);
+        let y = Loop { v: &vb, ..*self }.observation(x);
+        let u = network_box(self.net, &y);
+        if !(y.is_proper() && u.is_proper()) {
+            return None;
+        }
+        let n = x.lo.len();
+        let delta = self.model_delta(&x.abs_max(), &u.abs_max());
+        let mut lo = Vec::with_capacity(n);
+        let mut hi = Vec::with_capacity(n);
+        for i in 0..n {
+            let ra: Vec<f64> = self.plant.a.row(i).iter().copied().collect();
+            let rb: Vec<f64> = self.plant.b.row(i).iter().copied().collect();
+            let c = self.plant.c[i];
+            lo.push(sum_lower([
+                dot_box_lower(&ra, &x.lo, &x.hi),
+                dot_box_lower(&rb, &u.lo, &u.hi),
+                c,
+                w[i],
+                -delta[i],
+            ]));
+            hi.push(sum_upper([
+                dot_box_upper(&ra, &x.lo, &x.hi),
+                dot_box_upper(&rb, &u.lo, &u.hi),
+                c,
+                w[i],
+                delta[i],
+            ]));
+        }
+        let b = Bx { lo, hi };
+        b.is_proper().then_some(b)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    #[test]
+    fn relu_lines_bound_relu_on_their_interval() {
+        for (l, u) in [(-1.0, 2.0), (-3.0, 0.5), (-1e-300, 1e-300), (-0.1, 0.3)] {
+            let r = relu_lines(l, u);
+            for k in 0..=100 {
+                let z: f64 = l + (u - l) * k as f64 / 100.0;
+                let relu = z.max(0.0);
+                assert!(r.al * z + r.bl <= relu + 1e-15);
+                assert!(r.au * z + r.bu >= relu);
+            }
+        }
+    }
+
+    #[test]
+    fn network_bounds_contain_samples() {
+        let net = Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(3, 2, &[1.0, -1.0, 0.5, 2.0, -1.5, 0.3]),
+                    b: DVector::from_column_slice(&[0.1, -0.2, 0.3]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 3, &[1.0, -2.0, 0.7]),
+                    b: DVector::from_column_slice(&[0.05]),
+                },
+            ],
+        );
+        let y = Bx {
+            lo: vec![-1.0, -0.5],
+            hi: vec![0.5, 1.0],
+        };
+        let nb = NetBounds::new(&net, &y, None).expect("finite");
+        let out = nb.output();
+        let (g, h) = nb.linear(&[1.0]);
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let x = [-1.0 + 1.5 * i as f64 / 20.0, -0.5 + 1.5 * j as f64 / 20.0];
+                let v = net.forward(&x)[0];
+                assert!(out.lo[0] <= v && v <= out.hi[0]);
+                assert!(v <= g[0] * x[0] + g[1] * x[1] + h + 1e-12);
+            }
+        }
+        // the witness checks against itself, and a tightened one does not
+        let w = nb.witness.clone();
+        assert!(NetBounds::new(&net, &y, Some(&w)).is_ok());
+        let mut bad = w.clone();
+        bad[0].hi[1] -= 0.01;
+        assert!(matches!(
+            NetBounds::new(&net, &y, Some(&bad)),
+            Err(Trouble::Neuron {
+                layer: 0,
+                neuron: 1,
+                ..
+            })
+        ));
+    }
+}

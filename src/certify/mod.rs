@@ -1,0 +1,644 @@
+//! The certificate checker: re-checks a verdict from a `ravel-certificate/1`
+//! file without trusting the analysis that produced it.
+//!
+//! # What a VALID answer proves
+//!
+//! For the problem recorded in the certificate (plants, noise boxes, initial
+//! set, goal and avoid sets, horizon; `ravel certify` first checks that it
+//! is exactly the problem its spec lowers to, and that the spec and
+//! controller files have the recorded SHA-256) and the controller as loaded
+//! (saturation included):
+//!
+//! * every VERIFIED property holds for **every** trajectory: the cells cover
+//!   the initial set; every claimed set of every cell contains the checker's
+//!   own one-step bound of the previous claimed set, computed with the
+//!   witness (pre-activation bounds of every hidden layer, each checked
+//!   against the checker's own bound from the earlier ones); the final sets
+//!   lie in the goal; and at every constrained step one inequality of each
+//!   avoid-set member separates the set from it;
+//! * every FALSIFIED property is violated by the recorded trajectory: its
+//!   initial state and noise values lie in their sets, and the
+//!   outward-rounded interval enclosure of the true trajectory from them
+//!   violates the property at the recorded step as a whole.
+//!
+//! UNSURE properties claim nothing and are not checked.
+//!
+//! # What it trusts
+//!
+//! This module (its arithmetic is its own: interval images, ReLU
+//! relaxations, back-substitution, box coverage), the outward-rounded sums
+//! of [`crate::num`], the ONNX loader and the front end that maps a spec to
+//! its problem (parse, check, lower), and `serde_json`. It does not call
+//! the propagators, the partitioners, the LP or SDP solvers or the Monte
+//! Carlo simulation; nothing it uses was computed by them except the
+//! numbers in the certificate, which it checks.
+//!
+//! # What it does not check yet
+//!
+//! Sets other than boxes, initial sets other than boxes, and activations
+//! other than ReLU: the certificate then says why the VERIFIED evidence is
+//! not checkable, and the answer is UNSUPPORTED (never VALID).
+
+pub mod bounds;
+mod cover;
+
+use serde_json::Value;
+
+use crate::nn::Network;
+use crate::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
+use bounds::{Bx, Loop, PlantRows, Trouble};
+
+/// The certificate format this module reads and [`crate::certificate`] writes.
+pub const FORMAT: &str = "ravel-certificate/1";
+
+/// The answer about one certificate.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Answer {
+    /// Every claim holds.
+    Valid,
+    /// A claim is false: the first failing item, for people.
+    Invalid(String),
+    /// Some claim cannot be checked (and none was found false): why.
+    Unsupported(String),
+    /// The certificate is not a readable `ravel-certificate/1`: why.
+    Unreadable(String),
+}
+
+/// The checker's report: the answer and one line per property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Report {
+    /// The answer.
+    pub answer: Answer,
+    /// `name: STATUS (checked | not checked: why | no claim)` per property.
+    pub properties: Vec<String>,
+    /// Cells and steps of the VERIFIED evidence that were checked.
+    pub cells: usize,
+    /// Steps per cell.
+    pub steps: usize,
+    /// The first false claim of the VERIFIED evidence, if one was found
+    /// (the certificate writer uses it to tell a checkable certificate from
+    /// one the checker's bounds cannot establish).
+    pub evidence_failure: Option<String>,
+}
+
+type R<T> = Result<T, String>;
+
+fn get<'a>(v: &'a Value, key: &str) -> R<&'a Value> {
+    v.get(key).ok_or_else(|| format!("missing field `{key}`"))
+}
+
+fn num(v: &Value) -> R<f64> {
+    v.as_f64()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| "expected a finite number".to_string())
+}
+
+fn uint(v: &Value, what: &str) -> R<usize> {
+    v.as_u64()
+        .and_then(|x| usize::try_from(x).ok())
+        .ok_or_else(|| format!("`{what}` must be a non-negative integer"))
+}
+
+fn vector(v: &Value, len: usize, what: &str) -> R<Vec<f64>> {
+    let a = v
+        .as_array()
+        .ok_or_else(|| format!("`{what}` must be an array"))?;
+    if a.len() != len {
+        return Err(format!("`{what}` has {} entries, expected {len}", a.len()));
+    }
+    a.iter()
+        .map(|x| num(x).map_err(|e| format!("`{what}`: {e}")))
+        .collect()
+}
+
+fn matrix(v: &Value, rows: usize, cols: usize, what: &str) -> R<nalgebra::DMatrix<f64>> {
+    let a = v
+        .as_array()
+        .ok_or_else(|| format!("`{what}` must be an array of rows"))?;
+    if a.len() != rows {
+        return Err(format!("`{what}` has {} rows, expected {rows}", a.len()));
+    }
+    let mut m = nalgebra::DMatrix::zeros(rows, cols);
+    for (i, r) in a.iter().enumerate() {
+        for (j, x) in vector(r, cols, what)?.into_iter().enumerate() {
+            m[(i, j)] = x;
+        }
+    }
+    Ok(m)
+}
+
+fn boxed(v: &Value, n: usize, what: &str) -> R<Bx> {
+    let b = Bx {
+        lo: vector(get(v, "lo")?, n, what)?,
+        hi: vector(get(v, "hi")?, n, what)?,
+    };
+    if !b.is_proper() {
+        return Err(format!("`{what}` is not a box (lo > hi somewhere)"));
+    }
+    Ok(b)
+}
+
+/// Rows `(a, b)` of `a·x ≤ b`.
+fn rows(v: &Value, n: usize, what: &str) -> R<Vec<(Vec<f64>, f64)>> {
+    v.as_array()
+        .ok_or_else(|| format!("`{what}` must be an array"))?
+        .iter()
+        .map(|r| Ok((vector(get(r, "a")?, n, what)?, num(get(r, "b")?)?)))
+        .collect()
+}
+
+/// A property as the checker reads it.
+enum Prop {
+    Goal(Vec<(Vec<f64>, f64)>),
+    Avoid {
+        members: Vec<Vec<(Vec<f64>, f64)>>,
+        steps: (usize, usize),
+    },
+}
+
+/// The problem as the checker reads it.
+struct Problem {
+    n: usize,
+    horizon: usize,
+    plants: Vec<PlantRows>,
+    obs: nalgebra::DMatrix<f64>,
+    w: Bx,
+    v: Bx,
+    /// The initial box, or why the initial set is not checkable.
+    initial: Result<Bx, String>,
+    props: Vec<(String, Prop)>,
+}
+
+impl Problem {
+    fn read(p: &Value, net: &Network) -> R<Problem> {
+        let n = uint(get(p, "states")?, "states")?;
+        let m = uint(get(p, "controls")?, "controls")?;
+        let q = uint(get(p, "observations")?, "observations")?;
+        let horizon = uint(get(p, "horizon")?, "horizon")?;
+        let max = crate::limits::MAX_DIM as usize;
+        if n == 0 || n > max || m > max || q > max {
+            return Err("dimensions out of range".into());
+        }
+        if horizon > crate::limits::MAX_HORIZON as usize {
+            return Err("horizon out of range".into());
+        }
+        if net.inputs != q || net.outputs() != m {
+            return Err(format!(
+                "the controller maps {} inputs to {} outputs; the problem needs {q} → {m}",
+                net.inputs,
+                net.outputs()
+            ));
+        }
+        let plants = get(p, "plants")?
+            .as_array()
+            .filter(|a| !a.is_empty())
+            .ok_or("`plants` must be a non-empty array")?
+            .iter()
+            .map(|pl| {
+                let err = match get(pl, "error")? {
+                    Value::Null => None,
+                    e => Some((
+                        matrix(get(e, "A")?, n, n, "error.A")?,
+                        matrix(get(e, "B")?, n, m, "error.B")?,
+                        vector(get(e, "c")?, n, "error.c")?,
+                    )),
+                };
+                Ok(PlantRows {
+                    a: matrix(get(pl, "A")?, n, n, "A")?,
+                    b: matrix(get(pl, "B")?, n, m, "B")?,
+                    c: vector(get(pl, "c")?, n, "c")?,
+                    err,
+                })
+            })
+            .collect::<R<Vec<_>>>()?;
+        let init = get(p, "initial")?;
+        let initial = match init.get("box") {
+            Some(b) => Ok(boxed(b, n, "initial")?),
+            None => Err("the initial set is not a box".to_string()),
+        };
+        let props = get(p, "properties")?
+            .as_array()
+            .ok_or("`properties` must be an array")?
+            .iter()
+            .map(|pr| {
+                let name = get(pr, "name")?
+                    .as_str()
+                    .ok_or("`name` must be a string")?
+                    .to_string();
+                let kind = match get(pr, "kind")?.as_str() {
+                    Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
+                    Some("avoid") => {
+                        let s = get(pr, "steps")?;
+                        let steps = (
+                            uint(get(s, "first")?, "steps.first")?,
+                            uint(get(s, "last")?, "steps.last")?,
+                        );
+                        let members = get(pr, "members")?
+                            .as_array()
+                            .ok_or("`members` must be an array")?
+                            .iter()
+                            .map(|mb| rows(mb, n, "avoid rows"))
+                            .collect::<R<Vec<_>>>()?;
+                        Prop::Avoid { members, steps }
+                    }
+                    _ => return Err("`kind` must be \"goal\" or \"avoid\"".to_string()),
+                };
+                Ok((name, kind))
+            })
+            .collect::<R<Vec<_>>>()?;
+        Ok(Problem {
+            n,
+            horizon,
+            plants,
+            obs: matrix(get(p, "observation")?, n, q, "observation")?,
+            w: boxed(get(p, "process_noise")?, n, "process_noise")?,
+            v: boxed(get(p, "sensor_noise")?, q, "sensor_noise")?,
+            initial,
+            props,
+        })
+    }
+
+    fn at<'a>(&'a self, t: usize, net: &'a Network) -> Loop<'a> {
+        Loop {
+            plant: &self.plants[t.min(self.plants.len() - 1)],
+            obs: &self.obs,
+            w: &self.w,
+            v: &self.v,
+            net,
+        }
+    }
+
+    /// The last step a property constrains.
+    fn last_step(&self, p: &Prop) -> usize {
+        match p {
+            Prop::Goal(_) => self.horizon,
+            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+        }
+    }
+}
+
+/// The name of coordinate `i`'s upper or lower facet, for messages.
+fn facet(i: usize, upper: bool) -> String {
+    format!(
+        "x[{i}] {}",
+        if upper { "upper bound" } else { "lower bound" }
+    )
+}
+
+/// Check one certificate against the controller `net` (saturation included).
+pub fn check(cert: &Value, net: &Network) -> Report {
+    let mut report = Report {
+        answer: Answer::Valid,
+        properties: Vec::new(),
+        cells: 0,
+        steps: 0,
+        evidence_failure: None,
+    };
+    match check_inner(cert, net, &mut report) {
+        Ok(answer) => report.answer = answer,
+        Err(e) => report.answer = Answer::Unreadable(e),
+    }
+    report
+}
+
+fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
+    match get(cert, "format")?.as_str() {
+        Some(FORMAT) => {}
+        Some(other) => {
+            return Err(format!(
+                "format `{}` is not {FORMAT}",
+                crate::diag::sanitize(other)
+            ))
+        }
+        None => return Err("`format` must be a string".into()),
+    }
+    let problem = Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
+    let verdicts = get(cert, "verdicts")?
+        .as_array()
+        .ok_or("`verdicts` must be an array")?;
+    if verdicts.len() != problem.props.len() {
+        return Err(format!(
+            "{} verdicts for {} properties",
+            verdicts.len(),
+            problem.props.len()
+        ));
+    }
+    let mut invalid: Option<String> = None;
+    let mut unsupported: Option<String> = None;
+    let mut verified = Vec::new();
+    for (i, (v, (name, prop))) in verdicts.iter().zip(&problem.props).enumerate() {
+        if get(v, "property")?.as_str() != Some(name.as_str()) {
+            return Err(format!(
+                "verdict {i} is not about property `{}`",
+                crate::diag::sanitize(name)
+            ));
+        }
+        let shown = crate::diag::sanitize(name);
+        match get(v, "status")?.as_str() {
+            Some("VERIFIED") => verified.push(i),
+            Some("UNSURE") => report
+                .properties
+                .push(format!("{shown}: UNSURE (no claim)")),
+            Some("FALSIFIED") => {
+                let step = uint(get(v, "step")?, "step")?;
+                match replay(&problem, net, prop, step, get(v, "trajectory")?)? {
+                    Ok(()) => report.properties.push(format!(
+                        "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
+                    )),
+                    Err(why) => {
+                        let msg = format!("property `{shown}`: the counterexample {why}");
+                        report
+                            .properties
+                            .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
+                        invalid.get_or_insert(msg);
+                    }
+                }
+            }
+            _ => {
+                return Err(format!(
+                    "verdict {i}: `status` must be VERIFIED, FALSIFIED or UNSURE"
+                ))
+            }
+        }
+    }
+    if !verified.is_empty() {
+        let ev = get(cert, "evidence")?;
+        match get(ev, "status")?.as_str() {
+            Some("checkable") => {
+                let needed = verified
+                    .iter()
+                    .map(|&i| problem.last_step(&problem.props[i].1))
+                    .max()
+                    .unwrap_or(0);
+                match evidence(&problem, net, ev, needed, &verified, report)? {
+                    Ok(()) => {
+                        for &i in &verified {
+                            let shown = crate::diag::sanitize(&problem.props[i].0);
+                            report
+                                .properties
+                                .push(format!("{shown}: VERIFIED (checked)"));
+                        }
+                    }
+                    Err(msg) => {
+                        for &i in &verified {
+                            let shown = crate::diag::sanitize(&problem.props[i].0);
+                            report
+                                .properties
+                                .push(format!("{shown}: VERIFIED — not established"));
+                        }
+                        report.evidence_failure = Some(msg.clone());
+                        invalid.get_or_insert(msg);
+                    }
+                }
+            }
+            Some("unsupported") => {
+                let why = get(ev, "reason")?.as_str().unwrap_or("no reason given");
+                let why = crate::diag::sanitize(why);
+                for &i in &verified {
+                    let shown = crate::diag::sanitize(&problem.props[i].0);
+                    report
+                        .properties
+                        .push(format!("{shown}: VERIFIED — not checkable: {why}"));
+                }
+                unsupported.get_or_insert(why);
+            }
+            _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
+        }
+    }
+    Ok(match (invalid, unsupported) {
+        (Some(m), _) => Answer::Invalid(m),
+        (None, Some(m)) => Answer::Unsupported(m),
+        (None, None) => Answer::Valid,
+    })
+}
+
+/// Check the VERIFIED evidence; the outer error is an unreadable
+/// certificate, the inner one the first false claim.
+fn evidence(
+    problem: &Problem,
+    net: &Network,
+    ev: &Value,
+    needed: usize,
+    verified: &[usize],
+    report: &mut Report,
+) -> R<Result<(), String>> {
+    let x0 = match &problem.initial {
+        Ok(b) => b,
+        Err(e) => return Err(format!("evidence is marked checkable but {e}")),
+    };
+    let n = problem.n;
+    let steps = uint(get(ev, "steps")?, "evidence.steps")?;
+    if steps < needed || steps > problem.horizon {
+        return Ok(Err(format!(
+            "the evidence covers steps 0..={steps}, the verified properties need 0..={needed}"
+        )));
+    }
+    let cells_json = get(ev, "cells")?
+        .as_array()
+        .ok_or("`evidence.cells` must be an array")?;
+    let mut cells = Vec::with_capacity(cells_json.len());
+    let mut sets: Vec<Vec<Bx>> = Vec::with_capacity(cells_json.len());
+    for (c, cell) in cells_json.iter().enumerate() {
+        let start = boxed(get(cell, "box")?, n, "cell box")?;
+        let claims = get(cell, "steps")?
+            .as_array()
+            .ok_or("`steps` must be an array")?;
+        if claims.len() != steps {
+            return Err(format!(
+                "cell {c} has {} steps, expected {steps}",
+                claims.len()
+            ));
+        }
+        let mut chain = vec![start.clone()];
+        for (k, claim) in claims.iter().enumerate() {
+            let t = k + 1;
+            let set = boxed(get(claim, "set")?, n, "claimed set")?;
+            let witness = get(claim, "preactivations")?
+                .as_array()
+                .ok_or("`preactivations` must be an array")?
+                .iter()
+                .map(|b| {
+                    let len = b.get("lo").and_then(Value::as_array).map_or(0, Vec::len);
+                    boxed(b, len, "pre-activation bounds")
+                })
+                .collect::<R<Vec<_>>>()?;
+            let prev = &chain[k];
+            let proven = match problem.at(k, net).step(prev, Some(&witness)) {
+                Ok((b, _)) => b,
+                Err(Trouble::Neuron {
+                    layer,
+                    neuron,
+                    claimed,
+                    proven,
+                }) => {
+                    return Ok(Err(format!(
+                        "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+                        claimed.0, claimed.1, proven.0, proven.1
+                    )))
+                }
+                Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
+                Err(Trouble::Overflow) => {
+                    return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
+                }
+                Err(Trouble::Activation(a)) => {
+                    return Err(format!(
+                        "evidence is marked checkable but the controller has {} activations",
+                        a.name()
+                    ))
+                }
+            };
+            for i in 0..n {
+                if set.hi[i] < proven.hi[i] {
+                    return Ok(Err(format!(
+                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {:e})",
+                        facet(i, true),
+                        set.hi[i],
+                        proven.hi[i],
+                        proven.hi[i] - set.hi[i]
+                    )));
+                }
+                if set.lo[i] > proven.lo[i] {
+                    return Ok(Err(format!(
+                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {:e})",
+                        facet(i, false),
+                        set.lo[i],
+                        proven.lo[i],
+                        set.lo[i] - proven.lo[i]
+                    )));
+                }
+            }
+            chain.push(set);
+        }
+        cells.push(start);
+        sets.push(chain);
+    }
+    if let Err(point) = cover::covers(&cells, x0) {
+        return Ok(Err(match point {
+            Some(p) => format!("the cells do not cover the initial set: {p:?} is in no cell"),
+            None => {
+                "the cells' coverage of the initial set could not be decided within the work limit"
+                    .to_string()
+            }
+        }));
+    }
+    for &i in verified {
+        let (name, prop) = &problem.props[i];
+        let shown = crate::diag::sanitize(name);
+        for (c, chain) in sets.iter().enumerate() {
+            match prop {
+                Prop::Goal(g) => {
+                    let last = &chain[problem.horizon];
+                    for (r, (a, b)) in g.iter().enumerate() {
+                        let worst = sum_upper([dot_box_upper(a, &last.lo, &last.hi), -b]);
+                        if worst.is_nan() || worst > 0.0 {
+                            return Ok(Err(format!(
+                                "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {worst:e}",
+                                problem.horizon
+                            )));
+                        }
+                    }
+                }
+                Prop::Avoid { members, steps: s } => {
+                    for (t, set) in chain
+                        .iter()
+                        .enumerate()
+                        .take(problem.last_step(prop) + 1)
+                        .skip(s.0)
+                    {
+                        for (k, mb) in members.iter().enumerate() {
+                            let separated = mb.iter().any(|(a, b)| {
+                                sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0
+                            });
+                            if !separated {
+                                return Ok(Err(format!(
+                                    "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
+                                )));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    report.cells = cells.len();
+    report.steps = steps;
+    Ok(Ok(()))
+}
+
+/// Replay a counterexample rigorously; the outer error is an unreadable
+/// trajectory, the inner one why it does not violate the property.
+fn replay(
+    problem: &Problem,
+    net: &Network,
+    prop: &Prop,
+    step: usize,
+    tr: &Value,
+) -> R<Result<(), String>> {
+    let n = problem.n;
+    let q = problem.obs.ncols();
+    if step > problem.horizon {
+        return Ok(Err(format!(
+            "names step {step}, beyond the horizon {}",
+            problem.horizon
+        )));
+    }
+    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < step || vs.len() < step {
+        return Err(format!(
+            "the trajectory has noise for fewer than {step} steps"
+        ));
+    }
+    let initial = match &problem.initial {
+        Ok(b) => b,
+        Err(e) => return Err(format!("cannot replay: {e}")),
+    };
+    if !initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    let mut x = Bx::point(&x0);
+    for t in 0..step {
+        let w = vector(&ws[t], n, "process_noise")?;
+        let v = vector(&vs[t], q, "sensor_noise")?;
+        if !problem.w.contains(&w) {
+            return Ok(Err(format!(
+                "has process noise outside its box at step {t}"
+            )));
+        }
+        if !problem.v.contains(&v) {
+            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+        }
+        match problem.at(t, net).enclose(&x, &w, &v) {
+            Some(next) => x = next,
+            None => return Ok(Err(format!("overflows at step {}", t + 1))),
+        }
+    }
+    let violated = match prop {
+        Prop::Goal(g) => {
+            step == problem.horizon
+                && g.iter()
+                    .any(|(a, b)| sum_lower([dot_box_lower(a, &x.lo, &x.hi), -b]) > 0.0)
+        }
+        Prop::Avoid { members, steps } => {
+            steps.0 <= step
+                && step <= problem.last_step(prop)
+                && members.iter().any(|mb| {
+                    mb.iter()
+                        .all(|(a, b)| sum_upper([dot_box_upper(a, &x.lo, &x.hi), -b]) <= 0.0)
+                })
+        }
+    };
+    Ok(if violated {
+        Ok(())
+    } else {
+        Err(format!(
+            "does not certainly violate the property at step {step} (enclosure {:?} … {:?})",
+            x.lo, x.hi
+        ))
+    })
+}

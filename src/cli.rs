@@ -491,7 +491,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
     match &report.answer {
         Answer::Valid => {}
         Answer::Invalid(m) | Answer::Unsupported(m) | Answer::Unreadable(m) => {
-            text += &format!("\n  {}", crate::diag::sanitize(m));
+            text += &format!("\n  {}", crate::diag::sanitize_to(m, 600));
         }
     }
     for p in &report.properties {

@@ -339,7 +339,11 @@ fn plain(d: &Diagnostic, name: &str, source: &str) -> String {
 /// invisible format characters are written as `\u{…}` escapes, and text
 /// longer than 80 characters is cut in the middle with `…`.
 pub fn sanitize(s: &str) -> String {
-    const KEEP: usize = 80;
+    sanitize_to(s, 80)
+}
+
+/// [`sanitize`], cutting text longer than `keep` characters.
+pub fn sanitize_to(s: &str, keep: usize) -> String {
     let escaped: Vec<String> = s
         .chars()
         .map(|c| {
@@ -352,11 +356,11 @@ pub fn sanitize(s: &str) -> String {
             }
         })
         .collect();
-    if escaped.len() <= KEEP {
+    if escaped.len() <= keep {
         escaped.concat()
     } else {
-        let head = escaped[..KEEP / 2].concat();
-        let tail = escaped[escaped.len() - KEEP / 2..].concat();
+        let head = escaped[..keep / 2].concat();
+        let tail = escaped[escaped.len() - keep / 2..].concat();
         format!("{head}…{tail}")
     }
 }

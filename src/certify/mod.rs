@@ -138,6 +138,15 @@ fn boxed(v: &Value, n: usize, what: &str) -> R<Bx> {
     Ok(b)
 }
 
+/// A claimed box: finite numbers of the right count; `lo > hi` is allowed
+/// (an empty claim is a false claim, caught by the checks that use it).
+fn claimed_box(v: &Value, n: usize, what: &str) -> R<Bx> {
+    Ok(Bx {
+        lo: vector(get(v, "lo")?, n, what)?,
+        hi: vector(get(v, "hi")?, n, what)?,
+    })
+}
+
 /// Rows `(a, b)` of `a·x ≤ b`.
 fn rows(v: &Value, n: usize, what: &str) -> R<Vec<(Vec<f64>, f64)>> {
     v.as_array()
@@ -393,7 +402,7 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             }
             Some("unsupported") => {
                 let why = get(ev, "reason")?.as_str().unwrap_or("no reason given");
-                let why = crate::diag::sanitize(why);
+                let why = crate::diag::sanitize_to(why, 600);
                 for &i in &verified {
                     let shown = crate::diag::sanitize(&problem.props[i].0);
                     report
@@ -439,7 +448,10 @@ fn evidence(
     let mut cells = Vec::with_capacity(cells_json.len());
     let mut sets: Vec<Vec<Bx>> = Vec::with_capacity(cells_json.len());
     for (c, cell) in cells_json.iter().enumerate() {
-        let start = boxed(get(cell, "box")?, n, "cell box")?;
+        let start = claimed_box(get(cell, "box")?, n, "cell box")?;
+        if !start.is_proper() {
+            return Ok(Err(format!("cell {c}'s box is empty")));
+        }
         let claims = get(cell, "steps")?
             .as_array()
             .ok_or("`steps` must be an array")?;
@@ -452,14 +464,14 @@ fn evidence(
         let mut chain = vec![start.clone()];
         for (k, claim) in claims.iter().enumerate() {
             let t = k + 1;
-            let set = boxed(get(claim, "set")?, n, "claimed set")?;
+            let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
             let witness = get(claim, "preactivations")?
                 .as_array()
                 .ok_or("`preactivations` must be an array")?
                 .iter()
                 .map(|b| {
                     let len = b.get("lo").and_then(Value::as_array).map_or(0, Vec::len);
-                    boxed(b, len, "pre-activation bounds")
+                    claimed_box(b, len, "pre-activation bounds")
                 })
                 .collect::<R<Vec<_>>>()?;
             let prev = &chain[k];

@@ -1,0 +1,408 @@
+//! Certificates: tampering is caught. Every single-number shrink of a
+//! claimed set, a witness or a cell is rejected (the claims are exactly the
+//! checker's bounds, so any shrink makes a claim unprovable); changed
+//! plants, noise, goals, controller weights and dropped cells are rejected;
+//! counterexamples that start outside X0, use noise outside its box or name
+//! the wrong step are rejected. The command line: `verify --certificate`,
+//! `certify` exit codes, changed files, hostile certificate files.
+
+use std::path::Path;
+use std::process::Command;
+
+use ravel::certify::{check, Answer};
+use ravel::nn::Layer;
+use serde_json::Value;
+
+fn run(spec: &str) -> (ravel::lower::Plan, Value) {
+    let source = std::fs::read_to_string(spec).expect("spec readable");
+    let dir = Path::new(spec).parent().expect("folder");
+    let checked = ravel::front_end(&source, dir, &ravel::cli::read_request).expect("valid spec");
+    let plan = ravel::lower::lower(&checked);
+    let outcome = ravel::execute::execute(&plan, &|| 0.0);
+    let id = ravel::certificate::Identity {
+        spec_path: spec.to_string(),
+        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
+    };
+    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    (plan, cert)
+}
+
+fn answer(cert: &Value, plan: &ravel::lower::Plan) -> Answer {
+    check(cert, &plan.closed_loop.net).answer
+}
+
+fn expect_invalid(cert: &Value, plan: &ravel::lower::Plan, words: &str, what: &str) {
+    match answer(cert, plan) {
+        Answer::Invalid(m) => assert!(m.contains(words), "{what}: message `{m}` lacks `{words}`"),
+        other => panic!("{what}: expected INVALID, got {other:?}"),
+    }
+}
+
+/// Every number of the evidence, as a JSON pointer and whether it is an
+/// upper end (`hi`) or a lower end (`lo`).
+fn evidence_numbers(cert: &Value) -> Vec<(String, bool)> {
+    let mut out = Vec::new();
+    let cells = cert["evidence"]["cells"].as_array().expect("cells");
+    for (c, cell) in cells.iter().enumerate() {
+        let mut boxes = vec![format!("/evidence/cells/{c}/box")];
+        for (k, st) in cell["steps"].as_array().expect("steps").iter().enumerate() {
+            boxes.push(format!("/evidence/cells/{c}/steps/{k}/set"));
+            let pre = st["preactivations"].as_array().expect("witness");
+            for l in 0..pre.len() {
+                boxes.push(format!("/evidence/cells/{c}/steps/{k}/preactivations/{l}"));
+            }
+        }
+        for b in boxes {
+            let v = cert.pointer(&b).expect("box");
+            for (end, upper) in [("lo", false), ("hi", true)] {
+                for i in 0..v[end].as_array().expect("array").len() {
+                    out.push((format!("{b}/{end}/{i}"), upper));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn every_one_ulp_shrink_of_a_claim_is_rejected() {
+    let (plan, cert) = run("specs/double_integrator.ravel");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let numbers = evidence_numbers(&cert);
+    assert!(numbers.len() > 100, "{} numbers", numbers.len());
+    for (ptr, upper) in numbers {
+        let mut bad = cert.clone();
+        let v = bad.pointer(&ptr).and_then(Value::as_f64).expect("number");
+        let shrunk = if upper { v.next_down() } else { v.next_up() };
+        *bad.pointer_mut(&ptr).expect("number") = serde_json::json!(shrunk);
+        match answer(&bad, &plan) {
+            Answer::Invalid(_) => {}
+            other => panic!("shrinking {ptr} ({v} → {shrunk}) was not rejected: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn changed_problems_are_rejected() {
+    let (plan, cert) = run("specs/double_integrator.ravel");
+    let edits: &[(&str, f64)] = &[
+        ("/problem/plants/0/A/0/1", 1e-3),
+        ("/problem/plants/0/A/1/1", -1e-3),
+        ("/problem/plants/0/B/0/0", 1e-3),
+        ("/problem/plants/0/c/1", 1e-4),
+        ("/problem/process_noise/hi/0", 1e-6),
+        ("/problem/sensor_noise/lo/1", -1e-6),
+        ("/problem/initial/box/hi/0", 1e-9),
+        ("/problem/initial/box/lo/1", -1e-9),
+    ];
+    for (ptr, delta) in edits {
+        let mut bad = cert.clone();
+        let v = bad.pointer(ptr).and_then(Value::as_f64).expect("number");
+        *bad.pointer_mut(ptr).expect("number") = serde_json::json!(v + delta);
+        match answer(&bad, &plan) {
+            Answer::Invalid(_) => {}
+            other => panic!("changing {ptr} by {delta} was not rejected: {other:?}"),
+        }
+    }
+    // a goal the final sets leave
+    let mut bad = cert.clone();
+    let last = &cert["evidence"]["cells"][0]["steps"][4]["set"];
+    let top = last["hi"][0].as_f64().expect("number");
+    bad["problem"]["properties"][0]["rows"][0]["b"] = serde_json::json!(top - 1e-6);
+    expect_invalid(&bad, &plan, "leaves goal row 0", "shrunk goal");
+    // an avoid set the sets reach
+    let mut bad = cert.clone();
+    let low = last["lo"][0].as_f64().expect("number");
+    bad["problem"]["properties"][1]["members"][0][0]["b"] = serde_json::json!(-low + 1e-6);
+    expect_invalid(&bad, &plan, "no inequality of member 0", "grown avoid set");
+}
+
+#[test]
+fn a_changed_controller_weight_is_rejected() {
+    let (plan, cert) = run("specs/double_integrator.ravel");
+    // (layer, row, column or bias): entries that matter on this X0 (the
+    // first hidden neuron of the second layer is inactive there, so its
+    // outgoing weight may change without making any claim false)
+    for (layer, row, col, delta) in [
+        (0usize, 0, Some(0), 1e-4),
+        (2, 1, Some(1), -1e-4),
+        (4, 0, None, 1e-4),
+    ] {
+        let mut net = plan.closed_loop.net.clone();
+        let Some(Layer::Affine { w, b }) = net.layers.get_mut(layer) else {
+            panic!("layer {layer} is affine");
+        };
+        match col {
+            Some(c) => w[(row, c)] += delta,
+            None => b[row] += delta,
+        }
+        match check(&cert, &net).answer {
+            Answer::Invalid(_) => {}
+            other => panic!("change in layer {layer} not rejected: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn partitions_must_cover_and_every_cell_face_matters() {
+    let (plan, cert) = run("specs/double_integrator_partitioned.ravel");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let cells = cert["evidence"]["cells"].as_array().expect("cells").len();
+    assert_eq!(cells, 16);
+    let mut bad = cert.clone();
+    bad["evidence"]["cells"]
+        .as_array_mut()
+        .expect("cells")
+        .remove(5);
+    expect_invalid(&bad, &plan, "do not cover", "dropped cell");
+    // shrinking any face of any cell (and re-deriving nothing) is rejected
+    for c in 0..cells {
+        for (end, sign) in [("lo", 1.0), ("hi", -1.0)] {
+            for i in 0..2 {
+                let mut bad = cert.clone();
+                let b = &mut bad["evidence"]["cells"][c]["box"];
+                let (lo, hi) = (
+                    b["lo"][i].as_f64().unwrap_or(0.0),
+                    b["hi"][i].as_f64().unwrap_or(0.0),
+                );
+                let v = b[end][i].as_f64().expect("number");
+                b[end][i] = serde_json::json!(v + sign * 0.01 * (hi - lo));
+                match answer(&bad, &plan) {
+                    Answer::Invalid(_) => {}
+                    other => panic!("cell {c} {end}[{i}] shrink not rejected: {other:?}"),
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn counterexamples_are_replayed_not_trusted() {
+    let (plan, cert) = run("specs/double_integrator_falsified.ravel");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let tr = "/verdicts/0/trajectory";
+    let mut bad = cert.clone();
+    let x0 = bad
+        .pointer(&format!("{tr}/initial/0"))
+        .and_then(Value::as_f64)
+        .expect("x0");
+    *bad.pointer_mut(&format!("{tr}/initial/0")).expect("x0") = serde_json::json!(x0 - 1e-9);
+    expect_invalid(
+        &bad,
+        &plan,
+        "starts outside the initial set",
+        "x0 outside X0",
+    );
+    let mut bad = cert.clone();
+    *bad.pointer_mut(&format!("{tr}/process_noise/2/1"))
+        .expect("w") = serde_json::json!(1e-12);
+    expect_invalid(
+        &bad,
+        &plan,
+        "process noise outside its box at step 2",
+        "noise",
+    );
+    let mut bad = cert.clone();
+    bad["verdicts"][0]["step"] = serde_json::json!(4);
+    expect_invalid(&bad, &plan, "does not certainly violate", "wrong step");
+}
+
+#[test]
+fn malformed_certificates_are_unreadable_not_valid() {
+    let (plan, cert) = run("specs/double_integrator.ravel");
+    type Edit = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Edit)> = vec![
+        (
+            "format",
+            Box::new(|c| c["format"] = serde_json::json!("ravel-certificate/99")),
+        ),
+        (
+            "no problem",
+            Box::new(|c| {
+                c.as_object_mut().map(|o| o.remove("problem"));
+            }),
+        ),
+        (
+            "huge states",
+            Box::new(|c| c["problem"]["states"] = serde_json::json!(1u64 << 40)),
+        ),
+        (
+            "huge horizon",
+            Box::new(|c| c["problem"]["horizon"] = serde_json::json!(u64::MAX)),
+        ),
+        (
+            "string number",
+            Box::new(|c| c["problem"]["plants"][0]["A"][0][0] = serde_json::json!("1")),
+        ),
+        (
+            "short row",
+            Box::new(|c| c["problem"]["plants"][0]["A"][0] = serde_json::json!([1.0])),
+        ),
+        (
+            "verdict count",
+            Box::new(|c| {
+                c["verdicts"].as_array_mut().map(Vec::pop);
+            }),
+        ),
+        (
+            "status",
+            Box::new(|c| c["verdicts"][0]["status"] = serde_json::json!("PROVEN")),
+        ),
+        (
+            "steps",
+            Box::new(|c| c["evidence"]["steps"] = serde_json::json!(3)),
+        ),
+        (
+            "witness layers",
+            Box::new(|c| {
+                c["evidence"]["cells"][0]["steps"][0]["preactivations"]
+                    .as_array_mut()
+                    .map(Vec::pop);
+            }),
+        ),
+        (
+            "evidence status",
+            Box::new(|c| c["evidence"]["status"] = serde_json::json!("trust me")),
+        ),
+    ];
+    for (what, edit) in cases {
+        let mut bad = cert.clone();
+        edit(&mut bad);
+        match answer(&bad, &plan) {
+            Answer::Unreadable(_) | Answer::Invalid(_) => {}
+            other => panic!("{what}: expected UNREADABLE or INVALID, got {other:?}"),
+        }
+    }
+    // an UNSURE verdict turned VERIFIED with no evidence behind it
+    let (plan, cert) = run("specs/double_integrator_ibp.ravel");
+    let mut bad = cert.clone();
+    bad["verdicts"][0]["status"] = serde_json::json!("VERIFIED");
+    assert!(!matches!(answer(&bad, &plan), Answer::Valid));
+}
+
+fn ravel() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_ravel"))
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("ravel-cert-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+#[test]
+fn command_line_writes_and_checks_certificates() {
+    let dir = tmp("cli");
+    let cert = dir.join("di.cert.json");
+    let st = ravel()
+        .args([
+            "verify",
+            "specs/double_integrator.ravel",
+            "--no-timing",
+            "--certificate",
+        ])
+        .arg(&cert)
+        .output()
+        .expect("runs");
+    assert_eq!(st.status.code(), Some(0));
+    let ok = ravel().arg("certify").arg(&cert).output().expect("runs");
+    let text = String::from_utf8_lossy(&ok.stdout);
+    assert_eq!(ok.status.code(), Some(0), "{text}");
+    assert!(text.starts_with("VALID"), "{text}");
+
+    // a copy of the spec with one plant entry changed: the hash catches it
+    let spec = std::fs::read_to_string("specs/double_integrator.ravel").expect("spec");
+    let changed = spec.replacen("[0, 1]", "[0, 1.001]", 1);
+    assert_ne!(changed, spec);
+    let copy = Path::new("specs").join(format!("tmp-cert-{}.ravel", std::process::id()));
+    std::fs::write(&copy, changed).expect("write");
+    let bad = ravel()
+        .arg("certify")
+        .arg(&cert)
+        .arg("--spec")
+        .arg(&copy)
+        .output()
+        .expect("runs");
+    let _ = std::fs::remove_file(&copy);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stdout).contains("SHA-256 differs"));
+
+    // a different controller
+    let other = ravel()
+        .arg("certify")
+        .arg(&cert)
+        .args(["--controller", "models/double_integrator_tanh.onnx"])
+        .output()
+        .expect("runs");
+    assert_ne!(other.status.code(), Some(0));
+
+    // many results: a folder of certificates, one per pair
+    let folder = dir.join("many");
+    let st = ravel()
+        .args([
+            "verify",
+            "specs/double_integrator.ravel",
+            "specs/double_integrator_falsified.ravel",
+            "--no-timing",
+            "--certificate",
+        ])
+        .arg(&folder)
+        .output()
+        .expect("runs");
+    assert_eq!(st.status.code(), Some(1));
+    let all = ravel()
+        .arg("certify")
+        .arg(folder.join("double_integrator.cert.json"))
+        .arg(folder.join("double_integrator_falsified.cert.json"))
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&all.stdout);
+    assert_eq!(all.status.code(), Some(0), "{text}");
+    assert_eq!(text.matches("VALID").count(), 2, "{text}");
+
+    // unsupported evidence: exit 2, never VALID
+    let ball = dir.join("ball.cert.json");
+    ravel()
+        .args([
+            "verify",
+            "specs/double_integrator_ball.ravel",
+            "--no-timing",
+            "--certificate",
+        ])
+        .arg(&ball)
+        .output()
+        .expect("runs");
+    let un = ravel().arg("certify").arg(&ball).output().expect("runs");
+    assert_eq!(un.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&un.stdout).starts_with("UNSUPPORTED"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn hostile_certificate_files_end_with_exit_2() {
+    let dir = tmp("hostile");
+    let not_json = dir.join("x.json");
+    std::fs::write(&not_json, "{\"format\": ").expect("write");
+    let deep = dir.join("deep.json");
+    std::fs::write(&deep, "[".repeat(100_000)).expect("write");
+    let empty = dir.join("empty.json");
+    std::fs::write(&empty, "").expect("write");
+    let wrong = dir.join("wrong.json");
+    std::fs::write(&wrong, "{\"format\": \"ravel-certificate/1\", \"spec\": {\"path\": \"/dev/zero\"}, \"controller\": {\"path\": \"x\"}}").expect("write");
+    for f in [
+        not_json.as_path(),
+        deep.as_path(),
+        empty.as_path(),
+        wrong.as_path(),
+        Path::new("/dev/zero"),
+        Path::new("/nonexistent/cert.json"),
+        dir.as_path(),
+    ] {
+        let o = ravel().arg("certify").arg(f).output().expect("runs");
+        assert_eq!(o.status.code(), Some(2), "{}", f.display());
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.starts_with("UNREADABLE"), "{}: {text}", f.display());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

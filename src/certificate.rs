@@ -16,11 +16,11 @@
 
 use serde_json::{json, Value};
 
-use crate::certify::bounds::{Bx, Loop, PlantRows};
+use crate::certify::bounds::{Bx, Loop, PlantRows, Start};
 use crate::certify::{self, Answer, FORMAT};
 use crate::execute::{Outcome, Status, Trajectory};
 use crate::lower::{Plan, PropertyKind};
-use crate::nn::{Activation, Layer, Network};
+use crate::nn::{Layer, Network};
 use crate::sets::{IBox, Region};
 
 /// Who made the certificate and from which files.
@@ -152,24 +152,6 @@ fn trajectory_json(tr: &Trajectory) -> Value {
     })
 }
 
-/// Why the VERIFIED evidence of this plan is not of a kind the checker
-/// handles, if it is not.
-fn not_checkable(plan: &Plan) -> Option<String> {
-    if !matches!(plan.initial, Region::Box(_)) {
-        return Some(
-            "the initial set is not a box; the checker handles box initial sets only".into(),
-        );
-    }
-    let acts = plan.closed_loop.net.activations();
-    if let Some(a) = acts.iter().find(|a| **a != Activation::Relu) {
-        return Some(format!(
-            "the controller has {} activations; the checker relaxes ReLU only",
-            a.name()
-        ));
-    }
-    None
-}
-
 /// The VERIFIED evidence: per cell, the chain of boxes with the witness of
 /// every step, up to `steps`.
 fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String> {
@@ -207,6 +189,21 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
         };
         let mut claims = Vec::with_capacity(steps);
         for t in 0..steps {
+            let start = match (&plan.initial, t) {
+                (
+                    Region::Ball {
+                        center,
+                        radius,
+                        norm,
+                    },
+                    0,
+                ) => Start::Ball {
+                    center,
+                    radius,
+                    norm: norm.name(),
+                },
+                _ => Start::Box,
+            };
             let lp = Loop {
                 plant: &plants[t.min(plants.len() - 1)],
                 obs: &cl.plant.obs,
@@ -215,7 +212,7 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
                 net: &cl.net,
             };
             let (next, witness) = lp
-                .step(&set, None)
+                .step(&set, &start, None)
                 .map_err(|e| format!("the checker's bound of cell {c} at step {}: {e}", t + 1))?;
             claims.push(json!({
                 "set": bx_json(&next),
@@ -274,12 +271,9 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
     let Some(steps) = needed else {
         return cert;
     };
-    let evidence = match not_checkable(plan) {
-        Some(why) => json!({ "status": "unsupported", "reason": why }),
-        None => match derive(plan, outcome, steps) {
-            Ok(ev) => ev,
-            Err(why) => json!({ "status": "unsupported", "reason": why }),
-        },
+    let evidence = match derive(plan, outcome, steps) {
+        Ok(ev) => ev,
+        Err(why) => json!({ "status": "unsupported", "reason": why }),
     };
     cert["evidence"] = evidence;
     if cert["evidence"]["status"] == "checkable" {

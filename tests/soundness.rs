@@ -507,6 +507,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
     use ravel::sets::Polytope;
 
     let mut checked = 0usize;
+    let mut certified = 0usize;
     for seed in 0..36u64 {
         let case = random_case(seed);
         let n = case.x0.dim();
@@ -560,6 +561,11 @@ fn every_trajectory_stays_inside_what_execute_reports() {
             b0.lo.iter().map(|l| l - 0.5).collect(),
             b0.hi.iter().map(|h| h + 0.5).collect(),
         ));
+        let mut toward = vec![0.0; n];
+        toward[0] = -1.0;
+        let far = Polytope {
+            rows: vec![(toward, -(b0.hi[0] + 100.0))],
+        };
         for prop in PROPAGATORS {
             if prop == Propagator::ReachSdp && seed % 6 != 0 {
                 continue;
@@ -581,10 +587,20 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 boundary: boundary.clone(),
                 horizon: case.horizon,
                 propagator: prop,
-                properties: vec![Property {
-                    name: "G".into(),
-                    kind: PropertyKind::Goal(goal.clone()),
-                }],
+                properties: vec![
+                    Property {
+                        name: "G".into(),
+                        kind: PropertyKind::Goal(goal.clone()),
+                    },
+                    // far away: usually VERIFIED, so certificates have evidence
+                    Property {
+                        name: "far".into(),
+                        kind: PropertyKind::Avoid {
+                            members: vec![far.clone()],
+                            steps: (0, case.horizon),
+                        },
+                    },
+                ],
                 samples: 200,
                 seed,
             };
@@ -593,6 +609,33 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 "{} {prop:?} {:?} {:?}",
                 case.label, plan.partitioner, plan.boundary
             );
+            // the certificate of the result: never INVALID; VALID when checkable
+            let id = ravel::certificate::Identity {
+                spec_path: String::new(),
+                spec_sha256: String::new(),
+            };
+            let cert = ravel::certificate::build(&plan, &out, &id);
+            let report = ravel::certify::check(&cert, &plan.closed_loop.net);
+            match &report.answer {
+                ravel::certify::Answer::Valid => {
+                    if out
+                        .properties
+                        .iter()
+                        .any(|p| p.status == ravel::execute::Status::Verified)
+                    {
+                        certified += 1;
+                    }
+                }
+                ravel::certify::Answer::Unsupported(m) => {
+                    if std::env::var("RAVEL_DEBUG_CERT").is_ok() {
+                        eprintln!(
+                            "{what}: {m} {:?}",
+                            out.properties.iter().map(|p| p.status).collect::<Vec<_>>()
+                        );
+                    }
+                }
+                other => panic!("{what}: certificate {other:?}"),
+            }
             let mut rng = Rng::new(seed * 104_729 + 17);
             let mut tried = 0;
             while tried < 60 {
@@ -616,6 +659,84 @@ fn every_trajectory_stays_inside_what_execute_reports() {
         }
     }
     assert!(checked > 30_000, "only {checked} states were checked");
+    assert!(
+        certified >= 5,
+        "only {certified} VERIFIED results were certified"
+    );
+}
+
+/// The certificate checker's own one-step bounds (what a certificate's
+/// claims are derived from) contain every simulated trajectory on the
+/// random loops (ReLU, tanh, sigmoid) with box initial sets: noise, limits, observation matrices, time-varying and
+/// uncertain plants.
+#[test]
+fn trajectories_stay_inside_the_checkers_own_bounds() {
+    use ravel::certify::bounds::{Bx, Loop, PlantRows};
+    let mut checked = 0usize;
+    for seed in 0..90u64 {
+        let case = random_case(seed);
+        let Region::Box(x0) = &case.x0 else { continue };
+        let plants: Vec<PlantRows> = case
+            .cl
+            .plants()
+            .into_iter()
+            .map(|p| PlantRows {
+                a: p.a.clone(),
+                b: p.b.clone(),
+                c: p.c.as_slice().to_vec(),
+                err: p
+                    .err
+                    .as_ref()
+                    .map(|e| (e.a.clone(), e.b.clone(), e.c.as_slice().to_vec())),
+            })
+            .collect();
+        let pl = &case.cl.plant;
+        let w = Bx {
+            lo: pl.w.lo.clone(),
+            hi: pl.w.hi.clone(),
+        };
+        let v = Bx {
+            lo: pl.v.lo.clone(),
+            hi: pl.v.hi.clone(),
+        };
+        let mut chain = vec![Bx {
+            lo: x0.lo.clone(),
+            hi: x0.hi.clone(),
+        }];
+        for t in 0..case.horizon {
+            let lp = Loop {
+                plant: &plants[t.min(plants.len() - 1)],
+                obs: &pl.obs,
+                w: &w,
+                v: &v,
+                net: &case.cl.net,
+            };
+            let start = ravel::certify::bounds::Start::Box;
+            let (next, witness) = lp.step(&chain[t], &start, None).expect("finite bounds");
+            // the witness it reports checks against itself
+            assert_eq!(
+                lp.step(&chain[t], &start, Some(&witness)).map(|r| r.0),
+                Ok(next.clone())
+            );
+            chain.push(next);
+        }
+        let mut rng = Rng::new(seed * 7_919 + 3);
+        for _ in 0..300 {
+            let mut x = initial_point(&mut rng, &case.x0);
+            for (t, b) in chain.iter().enumerate() {
+                assert!(
+                    b.contains(&x),
+                    "{}: step {t} state {x:?} outside the checker's box {b:?}",
+                    case.label
+                );
+                checked += 1;
+                if t < case.horizon {
+                    x = advance(&mut rng, &case.cl, t, &x);
+                }
+            }
+        }
+    }
+    assert!(checked > 20_000, "only {checked} states were checked");
 }
 
 /// The rigorous replay that confirms counterexamples encloses the true

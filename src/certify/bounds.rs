@@ -76,8 +76,6 @@ pub enum Trouble {
     Shape(String),
     /// A number came out non-finite.
     Overflow,
-    /// An activation the checker has no relaxation for.
-    Activation(Activation),
 }
 
 impl std::fmt::Display for Trouble {
@@ -95,7 +93,6 @@ impl std::fmt::Display for Trouble {
             ),
             Trouble::Shape(s) => write!(f, "{s}"),
             Trouble::Overflow => write!(f, "a bound is not finite"),
-            Trouble::Activation(a) => write!(f, "no relaxation for {} activations", a.name()),
         }
     }
 }
@@ -226,6 +223,137 @@ fn relu_lines(l: f64, u: f64) -> Lines {
         bl: 0.0,
         au: a,
         bu: at_l.max(at_u),
+    }
+}
+
+/// `v` pushed up by `k` relative roundings (and an underflow).
+fn up(v: f64, k: f64) -> f64 {
+    (v + v.abs() * k * U * 1.0625 + ETA).next_up()
+}
+
+/// `v` pushed down by `k` relative roundings (and an underflow).
+fn down(v: f64, k: f64) -> f64 {
+    -up(-v, k)
+}
+
+/// Bounds of `σ(z)` (the loader's evaluation error bound, as the analysis uses).
+fn sigma_bounds(act: Activation, z: f64) -> (f64, f64) {
+    let v = act.eval(z);
+    let e = act.eval_error(v);
+    ((v - e).next_down(), (v + e).next_up())
+}
+
+/// Bounds of `σ'(z)` from the bounds of `σ(z)`.
+fn deriv_bounds(act: Activation, z: f64) -> (f64, f64) {
+    let (lo, hi) = sigma_bounds(act, z);
+    match act {
+        Activation::Tanh => {
+            // 1 − t² over t ∈ [lo, hi]
+            let big = lo.abs().max(hi.abs()).min(1.0);
+            let small = if lo <= 0.0 && hi >= 0.0 {
+                0.0
+            } else {
+                lo.abs().min(hi.abs()).min(1.0)
+            };
+            (
+                down(1.0 - up(big * big, 1.0), 1.0).max(0.0),
+                up(1.0 - down(small * small, 1.0), 1.0),
+            )
+        }
+        _ => {
+            // s(1 − s) over s ∈ [lo, hi] ∩ [0, 1]: concave, peak ¼ at ½
+            let (lo, hi) = (lo.max(0.0), hi.min(1.0));
+            let f = |s: f64| s * (1.0 - s);
+            let min = down(f(lo).min(f(hi)), 3.0).max(0.0);
+            let max = if lo <= 0.5 && 0.5 <= hi {
+                0.25
+            } else {
+                up(f(lo).max(f(hi)), 3.0)
+            };
+            (min, max)
+        }
+    }
+}
+
+/// Where `σ'(z) = a` on the side of `z ≥ 0` (`positive`) or `z ≤ 0`:
+/// only an approximation (any point gives a valid bound below).
+fn stationary(act: Activation, a: f64, positive: bool) -> f64 {
+    let z = match act {
+        Activation::Tanh => (1.0 - a).max(0.0).sqrt().atanh(),
+        _ => {
+            let s = 0.5 * (1.0 + (1.0 - 4.0 * a).max(0.0).sqrt());
+            (s / (1.0 - s)).ln()
+        }
+    };
+    let z = if z.is_finite() { z } else { 0.0 };
+    if positive {
+        z
+    } else {
+        -z
+    }
+}
+
+/// Certified bounds of `g(z) = σ(z) − a z` over `[p, q]` on a piece where
+/// `σ` is convex (`convex`) or concave. The extreme at an end is exact up to
+/// rounding; the one inside is bounded by the tangent of `g` at an
+/// approximate stationary point `ẑ` (a concave `g` lies below every tangent,
+/// a convex one above), evaluated at both ends with `g'(ẑ)` as an interval.
+fn gap_bounds(act: Activation, a: f64, p: f64, q: f64, convex: bool) -> (f64, f64) {
+    let g_up = |z: f64| sum_upper([sigma_bounds(act, z).1, -(a * z)]);
+    let g_lo = |z: f64| sum_lower([sigma_bounds(act, z).0, -(a * z)]);
+    let ends_max = g_up(p).max(g_up(q));
+    let ends_min = g_lo(p).min(g_lo(q));
+    let zh = stationary(act, a, !convex).clamp(p, q);
+    let (dl, dh) = deriv_bounds(act, zh);
+    let (dl, dh) = (sum_lower([dl, -a]), sum_upper([dh, -a]));
+    let tangent = |z: f64, upper: bool| {
+        let (el, eh) = (sum_lower([z, -zh]), sum_upper([z, -zh]));
+        let corners = [dl * el, dl * eh, dh * el, dh * eh];
+        if upper {
+            let m = corners.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));
+            sum_upper([g_up(zh), up(m, 1.0)])
+        } else {
+            let m = corners.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+            sum_lower([g_lo(zh), down(m, 1.0)])
+        }
+    };
+    if convex {
+        (tangent(p, false).min(tangent(q, false)), ends_max)
+    } else {
+        (ends_min, tangent(p, true).max(tangent(q, true)))
+    }
+}
+
+/// The checker's relaxation of tanh or sigmoid on `[l, u]`: two lines of
+/// the chord's slope, their intercepts the certified infimum and supremum
+/// of `σ(z) − a z` over the interval (σ is convex for `z ≤ 0` and concave
+/// for `z ≥ 0`, so the interval is split at 0).
+fn smooth_lines(act: Activation, l: f64, u: f64) -> Lines {
+    let (fl, fu) = (act.eval(l), act.eval(u));
+    let peak = if act == Activation::Tanh { 1.0 } else { 0.25 };
+    let a = if u > l { (fu - fl) / (u - l) } else { 0.0 };
+    let a = if a.is_finite() {
+        a.clamp(0.0, peak)
+    } else {
+        0.0
+    };
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    if l < 0.0 {
+        let (a_lo, a_hi) = gap_bounds(act, a, l, u.min(0.0), true);
+        lo = lo.min(a_lo);
+        hi = hi.max(a_hi);
+    }
+    if u >= 0.0 {
+        let (a_lo, a_hi) = gap_bounds(act, a, l.max(0.0), u, false);
+        lo = lo.min(a_lo);
+        hi = hi.max(a_hi);
+    }
+    Lines {
+        al: a,
+        bl: lo,
+        au: a,
+        bu: hi,
     }
 }
 
@@ -380,7 +508,15 @@ impl<'a> NetBounds<'a> {
                         .collect();
                     (act_box(Activation::Relu, cur), lines)
                 }
-                Layer::Act(a) => return Err(Trouble::Activation(*a)),
+                Layer::Act(a) => {
+                    let lines = cur
+                        .lo
+                        .iter()
+                        .zip(&cur.hi)
+                        .map(|(&l, &u)| smooth_lines(*a, l, u))
+                        .collect();
+                    (act_box(*a, cur), lines)
+                }
             };
             if !next.is_proper() {
                 return Err(Trouble::Overflow);
@@ -461,6 +597,64 @@ pub struct PlantRows {
     pub err: Option<(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>, Vec<f64>)>,
 }
 
+/// What is known of the states a step starts from beyond their box: at
+/// step 0 of an ℓp-ball initial set, the ball (supports are then the
+/// smaller of the box's and the ball's).
+#[derive(Clone, Copy, Debug)]
+pub enum Start<'a> {
+    /// The box is all that is known.
+    Box,
+    /// `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}`, `norm` one of `1`, `2`, `inf`.
+    Ball {
+        /// Centre.
+        center: &'a [f64],
+        /// Radius per coordinate.
+        radius: &'a [f64],
+        /// The norm's name.
+        norm: &'a str,
+    },
+}
+
+impl Start<'_> {
+    /// An upper bound of `max c·x` over the box `x` intersected with what is known.
+    pub fn support(&self, c: &[f64], x: &Bx) -> f64 {
+        let boxed = dot_box_upper(c, &x.lo, &x.hi);
+        match self {
+            Start::Box => boxed,
+            Start::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                // c·centre + ‖diag(r) c‖ in the dual norm
+                let scaled: Vec<f64> = c
+                    .iter()
+                    .zip(*radius)
+                    .map(|(c, r)| (c.abs() * r).next_up())
+                    .collect();
+                let dual = match *norm {
+                    "inf" => sum_upper(scaled.iter().copied()),
+                    "1" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    _ => sum_upper(scaled.iter().map(|v| (v * v).next_up()))
+                        .sqrt()
+                        .next_up(),
+                };
+                let ball = sum_upper(
+                    c.iter()
+                        .zip(*center)
+                        .map(|(c, z)| mul0(*c, *z))
+                        .chain([dual]),
+                );
+                if ball.is_nan() {
+                    boxed
+                } else {
+                    boxed.min(ball)
+                }
+            }
+        }
+    }
+}
+
 /// The loop data one step needs.
 pub struct Loop<'a> {
     /// The plant of this step.
@@ -524,7 +718,7 @@ impl Loop<'_> {
     /// (a) back-substitution of `fᵀB` through the network (Reach-LP) and
     /// (b) `fᵀB` over the control box (the separate bound), each plus the
     /// exact-plant terms and the model error.
-    pub fn facet_bound(&self, f: &[f64], x: &Bx, nb: &NetBounds, u: &Bx) -> f64 {
+    pub fn facet_bound(&self, f: &[f64], x: &Bx, start: &Start, nb: &NetBounds, u: &Bx) -> f64 {
         let xmax = x.abs_max();
         let umax = u.abs_max();
         let (fa, fa_err) = Self::row_times(f, &self.plant.a);
@@ -539,7 +733,7 @@ impl Loop<'_> {
         ]);
         // (b) the separate bound
         let separate = sum_upper([
-            dot_box_upper(&fa, &x.lo, &x.hi),
+            start.support(&fa, x),
             dot_box_upper(&fb, &u.lo, &u.hi),
             common,
         ]);
@@ -549,7 +743,7 @@ impl Loop<'_> {
         let coef: Vec<f64> = fa.iter().zip(&cg).map(|(a, b)| a + b).collect();
         let sum_err: Vec<f64> = coef.iter().map(|c| (c.abs() * U).next_up()).collect();
         let reach_lp = sum_upper([
-            dot_box_upper(&coef, &x.lo, &x.hi),
+            start.support(&coef, x),
             abs_dot(&cg_err, &xmax),
             abs_dot(&sum_err, &xmax),
             dot_box_upper(&g, &self.v.lo, &self.v.hi),
@@ -567,7 +761,12 @@ impl Loop<'_> {
     /// The checker's bound of the next state's box from the box `x`, with
     /// the network witness (`claimed`) or without (then the witness used is
     /// returned, for the certificate writer).
-    pub fn step(&self, x: &Bx, claimed: Option<&[Bx]>) -> Result<(Bx, Witness), Trouble> {
+    pub fn step(
+        &self,
+        x: &Bx,
+        start: &Start,
+        claimed: Option<&[Bx]>,
+    ) -> Result<(Bx, Witness), Trouble> {
         if !x.is_proper() {
             return Err(Trouble::Overflow);
         }
@@ -585,9 +784,9 @@ impl Loop<'_> {
         let mut f = vec![0.0; n];
         for i in 0..n {
             f[i] = 1.0;
-            next.hi[i] = self.facet_bound(&f, x, &nb, &u);
+            next.hi[i] = self.facet_bound(&f, x, start, &nb, &u);
             f[i] = -1.0;
-            next.lo[i] = -self.facet_bound(&f, x, &nb, &u);
+            next.lo[i] = -self.facet_bound(&f, x, start, &nb, &u);
             f[i] = 0.0;
         }
         if !next.is_proper() {
@@ -648,6 +847,38 @@ mod tests {
                 let relu = z.max(0.0);
                 assert!(r.al * z + r.bl <= relu + 1e-15);
                 assert!(r.au * z + r.bu >= relu);
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_lines_bound_tanh_and_sigmoid_on_their_interval() {
+        let cases = [
+            (-3.0, 2.0),
+            (-0.5, -0.1),
+            (0.2, 4.0),
+            (-1e-9, 1e-9),
+            (-40.0, 40.0),
+            (1.5, 1.5),
+            (-0.3, 0.0),
+            (0.0, 0.3),
+        ];
+        for act in [Activation::Tanh, Activation::Sigmoid] {
+            for (l, u) in cases {
+                let r = smooth_lines(act, l, u);
+                for k in 0..=2000 {
+                    let z: f64 = l + (u - l) * k as f64 / 2000.0;
+                    let v = act.eval(z);
+                    assert!(r.al * z + r.bl <= v + 1e-15, "{act:?} [{l}, {u}] at {z}");
+                    assert!(r.au * z + r.bu >= v - 1e-15, "{act:?} [{l}, {u}] at {z}");
+                }
+                // and not loose: the lines are within the interval's image width
+                let w = act.eval(u) - act.eval(l);
+                assert!(
+                    r.bu - r.bl <= w + 1e-9,
+                    "{act:?} [{l}, {u}]: gap {}",
+                    r.bu - r.bl
+                );
             }
         }
     }

@@ -12,9 +12,15 @@ use super::bounds::Bx;
 /// Work limit: pieces examined before the answer is "undecided".
 const MAX_PIECES: usize = 20_000_000;
 
-/// `Ok` when `cells` cover `target`; otherwise `Err(Some(point))` with a
-/// point of `target` in no cell, or `Err(None)` when the work limit ran out.
-pub fn covers(cells: &[Bx], target: &Bx) -> Result<(), Option<Vec<f64>>> {
+/// `Ok` when `cells` cover every point of `target` except in pieces that
+/// `misses` shows to lie outside the set of interest; otherwise
+/// `Err(Some(point))` with a point of `target` in no cell, or `Err(None)`
+/// when the work limit ran out.
+pub fn covers(
+    cells: &[Bx],
+    target: &Bx,
+    misses: &dyn Fn(&Bx) -> bool,
+) -> Result<(), Option<Vec<f64>>> {
     let n = target.lo.len();
     let mut stack = vec![target.clone()];
     let mut work = 0usize;
@@ -35,6 +41,9 @@ pub fn covers(cells: &[Bx], target: &Bx) -> Result<(), Option<Vec<f64>>> {
             })
         });
         let Some(c) = cell else {
+            if misses(&piece) {
+                continue;
+            }
             let mid = piece
                 .lo
                 .iter()
@@ -83,24 +92,27 @@ mod tests {
             }
         }
         let target = b(&[0.0, 0.0], &[1.0, 1.0]);
-        assert_eq!(covers(&cells, &target), Ok(()));
+        assert_eq!(covers(&cells, &target, &|_| false), Ok(()));
         let hole = cells.remove(5);
-        let Err(Some(p)) = covers(&cells, &target) else {
+        let Err(Some(p)) = covers(&cells, &target, &|_| false) else {
             panic!("a missing cell must be found");
         };
         assert!(hole.contains(&p));
         // a gap of one ulp between two cells is found too
         let split = 0.5f64;
         let gap = vec![b(&[0.0], &[split]), b(&[split.next_up().next_up()], &[1.0])];
-        assert!(covers(&gap, &b(&[0.0], &[1.0])).is_err());
+        assert!(covers(&gap, &b(&[0.0], &[1.0]), &|_| false).is_err());
         let touching = vec![b(&[0.0], &[split]), b(&[split], &[1.0])];
-        assert_eq!(covers(&touching, &b(&[0.0], &[1.0])), Ok(()));
+        assert_eq!(covers(&touching, &b(&[0.0], &[1.0]), &|_| false), Ok(()));
     }
 
     #[test]
     fn degenerate_targets_and_overlapping_cells() {
         let cells = vec![b(&[-1.0, 0.0], &[0.5, 2.0]), b(&[0.0, -1.0], &[2.0, 1.0])];
-        assert_eq!(covers(&cells, &b(&[0.0, 0.5], &[1.0, 0.5])), Ok(()));
-        assert!(covers(&cells, &b(&[0.0, 1.5], &[1.0, 1.5])).is_err());
+        assert_eq!(
+            covers(&cells, &b(&[0.0, 0.5], &[1.0, 0.5]), &|_| false),
+            Ok(())
+        );
+        assert!(covers(&cells, &b(&[0.0, 1.5], &[1.0, 1.5]), &|_| false).is_err());
     }
 }

@@ -35,9 +35,10 @@
 //!
 //! # What it does not check yet
 //!
-//! Sets other than boxes, initial sets other than boxes, and activations
-//! other than ReLU: the certificate then says why the VERIFIED evidence is
-//! not checkable, and the answer is UNSUPPORTED (never VALID).
+//! Claimed sets are boxes. When the checker's box chain does not prove a
+//! verdict that the analysis proved with tighter sets (polytope or hull
+//! boundaries, unrolled CROWN), the certificate says so and the answer is
+//! UNSUPPORTED (never VALID).
 
 pub mod bounds;
 mod cover;
@@ -46,7 +47,7 @@ use serde_json::Value;
 
 use crate::nn::Network;
 use crate::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
-use bounds::{Bx, Loop, PlantRows, Trouble};
+use bounds::{Bx, Loop, PlantRows, Start, Trouble};
 
 /// The certificate format this module reads and [`crate::certificate`] writes.
 pub const FORMAT: &str = "ravel-certificate/1";
@@ -165,6 +166,136 @@ enum Prop {
     },
 }
 
+/// The initial set as the checker reads it.
+enum Initial {
+    Box(Bx),
+    Polytope {
+        bbox: Bx,
+        rows: Vec<(Vec<f64>, f64)>,
+    },
+    /// `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}`; the norm is `1`, `2` or `inf`.
+    Ball {
+        center: Vec<f64>,
+        radius: Vec<f64>,
+        norm: String,
+    },
+}
+
+impl Initial {
+    /// A box containing the set (part of a polytope's definition; the
+    /// ball's, rounded outward).
+    fn bbox(&self) -> Bx {
+        match self {
+            Initial::Box(b) | Initial::Polytope { bbox: b, .. } => b.clone(),
+            Initial::Ball { center, radius, .. } => Bx {
+                lo: center
+                    .iter()
+                    .zip(radius)
+                    .map(|(c, r)| sum_lower([*c, -r]))
+                    .collect(),
+                hi: center
+                    .iter()
+                    .zip(radius)
+                    .map(|(c, r)| sum_upper([*c, *r]))
+                    .collect(),
+            },
+        }
+    }
+
+    /// What step 0 knows beyond a cell's box.
+    fn start(&self) -> Start<'_> {
+        match self {
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => Start::Ball {
+                center,
+                radius,
+                norm,
+            },
+            Initial::Box(_) | Initial::Polytope { .. } => Start::Box,
+        }
+    }
+
+    /// Whether the box `b` certainly misses the set: one inequality of a
+    /// polytope separates it, or its point nearest a ball's centre is
+    /// farther than the radius (rounded toward the centre).
+    fn misses(&self, b: &Bx) -> bool {
+        match self {
+            Initial::Box(_) => false,
+            Initial::Polytope { rows, .. } => rows
+                .iter()
+                .any(|(a, h)| sum_lower([dot_box_lower(a, &b.lo, &b.hi), -h]) > 0.0),
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                let mut scaled = Vec::with_capacity(center.len());
+                for i in 0..center.len() {
+                    let gap =
+                        sum_lower([b.lo[i], -center[i]]).max(sum_lower([center[i], -b.hi[i]]));
+                    if gap <= 0.0 {
+                        scaled.push(0.0);
+                    } else if radius[i] > 0.0 {
+                        scaled.push((gap / radius[i]).next_down());
+                    } else {
+                        return true;
+                    }
+                }
+                let len = match norm.as_str() {
+                    "inf" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    "1" => sum_lower(scaled.iter().copied()),
+                    _ => sum_lower(scaled.iter().map(|v| (v * v).next_down())),
+                };
+                len > 1.0
+            }
+        }
+    }
+
+    /// Whether `x` certainly lies in the set (outward-rounded tests).
+    fn contains(&self, x: &[f64]) -> bool {
+        match self {
+            Initial::Box(b) => b.contains(x),
+            Initial::Polytope { bbox, rows } => {
+                bbox.contains(x)
+                    && rows.iter().all(|(a, b)| {
+                        sum_upper(a.iter().zip(x).map(|(a, x)| a * x).chain([-b])) <= 0.0
+                    })
+            }
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                if x.len() != center.len() {
+                    return false;
+                }
+                // |xᵢ − cᵢ| / rᵢ, rounded up (0 where rᵢ = 0 and xᵢ = cᵢ)
+                let mut scaled = Vec::with_capacity(x.len());
+                for ((x, c), r) in x.iter().zip(center).zip(radius) {
+                    let d = sum_upper([*x, -c]).abs().max(sum_lower([*x, -c]).abs());
+                    if d == 0.0 {
+                        scaled.push(0.0);
+                    } else if *r > 0.0 {
+                        scaled.push((d / r).next_up());
+                    } else {
+                        return false;
+                    }
+                }
+                let total = match norm.as_str() {
+                    "inf" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    "1" => sum_upper(scaled.iter().copied()),
+                    "2" => sum_upper(scaled.iter().map(|v| (v * v).next_up())),
+                    _ => return false,
+                };
+                total <= 1.0
+            }
+        }
+    }
+}
+
 /// The problem as the checker reads it.
 struct Problem {
     n: usize,
@@ -173,8 +304,7 @@ struct Problem {
     obs: nalgebra::DMatrix<f64>,
     w: Bx,
     v: Bx,
-    /// The initial box, or why the initial set is not checkable.
-    initial: Result<Bx, String>,
+    initial: Initial,
     props: Vec<(String, Prop)>,
 }
 
@@ -221,9 +351,29 @@ impl Problem {
             })
             .collect::<R<Vec<_>>>()?;
         let init = get(p, "initial")?;
-        let initial = match init.get("box") {
-            Some(b) => Ok(boxed(b, n, "initial")?),
-            None => Err("the initial set is not a box".to_string()),
+        let initial = if let Some(b) = init.get("box") {
+            Initial::Box(boxed(b, n, "initial")?)
+        } else if let Some(p) = init.get("polytope") {
+            Initial::Polytope {
+                bbox: boxed(get(p, "bbox")?, n, "initial bbox")?,
+                rows: rows(get(p, "rows")?, n, "initial rows")?,
+            }
+        } else if let Some(b) = init.get("ball") {
+            let norm = get(b, "norm")?.as_str().unwrap_or("").to_string();
+            if !matches!(norm.as_str(), "1" | "2" | "inf") {
+                return Err("the ball's norm must be \"1\", \"2\" or \"inf\"".into());
+            }
+            let radius = vector(get(b, "radius")?, n, "initial radius")?;
+            if radius.iter().any(|r| *r < 0.0) {
+                return Err("a ball radius is negative".into());
+            }
+            Initial::Ball {
+                center: vector(get(b, "center")?, n, "initial center")?,
+                radius,
+                norm,
+            }
+        } else {
+            return Err("`initial` must be a box, a polytope or a ball".into());
         };
         let props = get(p, "properties")?
             .as_array()
@@ -431,10 +581,6 @@ fn evidence(
     verified: &[usize],
     report: &mut Report,
 ) -> R<Result<(), String>> {
-    let x0 = match &problem.initial {
-        Ok(b) => b,
-        Err(e) => return Err(format!("evidence is marked checkable but {e}")),
-    };
     let n = problem.n;
     let steps = uint(get(ev, "steps")?, "evidence.steps")?;
     if steps < needed || steps > problem.horizon {
@@ -475,7 +621,12 @@ fn evidence(
                 })
                 .collect::<R<Vec<_>>>()?;
             let prev = &chain[k];
-            let proven = match problem.at(k, net).step(prev, Some(&witness)) {
+            let start = if k == 0 {
+                problem.initial.start()
+            } else {
+                Start::Box
+            };
+            let proven = match problem.at(k, net).step(prev, &start, Some(&witness)) {
                 Ok((b, _)) => b,
                 Err(Trouble::Neuron {
                     layer,
@@ -491,12 +642,6 @@ fn evidence(
                 Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
                 Err(Trouble::Overflow) => {
                     return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
-                }
-                Err(Trouble::Activation(a)) => {
-                    return Err(format!(
-                        "evidence is marked checkable but the controller has {} activations",
-                        a.name()
-                    ))
                 }
             };
             for i in 0..n {
@@ -524,7 +669,8 @@ fn evidence(
         cells.push(start);
         sets.push(chain);
     }
-    if let Err(point) = cover::covers(&cells, x0) {
+    let x0 = &problem.initial;
+    if let Err(point) = cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
         return Ok(Err(match point {
             Some(p) => format!("the cells do not cover the initial set: {p:?} is in no cell"),
             None => {
@@ -606,11 +752,7 @@ fn replay(
             "the trajectory has noise for fewer than {step} steps"
         ));
     }
-    let initial = match &problem.initial {
-        Ok(b) => b,
-        Err(e) => return Err(format!("cannot replay: {e}")),
-    };
-    if !initial.contains(&x0) {
+    if !problem.initial.contains(&x0) {
         return Ok(Err("starts outside the initial set".into()));
     }
     let mut x = Bx::point(&x0);

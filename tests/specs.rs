@@ -115,7 +115,10 @@ fn valid_specs() {
 const NOT_CHECKABLE: &[(&str, &str)] = &[
     ("double_integrator_ball.ravel", "do not prove the verdict"),
     ("double_integrator_hull.ravel", "do not prove the verdict"),
-    ("double_integrator_unrolled.ravel", "do not prove the verdict"),
+    (
+        "double_integrator_unrolled.ravel",
+        "do not prove the verdict",
+    ),
 ];
 
 /// The certificate of a result, checked: the category guard (VALID, or

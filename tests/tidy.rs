@@ -103,3 +103,37 @@ fn readme_example_output_is_what_ravel_prints() {
     }
     assert!(compared > 10);
 }
+
+/// The certificate checker shares no analysis code: outside comments, its
+/// files name only the network type, the rounding helpers, the limits and
+/// the text sanitiser from the rest of the crate.
+#[test]
+fn the_checker_imports_no_analysis_code() {
+    const ALLOWED: [&str; 4] = ["nn", "num", "limits", "diag"];
+    let mut files = Vec::new();
+    rust_files(&root().join("src/certify"), &mut files);
+    assert!(files.len() >= 3);
+    for f in files {
+        let text = std::fs::read_to_string(&f).expect("readable");
+        for line in text.lines() {
+            let code = line.split("//").next().unwrap_or("");
+            for (i, _) in code.match_indices("crate::") {
+                let rest = &code[i + "crate::".len()..];
+                let name: String = rest
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                assert!(
+                    ALLOWED.contains(&name.as_str()),
+                    "{} uses crate::{name}: the checker must stay independent of the analysis",
+                    f.display()
+                );
+            }
+            assert!(
+                !code.contains("clarabel") && !code.contains("super::super"),
+                "{}: {line}",
+                f.display()
+            );
+        }
+    }
+}

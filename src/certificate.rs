@@ -16,7 +16,8 @@
 
 use serde_json::{json, Value};
 
-use crate::certify::bounds::{Bx, Loop, PlantRows, Start};
+use crate::analysis::closed_loop::Propagator;
+use crate::certify::bounds::{widen, Bx, Chain, Loop, PlantRows, Start, Trouble};
 use crate::certify::{self, Answer, FORMAT};
 use crate::execute::{Outcome, Status, Trajectory};
 use crate::lower::{Plan, PropertyKind};
@@ -177,6 +178,9 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
         lo: cl.plant.v.lo.clone(),
         hi: cl.plant.v.hi.clone(),
     };
+    // the unrolled chain costs quadratic time in the horizon: only when the
+    // analysis itself unrolled
+    let unrolled = plan.propagator == Propagator::CrownUnrolled;
     let mut cells = Vec::with_capacity(outcome.cells.len());
     for (c, sets) in outcome.cells.iter().enumerate() {
         let start = sets
@@ -188,22 +192,20 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
             hi: start.hi.clone(),
         };
         let mut claims = Vec::with_capacity(steps);
+        let first = match &plan.initial {
+            Region::Ball {
+                center,
+                radius,
+                norm,
+            } => Start::Ball {
+                center,
+                radius,
+                norm: norm.name(),
+            },
+            Region::Box(_) | Region::Polytope { .. } => Start::Box,
+        };
+        let mut chain = Chain::new(first, unrolled);
         for t in 0..steps {
-            let start = match (&plan.initial, t) {
-                (
-                    Region::Ball {
-                        center,
-                        radius,
-                        norm,
-                    },
-                    0,
-                ) => Start::Ball {
-                    center,
-                    radius,
-                    norm: norm.name(),
-                },
-                _ => Start::Box,
-            };
             let lp = Loop {
                 plant: &plants[t.min(plants.len() - 1)],
                 obs: &cl.plant.obs,
@@ -211,9 +213,14 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
                 v: &v,
                 net: &cl.net,
             };
-            let (next, witness) = lp
-                .step(&set, &start, None)
-                .map_err(|e| format!("the checker's bound of cell {c} at step {}: {e}", t + 1))?;
+            let fail =
+                |e: Trouble| format!("the checker's bound of cell {c} at step {}: {e}", t + 1);
+            // claims are widened by a hair, so that a checker on another
+            // machine (whose libm may round tanh, exp, … differently) proves
+            // them too; the next step starts from the widened claims
+            let witness = chain.witness(&lp, &set).map_err(fail)?;
+            let (next, _) = chain.step(lp, &set, Some(&witness)).map_err(fail)?;
+            let next = widen(&next);
             claims.push(json!({
                 "set": bx_json(&next),
                 "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
@@ -222,7 +229,8 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
         }
         cells.push(json!({ "box": box_json(&start), "steps": claims }));
     }
-    Ok(json!({ "status": "checkable", "steps": steps, "cells": cells }))
+    let mode = if unrolled { "unrolled" } else { "one_step" };
+    Ok(json!({ "status": "checkable", "mode": mode, "steps": steps, "cells": cells }))
 }
 
 /// The certificate of one (spec, controller) result.

@@ -671,7 +671,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
 /// uncertain plants.
 #[test]
 fn trajectories_stay_inside_the_checkers_own_bounds() {
-    use ravel::certify::bounds::{Bx, Loop, PlantRows};
+    use ravel::certify::bounds::{Bx, Chain, Loop, PlantRows, Start};
     let mut checked = 0usize;
     for seed in 0..90u64 {
         let case = random_case(seed);
@@ -699,37 +699,54 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
             lo: pl.v.lo.clone(),
             hi: pl.v.hi.clone(),
         };
-        let mut chain = vec![Bx {
+        let x0b = Bx {
             lo: x0.lo.clone(),
             hi: x0.hi.clone(),
-        }];
-        for t in 0..case.horizon {
-            let lp = Loop {
-                plant: &plants[t.min(plants.len() - 1)],
-                obs: &pl.obs,
-                w: &w,
-                v: &v,
-                net: &case.cl.net,
-            };
-            let start = ravel::certify::bounds::Start::Box;
-            let (next, witness) = lp.step(&chain[t], &start, None).expect("finite bounds");
-            // the witness it reports checks against itself
-            assert_eq!(
-                lp.step(&chain[t], &start, Some(&witness)).map(|r| r.0),
-                Ok(next.clone())
-            );
-            chain.push(next);
+        };
+        // one-step chains and unrolled chains
+        let mut chains = Vec::new();
+        for unrolled in [false, true] {
+            let mut links = Chain::new(Start::Box, unrolled);
+            let mut chain = vec![x0b.clone()];
+            for t in 0..case.horizon {
+                let lp = Loop {
+                    plant: &plants[t.min(plants.len() - 1)],
+                    obs: &pl.obs,
+                    w: &w,
+                    v: &v,
+                    net: &case.cl.net,
+                };
+                let (next, _) = links.step(lp, &chain[t], None).expect("finite bounds");
+                chain.push(next);
+            }
+            chains.push(chain);
         }
+        // the witness a one-step chain reports checks against itself
+        let lp0 = Loop {
+            plant: &plants[0],
+            obs: &pl.obs,
+            w: &w,
+            v: &v,
+            net: &case.cl.net,
+        };
+        let (first, witness) = lp0.step(&x0b, &Start::Box, None).expect("finite");
+        assert_eq!(
+            lp0.step(&x0b, &Start::Box, Some(&witness)).map(|r| r.0),
+            Ok(first)
+        );
         let mut rng = Rng::new(seed * 7_919 + 3);
         for _ in 0..300 {
             let mut x = initial_point(&mut rng, &case.x0);
-            for (t, b) in chain.iter().enumerate() {
-                assert!(
-                    b.contains(&x),
-                    "{}: step {t} state {x:?} outside the checker's box {b:?}",
-                    case.label
-                );
-                checked += 1;
+            for t in 0..=case.horizon {
+                for chain in &chains {
+                    let b = &chain[t];
+                    assert!(
+                        b.contains(&x),
+                        "{}: step {t} state {x:?} outside the checker's box {b:?}",
+                        case.label
+                    );
+                    checked += 1;
+                }
                 if t < case.horizon {
                     x = advance(&mut rng, &case.cl, t, &x);
                 }

@@ -112,14 +112,8 @@ fn valid_specs() {
 
 /// Specs whose VERIFIED evidence the checker cannot establish yet, and the
 /// words its reason must contain; every other spec's certificate is VALID.
-const NOT_CHECKABLE: &[(&str, &str)] = &[
-    ("double_integrator_ball.ravel", "do not prove the verdict"),
-    ("double_integrator_hull.ravel", "do not prove the verdict"),
-    (
-        "double_integrator_unrolled.ravel",
-        "do not prove the verdict",
-    ),
-];
+const NOT_CHECKABLE: &[(&str, &str)] =
+    &[("double_integrator_hull.ravel", "do not prove the verdict")];
 
 /// The certificate of a result, checked: the category guard (VALID, or
 /// UNSUPPORTED for the specs listed above with their reason), then a

@@ -9,6 +9,8 @@
 //! explicit error term (the model of [`crate::num`]: a sum of `k` rounded
 //! terms is off by at most `γ(k)·Σ|terms|`).
 
+use nalgebra::{DMatrix, DVector};
+
 use crate::nn::{Activation, Layer, Network};
 use crate::num::{dot_box_lower, dot_box_upper, gamma, mul0, sum_lower, sum_upper, ETA, U};
 
@@ -97,10 +99,14 @@ impl std::fmt::Display for Trouble {
     }
 }
 
+/// Other proven upper bounds of a pre-activation bound's rows (see
+/// [`NetBounds::with_hook`]).
+type Hook<'h> = &'h dyn Fn(&Linear) -> Vec<f64>;
+
 /// Rows `sᵣ ≤ coefᵣ·z + offᵣ`, valid for every feasible `z`.
 #[derive(Clone, Debug)]
 struct Linear {
-    coef: Vec<Vec<f64>>,
+    coef: DMatrix<f64>,
     off: Vec<f64>,
 }
 
@@ -109,52 +115,90 @@ fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
     sum_upper(a.iter().zip(m).map(|(a, m)| mul0(a.abs(), *m)))
 }
 
+/// `|M|·m` rounded up, row by row.
+fn abs_times(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
+    (0..m.nrows())
+        .map(|j| sum_upper((0..m.ncols()).map(|i| mul0(m[(j, i)].abs(), v[i]))))
+        .collect()
+}
+
+/// The error bound of a rounded row–matrix product `c·M` (`k` terms per
+/// entry) applied to `|z| ≤ zmax`: `γ(k+1)·|c|·(|M|·zmax)`, with `mz = |M|·zmax`
+/// precomputed; the factor 1.0625 covers the rounding of the bound itself.
+fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], k: usize) -> f64 {
+    let s = sum_upper(c.zip(mz).map(|(c, m)| mul0(c.abs(), *m)));
+    (gamma(k + 1) * s * 1.0625 + (mz.len() as f64 + 2.0) * ETA).next_up()
+}
+
+/// `A·B` with plain loops in a fixed order (each entry summed over `k`
+/// ascending, no fused multiply-add): the same bits on every machine, so a
+/// certificate written on one checks on another. (A BLAS-style product
+/// picks its kernel by CPU, and kernels round differently.)
+fn mul(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let (r, k) = a.shape();
+    let c = b.ncols();
+    let mut out = DMatrix::zeros(r, c);
+    for j in 0..c {
+        for p in 0..k {
+            let bpj = b[(p, j)];
+            if bpj == 0.0 {
+                continue;
+            }
+            let col = a.column(p);
+            let mut dst = out.column_mut(j);
+            for i in 0..r {
+                dst[i] += col[i] * bpj;
+            }
+        }
+    }
+    out
+}
+
+/// The `2k × k` matrix `[I; −I]`.
+fn plus_minus(k: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(2 * k, k, |r, c| {
+        if r == c {
+            1.0
+        } else if r == k + c {
+            -1.0
+        } else {
+            0.0
+        }
+    })
+}
+
 impl Linear {
     /// Substitute `z = W z' + b`, where `|z'| ≤ zmax`. Each new coefficient
     /// is a rounded `k`-term dot product, off from the exact one by at most
-    /// `γ(k)·Σ|cⱼ||Wⱼᵢ|`; that error times `|z'ᵢ|max` goes into the offset.
-    fn through_affine(
-        &self,
-        w: &nalgebra::DMatrix<f64>,
-        b: &nalgebra::DVector<f64>,
-        zmax: &[f64],
-    ) -> Linear {
-        let (k, n) = (w.nrows(), w.ncols());
-        let g = gamma(k + 1) * 1.0625;
-        let mut coef = Vec::with_capacity(self.coef.len());
-        let mut off = Vec::with_capacity(self.coef.len());
-        for (c, o) in self.coef.iter().zip(&self.off) {
-            let mut row = vec![0.0; n];
-            let mut abs = vec![0.0; n];
-            for (j, &cj) in c.iter().enumerate() {
-                if cj == 0.0 {
-                    continue;
-                }
-                for i in 0..n {
-                    let wji = w[(j, i)];
-                    row[i] += cj * wji;
-                    abs[i] += (cj * wji).abs();
-                }
-            }
-            // the accumulated |c||W| is itself rounded: the factor 1.0625 covers it
-            let err = (g * abs_dot(&abs, zmax) + (n as f64 + 2.0) * ETA).next_up();
-            let consts = c.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
-            off.push(sum_upper(consts.chain([*o, err])));
-            coef.push(row);
-        }
+    /// `γ(k)·Σⱼ|cⱼ||Wⱼᵢ|`; times `|z'ᵢ|max` and summed over `i`, that is
+    /// `γ(k)·|c|·(|W|·zmax)`, which goes into the offset.
+    fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, zmax: &[f64]) -> Linear {
+        let wz = abs_times(w, zmax);
+        let coef = mul(&self.coef, w);
+        let off = (0..self.coef.nrows())
+            .map(|r| {
+                let row = self.coef.row(r);
+                let err = product_error(row.iter().copied(), &wz, w.nrows());
+                let consts = row.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
+                sum_upper(consts.chain([self.off[r], err]))
+            })
+            .collect();
         Linear { coef, off }
     }
 
     /// Replace `h = σ(z)` by the relaxation lines (upper line for a
     /// non-negative coefficient, lower line otherwise); `|z| ≤ zmax`.
     fn through_relax(&self, lines: &[Lines], zmax: &[f64]) -> Linear {
-        let mut coef = Vec::with_capacity(self.coef.len());
-        let mut off = Vec::with_capacity(self.coef.len());
-        for (c, o) in self.coef.iter().zip(&self.off) {
-            let mut row = vec![0.0; c.len()];
-            let mut terms = vec![*o];
+        let (rows, cols) = self.coef.shape();
+        let mut coef = DMatrix::zeros(rows, cols);
+        let mut off = Vec::with_capacity(rows);
+        let mut terms = Vec::with_capacity(cols + 2);
+        for r in 0..rows {
+            terms.clear();
+            terms.push(self.off[r]);
             let mut err = 0.0;
-            for (j, (&cj, l)) in c.iter().zip(lines).enumerate() {
+            for (j, l) in lines.iter().enumerate() {
+                let cj = self.coef[(r, j)];
                 if cj == 0.0 {
                     continue;
                 }
@@ -163,23 +207,36 @@ impl Linear {
                 } else {
                     (l.al, l.bl)
                 };
-                row[j] = cj * a;
-                err += (cj * a).abs() * zmax[j];
+                let v = cj * a;
+                coef[(r, j)] = v;
+                err += v.abs() * zmax[j];
                 terms.push(mul0(cj, b));
             }
-            terms.push((2.0 * U * err * 1.0625 + (c.len() as f64 + 2.0) * ETA).next_up());
-            off.push(sum_upper(terms));
-            coef.push(row);
+            terms.push((2.0 * U * err * 1.0625 + (cols as f64 + 2.0) * ETA).next_up());
+            off.push(sum_upper(terms.iter().copied()));
         }
         Linear { coef, off }
     }
 
     /// Upper bounds of the rows over the box.
     fn over(&self, b: &Bx) -> Vec<f64> {
-        self.coef
-            .iter()
-            .zip(&self.off)
-            .map(|(c, o)| sum_upper([dot_box_upper(c, &b.lo, &b.hi), *o]))
+        (0..self.coef.nrows())
+            .map(|r| {
+                let row = self.coef.row(r);
+                let terms = row
+                    .iter()
+                    .zip(b.lo.iter().zip(&b.hi))
+                    .map(
+                        |(&a, (&l, &h))| {
+                            if a >= 0.0 {
+                                mul0(a, h)
+                            } else {
+                                mul0(a, l)
+                            }
+                        },
+                    );
+                sum_upper(terms.chain([self.off[r]]))
+            })
             .collect()
     }
 }
@@ -357,8 +414,28 @@ fn smooth_lines(act: Activation, l: f64, u: f64) -> Lines {
     }
 }
 
+/// `b` widened by `2⁻³⁶·(1 + |v|)` at each end `v`: far below any bound's
+/// meaning, far above the last-bit differences between two machines' libm
+/// (which the tanh and sigmoid relaxations go through). The certificate
+/// writer claims widened bounds, so a checker elsewhere proves them too.
+pub fn widen(b: &Bx) -> Bx {
+    const HAIR: f64 = 1.0 / 68_719_476_736.0; // 2⁻³⁶
+    Bx {
+        lo: b
+            .lo
+            .iter()
+            .map(|v| (v - HAIR * (1.0 + v.abs())).next_down())
+            .collect(),
+        hi: b
+            .hi
+            .iter()
+            .map(|v| (v + HAIR * (1.0 + v.abs())).next_up())
+            .collect(),
+    }
+}
+
 /// Certified interval image of a box under `z = W x + b`.
-pub fn affine_box(w: &nalgebra::DMatrix<f64>, b: &[f64], x: &Bx) -> Bx {
+pub fn affine_box(w: &DMatrix<f64>, b: &[f64], x: &Bx) -> Bx {
     let mut lo = Vec::with_capacity(w.nrows());
     let mut hi = Vec::with_capacity(w.nrows());
     for (j, bj) in b.iter().enumerate().take(w.nrows()) {
@@ -424,6 +501,20 @@ impl<'a> NetBounds<'a> {
     /// previous claims (IBP intersected with back-substitution), and the
     /// claimed box is used from then on; without, the proven box is used.
     pub fn new(net: &'a Network, y: &Bx, claimed: Option<&[Bx]>) -> Result<NetBounds<'a>, Trouble> {
+        NetBounds::with_hook(net, y, claimed, None, false)
+    }
+
+    /// [`NetBounds::new`], where every pre-activation bound (a linear bound
+    /// over the input `y`) is also handed to `hook`, which returns other
+    /// proven upper bounds of its rows (the unrolled chain bounds them
+    /// through earlier steps); the smaller is kept.
+    fn with_hook(
+        net: &'a Network,
+        y: &Bx,
+        claimed: Option<&[Bx]>,
+        hook: Option<Hook>,
+        widened: bool,
+    ) -> Result<NetBounds<'a>, Trouble> {
         let mut s = NetBounds {
             net,
             boxes: vec![y.clone()],
@@ -454,18 +545,19 @@ impl<'a> NetBounds<'a> {
                     let mut next = affine_box(w, b.as_slice(), cur);
                     if matches!(net.layers.get(i + 1), Some(Layer::Act(_))) {
                         let k = w.nrows();
-                        let mut spec = Linear {
-                            coef: Vec::with_capacity(2 * k),
+                        let spec = Linear {
+                            coef: plus_minus(k),
                             off: vec![0.0; 2 * k],
                         };
-                        for sign in [1.0, -1.0] {
-                            for j in 0..k {
-                                let mut r = vec![0.0; k];
-                                r[j] = sign;
-                                spec.coef.push(r);
+                        let back = s.backward(spec, i + 1);
+                        let mut up = back.over(y);
+                        if let Some(h) = hook {
+                            for (u, o) in up.iter_mut().zip(h(&back)) {
+                                if !o.is_nan() {
+                                    *u = u.min(o);
+                                }
                             }
                         }
-                        let up = s.backward(spec, i + 1).over(y);
                         for j in 0..k {
                             next.hi[j] = next.hi[j].min(up[j]);
                             next.lo[j] = next.lo[j].max(-up[k + j]);
@@ -494,6 +586,8 @@ impl<'a> NetBounds<'a> {
                                 }
                             }
                             next = c.clone();
+                        } else if widened {
+                            next = widen(&next);
                         }
                         s.witness.push(next.clone());
                     }
@@ -547,22 +641,12 @@ impl<'a> NetBounds<'a> {
             .cloned()
             .unwrap_or_else(|| self.boxes[0].clone());
         let m = out.lo.len();
-        let mut coef = Vec::with_capacity(2 * m);
-        for sign in [1.0, -1.0] {
-            for j in 0..m {
-                let mut r = vec![0.0; m];
-                r[j] = sign;
-                coef.push(r);
-            }
-        }
+        let spec = Linear {
+            coef: plus_minus(m),
+            off: vec![0.0; 2 * m],
+        };
         let up = self
-            .backward(
-                Linear {
-                    coef,
-                    off: vec![0.0; 2 * m],
-                },
-                self.net.layers.len(),
-            )
+            .backward(spec, self.net.layers.len())
             .over(&self.boxes[0]);
         for j in 0..m {
             out.hi[j] = out.hi[j].min(up[j]);
@@ -571,16 +655,16 @@ impl<'a> NetBounds<'a> {
         out
     }
 
-    /// `s·π(y) ≤ g·y + h` over the input box, for one specification row `s`.
-    fn linear(&self, s: &[f64]) -> (Vec<f64>, f64) {
-        let b = self.backward(
+    /// `S π(y) ≤ G y + h` over the input box, for specification rows `S`.
+    fn linear(&self, spec: DMatrix<f64>) -> Linear {
+        let rows = spec.nrows();
+        self.backward(
             Linear {
-                coef: vec![s.to_vec()],
-                off: vec![0.0],
+                coef: spec,
+                off: vec![0.0; rows],
             },
             self.net.layers.len(),
-        );
-        (b.coef[0].clone(), b.off[0])
+        )
     }
 }
 
@@ -588,13 +672,13 @@ impl<'a> NetBounds<'a> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlantRows {
     /// `A` (`n × n`).
-    pub a: nalgebra::DMatrix<f64>,
+    pub a: DMatrix<f64>,
     /// `B` (`n × m`).
-    pub b: nalgebra::DMatrix<f64>,
+    pub b: DMatrix<f64>,
     /// `c` (`n`).
     pub c: Vec<f64>,
     /// Entrywise error bounds of `A`, `B`, `c` (continuous-time plants).
-    pub err: Option<(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>, Vec<f64>)>,
+    pub err: Option<(DMatrix<f64>, DMatrix<f64>, Vec<f64>)>,
 }
 
 /// What is known of the states a step starts from beyond their box: at
@@ -660,7 +744,7 @@ pub struct Loop<'a> {
     /// The plant of this step.
     pub plant: &'a PlantRows,
     /// `C` (`n × p`): `y = Cᵀx + v`.
-    pub obs: &'a nalgebra::DMatrix<f64>,
+    pub obs: &'a DMatrix<f64>,
     /// Process noise box.
     pub w: &'a Bx,
     /// Sensor noise box.
@@ -697,65 +781,113 @@ impl Loop<'_> {
         }
     }
 
-    /// `fᵀM` rounded, with the per-entry error bound `γ(n)·Σ|fᵢ||Mᵢⱼ|`.
-    fn row_times(f: &[f64], m: &nalgebra::DMatrix<f64>) -> (Vec<f64>, Vec<f64>) {
-        let g = gamma(f.len() + 1) * 1.0625;
-        (0..m.ncols())
-            .map(|j| {
-                let mut s = 0.0;
-                let mut a = 0.0;
-                for (i, fi) in f.iter().enumerate() {
-                    s += fi * m[(i, j)];
-                    a += (fi * m[(i, j)]).abs();
-                }
-                (s, (g * a + (f.len() as f64 + 2.0) * ETA).next_up())
-            })
-            .unzip()
-    }
-
-    /// An upper bound of `f·x⁺` over `x ∈ x`, `w ∈ W`, `v ∈ V`, with the
-    /// network bounded over the observation box: the smaller of
-    /// (a) back-substitution of `fᵀB` through the network (Reach-LP) and
-    /// (b) `fᵀB` over the control box (the separate bound), each plus the
-    /// exact-plant terms and the model error.
-    pub fn facet_bound(&self, f: &[f64], x: &Bx, start: &Start, nb: &NetBounds, u: &Bx) -> f64 {
+    /// Upper bounds of `fᵣ·x⁺` for the rows `fᵣ` of `facets`, over
+    /// `x ∈ x` (and what `start` knows), `w ∈ W`, `v ∈ V`, with the network
+    /// bounded over the observation box: per row the smaller of
+    /// (a) back-substitution of `fᵣᵀB` through the network (Reach-LP) and
+    /// (b) `fᵣᵀB` over the control box `u` (the separate bound), each plus
+    /// the exact-plant terms, the model error and every rounding error.
+    pub fn facet_bounds(
+        &self,
+        facets: &DMatrix<f64>,
+        x: &Bx,
+        start: &Start,
+        nb: &NetBounds,
+        u: &Bx,
+    ) -> Vec<f64> {
+        let n = x.lo.len();
         let xmax = x.abs_max();
         let umax = u.abs_max();
-        let (fa, fa_err) = Self::row_times(f, &self.plant.a);
-        let (fb, fb_err) = Self::row_times(f, &self.plant.b);
         let delta = self.model_delta(&xmax, &umax);
-        let common = sum_upper([
-            sum_upper(f.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
-            dot_box_upper(f, &self.w.lo, &self.w.hi),
-            abs_dot(&fa_err, &xmax),
-            abs_dot(&fb_err, &umax),
-            abs_dot(f, &delta),
-        ]);
-        // (b) the separate bound
-        let separate = sum_upper([
-            start.support(&fa, x),
-            dot_box_upper(&fb, &u.lo, &u.hi),
-            common,
-        ]);
-        // (a) fᵀB π(y) ≤ g·y + h, y = Cᵀx + v
-        let (g, h) = nb.linear(&fb);
-        let (cg, cg_err) = Self::row_times(&g, &self.obs.transpose());
-        let coef: Vec<f64> = fa.iter().zip(&cg).map(|(a, b)| a + b).collect();
-        let sum_err: Vec<f64> = coef.iter().map(|c| (c.abs() * U).next_up()).collect();
-        let reach_lp = sum_upper([
-            start.support(&coef, x),
-            abs_dot(&cg_err, &xmax),
-            abs_dot(&sum_err, &xmax),
-            dot_box_upper(&g, &self.v.lo, &self.v.hi),
-            h,
-            common,
-        ]);
-        let best = reach_lp.min(separate);
-        if reach_lp.is_nan() || separate.is_nan() {
-            f64::NAN
-        } else {
-            best
-        }
+        let fa = mul(facets, &self.plant.a);
+        let fb = mul(facets, &self.plant.b);
+        let ax = abs_times(&self.plant.a, &xmax);
+        let bu = abs_times(&self.plant.b, &umax);
+        // (a): F x⁺ bounded linearly in x
+        let lin = self.back_step(
+            &Linear {
+                coef: facets.clone(),
+                off: vec![0.0; facets.nrows()],
+            },
+            x,
+            nb,
+            u,
+        );
+        (0..facets.nrows())
+            .map(|r| {
+                let f: Vec<f64> = facets.row(r).iter().copied().collect();
+                let fa_r: Vec<f64> = fa.row(r).iter().copied().collect();
+                let fb_r: Vec<f64> = fb.row(r).iter().copied().collect();
+                let common = sum_upper([
+                    sum_upper(f.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
+                    dot_box_upper(&f, &self.w.lo, &self.w.hi),
+                    product_error(f.iter().copied(), &ax, n),
+                    product_error(f.iter().copied(), &bu, n),
+                    abs_dot(&f, &delta),
+                ]);
+                let separate = sum_upper([
+                    start.support(&fa_r, x),
+                    dot_box_upper(&fb_r, &u.lo, &u.hi),
+                    common,
+                ]);
+                let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                let reach_lp = sum_upper([start.support(&row, x), lin.off[r]]);
+                if reach_lp.is_nan() || separate.is_nan() {
+                    f64::NAN
+                } else {
+                    reach_lp.min(separate)
+                }
+            })
+            .collect()
+    }
+
+    /// One step of back-substitution: rows `L x⁺ ≤ …` (`lin`, over the
+    /// next state) become rows linear in the state `x ∈ x`: `L A x` exactly
+    /// up to rounding, `L B π(y)` through the network (CROWN with the
+    /// witness's relaxations), `y = Cᵀx + v` substituted, `v` and `w`
+    /// bounded over their boxes, plus `L c`, the model error and every
+    /// rounding error. The tutorial's lemma for Reach-LP, and one link of
+    /// the unrolled chain.
+    fn back_step(&self, lin: &Linear, x: &Bx, nb: &NetBounds, u: &Bx) -> Linear {
+        let n = x.lo.len();
+        let xmax = x.abs_max();
+        let umax = u.abs_max();
+        let delta = self.model_delta(&xmax, &umax);
+        let la = mul(&lin.coef, &self.plant.a);
+        let lb = mul(&lin.coef, &self.plant.b);
+        let ax = abs_times(&self.plant.a, &xmax);
+        let bu = abs_times(&self.plant.b, &umax);
+        let net = nb.linear(lb);
+        let ct = self.obs.transpose();
+        let gc = mul(&net.coef, &ct);
+        let cx = abs_times(&ct, &xmax);
+        let coef = la + gc;
+        let off = (0..lin.coef.nrows())
+            .map(|r| {
+                let l: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                let g: Vec<f64> = net.coef.row(r).iter().copied().collect();
+                // the sum LA + GC is one more rounding per entry
+                let sum_err = sum_upper(
+                    coef.row(r)
+                        .iter()
+                        .zip(&xmax)
+                        .map(|(c, m)| mul0((c.abs() * U).next_up(), *m)),
+                );
+                sum_upper([
+                    lin.off[r],
+                    net.off[r],
+                    sum_upper(l.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
+                    dot_box_upper(&l, &self.w.lo, &self.w.hi),
+                    dot_box_upper(&g, &self.v.lo, &self.v.hi),
+                    product_error(l.iter().copied(), &ax, n),
+                    product_error(l.iter().copied(), &bu, n),
+                    product_error(g.iter().copied(), &cx, g.len()),
+                    sum_err,
+                    abs_dot(&l, &delta),
+                ])
+            })
+            .collect();
+        Linear { coef, off }
     }
 
     /// The checker's bound of the next state's box from the box `x`, with
@@ -777,18 +909,11 @@ impl Loop<'_> {
             return Err(Trouble::Overflow);
         }
         let n = x.lo.len();
-        let mut next = Bx {
-            lo: vec![0.0; n],
-            hi: vec![0.0; n],
+        let ub = self.facet_bounds(&plus_minus(n), x, start, &nb, &u);
+        let next = Bx {
+            lo: ub[n..].iter().map(|v| -v).collect(),
+            hi: ub[..n].to_vec(),
         };
-        let mut f = vec![0.0; n];
-        for i in 0..n {
-            f[i] = 1.0;
-            next.hi[i] = self.facet_bound(&f, x, start, &nb, &u);
-            f[i] = -1.0;
-            next.lo[i] = -self.facet_bound(&f, x, start, &nb, &u);
-            f[i] = 0.0;
-        }
         if !next.is_proper() {
             return Err(Trouble::Overflow);
         }
@@ -830,6 +955,156 @@ impl Loop<'_> {
         }
         let b = Bx { lo, hi };
         b.is_proper().then_some(b)
+    }
+}
+
+/// One step of a cell's chain, kept for back-substitution by later steps.
+struct Link<'a> {
+    lp: Loop<'a>,
+    x: Bx,
+    nb: NetBounds<'a>,
+    u: Bx,
+}
+
+/// A cell's chain of steps as the checker builds it: step by step from the
+/// cell's box, each next box the checker's one-step bound of the previous
+/// one; with `unrolled`, also the bound of `x_t` back-substituted through
+/// every earlier step to the cell (CROWN on the unrolled loop), and every
+/// hidden neuron's bound likewise (the smaller is kept).
+pub struct Chain<'a> {
+    start: Start<'a>,
+    unrolled: bool,
+    links: Vec<Link<'a>>,
+}
+
+impl<'a> Chain<'a> {
+    /// An empty chain; `start` is what is known of the cell beyond its box.
+    pub fn new(start: Start<'a>, unrolled: bool) -> Chain<'a> {
+        Chain {
+            start,
+            unrolled,
+            links: Vec::new(),
+        }
+    }
+
+    /// Upper bounds of the rows of `lin` (linear in `x_s`, `s` the number
+    /// of links) over every state reachable from the cell: substituted
+    /// back through every link and bounded over the cell.
+    fn unroll(&self, mut lin: Linear) -> Vec<f64> {
+        for link in self.links.iter().rev() {
+            lin = link.lp.back_step(&lin, &link.x, &link.nb, &link.u);
+        }
+        let Some(first) = self.links.first() else {
+            return vec![f64::INFINITY; lin.coef.nrows()];
+        };
+        (0..lin.coef.nrows())
+            .map(|r| {
+                let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                sum_upper([self.start.support(&row, &first.x), lin.off[r]])
+            })
+            .collect()
+    }
+
+    /// The network over the observation box of `x` for the next step, with
+    /// every neuron also bounded through the earlier steps when unrolled.
+    fn net_bounds(
+        &self,
+        lp: &Loop<'a>,
+        x: &Bx,
+        claimed: Option<&[Bx]>,
+        widened: bool,
+    ) -> Result<NetBounds<'a>, Trouble> {
+        let s = self.links.len();
+        let y = lp.observation(x);
+        let ct = lp.obs.transpose();
+        let xmax = x.abs_max();
+        let cx = abs_times(&ct, &xmax);
+        // a bound linear in y_s becomes one linear in x_s, then is unrolled
+        let through = |back: &Linear| -> Vec<f64> {
+            let coef = mul(&back.coef, &ct);
+            let off = (0..back.coef.nrows())
+                .map(|r| {
+                    let g: Vec<f64> = back.coef.row(r).iter().copied().collect();
+                    sum_upper([
+                        back.off[r],
+                        dot_box_upper(&g, &lp.v.lo, &lp.v.hi),
+                        product_error(g.iter().copied(), &cx, g.len()),
+                    ])
+                })
+                .collect();
+            self.unroll(Linear { coef, off })
+        };
+        let hook: Option<Hook> = if self.unrolled && s > 0 {
+            Some(&through)
+        } else {
+            None
+        };
+        NetBounds::with_hook(lp.net, &y, claimed, hook, widened)
+    }
+
+    /// Pre-activation bounds for the next step from `x` as the certificate
+    /// writer claims them: each layer's proven bound, computed from the
+    /// earlier layers' claims, [`widen`]ed.
+    pub fn witness(&self, lp: &Loop<'a>, x: &Bx) -> Result<Witness, Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        Ok(self.net_bounds(lp, x, None, true)?.witness)
+    }
+
+    /// The next step from the box `x` (the cell's box for the first step,
+    /// else the previous claimed box) with loop `lp`: its proven box and
+    /// the witness used (checked against `claimed` when given).
+    pub fn step(
+        &mut self,
+        lp: Loop<'a>,
+        x: &Bx,
+        claimed: Option<&[Bx]>,
+    ) -> Result<(Bx, Witness), Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let s = self.links.len();
+        let start = if s == 0 { self.start } else { Start::Box };
+        let nb = self.net_bounds(&lp, x, claimed, false)?;
+        let u = nb.output();
+        if !u.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let n = x.lo.len();
+        let facets = plus_minus(n);
+        let mut ub = lp.facet_bounds(&facets, x, &start, &nb, &u);
+        if self.unrolled && s > 0 {
+            let lin = lp.back_step(
+                &Linear {
+                    coef: facets.clone(),
+                    off: vec![0.0; 2 * n],
+                },
+                x,
+                &nb,
+                &u,
+            );
+            for (b, o) in ub.iter_mut().zip(self.unroll(lin)) {
+                if !o.is_nan() {
+                    *b = b.min(o);
+                }
+            }
+        }
+        let next = Bx {
+            lo: ub[n..].iter().map(|v| -v).collect(),
+            hi: ub[..n].to_vec(),
+        };
+        if !next.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let witness = nb.witness.clone();
+        self.links.push(Link {
+            lp,
+            x: x.clone(),
+            nb,
+            u,
+        });
+        Ok((next, witness))
     }
 }
 
@@ -905,7 +1180,11 @@ mod tests {
         };
         let nb = NetBounds::new(&net, &y, None).expect("finite");
         let out = nb.output();
-        let (g, h) = nb.linear(&[1.0]);
+        let lin = nb.linear(DMatrix::from_element(1, 1, 1.0));
+        let (g, h) = (
+            lin.coef.row(0).iter().copied().collect::<Vec<f64>>(),
+            lin.off[0],
+        );
         for i in 0..=20 {
             for j in 0..=20 {
                 let x = [-1.0 + 1.5 * i as f64 / 20.0, -0.5 + 1.5 * j as f64 / 20.0];

@@ -47,7 +47,7 @@ use serde_json::Value;
 
 use crate::nn::Network;
 use crate::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
-use bounds::{Bx, Loop, PlantRows, Start, Trouble};
+use bounds::{Bx, Chain, Loop, PlantRows, Start, Trouble};
 
 /// The certificate format this module reads and [`crate::certificate`] writes.
 pub const FORMAT: &str = "ravel-certificate/1";
@@ -588,6 +588,11 @@ fn evidence(
             "the evidence covers steps 0..={steps}, the verified properties need 0..={needed}"
         )));
     }
+    let unrolled = match ev.get("mode").and_then(Value::as_str) {
+        Some("unrolled") => true,
+        Some("one_step") => false,
+        _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
+    };
     let cells_json = get(ev, "cells")?
         .as_array()
         .ok_or("`evidence.cells` must be an array")?;
@@ -608,6 +613,7 @@ fn evidence(
             ));
         }
         let mut chain = vec![start.clone()];
+        let mut links = Chain::new(problem.initial.start(), unrolled);
         for (k, claim) in claims.iter().enumerate() {
             let t = k + 1;
             let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
@@ -621,12 +627,7 @@ fn evidence(
                 })
                 .collect::<R<Vec<_>>>()?;
             let prev = &chain[k];
-            let start = if k == 0 {
-                problem.initial.start()
-            } else {
-                Start::Box
-            };
-            let proven = match problem.at(k, net).step(prev, &start, Some(&witness)) {
+            let proven = match links.step(problem.at(k, net), prev, Some(&witness)) {
                 Ok((b, _)) => b,
                 Err(Trouble::Neuron {
                     layer,
@@ -647,20 +648,20 @@ fn evidence(
             for i in 0..n {
                 if set.hi[i] < proven.hi[i] {
                     return Ok(Err(format!(
-                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {:e})",
+                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
                         facet(i, true),
                         set.hi[i],
                         proven.hi[i],
-                        proven.hi[i] - set.hi[i]
+                        crate::diag::compact(proven.hi[i] - set.hi[i])
                     )));
                 }
                 if set.lo[i] > proven.lo[i] {
                     return Ok(Err(format!(
-                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {:e})",
+                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
                         facet(i, false),
                         set.lo[i],
                         proven.lo[i],
-                        set.lo[i] - proven.lo[i]
+                        crate::diag::compact(set.lo[i] - proven.lo[i])
                     )));
                 }
             }
@@ -690,8 +691,9 @@ fn evidence(
                         let worst = sum_upper([dot_box_upper(a, &last.lo, &last.hi), -b]);
                         if worst.is_nan() || worst > 0.0 {
                             return Ok(Err(format!(
-                                "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {worst:e}",
-                                problem.horizon
+                                "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",
+                                problem.horizon,
+                                crate::diag::compact(worst)
                             )));
                         }
                     }

@@ -17,10 +17,13 @@
 use serde_json::{json, Value};
 
 use crate::analysis::closed_loop::Propagator;
-use crate::certify::bounds::{widen, Bx, Chain, Loop, PlantRows, Start, Trouble};
+use nalgebra::DMatrix;
+
+use crate::certify::bounds::{widen, Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
 use crate::certify::{self, Answer, FORMAT};
 use crate::execute::{Outcome, Status, Trajectory};
 use crate::lower::{Plan, PropertyKind};
+use crate::lp;
 use crate::nn::{Layer, Network};
 use crate::sets::{IBox, Region};
 
@@ -205,6 +208,11 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
             Region::Box(_) | Region::Polytope { .. } => Start::Box,
         };
         let mut chain = Chain::new(first, unrolled);
+        // the previous set's inequalities (step 0: a polytope X0's)
+        let mut prev_rows: Vec<(Vec<f64>, f64)> = match &plan.initial {
+            Region::Polytope { rows, .. } => rows.clone(),
+            Region::Box(_) | Region::Ball { .. } => Vec::new(),
+        };
         for t in 0..steps {
             let lp = Loop {
                 plant: &plants[t.min(plants.len() - 1)],
@@ -215,19 +223,81 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
             };
             let fail =
                 |e: Trouble| format!("the checker's bound of cell {c} at step {}: {e}", t + 1);
+            // the analysis's directions for the next set, if it is a polytope
+            let directions = match sets.get(t + 1) {
+                Some(Region::Polytope { rows, .. }) if !rows.is_empty() => {
+                    let n = set.lo.len();
+                    Some(DMatrix::from_fn(rows.len(), n, |r, j| rows[r].0[j]))
+                }
+                _ => None,
+            };
+            let (lo, hi) = (set.lo.clone(), set.hi.clone());
+            let solve = |g: &[f64]| lp::maximize_dual(g, &prev_rows, &lo, &hi);
+            let duals = Duals::solved(&solve);
+            let start = if !prev_rows.is_empty() {
+                Start::Polytope {
+                    rows: &prev_rows,
+                    duals: &duals,
+                }
+            } else if t == 0 {
+                first
+            } else {
+                Start::Box
+            };
             // claims are widened by a hair, so that a checker on another
             // machine (whose libm may round tanh, exp, … differently) proves
             // them too; the next step starts from the widened claims
             let witness = chain.witness(&lp, &set).map_err(fail)?;
-            let (next, _) = chain.step(lp, &set, Some(&witness)).map_err(fail)?;
-            let next = widen(&next);
-            claims.push(json!({
+            let stepped = chain
+                .step(lp, &set, start, directions.as_ref(), Some(&witness))
+                .map_err(fail)?;
+            let next = widen(&stepped.next);
+            let rows_next: Vec<(Vec<f64>, f64)> = match &directions {
+                Some(d) => (0..d.nrows())
+                    .map(|r| {
+                        let o = stepped.offsets[r];
+                        let o = widen(&Bx {
+                            lo: vec![o],
+                            hi: vec![o],
+                        })
+                        .hi[0];
+                        (d.row(r).iter().copied().collect(), o)
+                    })
+                    .collect(),
+                None => Vec::new(),
+            };
+            let mut claim = json!({
                 "set": bx_json(&next),
                 "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
-            }));
+            });
+            if !rows_next.is_empty() {
+                claim["rows"] = ineq_json(&rows_next);
+            }
+            if !prev_rows.is_empty() {
+                claim["duals"] = json!(duals.used());
+            }
+            claims.push(claim);
             set = next;
+            prev_rows = rows_next;
         }
-        cells.push(json!({ "box": box_json(&start), "steps": claims }));
+        let mut cell = json!({ "box": box_json(&start), "steps": claims });
+        if !prev_rows.is_empty() {
+            // duals of the goal rows over the last set
+            let goal_duals: Vec<Vec<f64>> = plan
+                .properties
+                .iter()
+                .filter_map(|p| match &p.kind {
+                    PropertyKind::Goal(g) => Some(g),
+                    PropertyKind::Avoid { .. } => None,
+                })
+                .flat_map(|g| g.rows.iter())
+                .map(|(a, _)| {
+                    lp::maximize_dual(a, &prev_rows, &set.lo, &set.hi).unwrap_or_default()
+                })
+                .collect();
+            cell["goal_duals"] = json!(goal_duals);
+        }
+        cells.push(cell);
     }
     let mode = if unrolled { "unrolled" } else { "one_step" };
     Ok(json!({ "status": "checkable", "mode": mode, "steps": steps, "cells": cells }))

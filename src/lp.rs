@@ -32,7 +32,6 @@ pub struct LpBound {
 /// A certified lower bound of `min qᵀx` subject to `rows` (`aᵣ·x ≤ bᵣ`) and
 /// the finite box `lo ≤ x ≤ hi`.
 pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> LpBound {
-    let n = q.len();
     let fallback = dot_box_lower(q, lo, hi);
     if rows.is_empty() || !fallback.is_finite() {
         return LpBound {
@@ -40,6 +39,57 @@ pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> 
             issue: None,
         };
     }
+    match solve(q, rows, lo, hi) {
+        Err(issue) => LpBound {
+            value: fallback,
+            issue: Some(issue),
+        },
+        Ok(s) => {
+            let dual = dual_bound(q, &s.b, (&s.ri, &s.ci, &s.vs), &s.z, lo, hi);
+            LpBound {
+                value: if dual.is_finite() {
+                    dual.max(fallback)
+                } else {
+                    fallback
+                },
+                issue: None,
+            }
+        }
+    }
+}
+
+/// A dual vector of `max gᵀx` subject to `rows` and the box, for the
+/// rows only, projected onto `z ≥ 0` (`None` when the solver did not
+/// certify an optimum). Any such vector `μ` gives the bound
+/// `max gᵀx ≤ μᵀb + max_box (g − Hᵀμ)ᵀx`; the certificate writer records it
+/// as a witness, and the checker evaluates that bound itself.
+pub fn maximize_dual(
+    g: &[f64],
+    rows: &[(Vec<f64>, f64)],
+    lo: &[f64],
+    hi: &[f64],
+) -> Option<Vec<f64>> {
+    if rows.is_empty() {
+        return Some(Vec::new());
+    }
+    let q: Vec<f64> = g.iter().map(|v| -v).collect();
+    solve(&q, rows, lo, hi)
+        .ok()
+        .map(|s| s.z[..rows.len()].to_vec())
+}
+
+/// The constraint data and the projected dual of a solved LP.
+struct Solved {
+    ri: Vec<usize>,
+    ci: Vec<usize>,
+    vs: Vec<f64>,
+    b: Vec<f64>,
+    z: Vec<f64>,
+}
+
+/// Solve `min qᵀx` s.t. `rows`, `lo ≤ x ≤ hi` with Clarabel.
+fn solve(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> Result<Solved, Issue> {
+    let n = q.len();
     // A = [rows; I; −I], b = [b; hi; −lo]
     let m = rows.len() + 2 * n;
     let (mut ri, mut ci, mut vs) = (Vec::new(), Vec::new(), Vec::new());
@@ -68,35 +118,17 @@ pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> 
     }
     let a = CscMatrix::new_from_triplets(m, n, ri.clone(), ci.clone(), vs.clone());
     let p = CscMatrix::<f64>::zeros((n, n));
-    let settings = match DefaultSettingsBuilder::default()
+    let settings = DefaultSettingsBuilder::default()
         .verbose(false)
         .max_iter(200)
         .build()
-    {
-        Ok(s) => s,
-        Err(_) => {
-            return LpBound {
-                value: fallback,
-                issue: Some(Issue::BadSettings(Backend::Lp)),
-            }
-        }
-    };
+        .map_err(|_| Issue::BadSettings(Backend::Lp))?;
     let cones = [SupportedConeT::NonnegativeConeT(m)];
-    let mut solver = match DefaultSolver::new(&p, q, &a, &b, &cones, settings) {
-        Ok(s) => s,
-        Err(_) => {
-            return LpBound {
-                value: fallback,
-                issue: Some(Issue::RejectedData(Backend::Lp)),
-            }
-        }
-    };
+    let mut solver = DefaultSolver::new(&p, q, &a, &b, &cones, settings)
+        .map_err(|_| Issue::RejectedData(Backend::Lp))?;
     solver.solve();
     if let Some(issue) = Issue::from_status(Backend::Lp, solver.solution.status) {
-        return LpBound {
-            value: fallback,
-            issue: Some(issue),
-        };
+        return Err(issue);
     }
     let z: Vec<f64> = solver
         .solution
@@ -104,15 +136,7 @@ pub fn minimize(q: &[f64], rows: &[(Vec<f64>, f64)], lo: &[f64], hi: &[f64]) -> 
         .iter()
         .map(|&v| if v.is_finite() && v > 0.0 { v } else { 0.0 })
         .collect();
-    let dual = dual_bound(q, &b, (&ri, &ci, &vs), &z, lo, hi);
-    LpBound {
-        value: if dual.is_finite() {
-            dual.max(fallback)
-        } else {
-            fallback
-        },
-        issue: None,
-    }
+    Ok(Solved { ri, ci, vs, b, z })
 }
 
 /// `−bᵀz + min_box (q + Aᵀz)ᵀx`, rounded downward, for `z ≥ 0`; `A` as triplets.

@@ -60,17 +60,25 @@ fn evidence_numbers(cert: &Value) -> Vec<(String, bool)> {
                 }
             }
         }
+        // offsets of claimed polytope sets
+        for (k, st) in cell["steps"].as_array().expect("steps").iter().enumerate() {
+            for r in 0..st.get("rows").and_then(Value::as_array).map_or(0, Vec::len) {
+                out.push((format!("/evidence/cells/{c}/steps/{k}/rows/{r}/b"), true));
+            }
+        }
     }
     out
 }
 
 #[test]
 fn every_shrink_of_a_claim_is_rejected() {
-    // one-step (box X0), unrolled (box X0), unrolled from a ball
+    // one-step (box X0), unrolled (box X0), unrolled from a ball, hull
+    // polytopes (offsets, with LP duals as witnesses)
     for spec in [
         "specs/double_integrator.ravel",
         "specs/double_integrator_unrolled.ravel",
         "specs/double_integrator_ball.ravel",
+        "specs/double_integrator_hull.ravel",
     ] {
         every_shrink_rejected(spec);
     }
@@ -376,20 +384,17 @@ fn command_line_writes_and_checks_certificates() {
     assert_eq!(text.matches("VALID").count(), 2, "{text}");
 
     // unsupported evidence: exit 2, never VALID
-    let ball = dir.join("hull.cert.json");
-    ravel()
-        .args([
-            "verify",
-            "specs/double_integrator_hull.ravel",
-            "--no-timing",
-            "--certificate",
-        ])
-        .arg(&ball)
-        .output()
-        .expect("runs");
-    let un = ravel().arg("certify").arg(&ball).output().expect("runs");
+    let text = std::fs::read_to_string(&cert).expect("certificate");
+    let mut v: Value = serde_json::from_str(&text).expect("json");
+    v["evidence"] =
+        serde_json::json!({ "status": "unsupported", "reason": "multipliers not recorded" });
+    let un_path = dir.join("unsupported.cert.json");
+    std::fs::write(&un_path, v.to_string()).expect("write");
+    let un = ravel().arg("certify").arg(&un_path).output().expect("runs");
     assert_eq!(un.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&un.stdout).starts_with("UNSUPPORTED"));
+    let text = String::from_utf8_lossy(&un.stdout);
+    assert!(text.starts_with("UNSUPPORTED"), "{text}");
+    assert!(text.contains("multipliers not recorded"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -419,4 +424,40 @@ fn hostile_certificate_files_end_with_exit_2() {
         assert!(text.starts_with("UNREADABLE"), "{}: {text}", f.display());
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn dual_witnesses_cannot_prove_false_claims() {
+    // duals only decide how tight a support is: replacing them with
+    // nonsense (negative, huge, wrong length) keeps true claims or loses
+    // them, but a claim shrunk below the checker's bound is never accepted
+    let (plan, cert) = run("specs/double_integrator_hull.ravel");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let garbage = [
+        serde_json::json!([-1.0, 1e300, 0.0]),
+        serde_json::json!([]),
+        serde_json::json!([1e308, 1e308, 1e308, 1e308, 1e308, 1e308, 1e308, 1e308]),
+    ];
+    let steps = cert["evidence"]["cells"][0]["steps"]
+        .as_array()
+        .expect("steps")
+        .len();
+    for g in &garbage {
+        for k in 1..steps {
+            let mut bad = cert.clone();
+            let st = &mut bad["evidence"]["cells"][0]["steps"][k];
+            if let Some(d) = st.get_mut("duals").and_then(Value::as_array_mut) {
+                for x in d.iter_mut() {
+                    *x = g.clone();
+                }
+            }
+            // and the set's first offset shrunk by a tenth of its size
+            let b = st["rows"][0]["b"].as_f64().expect("offset");
+            st["rows"][0]["b"] = serde_json::json!(b - 0.1 * (1.0 + b.abs()));
+            assert!(
+                matches!(answer(&bad, &plan), Answer::Invalid(_)),
+                "step {k} with duals {g}"
+            );
+        }
+    }
 }

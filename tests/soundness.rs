@@ -716,8 +716,10 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
                     v: &v,
                     net: &case.cl.net,
                 };
-                let (next, _) = links.step(lp, &chain[t], None).expect("finite bounds");
-                chain.push(next);
+                let st = links
+                    .step(lp, &chain[t], Start::Box, None, None)
+                    .expect("finite bounds");
+                chain.push(st.next);
             }
             chains.push(chain);
         }

@@ -110,14 +110,8 @@ fn valid_specs() {
     });
 }
 
-/// Specs whose VERIFIED evidence the checker cannot establish yet, and the
-/// words its reason must contain; every other spec's certificate is VALID.
-const NOT_CHECKABLE: &[(&str, &str)] =
-    &[("double_integrator_hull.ravel", "do not prove the verdict")];
-
-/// The certificate of a result, checked: the category guard (VALID, or
-/// UNSUPPORTED for the specs listed above with their reason), then a
-/// summary for the snapshot.
+/// The certificate of a result, checked: the category guard (every shipped
+/// spec's certificate is VALID), then a summary for the snapshot.
 fn certificate_summary(
     name: &str,
     plan: &ravel::lower::Plan,
@@ -134,18 +128,11 @@ fn certificate_summary(
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
     assert_eq!(back, cert, "{name}: certificate does not round-trip");
     let report = ravel::certify::check(&back, &plan.closed_loop.net);
-    let file = name.rsplit('/').next().unwrap_or(name);
-    match NOT_CHECKABLE.iter().find(|(f, _)| *f == file) {
-        Some((_, why)) => match &report.answer {
-            Answer::Unsupported(m) => assert!(m.contains(why), "{name}: reason `{m}`"),
-            other => panic!("{name}: expected UNSUPPORTED ({why}), got {other:?}"),
-        },
-        None => assert_eq!(
-            report.answer,
-            Answer::Valid,
-            "{name}: certificate not VALID"
-        ),
-    }
+    assert_eq!(
+        report.answer,
+        Answer::Valid,
+        "{name}: certificate not VALID"
+    );
     let mut s = format!("answer: {:?}\n", report.answer);
     s += &format!("evidence: {}\n", cert["evidence"]["status"]);
     s += &format!("cells × steps: {} × {}\n", report.cells, report.steps);

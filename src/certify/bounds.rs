@@ -681,11 +681,107 @@ pub struct PlantRows {
     pub err: Option<(DMatrix<f64>, DMatrix<f64>, Vec<f64>)>,
 }
 
+/// Finds a dual vector for the support of a direction (the writer's LP).
+pub type Solver<'a> = &'a dyn Fn(&[f64]) -> Option<Vec<f64>>;
+
+/// Dual vectors for supports over a polytope, in the order the supports
+/// are asked for: read from a certificate (the checker), or obtained from
+/// `solve` and recorded (the writer, which may use an LP solver; the
+/// checker never does). Any vector is sound: it only decides how tight
+/// the support is.
+pub struct Duals<'a> {
+    given: &'a [Vec<f64>],
+    solve: Option<Solver<'a>>,
+    used: std::cell::RefCell<Vec<Vec<f64>>>,
+}
+
+impl<'a> Duals<'a> {
+    /// Duals read from a certificate.
+    pub fn given(given: &'a [Vec<f64>]) -> Duals<'a> {
+        Duals {
+            given,
+            solve: None,
+            used: std::cell::RefCell::new(Vec::new()),
+        }
+    }
+
+    /// Duals found by `solve(c)` for each support of `c`.
+    pub fn solved(solve: Solver<'a>) -> Duals<'a> {
+        Duals {
+            given: &[],
+            solve: Some(solve),
+            used: std::cell::RefCell::new(Vec::new()),
+        }
+    }
+
+    /// The duals used so far, in order.
+    pub fn used(&self) -> Vec<Vec<f64>> {
+        self.used.borrow().clone()
+    }
+
+    fn next(&self, c: &[f64]) -> Vec<f64> {
+        let k = self.used.borrow().len();
+        let mu = match self.solve {
+            Some(f) => f(c).unwrap_or_default(),
+            None => self.given.get(k).cloned().unwrap_or_default(),
+        };
+        self.used.borrow_mut().push(mu.clone());
+        mu
+    }
+}
+
+impl std::fmt::Debug for Duals<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Duals({} used)", self.used.borrow().len())
+    }
+}
+
+/// `max c·x` over `{x ∈ box | H x ≤ h}` bounded with a dual `μ ≥ 0` (entries
+/// below zero or NaN count as 0): `μ·h + max_box (c − Hᵀμ)·x`, every
+/// rounding covered; `+∞` when `μ` does not fit the rows.
+fn dual_support(c: &[f64], rows: &[(Vec<f64>, f64)], mu: &[f64], x: &Bx) -> f64 {
+    if mu.len() != rows.len() {
+        return f64::INFINITY;
+    }
+    let mu: Vec<f64> = mu.iter().map(|m| if *m > 0.0 { *m } else { 0.0 }).collect();
+    let n = c.len();
+    let mut r = c.to_vec();
+    let mut mag: Vec<f64> = c.iter().map(|v| v.abs()).collect();
+    for ((a, _), m) in rows.iter().zip(&mu) {
+        if *m == 0.0 {
+            continue;
+        }
+        for j in 0..n {
+            let t = a[j] * m;
+            r[j] -= t;
+            mag[j] += t.abs();
+        }
+    }
+    let xmax = x.abs_max();
+    let k = rows.len() + 2;
+    let err = sum_upper((0..n).map(|j| {
+        mul0(
+            (gamma(k) * mag[j] * 1.0625 + k as f64 * ETA).next_up(),
+            xmax[j],
+        )
+    }));
+    let mh = sum_upper(rows.iter().zip(&mu).map(|((_, h), m)| mul0(*m, *h)));
+    sum_upper([dot_box_upper(&r, &x.lo, &x.hi), err, mh])
+}
+
 /// What is known of the states a step starts from beyond their box: at
-/// step 0 of an ℓp-ball initial set, the ball (supports are then the
-/// smaller of the box's and the ball's).
+/// step 0 of an ℓp-ball initial set, the ball; for a polytope initial set or
+/// a polytope reachable set, its inequalities (with dual witnesses for the
+/// supports). Supports are the smaller of the box's and the other's.
 #[derive(Clone, Copy, Debug)]
 pub enum Start<'a> {
+    /// `{x ∈ box | H x ≤ h}`, supports bounded with the duals.
+    Polytope {
+        /// The rows `(H_r, h_r)`.
+        rows: &'a [(Vec<f64>, f64)],
+        /// Where the dual vectors come from.
+        duals: &'a Duals<'a>,
+    },
     /// The box is all that is known.
     Box,
     /// `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}`, `norm` one of `1`, `2`, `inf`.
@@ -705,6 +801,15 @@ impl Start<'_> {
         let boxed = dot_box_upper(c, &x.lo, &x.hi);
         match self {
             Start::Box => boxed,
+            Start::Polytope { rows, duals } => {
+                let mu = duals.next(c);
+                let b = dual_support(c, rows, &mu, x);
+                if b.is_nan() {
+                    boxed
+                } else {
+                    boxed.min(b)
+                }
+            }
             Start::Ball {
                 center,
                 radius,
@@ -958,6 +1063,17 @@ impl Loop<'_> {
     }
 }
 
+/// What one step of a chain proves.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stepped {
+    /// The box of the next states.
+    pub next: Bx,
+    /// Upper bounds of the next states along the extra directions.
+    pub offsets: Vec<f64>,
+    /// The pre-activation bounds used.
+    pub witness: Witness,
+}
+
 /// One step of a cell's chain, kept for back-substitution by later steps.
 struct Link<'a> {
     lp: Loop<'a>,
@@ -978,7 +1094,8 @@ pub struct Chain<'a> {
 }
 
 impl<'a> Chain<'a> {
-    /// An empty chain; `start` is what is known of the cell beyond its box.
+    /// An empty chain; `start` is what the unrolled bounds know of the cell
+    /// beyond its box (a ball; polytope rows are used by the first step only).
     pub fn new(start: Start<'a>, unrolled: bool) -> Chain<'a> {
         Chain {
             start,
@@ -1053,32 +1170,49 @@ impl<'a> Chain<'a> {
     }
 
     /// The next step from the box `x` (the cell's box for the first step,
-    /// else the previous claimed box) with loop `lp`: its proven box and
-    /// the witness used (checked against `claimed` when given).
+    /// else the previous claimed box; `start` says what else is known of
+    /// it) with loop `lp`: its proven box, the proven offsets along the
+    /// extra `directions` (rows), and the witness used (checked against
+    /// `claimed` when given).
     pub fn step(
         &mut self,
         lp: Loop<'a>,
         x: &Bx,
+        start: Start,
+        directions: Option<&DMatrix<f64>>,
         claimed: Option<&[Bx]>,
-    ) -> Result<(Bx, Witness), Trouble> {
+    ) -> Result<Stepped, Trouble> {
         if !x.is_proper() {
             return Err(Trouble::Overflow);
         }
         let s = self.links.len();
-        let start = if s == 0 { self.start } else { Start::Box };
         let nb = self.net_bounds(&lp, x, claimed, false)?;
         let u = nb.output();
         if !u.is_proper() {
             return Err(Trouble::Overflow);
         }
         let n = x.lo.len();
-        let facets = plus_minus(n);
+        let extra = directions.map_or(0, DMatrix::nrows);
+        let mut facets = DMatrix::zeros(2 * n + extra, n);
+        facets
+            .view_mut((0, 0), (2 * n, n))
+            .copy_from(&plus_minus(n));
+        if let Some(d) = directions {
+            if d.ncols() != n {
+                return Err(Trouble::Shape(format!(
+                    "directions of width {} for {n} states",
+                    d.ncols()
+                )));
+            }
+            facets.view_mut((2 * n, 0), (extra, n)).copy_from(d);
+        }
         let mut ub = lp.facet_bounds(&facets, x, &start, &nb, &u);
         if self.unrolled && s > 0 {
+            let rows = facets.nrows();
             let lin = lp.back_step(
                 &Linear {
                     coef: facets.clone(),
-                    off: vec![0.0; 2 * n],
+                    off: vec![0.0; rows],
                 },
                 x,
                 &nb,
@@ -1091,10 +1225,11 @@ impl<'a> Chain<'a> {
             }
         }
         let next = Bx {
-            lo: ub[n..].iter().map(|v| -v).collect(),
+            lo: ub[n..2 * n].iter().map(|v| -v).collect(),
             hi: ub[..n].to_vec(),
         };
-        if !next.is_proper() {
+        let offsets = ub[2 * n..].to_vec();
+        if !next.is_proper() || offsets.iter().any(|v| !v.is_finite()) {
             return Err(Trouble::Overflow);
         }
         let witness = nb.witness.clone();
@@ -1104,7 +1239,11 @@ impl<'a> Chain<'a> {
             nb,
             u,
         });
-        Ok((next, witness))
+        Ok(Stepped {
+            next,
+            offsets,
+            witness,
+        })
     }
 }
 

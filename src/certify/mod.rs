@@ -47,7 +47,7 @@ use serde_json::Value;
 
 use crate::nn::Network;
 use crate::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
-use bounds::{Bx, Chain, Loop, PlantRows, Start, Trouble};
+use bounds::{Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
 
 /// The certificate format this module reads and [`crate::certificate`] writes.
 pub const FORMAT: &str = "ravel-certificate/1";
@@ -165,6 +165,9 @@ enum Prop {
         steps: (usize, usize),
     },
 }
+
+/// Inequalities `a·x ≤ b`.
+type Rows = Vec<(Vec<f64>, f64)>;
 
 /// The initial set as the checker reads it.
 enum Initial {
@@ -598,6 +601,8 @@ fn evidence(
         .ok_or("`evidence.cells` must be an array")?;
     let mut cells = Vec::with_capacity(cells_json.len());
     let mut sets: Vec<Vec<Bx>> = Vec::with_capacity(cells_json.len());
+    // per cell: the last claimed set's inequalities and the goal rows' duals over it
+    let mut finals: Vec<(Rows, Vec<Vec<f64>>)> = Vec::with_capacity(cells_json.len());
     for (c, cell) in cells_json.iter().enumerate() {
         let start = claimed_box(get(cell, "box")?, n, "cell box")?;
         if !start.is_proper() {
@@ -614,9 +619,43 @@ fn evidence(
         }
         let mut chain = vec![start.clone()];
         let mut links = Chain::new(problem.initial.start(), unrolled);
+        // the inequalities of the previous claimed set (step 0: a polytope X0's)
+        let mut prev_rows: Vec<(Vec<f64>, f64)> = match &problem.initial {
+            Initial::Polytope { rows, .. } => rows.clone(),
+            Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
+        };
         for (k, claim) in claims.iter().enumerate() {
             let t = k + 1;
             let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
+            let rows_now = match claim.get("rows") {
+                None => Vec::new(),
+                Some(r) => rows(r, n, "claimed rows")?,
+            };
+            let given: Vec<Vec<f64>> = match claim.get("duals") {
+                None => Vec::new(),
+                Some(d) => d
+                    .as_array()
+                    .ok_or("`duals` must be an array")?
+                    .iter()
+                    .map(|v| {
+                        let len = v.as_array().map_or(0, Vec::len);
+                        vector(v, len, "duals")
+                    })
+                    .collect::<R<Vec<_>>>()?,
+            };
+            let duals = Duals::given(&given);
+            let start_k = if !prev_rows.is_empty() {
+                Start::Polytope {
+                    rows: &prev_rows,
+                    duals: &duals,
+                }
+            } else if k == 0 {
+                problem.initial.start()
+            } else {
+                Start::Box
+            };
+            let directions = (!rows_now.is_empty())
+                .then(|| nalgebra::DMatrix::from_fn(rows_now.len(), n, |r, j| rows_now[r].0[j]));
             let witness = get(claim, "preactivations")?
                 .as_array()
                 .ok_or("`preactivations` must be an array")?
@@ -627,8 +666,25 @@ fn evidence(
                 })
                 .collect::<R<Vec<_>>>()?;
             let prev = &chain[k];
-            let proven = match links.step(problem.at(k, net), prev, Some(&witness)) {
-                Ok((b, _)) => b,
+            let stepped = links.step(
+                problem.at(k, net),
+                prev,
+                start_k,
+                directions.as_ref(),
+                Some(&witness),
+            );
+            let proven = match stepped {
+                Ok(st) => {
+                    for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
+                        if b < o {
+                            return Ok(Err(format!(
+                                "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
+                                crate::diag::compact(o - b)
+                            )));
+                        }
+                    }
+                    st.next
+                }
                 Err(Trouble::Neuron {
                     layer,
                     neuron,
@@ -666,9 +722,23 @@ fn evidence(
                 }
             }
             chain.push(set);
+            prev_rows = rows_now;
         }
+        let goal_duals: Vec<Vec<f64>> = match cell.get("goal_duals") {
+            None => Vec::new(),
+            Some(d) => d
+                .as_array()
+                .ok_or("`goal_duals` must be an array")?
+                .iter()
+                .map(|v| {
+                    let len = v.as_array().map_or(0, Vec::len);
+                    vector(v, len, "goal_duals")
+                })
+                .collect::<R<Vec<_>>>()?,
+        };
         cells.push(start);
         sets.push(chain);
+        finals.push((prev_rows, goal_duals));
     }
     let x0 = &problem.initial;
     if let Err(point) = cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
@@ -687,8 +757,19 @@ fn evidence(
             match prop {
                 Prop::Goal(g) => {
                     let last = &chain[problem.horizon];
+                    let (last_rows, goal_duals) = &finals[c];
+                    let duals = Duals::given(goal_duals);
+                    let support = Start::Polytope {
+                        rows: last_rows,
+                        duals: &duals,
+                    };
                     for (r, (a, b)) in g.iter().enumerate() {
-                        let worst = sum_upper([dot_box_upper(a, &last.lo, &last.hi), -b]);
+                        let top = if last_rows.is_empty() {
+                            dot_box_upper(a, &last.lo, &last.hi)
+                        } else {
+                            support.support(a, last)
+                        };
+                        let worst = sum_upper([top, -b]);
                         if worst.is_nan() || worst > 0.0 {
                             return Ok(Err(format!(
                                 "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",

@@ -361,7 +361,7 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
             cert["evidence"] = json!({
                 "status": "unsupported",
                 "reason": format!(
-                    "the checker's one-step box bounds do not prove the verdict ({why}); the analysis ({}) was tighter than what the checker re-derives",
+                    "the checker's own bounds do not prove the verdict ({why}): either the analysis ({}) used bounds tighter than the checker re-derives (Reach-SDP multipliers are not checkable yet), or its verdict is wrong",
                     plan.propagator.name()
                 ),
             });

@@ -461,3 +461,39 @@ fn dual_witnesses_cannot_prove_false_claims() {
         }
     }
 }
+
+#[test]
+fn a_wrong_verified_verdict_never_gets_a_valid_certificate() {
+    // an analysis bug that reports VERIFIED for a property a real trajectory
+    // violates: the writer's claims are the checker's own bounds, so the
+    // evidence cannot establish the verdict and is marked unsupported
+    let source = std::fs::read_to_string("specs/double_integrator_falsified.ravel").expect("spec");
+    let checked =
+        ravel::front_end(&source, Path::new("specs"), &ravel::cli::read_request).expect("valid");
+    let plan = ravel::lower::lower(&checked);
+    let mut outcome = ravel::execute::execute(&plan, &|| 0.0);
+    assert_eq!(
+        outcome.properties[0].status,
+        ravel::execute::Status::Falsified
+    );
+    outcome.properties[0].status = ravel::execute::Status::Verified;
+    outcome.properties[0].counterexample = None;
+    let id = ravel::certificate::Identity {
+        spec_path: String::new(),
+        spec_sha256: String::new(),
+    };
+    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    assert_eq!(cert["evidence"]["status"], "unsupported");
+    match answer(&cert, &plan) {
+        Answer::Unsupported(m) => assert!(m.contains("or its verdict is wrong"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    // and forcing the evidence to "checkable" with the honest chain is INVALID
+    let mut forced = cert.clone();
+    let (_, honest) = run("specs/double_integrator_falsified.ravel");
+    forced["evidence"] = honest["evidence"].clone();
+    match answer(&forced, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("leaves goal row"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+}

@@ -336,3 +336,213 @@ fn one_spec_many_controllers_and_folders() {
     assert_eq!(code, 2);
     assert!(err.contains("E0301"), "{err}");
 }
+
+fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_ravel"))
+}
+
+/// Several specs with every verdict, one broken spec and a missing file.
+fn batch_args() -> Vec<&'static str> {
+    vec![
+        "verify",
+        "specs/double_integrator.ravel",
+        "specs/double_integrator_falsified.ravel",
+        "specs/double_integrator_hard.ravel",
+        "specs/invalid/index_out_of_range.ravel",
+        "specs/no_such_spec.ravel",
+        "specs/double_integrator_partitioned.ravel",
+    ]
+}
+
+#[test]
+fn jobs_do_not_change_a_single_byte() {
+    let run = |jobs: &str| {
+        let o = bin()
+            .args(batch_args())
+            .args(["--format", "json", "--jobs", jobs])
+            .output()
+            .expect("runs");
+        assert_eq!(o.status.code(), Some(2));
+        o.stdout
+    };
+    let one = run("1");
+    assert_eq!(one, run("2"));
+    assert_eq!(one, run("5"));
+    let v: serde_json::Value = serde_json::from_slice(&one).expect("JSON");
+    let r = v["results"].as_array().expect("results");
+    assert_eq!(r.len(), 6);
+    let verdicts: Vec<&str> = r
+        .iter()
+        .map(|x| x["verdict"].as_str().unwrap_or(""))
+        .collect();
+    // the pairs in argument order, a missing file an ERROR in its place
+    assert_eq!(
+        verdicts,
+        [
+            "VERIFIED",
+            "FALSIFIED",
+            "UNSURE",
+            "ERROR",
+            "ERROR",
+            "VERIFIED"
+        ]
+    );
+    for (i, x) in r.iter().enumerate() {
+        assert_eq!(x["index"], i);
+    }
+}
+
+#[test]
+fn shards_merge_into_the_unsharded_report() {
+    let whole = bin()
+        .args(batch_args())
+        .args(["--format", "json"])
+        .output()
+        .expect("runs")
+        .stdout;
+    let dir = std::env::temp_dir().join(format!("ravel-shards-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let mut files = Vec::new();
+    let mut seen = 0;
+    for k in 1..=3 {
+        let o = bin()
+            .args(batch_args())
+            .args(["--format", "json", "--shard", &format!("{k}/3")])
+            .output()
+            .expect("runs");
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+        seen += v["results"].as_array().map_or(0, Vec::len);
+        assert_eq!(v["shard"], format!("{k}/3"));
+        let f = dir.join(format!("{k}.json"));
+        std::fs::write(&f, &o.stdout).expect("write");
+        files.push(f);
+    }
+    assert_eq!(seen, 6, "every pair in exactly one shard");
+    let merged = bin().arg("merge").args(&files).output().expect("runs");
+    assert_eq!(merged.status.code(), Some(2), "the batch has an ERROR");
+    assert_eq!(merged.stdout, whole);
+    // a missing or doubled shard is an error, never a silent partial report
+    let missing = bin().arg("merge").args(&files[..2]).output().expect("runs");
+    assert_eq!(missing.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("is in no shard"));
+    let doubled = bin()
+        .arg("merge")
+        .args(&files)
+        .arg(&files[0])
+        .output()
+        .expect("runs");
+    assert_eq!(doubled.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&doubled.stderr).contains("appears twice"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_batch_options_are_usage_errors() {
+    for args in [
+        ["--shard", "0/2"],
+        ["--shard", "3/2"],
+        ["--shard", "1/0"],
+        ["--shard", "half"],
+        ["--jobs", "0"],
+        ["--fail-on", "never"],
+    ] {
+        let o = bin()
+            .args(["verify", "specs/double_integrator.ravel"])
+            .args(args)
+            .output()
+            .expect("runs");
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(!o.stderr.is_empty());
+    }
+    let empty = std::env::temp_dir().join(format!("ravel-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).expect("dir");
+    let o = bin().arg("verify").arg(&empty).output().expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&empty);
+}
+
+#[test]
+fn junit_reports_parse_and_follow_the_gate() {
+    let run = |fail_on: &str| {
+        bin()
+            .args(batch_args())
+            .args(["--format", "junit", "--fail-on", fail_on])
+            .output()
+            .expect("runs")
+    };
+    let o = run("unsure");
+    assert_eq!(o.status.code(), Some(2));
+    let text = String::from_utf8(o.stdout).expect("UTF-8");
+    let doc = roxmltree::Document::parse(&text).expect("well-formed XML");
+    let root = doc.root_element();
+    assert_eq!(root.tag_name().name(), "testsuites");
+    let suites: Vec<_> = root
+        .children()
+        .filter(|n| n.has_tag_name("testsuite"))
+        .collect();
+    assert_eq!(suites.len(), 6);
+    let cases = root
+        .descendants()
+        .filter(|n| n.has_tag_name("testcase"))
+        .count();
+    // 2 properties in each of the 4 loaded specs, one case per error
+    assert_eq!(cases, 4 * 2 + 2);
+    let failures: Vec<_> = root
+        .descendants()
+        .filter(|n| n.has_tag_name("failure"))
+        .collect();
+    assert!(failures
+        .iter()
+        .any(|f| f.attribute("type") == Some("FALSIFIED")
+            && f.text().is_some_and(|t| t.contains("counterexample"))));
+    assert!(failures
+        .iter()
+        .any(|f| f.attribute("type") == Some("UNSURE")));
+    assert_eq!(
+        root.descendants()
+            .filter(|n| n.has_tag_name("error"))
+            .count(),
+        2
+    );
+    assert_eq!(root.attribute("errors"), Some("2"));
+    // --fail-on falsified: UNSURE is skipped, and a batch with only
+    // VERIFIED and UNSURE passes
+    let o = run("falsified");
+    let text = String::from_utf8(o.stdout).expect("UTF-8");
+    let doc = roxmltree::Document::parse(&text).expect("well-formed XML");
+    assert!(doc.descendants().any(|n| n.has_tag_name("skipped")));
+    let gate = |fail_on: &str| {
+        bin()
+            .args([
+                "verify",
+                "specs/double_integrator.ravel",
+                "specs/double_integrator_hard.ravel",
+                "--fail-on",
+                fail_on,
+            ])
+            .output()
+            .expect("runs")
+            .status
+            .code()
+    };
+    assert_eq!(gate("falsified"), Some(0));
+    assert_eq!(gate("unsure"), Some(3));
+}
+
+#[test]
+fn jsonl_is_one_result_per_line_then_a_summary() {
+    let o = bin()
+        .args(batch_args())
+        .args(["--format", "jsonl"])
+        .output()
+        .expect("runs");
+    let text = String::from_utf8(o.stdout).expect("UTF-8");
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON object per line"))
+        .collect();
+    assert_eq!(lines.len(), 7);
+    assert_eq!(lines[6]["verdict"], "ERROR");
+    assert_eq!(lines[1]["verdict"], "FALSIFIED");
+    assert_eq!(lines[4]["verdict"], "ERROR");
+}

@@ -1,6 +1,8 @@
 //! The command line. This is the only module that touches the file system,
 //! the terminal, the clock and the process exit code.
 
+mod batch;
+
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -10,7 +12,6 @@ use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
 
 use crate::diag::{render, Diagnostic};
-use crate::execute::Status;
 
 /// ravel — verify reach-avoid properties of neural feedback loops.
 #[derive(Parser, Debug)]
@@ -60,6 +61,31 @@ enum Cmd {
         /// `<spec>[--<controller>].cert.json` per (spec, controller) pair.
         #[arg(long, value_name = "PATH")]
         certificate: Option<PathBuf>,
+        /// Run this many (spec, controller) pairs at once (default: the
+        /// number of cores); the output is the same for every number.
+        #[arg(long, value_name = "N", value_parser = batch::parse_jobs)]
+        jobs: Option<usize>,
+        /// Run only shard K of N: the pairs whose index is K − 1 modulo N
+        /// (JSON output then records the shard; `ravel merge` joins them).
+        #[arg(long, value_name = "K/N", value_parser = batch::parse_shard)]
+        shard: Option<batch::Shard>,
+        /// Which verdicts fail the run: `unsure` (FALSIFIED exits 1, UNSURE
+        /// exits 3) or `falsified` (UNSURE exits 0; JUnit: skipped).
+        #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
+        fail_on: batch::FailOn,
+        /// No progress on standard error.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Join the JSON reports of `verify --shard K/N --format json` into the
+    /// report of the whole batch (every pair exactly once, in order).
+    Merge {
+        /// The shards' JSON reports.
+        #[arg(required = true)]
+        reports: Vec<PathBuf>,
+        /// Which verdicts fail the run (as for `verify`).
+        #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
+        fail_on: batch::FailOn,
     },
     /// Re-check certificates written by `verify --certificate`, without
     /// trusting the analysis: VALID, INVALID (with the first false claim) or
@@ -120,8 +146,14 @@ impl ProgressLine<'_> {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum Format {
+    /// A report per pair for people, and a summary line.
     Text,
+    /// One JSON document (`ravel-report/1`).
     Json,
+    /// One JSON result per line, then a summary line.
+    Jsonl,
+    /// JUnit XML: a test suite per pair, a test case per property.
+    Junit,
 }
 
 /// Write to standard output; `Err(())` when it is closed (e.g. piped into
@@ -573,170 +605,26 @@ pub fn main() -> ExitCode {
             timing,
             time_limit,
             certificate,
+            jobs,
+            shard,
+            fail_on,
+            quiet,
         } => {
-            let show_progress = std::io::stderr().is_terminal();
-            let mut worst: Option<Status> = None;
-            let mut input_error = false;
-            let mut results = Vec::new();
-            let run_started = Instant::now();
-            // (VERIFIED, FALSIFIED, UNSURE, ERROR) counts for the summary line
-            let mut counts = [0usize; 4];
-            let (pairs, errors) = pairs(&specs, &controllers);
-            // one file for a single result, else a folder of them
-            let cert_dir = certificate
-                .as_ref()
-                .filter(|c| pairs.len() + errors.len() > 1 || c.is_dir());
-            if let Some(d) = cert_dir {
-                if let Err(e) = std::fs::create_dir_all(d) {
-                    err(&format!(
-                        "error: cannot create certificate folder `{}`: {e}\n",
-                        crate::diag::sanitize(&d.display().to_string())
-                    ));
-                    return ExitCode::from(exit::INPUT_ERROR);
-                }
-            }
-            for e in &errors {
-                input_error = true;
-                counts[3] += 1;
-                match format {
-                    Format::Text => err(&format!("error: {e}\n")),
-                    Format::Json => results.push(json!({ "spec": null, "verdict": "ERROR", "errors": [{ "code": null, "message": e }] })),
-                }
-            }
-            for (path, controller) in &pairs {
-                let l = match load_with(path, controller.as_deref()) {
-                    Ok(l) => l,
-                    Err(msg) => {
-                        counts[3] += 1;
-                        input_error = true;
-                        match format {
-                            Format::Text => err(&format!("error: {msg}\n")),
-                            Format::Json => results.push(json!({ "spec": path.display().to_string(), "verdict": "ERROR", "errors": [{ "code": null, "message": msg }] })),
-                        }
-                        continue;
-                    }
-                };
-                let checked = match l.result {
-                    Ok(c) => c,
-                    Err(d) => {
-                        counts[3] += 1;
-                        input_error = true;
-                        match format {
-                            Format::Text => {
-                                err(&render(&d, &l.display, &l.source, width, color));
-                                err(&format!("{}: {} error(s)\n", l.display, d.len()));
-                            }
-                            Format::Json => {
-                                let mut v = diag_json(&l.name, &l.source, &d);
-                                if let Some(c) = controller {
-                                    v["controller"] = json!(c.display().to_string());
-                                }
-                                results.push(v)
-                            }
-                        }
-                        continue;
-                    }
-                };
-                let started = Instant::now();
-                let plan = crate::lower::lower(&checked);
-                let line = ProgressLine {
-                    name: &l.display,
-                    started,
-                    last: std::cell::Cell::new(0.0),
-                };
-                let outcome = crate::execute::execute_with(
-                    &plan,
-                    &crate::execute::Control {
-                        elapsed: &|| started.elapsed().as_secs_f64(),
-                        time_limit,
-                        progress: &|p| {
-                            if show_progress {
-                                line.show(p);
-                            }
-                        },
-                    },
-                );
-                line.clear();
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                if let Some(target) = &certificate {
-                    let file = match cert_dir {
-                        Some(d) => d.join(certificate_name(path, controller.as_deref())),
-                        None => target.clone(),
-                    };
-                    let id = crate::certificate::Identity {
-                        spec_path: path.display().to_string(),
-                        spec_sha256: crate::check::sha256_hex(l.source.as_bytes()),
-                    };
-                    let cert = crate::certificate::build(&plan, &outcome, &id);
-                    let text = serde_json::to_string(&cert).unwrap_or_default();
-                    if let Err(e) = std::fs::write(&file, text + "\n") {
-                        err(&format!(
-                            "error: cannot write certificate `{}`: {e}\n",
-                            crate::diag::sanitize(&file.display().to_string())
-                        ));
-                        input_error = true;
-                        counts[3] += 1;
-                    }
-                }
-                worst = worst.max(Some(outcome.verdict));
-                counts[match outcome.verdict {
-                    Status::Verified => 0,
-                    Status::Falsified => 1,
-                    Status::Unsure => 2,
-                }] += 1;
-                match format {
-                    Format::Text => {
-                        let t = (!no_timing).then_some(ms);
-                        let text = crate::report::text(&l.display, &plan, &outcome, t);
-                        if out(&text).is_err() {
-                            return ExitCode::from(exit::BROKEN_PIPE);
-                        }
-                    }
-                    Format::Json => results.push(crate::report::json(
-                        &l.name,
-                        &plan,
-                        &outcome,
-                        timing.then_some(ms),
-                    )),
-                }
-            }
-            if format == Format::Text && counts.iter().sum::<usize>() > 1 {
-                let names = ["VERIFIED", "FALSIFIED", "UNSURE", "ERROR"];
-                let parts: Vec<String> = counts
-                    .iter()
-                    .zip(names)
-                    .filter(|(n, _)| **n > 0)
-                    .map(|(n, name)| format!("{n} {name}"))
-                    .collect();
-                let time = if no_timing {
-                    String::new()
-                } else {
-                    format!(" in {:.1} s", run_started.elapsed().as_secs_f64())
-                };
-                if out(&format!("summary: {}{time}", parts.join(", "))).is_err() {
-                    return ExitCode::from(exit::BROKEN_PIPE);
-                }
-            }
-            let overall = if input_error {
-                "ERROR"
-            } else {
-                worst.map_or("VERIFIED", Status::as_str)
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let opts = batch::Options {
+                format,
+                no_timing,
+                timing,
+                time_limit,
+                certificate,
+                fail_on,
+                jobs: jobs.unwrap_or(cores),
+                shard,
+                progress: !quiet && std::io::stderr().is_terminal(),
+                color,
             };
-            if format == Format::Json {
-                let doc = json!({ "schema": crate::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall, "results": results });
-                if out(&serde_json::to_string_pretty(&doc).unwrap_or_default()).is_err() {
-                    return ExitCode::from(exit::BROKEN_PIPE);
-                }
-            }
-            ExitCode::from(if input_error {
-                exit::INPUT_ERROR
-            } else {
-                match worst {
-                    Some(Status::Falsified) => exit::FALSIFIED,
-                    Some(Status::Unsure) => exit::UNSURE,
-                    _ => exit::VERIFIED,
-                }
-            })
+            batch::verify(&specs, &controllers, &opts)
         }
+        Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
     }
 }

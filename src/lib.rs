@@ -17,6 +17,7 @@ pub mod lp;
 pub mod nn;
 pub mod num;
 pub mod onnx;
+pub mod plot;
 pub mod report;
 pub mod rng;
 pub mod sets;

@@ -546,3 +546,89 @@ fn jsonl_is_one_result_per_line_then_a_summary() {
     assert_eq!(lines[1]["verdict"], "FALSIFIED");
     assert_eq!(lines[4]["verdict"], "ERROR");
 }
+
+#[test]
+fn plots_are_svg_documents_with_the_sets() {
+    let dir = std::env::temp_dir().join(format!("ravel-plots-{}", std::process::id()));
+    let o = bin()
+        .args([
+            "verify",
+            "specs/double_integrator_falsified.ravel",
+            "specs/double_integrator_partitioned.ravel",
+            "--quiet",
+            "--plot",
+        ])
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(1));
+    for (name, cells, counterexample) in [
+        ("double_integrator_falsified", 1, true),
+        ("double_integrator_partitioned", 16, false),
+    ] {
+        let text = std::fs::read_to_string(dir.join(format!("{name}.svg"))).expect("plot written");
+        let doc = roxmltree::Document::parse(&text).expect("well-formed SVG");
+        let group = |id: &str| {
+            doc.descendants()
+                .find(|n| n.attribute("id") == Some(id))
+                .unwrap_or_else(|| panic!("{name}: no group {id}"))
+        };
+        // one box per cell and step (5 steps), one bounding box per step
+        assert_eq!(
+            group("cells")
+                .children()
+                .filter(|n| n.has_tag_name("rect"))
+                .count(),
+            cells * 5
+        );
+        assert_eq!(
+            group("reach")
+                .children()
+                .filter(|n| n.has_tag_name("rect"))
+                .count(),
+            5
+        );
+        assert!(group("properties")
+            .children()
+            .any(|n| n.has_tag_name("polygon")));
+        assert!(
+            group("samples")
+                .children()
+                .filter(|n| n.has_tag_name("polyline"))
+                .count()
+                >= 50
+        );
+        assert_eq!(
+            doc.descendants()
+                .any(|n| n.attribute("id") == Some("counterexample")),
+            counterexample,
+            "{name}"
+        );
+    }
+    // coordinates that do not exist: an ERROR result, the others still run
+    let o = bin()
+        .args([
+            "verify",
+            "specs/double_integrator.ravel",
+            "--quiet",
+            "--plot-dims",
+            "0,5",
+            "--plot",
+        ])
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the state has 2 coordinates"));
+    let o = bin()
+        .args([
+            "verify",
+            "specs/double_integrator.ravel",
+            "--plot-dims",
+            "1,1",
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}

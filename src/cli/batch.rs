@@ -63,6 +63,25 @@ pub fn parse_shard(s: &str) -> Result<Shard, String> {
     Ok(Shard { k, n })
 }
 
+/// Parse `I,J`: two different state coordinates.
+pub fn parse_dims(s: &str) -> Result<(usize, usize), String> {
+    let (i, j) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}` is not I,J (for example 0,1)"))?;
+    let i: usize = i
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{i}` is not a coordinate"))?;
+    let j: usize = j
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{j}` is not a coordinate"))?;
+    if i == j {
+        return Err("the two plotted coordinates must differ".into());
+    }
+    Ok((i, j))
+}
+
 /// Parse a positive number of jobs.
 pub fn parse_jobs(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
@@ -94,6 +113,10 @@ pub struct Options {
     pub progress: bool,
     /// Colour in diagnostics.
     pub color: bool,
+    /// A folder for one SVG per result.
+    pub plot: Option<PathBuf>,
+    /// The coordinates plotted.
+    pub plot_dims: (usize, usize),
 }
 
 /// What one item is.
@@ -267,6 +290,35 @@ fn run(index: usize, work: &Work, opts: &Options, cert_dir: Option<&Path>, show:
             );
             stderr = format!("error: {msg}\n");
             json["certificate_error"] = json!(msg);
+            json["verdict"] = json!("ERROR");
+            class = Class::Error;
+        }
+    }
+    if let Some(dir) = &opts.plot {
+        let (i, j) = opts.plot_dims;
+        let n = plan.closed_loop.states();
+        let file =
+            dir.join(super::certificate_name(path, controller).replace(".cert.json", ".svg"));
+        let result = if i >= n || j >= n {
+            Err(format!(
+                "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
+                n - 1
+            ))
+        } else {
+            let samples: Vec<_> = (0..plan.samples.min(100))
+                .filter_map(|k| crate::execute::simulate(&plan, k))
+                .collect();
+            let svg = crate::plot::svg(&l.display, &plan, &outcome, (i, j), &samples);
+            std::fs::write(&file, svg).map_err(|e| {
+                format!(
+                    "cannot write plot `{}`: {e}",
+                    crate::diag::sanitize(&file.display().to_string())
+                )
+            })
+        };
+        if let Err(msg) = result {
+            stderr += &format!("error: {msg}\n");
+            json["plot_error"] = json!(msg);
             json["verdict"] = json!("ERROR");
             class = Class::Error;
         }
@@ -447,10 +499,10 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         .certificate
         .as_deref()
         .filter(|c| total > 1 || c.is_dir());
-    if let Some(d) = cert_dir {
+    for d in cert_dir.into_iter().chain(opts.plot.as_deref()) {
         if let Err(e) = std::fs::create_dir_all(d) {
             err(&format!(
-                "error: cannot create certificate folder `{}`: {e}\n",
+                "error: cannot create folder `{}`: {e}\n",
                 crate::diag::sanitize(&d.display().to_string())
             ));
             return ExitCode::from(exit::INPUT_ERROR);

@@ -76,6 +76,14 @@ enum Cmd {
         /// No progress on standard error.
         #[arg(long)]
         quiet: bool,
+        /// Write one SVG per result into this folder (created if missing):
+        /// the reachable sets per step, simulated trajectories, X0, goal,
+        /// avoid sets and any counterexample, projected on two states.
+        #[arg(long, value_name = "DIR")]
+        plot: Option<PathBuf>,
+        /// The two state coordinates a plot shows (default 0,1).
+        #[arg(long, value_name = "I,J", value_parser = batch::parse_dims, default_value = "0,1")]
+        plot_dims: (usize, usize),
     },
     /// Join the JSON reports of `verify --shard K/N --format json` into the
     /// report of the whole batch (every pair exactly once, in order).
@@ -609,6 +617,8 @@ pub fn main() -> ExitCode {
             shard,
             fail_on,
             quiet,
+            plot,
+            plot_dims,
         } => {
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = batch::Options {
@@ -622,6 +632,8 @@ pub fn main() -> ExitCode {
                 shard,
                 progress: !quiet && std::io::stderr().is_terminal(),
                 color,
+                plot,
+                plot_dims,
             };
             batch::verify(&specs, &controllers, &opts)
         }

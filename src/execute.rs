@@ -556,13 +556,18 @@ fn cell_region(initial: &Region, cell: &IBox) -> Region {
 /// has no clock and no terminal of its own).
 pub struct Control<'a> {
     /// Seconds since the run started.
-    pub elapsed: &'a dyn Fn() -> f64,
+    pub elapsed: &'a (dyn Fn() -> f64 + Sync),
     /// Stop after this many seconds, soundly: samples not drawn are not
     /// drawn, steps not propagated are the whole space ([`Cut::TimeLimit`]),
     /// and every property depending on them is UNSURE.
     pub time_limit: Option<f64>,
-    /// Told now and then what is being done (for a progress line).
-    pub progress: &'a dyn Fn(Progress),
+    /// Told now and then what is being done (for a progress line); may be
+    /// called from several threads.
+    pub progress: &'a (dyn Fn(Progress) + Sync),
+    /// Threads for the cells of a uniform partition (1: none). The outcome
+    /// is the same for every number: cells are independent and their sets
+    /// are collected in cell order.
+    pub threads: usize,
 }
 
 impl Control<'_> {
@@ -594,13 +599,14 @@ pub struct Progress {
 /// Execute a plan with no time limit and no progress reports. `elapsed`
 /// returns the seconds since the run started; it is consulted only by a
 /// partitioner with a time budget.
-pub fn execute(plan: &Plan, elapsed: &dyn Fn() -> f64) -> Outcome {
+pub fn execute(plan: &Plan, elapsed: &(dyn Fn() -> f64 + Sync)) -> Outcome {
     execute_with(
         plan,
         &Control {
             elapsed,
             time_limit: None,
             progress: &|_| {},
+            threads: 1,
         },
     )
 }
@@ -685,18 +691,47 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
     // the whole initial set first: every cell is kept inside it
     let root = (regions.len() > 1).then(|| propagate_cell_until(plan, &plan.initial, None, &stop));
     let calls = regions.len() + usize::from(root.is_some());
-    let sets = regions
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            (ctl.progress)(Progress {
-                phase: Phase::Cells,
-                done: i,
-                total: Some(regions.len()),
-            });
-            propagate_cell_until(plan, c, root.as_deref(), &stop)
-        })
-        .collect();
+    let one = |i: usize| {
+        (ctl.progress)(Progress {
+            phase: Phase::Cells,
+            done: i,
+            total: Some(regions.len()),
+        });
+        propagate_cell_until(plan, &regions[i], root.as_deref(), &stop)
+    };
+    let threads = ctl.threads.clamp(1, regions.len().max(1));
+    let sets = if threads == 1 {
+        (0..regions.len()).map(one).collect()
+    } else {
+        // cells are independent: threads take the next index, and the
+        // sets are put back in cell order
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let mut slots: Vec<Option<Vec<Step>>> = vec![None; regions.len()];
+        let done: Vec<Vec<(usize, Vec<Step>)>> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let mut mine = Vec::new();
+                        loop {
+                            let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            if i >= regions.len() {
+                                break mine;
+                            }
+                            mine.push((i, one(i)));
+                        }
+                    })
+                })
+                .collect();
+            workers
+                .into_iter()
+                .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        for (i, steps) in done.into_iter().flatten() {
+            slots[i] = Some(steps);
+        }
+        slots.into_iter().flatten().collect()
+    };
     Partitioned {
         cells: regions.iter().map(Region::bbox).collect(),
         sets,

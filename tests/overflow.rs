@@ -166,6 +166,7 @@ fn a_spent_time_limit_leaves_everything_unsure() {
                     elapsed: &|| 1.0,
                     time_limit: Some(0.5),
                     progress: &|_| {},
+                    threads: 2,
                 },
             );
             let what = format!("{} / {part}", prop.name());

@@ -203,7 +203,14 @@ fn error_item(
 }
 
 /// Run one item (no output; everything is returned).
-fn run(index: usize, work: &Work, opts: &Options, cert_dir: Option<&Path>, show: bool) -> Item {
+fn run(
+    index: usize,
+    work: &Work,
+    opts: &Options,
+    cert_dir: Option<&Path>,
+    show: bool,
+    cell_threads: usize,
+) -> Item {
     let (path, controller) = match work {
         Work::Argument(e) => {
             return error_item(
@@ -252,7 +259,7 @@ fn run(index: usize, work: &Work, opts: &Options, cert_dir: Option<&Path>, show:
     let line = ProgressLine {
         name: &l.display,
         started,
-        last: std::cell::Cell::new(0.0),
+        last: std::sync::atomic::AtomicU64::new(0),
     };
     let outcome = crate::execute::execute_with(
         &plan,
@@ -264,6 +271,7 @@ fn run(index: usize, work: &Work, opts: &Options, cert_dir: Option<&Path>, show:
                     line.show(p);
                 }
             },
+            threads: cell_threads,
         },
     );
     line.clear();
@@ -538,7 +546,8 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
     };
     if jobs == 1 {
         for &i in &mine {
-            let item = run(i, &work[i], opts, cert_dir, opts.progress);
+            // a single pair gets the jobs for its cells
+            let item = run(i, &work[i], opts, cert_dir, opts.progress, opts.jobs);
             if !emit(item, &mut counts) {
                 broken = true;
                 break;
@@ -556,7 +565,7 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
                     let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let Some(&i) = mine.get(k) else { break };
                     if tx
-                        .send((k, run(i, &work[i], opts, cert_dir, false)))
+                        .send((k, run(i, &work[i], opts, cert_dir, false, 1)))
                         .is_err()
                     {
                         break;

@@ -124,16 +124,18 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 struct ProgressLine<'a> {
     name: &'a str,
     started: Instant,
-    last: std::cell::Cell<f64>,
+    /// Seconds (as `f64` bits) when the line was last written; 0: never.
+    last: std::sync::atomic::AtomicU64,
 }
 
 impl ProgressLine<'_> {
     fn show(&self, p: crate::execute::Progress) {
+        use std::sync::atomic::Ordering;
         let now = self.started.elapsed().as_secs_f64();
-        if now - self.last.get() < 0.25 || now < 0.5 {
+        if now - f64::from_bits(self.last.load(Ordering::Relaxed)) < 0.25 || now < 0.5 {
             return;
         }
-        self.last.set(now);
+        self.last.store(now.to_bits(), Ordering::Relaxed);
         let what = match p.phase {
             crate::execute::Phase::Sampling => "simulating",
             crate::execute::Phase::Cells => "propagating cell",
@@ -146,7 +148,7 @@ impl ProgressLine<'_> {
     }
 
     fn clear(&self) {
-        if self.last.get() > 0.0 {
+        if self.last.load(std::sync::atomic::Ordering::Relaxed) != 0 {
             err("\r\x1b[2K");
         }
     }

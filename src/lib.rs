@@ -9,6 +9,7 @@ pub mod cli;
 pub mod diag;
 pub mod execute;
 pub mod expm;
+pub mod fmt;
 pub mod ir;
 pub mod issue;
 pub mod limits;

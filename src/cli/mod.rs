@@ -85,6 +85,16 @@ enum Cmd {
         #[arg(long, value_name = "I,J", value_parser = batch::parse_dims, default_value = "0,1")]
         plot_dims: (usize, usize),
     },
+    /// Rewrite specs in the canonical layout, comments kept (`--check`:
+    /// change nothing, print a diff and exit 1 when a file would change).
+    Fmt {
+        /// Spec files (.ravel), or folders searched recursively for them.
+        #[arg(required = true)]
+        specs: Vec<PathBuf>,
+        /// Only check: exit 1 and print a diff if a file is not formatted.
+        #[arg(long)]
+        check: bool,
+    },
     /// Join the JSON reports of `verify --shard K/N --format json` into the
     /// report of the whole batch (every pair exactly once, in order).
     Merge {
@@ -542,6 +552,125 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
     (code, text)
 }
 
+/// A line diff of `a` and `b` (longest common subsequence), `-`/`+` lines
+/// with one line of context; a whole-file replacement when the files are
+/// too long to compare line by line.
+fn diff(name: &str, a: &str, b: &str) -> String {
+    let (x, y): (Vec<&str>, Vec<&str>) = (a.lines().collect(), b.lines().collect());
+    let mut out = format!("--- {name}\n+++ {name} (formatted)\n");
+    if x.len().saturating_mul(y.len()) > 4_000_000 {
+        out.extend(x.iter().map(|l| format!("-{l}\n")));
+        out.extend(y.iter().map(|l| format!("+{l}\n")));
+        return out;
+    }
+    // lcs[i][j]: common subsequence length of x[i..] and y[j..]
+    let mut lcs = vec![vec![0u32; y.len() + 1]; x.len() + 1];
+    for i in (0..x.len()).rev() {
+        for j in (0..y.len()).rev() {
+            lcs[i][j] = if x[i] == y[j] {
+                lcs[i + 1][j + 1] + 1
+            } else {
+                lcs[i + 1][j].max(lcs[i][j + 1])
+            };
+        }
+    }
+    let (mut i, mut j) = (0, 0);
+    while i < x.len() || j < y.len() {
+        if i < x.len() && j < y.len() && x[i] == y[j] {
+            i += 1;
+            j += 1;
+        } else if i < x.len() && (j == y.len() || lcs[i + 1][j] >= lcs[i][j + 1]) {
+            out += &format!("{:>5} -{}\n", i + 1, x[i]);
+            i += 1;
+        } else {
+            out += &format!("{:>5} +{}\n", j + 1, y[j]);
+            j += 1;
+        }
+    }
+    out
+}
+
+/// `ravel fmt`.
+fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
+    let mut code = exit::VERIFIED;
+    let mut files = Vec::new();
+    for s in specs {
+        match expand(s, "ravel") {
+            Ok(v) => files.extend(v),
+            Err(e) => {
+                err(&format!("error: {e}\n"));
+                code = exit::INPUT_ERROR;
+            }
+        }
+    }
+    for f in &files {
+        let name = crate::diag::sanitize(&f.display().to_string());
+        let bytes = match read_request(&crate::ReadRequest {
+            path: f.clone(),
+            inside: None,
+            max_bytes: crate::limits::MAX_SPEC_BYTES,
+            whole: true,
+        }) {
+            Ok(b) => b,
+            Err(e) => {
+                err(&format!("error: cannot read `{name}`: {e}\n"));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+        };
+        let Ok(source) = String::from_utf8(bytes) else {
+            err(&format!("error: `{name}` is not UTF-8 text\n"));
+            code = exit::INPUT_ERROR;
+            continue;
+        };
+        let formatted = match crate::fmt::format(&source) {
+            Ok(t) => t,
+            Err(crate::fmt::Error::Syntax(d)) => {
+                err(&render(
+                    &d,
+                    &name,
+                    &source,
+                    100,
+                    std::io::stderr().is_terminal(),
+                ));
+                err(&format!("{name}: not formatted (it does not parse)\n"));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+            Err(crate::fmt::Error::Changed) => {
+                err(&format!(
+                    "error: `{name}`: formatting would change its meaning (a ravel bug, please report it); the file is left as it is\n"
+                ));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+        };
+        if formatted == source {
+            continue;
+        }
+        if check {
+            if out(&diff(&name, &source, &formatted)).is_err() {
+                return ExitCode::from(exit::BROKEN_PIPE);
+            }
+            if code == exit::VERIFIED {
+                code = exit::FALSIFIED;
+            }
+            continue;
+        }
+        // write beside, then rename: a crash never leaves half a spec
+        let tmp = f.with_extension("ravel.fmt-tmp");
+        let written = std::fs::write(&tmp, &formatted).and_then(|()| std::fs::rename(&tmp, f));
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            err(&format!("error: cannot write `{name}`: {e}\n"));
+            code = exit::INPUT_ERROR;
+        } else if out(&format!("formatted {name}")).is_err() {
+            return ExitCode::from(exit::BROKEN_PIPE);
+        }
+    }
+    ExitCode::from(code)
+}
+
 /// Run the CLI with the process arguments.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -640,5 +769,6 @@ pub fn main() -> ExitCode {
             batch::verify(&specs, &controllers, &opts)
         }
         Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
+        Cmd::Fmt { specs, check } => fmt_files(&specs, check),
     }
 }

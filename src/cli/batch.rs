@@ -210,6 +210,7 @@ fn run(
     cert_dir: Option<&Path>,
     show: bool,
     cell_threads: usize,
+    position: Option<(usize, usize)>,
 ) -> Item {
     let (path, controller) = match work {
         Work::Argument(e) => {
@@ -256,8 +257,12 @@ fn run(
     };
     let started = Instant::now();
     let plan = crate::lower::lower(&checked);
+    let shown = match position {
+        Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
+        _ => l.display.clone(),
+    };
     let line = ProgressLine {
-        name: &l.display,
+        name: &shown,
         started,
         last: std::sync::atomic::AtomicU64::new(0),
     };
@@ -545,9 +550,18 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         true
     };
     if jobs == 1 {
-        for &i in &mine {
+        for (k, &i) in mine.iter().enumerate() {
             // a single pair gets the jobs for its cells
-            let item = run(i, &work[i], opts, cert_dir, opts.progress, opts.jobs);
+            let position = Some((k + 1, mine.len()));
+            let item = run(
+                i,
+                &work[i],
+                opts,
+                cert_dir,
+                opts.progress,
+                opts.jobs,
+                position,
+            );
             if !emit(item, &mut counts) {
                 broken = true;
                 break;
@@ -565,7 +579,7 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
                     let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let Some(&i) = mine.get(k) else { break };
                     if tx
-                        .send((k, run(i, &work[i], opts, cert_dir, false, 1)))
+                        .send((k, run(i, &work[i], opts, cert_dir, false, 1, None)))
                         .is_err()
                     {
                         break;
@@ -585,7 +599,11 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
                         next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
                     }
                     if opts.progress && !broken {
-                        err(&format!("\r\x1b[2K{written} of {} results", mine.len()));
+                        err(&format!(
+                            "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
+                            mine.len(),
+                            run_started.elapsed().as_secs_f64()
+                        ));
                     }
                 }
             }

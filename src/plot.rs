@@ -77,6 +77,11 @@ fn clip(window: &[(f64, f64)], rows: &[([f64; 2], f64)]) -> Vec<(f64, f64)> {
                 }
             }
         }
+        // points on the line are met twice: keep one
+        out.dedup();
+        if out.len() > 1 && out.first() == out.last() {
+            out.pop();
+        }
         poly = out;
         if poly.is_empty() {
             break;

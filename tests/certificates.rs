@@ -497,3 +497,70 @@ fn a_wrong_verified_verdict_never_gets_a_valid_certificate() {
         other => panic!("{other:?}"),
     }
 }
+
+/// Random junk (nulls, 1e308, huge integers, strings, empty or nested
+/// arrays, inverted boxes, subnormals) in random places of real
+/// certificates: the checker answers, it never panics.
+#[test]
+fn mutated_certificates_never_panic() {
+    // a small deterministic generator (no dependency)
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let junk = [
+        serde_json::json!(null),
+        serde_json::json!(1e308),
+        serde_json::json!(-1e308),
+        serde_json::json!(0),
+        serde_json::json!(-0.0),
+        serde_json::json!(u64::MAX),
+        serde_json::json!("x"),
+        serde_json::json!([]),
+        serde_json::json!([[[]]]),
+        serde_json::json!({}),
+        serde_json::json!([1e-320, -5e-324]),
+        serde_json::json!({"lo": [1.0], "hi": [0.0]}),
+    ];
+    for spec in [
+        "specs/double_integrator.ravel",
+        "specs/double_integrator_hull.ravel",
+        "specs/double_integrator_falsified.ravel",
+        "specs/double_integrator_unrolled.ravel",
+    ] {
+        let (plan, cert) = run(spec);
+        // every node's JSON pointer
+        fn pointers(v: &Value, at: String, out: &mut Vec<String>) {
+            out.push(at.clone());
+            match v {
+                Value::Array(a) => {
+                    for (i, x) in a.iter().enumerate() {
+                        pointers(x, format!("{at}/{i}"), out);
+                    }
+                }
+                Value::Object(o) => {
+                    for (k, x) in o {
+                        pointers(x, format!("{at}/{k}"), out);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let mut all = Vec::new();
+        pointers(&cert, String::new(), &mut all);
+        for _ in 0..400 {
+            let mut bad = cert.clone();
+            let ptr = &all[(next() % all.len() as u64) as usize];
+            let value = junk[(next() % junk.len() as u64) as usize].clone();
+            if let Some(slot) = bad.pointer_mut(ptr) {
+                *slot = value;
+            }
+            let net = plan.closed_loop.net.clone();
+            let got = std::panic::catch_unwind(move || check(&bad, &net).answer);
+            assert!(got.is_ok(), "{spec}: a mutation at {ptr} panicked");
+        }
+    }
+}

@@ -1,4 +1,5 @@
-//! Mutation fuzzing of the front end (parser and checker) and of the ONNX
+//! Mutation fuzzing of the front end (parser and checker, and the formatter:
+//! idempotent, never a change of meaning) and of the ONNX
 //! loader, in process, with no file-system access (an in-memory reader).
 //!
 //! Opt-in: the tests are `#[ignore]`d and run for `RAVEL_FUZZ_SECONDS`
@@ -250,6 +251,16 @@ fn fuzz_front_end() {
         watchdog.case(&input);
         let started = Instant::now();
         let r = catch_unwind(AssertUnwindSafe(|| {
+            // the formatter: idempotent, and never a change of meaning
+            match ravel::fmt::format(&source) {
+                Ok(f) => assert_eq!(
+                    ravel::fmt::format(&f).ok().as_deref(),
+                    Some(f.as_str()),
+                    "fmt is not idempotent"
+                ),
+                Err(ravel::fmt::Error::Changed) => panic!("fmt would change the meaning"),
+                Err(ravel::fmt::Error::Syntax(_)) => {}
+            }
             match ravel::front_end(&source, Path::new("specs"), &reader) {
                 Ok(c) => {
                     let plan = ravel::lower::lower(&c);

@@ -657,9 +657,12 @@ fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
             }
             continue;
         }
-        // write beside, then rename: a crash never leaves half a spec
-        let tmp = f.with_extension("ravel.fmt-tmp");
-        let written = std::fs::write(&tmp, &formatted).and_then(|()| std::fs::rename(&tmp, f));
+        // write beside, then rename: a crash never leaves half a spec (and a
+        // symbolic link keeps pointing at the formatted file)
+        let target = std::fs::canonicalize(f).unwrap_or_else(|_| f.clone());
+        let tmp = target.with_extension("ravel.fmt-tmp");
+        let written =
+            std::fs::write(&tmp, &formatted).and_then(|()| std::fs::rename(&tmp, &target));
         if let Err(e) = written {
             let _ = std::fs::remove_file(&tmp);
             err(&format!("error: cannot write `{name}`: {e}\n"));

@@ -609,7 +609,8 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 "{} {prop:?} {:?} {:?}",
                 case.label, plan.partitioner, plan.boundary
             );
-            // the certificate of the result: never INVALID; VALID when checkable
+            // the certificate of the result: VALID (every VERIFIED verdict
+            // re-checked), never INVALID
             let id = ravel::certificate::Identity {
                 spec_path: String::new(),
                 spec_sha256: String::new(),
@@ -626,13 +627,10 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                         certified += 1;
                     }
                 }
-                ravel::certify::Answer::Unsupported(m) => {
-                    if std::env::var("RAVEL_DEBUG_CERT").is_ok() {
-                        eprintln!(
-                            "{what}: {m} {:?}",
-                            out.properties.iter().map(|p| p.status).collect::<Vec<_>>()
-                        );
-                    }
+                // only a verdict that Reach-SDP's tightness alone proves may
+                // lack checkable evidence (its multipliers are no witness yet)
+                ravel::certify::Answer::Unsupported(m) if prop == Propagator::ReachSdp => {
+                    let _ = m;
                 }
                 other => panic!("{what}: certificate {other:?}"),
             }

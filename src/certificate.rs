@@ -16,7 +16,7 @@
 
 use serde_json::{json, Value};
 
-use crate::analysis::closed_loop::Propagator;
+use crate::analysis::closed_loop::{ClosedLoop, Propagator};
 use nalgebra::DMatrix;
 
 use crate::certify::bounds::{widen, Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
@@ -156,11 +156,9 @@ fn trajectory_json(tr: &Trajectory) -> Value {
     })
 }
 
-/// The VERIFIED evidence: per cell, the chain of boxes with the witness of
-/// every step, up to `steps`.
-fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String> {
-    let cl = &plan.closed_loop;
-    let plants: Vec<PlantRows> = cl
+/// The closed loop's plants and noise boxes in the checker's types.
+pub fn loop_data(cl: &ClosedLoop) -> (Vec<PlantRows>, Bx, Bx) {
+    let plants = cl
         .plants()
         .into_iter()
         .map(|p| PlantRows {
@@ -173,14 +171,18 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
                 .map(|e| (e.a.clone(), e.b.clone(), e.c.as_slice().to_vec())),
         })
         .collect();
-    let w = Bx {
-        lo: cl.plant.w.lo.clone(),
-        hi: cl.plant.w.hi.clone(),
+    let boxed = |b: &IBox| Bx {
+        lo: b.lo.clone(),
+        hi: b.hi.clone(),
     };
-    let v = Bx {
-        lo: cl.plant.v.lo.clone(),
-        hi: cl.plant.v.hi.clone(),
-    };
+    (plants, boxed(&cl.plant.w), boxed(&cl.plant.v))
+}
+
+/// The VERIFIED evidence: per cell, the chain of boxes with the witness of
+/// every step, up to `steps`.
+fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let (plants, w, v) = loop_data(cl);
     // the unrolled chain costs quadratic time in the horizon: only when the
     // analysis itself unrolled
     let unrolled = plan.propagator == Propagator::CrownUnrolled;

@@ -508,6 +508,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
 
     let mut checked = 0usize;
     let mut certified = 0usize;
+    let mut claimed = 0usize;
     for seed in 0..36u64 {
         let case = random_case(seed);
         let n = case.x0.dim();
@@ -634,6 +635,17 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 }
                 other => panic!("{what}: certificate {other:?}"),
             }
+            // the claims of a checkable certificate: (steps, per cell the claims)
+            let claims = (cert["evidence"]["status"] == "checkable").then(|| {
+                let steps = cert["evidence"]["steps"].as_u64().unwrap_or(0) as usize;
+                let cells: Vec<Vec<serde_json::Value>> = cert["evidence"]["cells"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .map(|c| c["steps"].as_array().cloned().unwrap_or_default())
+                    .collect();
+                (steps, cells)
+            });
             let mut rng = Rng::new(seed * 104_729 + 17);
             let mut tried = 0;
             while tried < 60 {
@@ -649,6 +661,15 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                         out.reach[t]
                     );
                     checked += 1;
+                    // and inside the certificate's claims (boxes cut by their
+                    // inequalities), whose supports use LP duals and balls
+                    if let Some(claims) = claims.as_ref().filter(|c| t >= 1 && t <= c.0) {
+                        assert!(
+                            claims.1.iter().any(|cell| claim_holds(&cell[t - 1], &x)),
+                            "{what}: step {t} state {x:?} outside every certificate claim"
+                        );
+                        claimed += 1;
+                    }
                     if t < case.horizon {
                         x = advance(&mut rng, &case.cl, t, &x);
                     }
@@ -657,6 +678,10 @@ fn every_trajectory_stays_inside_what_execute_reports() {
         }
     }
     assert!(checked > 30_000, "only {checked} states were checked");
+    assert!(
+        claimed > 10_000,
+        "only {claimed} states met certificate claims"
+    );
     assert!(
         certified >= 5,
         "only {certified} VERIFIED results were certified"
@@ -669,34 +694,13 @@ fn every_trajectory_stays_inside_what_execute_reports() {
 /// uncertain plants.
 #[test]
 fn trajectories_stay_inside_the_checkers_own_bounds() {
-    use ravel::certify::bounds::{Bx, Chain, Loop, PlantRows, Start};
+    use ravel::certify::bounds::{Bx, Chain, Loop, Start};
     let mut checked = 0usize;
     for seed in 0..90u64 {
         let case = random_case(seed);
         let Region::Box(x0) = &case.x0 else { continue };
-        let plants: Vec<PlantRows> = case
-            .cl
-            .plants()
-            .into_iter()
-            .map(|p| PlantRows {
-                a: p.a.clone(),
-                b: p.b.clone(),
-                c: p.c.as_slice().to_vec(),
-                err: p
-                    .err
-                    .as_ref()
-                    .map(|e| (e.a.clone(), e.b.clone(), e.c.as_slice().to_vec())),
-            })
-            .collect();
+        let (plants, w, v) = ravel::certificate::loop_data(&case.cl);
         let pl = &case.cl.plant;
-        let w = Bx {
-            lo: pl.w.lo.clone(),
-            hi: pl.w.hi.clone(),
-        };
-        let v = Bx {
-            lo: pl.v.lo.clone(),
-            hi: pl.v.hi.clone(),
-        };
         let x0b = Bx {
             lo: x0.lo.clone(),
             hi: x0.hi.clone(),
@@ -754,6 +758,24 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
         }
     }
     assert!(checked > 20_000, "only {checked} states were checked");
+}
+
+/// Whether `x` satisfies one claim of a certificate: inside its box and
+/// below every claimed inequality.
+fn claim_holds(claim: &serde_json::Value, x: &[f64]) -> bool {
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let set = &claim["set"];
+    let in_box = x
+        .iter()
+        .enumerate()
+        .all(|(i, v)| num(&set["lo"][i]) <= *v && *v <= num(&set["hi"][i]));
+    let rows = claim["rows"].as_array().map_or(&[][..], Vec::as_slice);
+    in_box
+        && rows.iter().all(|r| {
+            let a = r["a"].as_array().map_or(&[][..], Vec::as_slice);
+            let dot: f64 = a.iter().zip(x).map(|(a, x)| num(a) * x).sum();
+            dot <= num(&r["b"]) + 1e-12 * (1.0 + num(&r["b"]).abs())
+        })
 }
 
 /// The rigorous replay that confirms counterexamples encloses the true

@@ -9,8 +9,9 @@
 
 use super::bounds::Bx;
 
-/// Work limit: pieces examined before the answer is "undecided".
-const MAX_PIECES: usize = 20_000_000;
+/// Work limit: coordinates compared (pieces × cells scanned × dimension)
+/// before the answer is "undecided" — a few seconds at most.
+const MAX_WORK: usize = 2_000_000_000;
 
 /// `Ok` when `cells` cover every point of `target` except in pieces that
 /// `misses` shows to lie outside the set of interest; otherwise
@@ -25,8 +26,9 @@ pub fn covers(
     let mut stack = vec![target.clone()];
     let mut work = 0usize;
     while let Some(piece) = stack.pop() {
-        work += 1;
-        if work > MAX_PIECES {
+        // the scan below looks at up to every cell, every coordinate
+        work = work.saturating_add(cells.len().max(1).saturating_mul(n.max(1)));
+        if work > MAX_WORK {
             return Err(None);
         }
         // a cell overlapping the piece: with positive length along every

@@ -599,6 +599,14 @@ fn evidence(
     let cells_json = get(ev, "cells")?
         .as_array()
         .ok_or("`evidence.cells` must be an array")?;
+    // the checker's work grows with cells × steps: the analysis's own limits
+    if cells_json.len() as u64 > crate::limits::MAX_CELLS {
+        return Err(format!(
+            "{} cells: more than the {} any analysis makes",
+            cells_json.len(),
+            crate::limits::MAX_CELLS
+        ));
+    }
     let mut cells = Vec::with_capacity(cells_json.len());
     let mut sets: Vec<Vec<Bx>> = Vec::with_capacity(cells_json.len());
     // per cell: the last claimed set's inequalities and the goal rows' duals over it
@@ -741,14 +749,20 @@ fn evidence(
         finals.push((prev_rows, goal_duals));
     }
     let x0 = &problem.initial;
-    if let Err(point) = cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
-        return Ok(Err(match point {
-            Some(p) => format!("the cells do not cover the initial set: {p:?} is in no cell"),
-            None => {
+    match cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
+        Ok(()) => {}
+        Err(Some(p)) => {
+            return Ok(Err(format!(
+                "the cells do not cover the initial set: {p:?} is in no cell"
+            )))
+        }
+        // undecided is not false: the certificate is not checkable
+        Err(None) => {
+            return Err(
                 "the cells' coverage of the initial set could not be decided within the work limit"
-                    .to_string()
-            }
-        }));
+                    .into(),
+            )
+        }
     }
     for &i in verified {
         let (name, prop) = &problem.props[i];

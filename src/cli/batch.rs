@@ -661,18 +661,9 @@ pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
     let mut seen: BTreeMap<u64, Value> = BTreeMap::new();
     for f in files {
         let name = crate::diag::sanitize(&f.display().to_string());
-        let bytes = match super::read_request(&crate::ReadRequest {
-            path: f.clone(),
-            inside: None,
-            max_bytes: crate::limits::MAX_CONTROLLER_BYTES,
-            whole: true,
-        }) {
-            Ok(b) => b,
-            Err(e) => return fail(format!("cannot read `{name}`: {e}")),
-        };
-        let doc: Value = match serde_json::from_slice(&bytes) {
+        let doc = match super::read_json(f) {
             Ok(v) => v,
-            Err(e) => return fail(format!("`{name}` is not JSON: {e}")),
+            Err(e) => return fail(format!("`{name}`: {e}")),
         };
         if doc["schema"] != crate::report::SCHEMA {
             return fail(format!(

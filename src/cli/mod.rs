@@ -392,6 +392,18 @@ pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// A JSON document from a file (a regular file of at most 512 MiB).
+fn read_json(file: &Path) -> Result<Value, String> {
+    let bytes = read_request(&crate::ReadRequest {
+        path: file.to_path_buf(),
+        inside: None,
+        max_bytes: crate::limits::MAX_CONTROLLER_BYTES,
+        whole: true,
+    })
+    .map_err(|e| format!("cannot read: {e}"))?;
+    serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))
+}
+
 /// The certificate file name of a (spec, controller) pair in a folder.
 fn certificate_name(spec: &Path, controller: Option<&Path>) -> String {
     let stem = |p: &Path| {
@@ -442,18 +454,9 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
     let name = crate::diag::sanitize(&file.display().to_string());
     let unreadable = |why: String| (exit::INPUT_ERROR, format!("UNREADABLE  {name}: {why}"));
     let invalid = |why: String| (exit::FALSIFIED, format!("INVALID     {name}: {why}"));
-    let bytes = match read_request(&crate::ReadRequest {
-        path: file.to_path_buf(),
-        inside: None,
-        max_bytes: crate::limits::MAX_CONTROLLER_BYTES,
-        whole: true,
-    }) {
-        Ok(b) => b,
-        Err(e) => return unreadable(format!("cannot read: {e}")),
-    };
-    let cert: Value = match serde_json::from_slice(&bytes) {
+    let cert = match read_json(file) {
         Ok(v) => v,
-        Err(e) => return unreadable(format!("not JSON: {e}")),
+        Err(e) => return unreadable(e),
     };
     let recorded = |key: &str| {
         cert.get(key)

@@ -17,7 +17,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 
 use crate::issue::{Backend, Issue};
-use crate::num::{dot_box_lower, gamma, sum_lower, sum_upper, ETA};
+use crate::num::{dot_box_lower, gamma, sum_lower, sum_upper, TINY};
 
 /// A certified bound from one LP.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -161,7 +161,7 @@ fn dual_bound(
     }
     // error of each computed rᵢ: γ(terms + 2)·Σ|terms|, plus underflow
     let err: Vec<f64> = (0..n)
-        .map(|j| (gamma(terms[j] + 2) * mag[j] * 1.0625 + (terms[j] as f64 + 2.0) * ETA).next_up())
+        .map(|j| (gamma(terms[j] + 2) * mag[j] * 1.0625 + TINY).next_up())
         .collect();
     let box_part = dot_box_lower(&r, lo, hi);
     let err_part = sum_upper((0..n).map(|j| err[j] * crate::num::abs_max(lo[j], hi[j])));
@@ -177,7 +177,7 @@ fn dual_bound(
 /// Rounding error of the products `bᵢ zᵢ` (each within one rounding of exact).
 fn slack_products(b: &[f64], z: &[f64]) -> f64 {
     let s: f64 = b.iter().zip(z).map(|(b, z)| (b * z).abs()).sum();
-    (crate::num::U * s * 1.0625 + b.len() as f64 * ETA).next_up()
+    (crate::num::U * s * 1.0625 + TINY).next_up()
 }
 
 /// A certified upper bound of `max gᵀx` subject to `rows` and the box.

@@ -321,7 +321,7 @@ impl Region {
                     }
                 };
                 // each |gᵢ rᵢ| is within one rounding of exact
-                let dual = (dual * (1.0 + 4.0 * num::U) + num::ETA).next_up();
+                let dual = (dual * (1.0 + 4.0 * num::U) + num::TINY).next_up();
                 num::sum_upper([num::dot_box_upper(g, center, center), dual])
             }
         };

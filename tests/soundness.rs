@@ -384,7 +384,7 @@ fn linear_bounds_hold_pointwise() {
             let s = &spec * y;
             for r in 0..2 {
                 let lin: f64 =
-                    (0..2).map(|i| bound.coef[(r, i)] * x[i]).sum::<f64>() + bound.offset[r];
+                    (0..2).map(|i| bound.coef.get(r, i) * x[i]).sum::<f64>() + bound.offset[r];
                 assert!(s[r] <= lin + 1e-12, "seed {seed} row {r}: {} > {lin}", s[r]);
             }
         }

@@ -14,7 +14,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::crown::{affine_image, Analysis, LinearUpper, Mode};
+use super::crown::{affine_image, Analysis, LinearUpper, Mode, Rows};
 use super::open_loop;
 use super::partition::{Budget, Strategy};
 use super::sdp;
@@ -366,9 +366,9 @@ impl ClosedLoop {
     }
 
     /// Raise each row `r`'s offset by `Σ_j |rows_rj|·δ_j` (the model error).
-    fn add_model_error(offsets: &mut [f64], rows: &DMatrix<f64>, delta: &[f64]) {
-        for (r, o) in offsets.iter_mut().enumerate() {
-            let extra = sum_upper((0..rows.ncols()).map(|j| mul0(rows[(r, j)].abs(), delta[j])));
+    fn add_model_error(offsets: &mut [f64], rows: &Rows, delta: &[f64]) {
+        for (o, row) in offsets.iter_mut().zip(rows.iter_rows()) {
+            let extra = sum_upper(row.iter().zip(delta).map(|(r, d)| mul0(r.abs(), *d)));
             *o = sum_upper([*o, extra]);
         }
     }
@@ -678,11 +678,12 @@ impl ClosedLoop {
         let n = self.states();
         let xuw = x.product(u).product(&self.plant.w);
         let d = self.at(t);
-        let mut bound = LinearUpper::of_spec(facets.clone())
+        let spec = LinearUpper::of_spec(&facets);
+        let mut bound = spec
             .through_affine(&d.dyn_xuw, &d.plant.c, &xuw.abs_max())
             .split_concretize(n, &u.product(&self.plant.w));
         if let Some(delta) = self.model_delta(t, x, &u.abs_max()) {
-            Self::add_model_error(&mut bound.offset, &facets, &delta);
+            Self::add_model_error(&mut bound.offset, &spec.coef, &delta);
         }
         bound
     }
@@ -709,18 +710,17 @@ impl ClosedLoop {
             .through_affine(&d.dyn_xw, &d.plant.c, &x.product(w).abs_max())
             .split_concretize(n, w);
         // S = M B in f64; its rounding error times the size of u goes into the offsets
-        let spec = &bound.coef * &d.plant.b;
+        let spec = bound.coef.mul(&d.plant.b);
         let k = gamma(n + 2);
-        let mb_abs = bound.coef.abs() * d.plant.b.abs();
+        let mb_abs = bound.coef.abs().mul(&d.plant.b.abs());
         let u_abs = analysis.output_box(Mode::Ibp).abs_max();
         let p = self.plant.obs.ncols();
         let mut control = analysis
             .upper(spec)
             .through_affine(&self.obs_xv, &DVector::zeros(p), &x.product(v).abs_max())
             .split_concretize(n, v);
-        for r in 0..control.offset.len() {
-            let row: Vec<f64> = mb_abs.row(r).iter().copied().collect();
-            control.offset[r] = sum_upper([control.offset[r], slack(k, &row, &u_abs)]);
+        for (o, row) in control.offset.iter_mut().zip(mb_abs.iter_rows()) {
+            *o = sum_upper([*o, slack(k, row, &u_abs)]);
         }
         let mut out = direct.add(&control, &abs_x);
         if let Some(delta) = self.model_delta(t, x, &u_abs) {

@@ -12,27 +12,33 @@
 
 use nalgebra::{DMatrix, DVector};
 
+pub use super::dense::Rows;
 use super::relax::{image, relax, Relax};
 use crate::issue::Issue;
 use crate::nn::{Layer, Network};
-use crate::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper, U};
+use crate::num::{abs_dot, gamma, mul0, Acc, TINY, U};
 use crate::sets::{IBox, Region};
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
+///
+/// Every operation works row by row on contiguous rows ([`Rows`]) and sums
+/// each row's terms with one running [`Acc`], so a bound costs its
+/// multiply-adds and a few allocations per layer, not per entry.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearUpper {
     /// `k × n` coefficients.
-    pub coef: DMatrix<f64>,
+    pub coef: Rows,
     /// `k` offsets.
     pub offset: Vec<f64>,
 }
 
 impl LinearUpper {
     /// The identity bound `sᵣ ≤ Fᵣ z` for a specification matrix `F`.
-    pub fn of_spec(f: DMatrix<f64>) -> LinearUpper {
-        let k = f.nrows();
+    pub fn of_spec(f: impl Into<Rows>) -> LinearUpper {
+        let coef = f.into();
+        let k = coef.nrows();
         LinearUpper {
-            coef: f,
+            coef,
             offset: vec![0.0; k],
         }
     }
@@ -55,29 +61,26 @@ impl LinearUpper {
         b: &DVector<f64>,
         wz: &[f64],
     ) -> LinearUpper {
-        let coef = &self.coef * w;
-        let k = gamma(w.nrows() + 2);
-        let offset = (0..self.coef.nrows())
-            .map(|r| {
-                let row = self.coef.row(r);
-                let err = slack_iter(k, row.iter().copied(), wz);
-                let products = row.iter().zip(b.iter()).map(|(l, b)| l * b);
-                sum_upper(products.chain([self.offset[r], err]))
-            })
-            .collect();
-        LinearUpper { coef, offset }
+        let mut out = LinearUpper {
+            coef: Rows::zeros(0, 0),
+            offset: self.offset.clone(),
+        };
+        affine_into(&self.coef, &mut out.offset, w, b, wz, &mut out.coef);
+        out
     }
 
     /// The sum of two bounds on the same variables (`|z| ≤ abs_in`).
     pub fn add(&self, other: &LinearUpper, abs_in: &[f64]) -> LinearUpper {
-        let coef = &self.coef + &other.coef;
-        let offset = (0..coef.nrows())
-            .map(|r| {
-                sum_upper([
-                    self.offset[r],
-                    other.offset[r],
-                    slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in),
-                ])
+        let coef = self.coef.plus(&other.coef);
+        let offset = coef
+            .iter_rows()
+            .zip(self.offset.iter().zip(&other.offset))
+            .map(|(row, (&a, &b))| {
+                let mut acc = Acc::ZERO;
+                acc.add(a);
+                acc.add(b);
+                acc.add(slack(2.0 * U, row, abs_in));
+                acc.upper()
             })
             .collect();
         LinearUpper { coef, offset }
@@ -86,14 +89,18 @@ impl LinearUpper {
     /// Keep the first `keep` variables and bound the rest over `tail` (added to
     /// the offsets): a bound on `(z, ζ)` becomes one on `z` valid for all `ζ ∈ tail`.
     pub fn split_concretize(&self, keep: usize, tail: &IBox) -> LinearUpper {
-        let k = self.coef.nrows();
-        let coef = self.coef.columns(0, keep).into_owned();
-        let offset = (0..k)
-            .map(|r| {
-                let row: Vec<f64> = (keep..self.coef.ncols())
-                    .map(|c| self.coef[(r, c)])
-                    .collect();
-                sum_upper([self.offset[r], dot_box_upper(&row, &tail.lo, &tail.hi)])
+        let coef = self.coef.first_columns(keep);
+        let offset = self
+            .coef
+            .iter_rows()
+            .zip(&self.offset)
+            .map(|(row, &o)| {
+                let mut acc = Acc::ZERO;
+                acc.add(o);
+                for (&a, (&l, &h)) in row[keep..].iter().zip(tail.lo.iter().zip(&tail.hi)) {
+                    acc.add(if a >= 0.0 { mul0(a, h) } else { mul0(a, l) });
+                }
+                acc.upper()
             })
             .collect();
         LinearUpper { coef, offset }
@@ -106,12 +113,17 @@ impl LinearUpper {
             return (self.concretize(b), Vec::new());
         }
         let mut issues = Vec::new();
-        let ub = (0..self.coef.nrows())
-            .map(|r| {
-                let row: Vec<f64> = self.coef.row(r).iter().copied().collect();
-                let s = region.support(&row);
+        let ub = self
+            .coef
+            .iter_rows()
+            .zip(&self.offset)
+            .map(|(row, &o)| {
+                let s = region.support(row);
                 issues.extend(s.issue);
-                sum_upper([s.value, self.offset[r]])
+                let mut acc = Acc::ZERO;
+                acc.add(s.value);
+                acc.add(o);
+                acc.upper()
             })
             .collect();
         (ub, issues)
@@ -119,70 +131,131 @@ impl LinearUpper {
 
     /// Certified upper bounds of each row over the box.
     pub fn concretize(&self, b: &IBox) -> Vec<f64> {
-        (0..self.coef.nrows())
-            .map(|r| {
-                let row = self.coef.row(r);
-                let terms = row
-                    .iter()
-                    .zip(b.lo.iter().zip(&b.hi))
-                    .map(|(&a, (&l, &h))| {
-                        if a == 0.0 {
-                            0.0
-                        } else if a > 0.0 {
-                            a * h
-                        } else {
-                            a * l
-                        }
+        self.coef
+            .iter_rows()
+            .zip(&self.offset)
+            .map(|(row, &o)| {
+                let mut acc = Acc::ZERO;
+                for (&a, (&l, &h)) in row.iter().zip(b.lo.iter().zip(&b.hi)) {
+                    acc.add(if a == 0.0 {
+                        0.0
+                    } else if a > 0.0 {
+                        a * h
+                    } else {
+                        a * l
                     });
-                sum_upper(terms.chain([self.offset[r]]))
+                }
+                acc.add(o);
+                acc.upper()
             })
             .collect()
     }
 }
 
+/// One affine layer of back-substitution: `out = coef · W`, and each offset
+/// raised by `coefᵣ · b` and the product's rounding error `γ·|coefᵣ|·wz`.
+fn affine_into(
+    coef: &Rows,
+    offset: &mut [f64],
+    w: &DMatrix<f64>,
+    b: &DVector<f64>,
+    wz: &[f64],
+    out: &mut Rows,
+) {
+    coef.mul_into(w, out);
+    let k = gamma(w.nrows() + 2);
+    for (row, o) in coef.iter_rows().zip(offset.iter_mut()) {
+        let mut acc = Acc::ZERO;
+        acc.add_products(row, b.as_slice());
+        acc.add(*o);
+        acc.add(slack(k, row, wz));
+        *o = acc.upper();
+    }
+}
+
+/// One activation layer of back-substitution, in place: each coefficient
+/// `l` of `h = σ(z)` becomes `l·a` with the upper relaxation's slope `a`
+/// when `l ≥ 0` (the lower one's otherwise), and its intercept times `l` goes
+/// into the offset, with the products' rounding error (`|z| ≤ abs_in`).
+fn relaxation_in_place(coef: &mut Rows, offset: &mut [f64], rel: &[Relax], abs_in: &[f64]) {
+    for (r, o) in offset.iter_mut().enumerate() {
+        let mut acc = Acc::ZERO;
+        acc.add(*o);
+        let row = coef.row_mut(r);
+        for (c, rl) in row.iter_mut().zip(rel) {
+            let l = *c;
+            let (a, b) = if l >= 0.0 {
+                (rl.au, rl.bu)
+            } else {
+                (rl.al, rl.bl)
+            };
+            *c = l * a;
+            if l != 0.0 {
+                acc.add(l * b);
+            }
+        }
+        acc.add(slack(2.0 * U, row, abs_in));
+        *o = acc.upper();
+    }
+}
+
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
 pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
-    (0..w.nrows())
-        .map(|j| sum_upper((0..w.ncols()).map(|i| w[(j, i)].abs() * m[i])))
-        .collect()
+    let mut acc = vec![Acc::ZERO; w.nrows()];
+    if w.nrows() > 0 {
+        for (col, &mi) in w.as_slice().chunks_exact(w.nrows()).zip(m) {
+            for (a, &wji) in acc.iter_mut().zip(col) {
+                a.add(mul0(wji.abs(), mi));
+            }
+        }
+    }
+    acc.into_iter().map(Acc::upper).collect()
 }
 
 /// `k · Σ|aᵢ|·mᵢ` rounded up: a bound on the error of rounded coefficients `a` applied to `|z| ≤ m`.
-fn slack_iter(k: f64, a: impl Iterator<Item = f64>, m: &[f64]) -> f64 {
-    let mut s = 0.0;
-    let mut n = 0usize;
-    for (a, m) in a.zip(m) {
-        if a != 0.0 {
-            s += a.abs() * m;
-        }
-        n += 1;
-    }
-    (k * s * 1.0625 + (n as f64 + 2.0) * crate::num::ETA).next_up()
+#[inline]
+fn slack(k: f64, a: &[f64], m: &[f64]) -> f64 {
+    (k * abs_dot(a, m) * 1.0625 + TINY).next_up()
 }
 
 /// The `2n × n` specification `[I; −I]`: upper bounds, then negated lower bounds.
-pub fn plus_minus_identity(n: usize) -> DMatrix<f64> {
-    DMatrix::from_fn(2 * n, n, |r, c| {
-        if r == c {
-            1.0
-        } else if r == n + c {
-            -1.0
-        } else {
-            0.0
-        }
-    })
+pub fn plus_minus_identity(n: usize) -> Rows {
+    let mut f = Rows::zeros(2 * n, n);
+    for i in 0..n {
+        f.row_mut(i)[i] = 1.0;
+        f.row_mut(n + i)[i] = -1.0;
+    }
+    f
 }
 
 /// Certified interval image of a box under `z = W x + b`.
 pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
-    let mut lo = Vec::with_capacity(w.nrows());
-    let mut hi = Vec::with_capacity(w.nrows());
-    for j in 0..w.nrows() {
-        let row: Vec<f64> = w.row(j).iter().copied().collect();
-        lo.push(sum_lower([dot_box_lower(&row, &x.lo, &x.hi), b[j]]));
-        hi.push(sum_upper([dot_box_upper(&row, &x.lo, &x.hi), b[j]]));
+    let rows = w.nrows();
+    let mut lo = vec![Acc::ZERO; rows];
+    let mut hi = vec![Acc::ZERO; rows];
+    if rows > 0 {
+        // column by column: nalgebra stores columns contiguously
+        for (i, col) in w.as_slice().chunks_exact(rows).enumerate() {
+            let (xl, xh) = (x.lo[i], x.hi[i]);
+            for ((l, h), &a) in lo.iter_mut().zip(hi.iter_mut()).zip(col) {
+                if a >= 0.0 {
+                    l.add(mul0(a, xl));
+                    h.add(mul0(a, xh));
+                } else {
+                    l.add(mul0(a, xh));
+                    h.add(mul0(a, xl));
+                }
+            }
+        }
     }
-    IBox::new(lo, hi)
+    for ((l, h), &bj) in lo.iter_mut().zip(hi.iter_mut()).zip(b.iter()) {
+        l.add(bj);
+        h.add(bj);
+    }
+    IBox::new(
+        lo.into_iter().map(Acc::lower).collect(),
+        hi.into_iter().map(Acc::upper).collect(),
+    )
 }
 
 /// Other certified upper bounds of a linear bound's rows (see [`Analysis::with_hook`]).
@@ -208,6 +281,9 @@ pub struct Analysis<'a> {
     relax: Vec<Vec<Relax>>,
     /// `|W|·|h|max` of each affine layer (empty for activations), for error terms.
     scales: Vec<Vec<f64>>,
+    /// `|h|max` of the value before each activation layer (empty for affine
+    /// layers), for error terms.
+    abs: Vec<Vec<f64>>,
 }
 
 impl<'a> Analysis<'a> {
@@ -232,12 +308,17 @@ impl<'a> Analysis<'a> {
             boxes: vec![input.clone()],
             relax: Vec::with_capacity(net.layers.len()),
             scales: Vec::with_capacity(net.layers.len()),
+            abs: Vec::with_capacity(net.layers.len()),
         };
         for (i, layer) in net.layers.iter().enumerate() {
-            let current = &a.boxes[i];
+            let abs = a.boxes[i].abs_max();
             a.scales.push(match layer {
-                Layer::Affine { w, .. } => weight_scale(w, &current.abs_max()),
+                Layer::Affine { w, .. } => weight_scale(w, &abs),
                 Layer::Act(_) => Vec::new(),
+            });
+            a.abs.push(match layer {
+                Layer::Affine { .. } => Vec::new(),
+                Layer::Act(_) => abs,
             });
             let current = &a.boxes[i];
             let (next, rel) = match layer {
@@ -309,49 +390,30 @@ impl<'a> Analysis<'a> {
     }
 
     /// CROWN: `S f(y) ≤ Λ y + c` over the input box, for a `k × outputs` matrix `S`.
-    pub fn upper(&self, spec: DMatrix<f64>) -> LinearUpper {
-        self.backward(spec, self.net.layers.len())
+    pub fn upper(&self, spec: impl Into<Rows>) -> LinearUpper {
+        self.backward(spec.into(), self.net.layers.len())
     }
 
     /// Back-substitute a bound on the value at position `end` down to the input.
-    fn backward(&self, spec: DMatrix<f64>, end: usize) -> LinearUpper {
-        let mut bound = LinearUpper::of_spec(spec);
+    fn backward(&self, spec: Rows, end: usize) -> LinearUpper {
+        let mut coef = spec;
+        let mut offset = vec![0.0; coef.nrows()];
+        // two buffers in turn: an affine layer writes the other one, an
+        // activation rewrites its rows in place
+        let mut spare = Rows::zeros(0, 0);
         for i in (0..end).rev() {
-            bound = match &self.net.layers[i] {
-                Layer::Affine { w, b } => bound.through_affine_scaled(w, b, &self.scales[i]),
-                Layer::Act(_) => {
-                    through_relaxation(&bound, &self.relax[i], &self.boxes[i].abs_max())
+            match &self.net.layers[i] {
+                Layer::Affine { w, b } => {
+                    affine_into(&coef, &mut offset, w, b, &self.scales[i], &mut spare);
+                    std::mem::swap(&mut coef, &mut spare);
                 }
-            };
-        }
-        bound
-    }
-}
-
-/// Replace `Λ h` by its relaxation in terms of `z` (`h = σ(z)`).
-fn through_relaxation(bound: &LinearUpper, rel: &[Relax], abs_in: &[f64]) -> LinearUpper {
-    let k = bound.coef.nrows();
-    let mut coef = DMatrix::<f64>::zeros(k, rel.len());
-    let mut offset = Vec::with_capacity(k);
-    for r in 0..k {
-        let mut terms = Vec::with_capacity(rel.len() + 2);
-        terms.push(bound.offset[r]);
-        for (j, rl) in rel.iter().enumerate() {
-            let l = bound.coef[(r, j)];
-            let (a, b) = if l >= 0.0 {
-                (rl.au, rl.bu)
-            } else {
-                (rl.al, rl.bl)
-            };
-            coef[(r, j)] = l * a;
-            if l != 0.0 {
-                terms.push(l * b);
+                Layer::Act(_) => {
+                    relaxation_in_place(&mut coef, &mut offset, &self.relax[i], &self.abs[i]);
+                }
             }
         }
-        terms.push(slack_iter(2.0 * U, coef.row(r).iter().copied(), abs_in));
-        offset.push(sum_upper(terms));
+        LinearUpper { coef, offset }
     }
-    LinearUpper { coef, offset }
 }
 
 #[cfg(test)]

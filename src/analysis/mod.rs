@@ -2,6 +2,7 @@
 
 pub mod closed_loop;
 pub mod crown;
+pub mod dense;
 pub mod open_loop;
 pub mod partition;
 pub mod relax;

@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::nn::{Activation, Layer, Network};
-use crate::num::{dot_box_lower, dot_box_upper, gamma, mul0, sum_lower, sum_upper, ETA, U};
+use crate::num::{dot_box_lower, dot_box_upper, gamma, mul0, sum_lower, sum_upper, TINY, U};
 
 /// A box `lo ≤ x ≤ hi`.
 #[derive(Clone, Debug, PartialEq)]
@@ -127,7 +127,7 @@ fn abs_times(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
 /// precomputed; the factor 1.0625 covers the rounding of the bound itself.
 fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], k: usize) -> f64 {
     let s = sum_upper(c.zip(mz).map(|(c, m)| mul0(c.abs(), *m)));
-    (gamma(k + 1) * s * 1.0625 + (mz.len() as f64 + 2.0) * ETA).next_up()
+    (gamma(k + 1) * s * 1.0625 + TINY).next_up()
 }
 
 /// `A·B` with plain loops in a fixed order (each entry summed over `k`
@@ -212,7 +212,7 @@ impl Linear {
                 err += v.abs() * zmax[j];
                 terms.push(mul0(cj, b));
             }
-            terms.push((2.0 * U * err * 1.0625 + (cols as f64 + 2.0) * ETA).next_up());
+            terms.push((2.0 * U * err * 1.0625 + TINY).next_up());
             off.push(sum_upper(terms.iter().copied()));
         }
         Linear { coef, off }
@@ -285,7 +285,7 @@ fn relu_lines(l: f64, u: f64) -> Lines {
 
 /// `v` pushed up by `k` relative roundings (and an underflow).
 fn up(v: f64, k: f64) -> f64 {
-    (v + v.abs() * k * U * 1.0625 + ETA).next_up()
+    (v + v.abs() * k * U * 1.0625 + TINY).next_up()
 }
 
 /// `v` pushed down by `k` relative roundings (and an underflow).
@@ -761,7 +761,7 @@ fn dual_support(c: &[f64], rows: &[(Vec<f64>, f64)], mu: &[f64], x: &Bx) -> f64 
     let k = rows.len() + 2;
     let err = sum_upper((0..n).map(|j| {
         mul0(
-            (gamma(k) * mag[j] * 1.0625 + k as f64 * ETA).next_up(),
+            (gamma(k) * mag[j] * 1.0625 + TINY).next_up(),
             xmax[j],
         )
     }));

@@ -408,11 +408,15 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
                     lo[k] = lo[k].min(v);
                 }
             }
-            let p = IBox::point(x);
-            sampled[t] = Some(match &sampled[t] {
-                Some(b) => b.hull(&p),
-                None => p,
-            });
+            match &mut sampled[t] {
+                Some(b) => {
+                    for ((lo, hi), v) in b.lo.iter_mut().zip(b.hi.iter_mut()).zip(x) {
+                        *lo = lo.min(*v);
+                        *hi = hi.max(*v);
+                    }
+                }
+                None => sampled[t] = Some(IBox::point(x)),
+            }
         }
         for (i, prop) in plan.properties.iter().enumerate() {
             let found = match &prop.kind {

@@ -50,6 +50,28 @@ impl Activation {
     }
 }
 
+/// `out = M x` in `f64`, summed column by column (`M₀x₀ + M₁x₁ + …`, the
+/// order of nalgebra's matrix-vector product), into `out`'s storage.
+pub fn mat_vec_into(m: &DMatrix<f64>, x: &[f64], out: &mut Vec<f64>) {
+    let rows = m.nrows();
+    out.clear();
+    out.resize(rows, 0.0);
+    if rows == 0 {
+        return;
+    }
+    for (j, (col, &xj)) in m.as_slice().chunks_exact(rows).zip(x).enumerate() {
+        if j == 0 {
+            for (o, &c) in out.iter_mut().zip(col) {
+                *o = xj * c;
+            }
+        } else {
+            for (o, &c) in out.iter_mut().zip(col) {
+                *o += xj * c;
+            }
+        }
+    }
+}
+
 /// The logistic sigmoid, evaluated without overflow for large |z|.
 pub fn sigmoid(z: f64) -> f64 {
     if z >= 0.0 {
@@ -107,15 +129,27 @@ impl Network {
     }
 
     /// Evaluate the network in `f64`.
+    ///
+    /// Each affine layer is evaluated column by column, `z = W₀h₀ + W₁h₁ + …`
+    /// then `+ b`: the order of nalgebra's matrix-vector product, so
+    /// simulations give the same bits as they always did, with two buffers
+    /// instead of a vector per layer.
     pub fn forward(&self, x: &[f64]) -> Vec<f64> {
-        let mut h = DVector::from_column_slice(x);
+        let mut h = x.to_vec();
+        let mut z = Vec::new();
         for layer in &self.layers {
             match layer {
-                Layer::Affine { w, b } => h = w * h + b,
-                Layer::Act(a) => h.apply(|z| *z = a.eval(*z)),
+                Layer::Affine { w, b } => {
+                    mat_vec_into(w, &h, &mut z);
+                    for (z, b) in z.iter_mut().zip(b.iter()) {
+                        *z += b;
+                    }
+                    std::mem::swap(&mut h, &mut z);
+                }
+                Layer::Act(a) => h.iter_mut().for_each(|v| *v = a.eval(*v)),
             }
         }
-        h.as_slice().to_vec()
+        h
     }
 
     /// The hidden activations used, in order of first appearance (for reports).

@@ -281,7 +281,8 @@ mod tests {
             let mut acc = Acc::ZERO;
             acc.add(0.25);
             acc.add_products(&x, &y);
-            let one_by_one = sum_upper(std::iter::once(0.25).chain(x.iter().zip(&y).map(|(a, b)| a * b)));
+            let one_by_one =
+                sum_upper(std::iter::once(0.25).chain(x.iter().zip(&y).map(|(a, b)| a * b)));
             let lower_one_by_one =
                 sum_lower(std::iter::once(0.25).chain(x.iter().zip(&y).map(|(a, b)| a * b)));
             // both are bounds on the same exact sum: their intervals overlap,

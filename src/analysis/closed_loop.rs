@@ -20,7 +20,7 @@ use super::partition::{Budget, Strategy};
 use super::sdp;
 use super::shape::Shape;
 use crate::issue::Issue;
-use crate::nn::Network;
+use crate::nn::{mat_vec_into, Network};
 use crate::num::{gamma, mul0, slack, sum_upper};
 use crate::sets::{IBox, Region};
 
@@ -336,14 +336,33 @@ impl ClosedLoop {
     }
 
     /// One exact step `t`: returns `(u, x⁺)` for state `x` and noise `w`, `v` (in `f64`).
+    ///
+    /// The sums run in the order of nalgebra's products (`y = Cᵀx + v`,
+    /// `x⁺ = ((A x + B u) + c) + w`, each product column by column).
     pub fn simulate(&self, t: usize, x: &[f64], w: &[f64], v: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let xv = DVector::from_column_slice(x);
-        let y = self.plant.obs.transpose() * &xv + DVector::from_column_slice(v);
-        let u = self.net.forward(y.as_slice());
-        let uv = DVector::from_column_slice(&u);
+        // y = Cᵀ x: `obs_xv` is [Cᵀ I]; its first n columns are Cᵀ's
+        let n = x.len();
+        let p = self.plant.obs.ncols();
+        let mut y = vec![0.0; p];
+        for (j, &xj) in x.iter().enumerate() {
+            let col = &self.obs_xv.as_slice()[j * p..(j + 1) * p];
+            for (o, &c) in y.iter_mut().zip(col) {
+                *o = if j == 0 { xj * c } else { *o + xj * c };
+            }
+        }
+        for (o, vi) in y.iter_mut().zip(v) {
+            *o += vi;
+        }
+        let u = self.net.forward(&y);
         let pl = self.plant_at(t);
-        let next = &pl.a * &xv + &pl.b * uv + &pl.c + DVector::from_column_slice(w);
-        (u, next.as_slice().to_vec())
+        let mut next = Vec::with_capacity(n);
+        mat_vec_into(&pl.a, x, &mut next);
+        let mut bu = Vec::with_capacity(n);
+        mat_vec_into(&pl.b, &u, &mut bu);
+        for (i, o) in next.iter_mut().enumerate() {
+            *o = ((*o + bu[i]) + pl.c[i]) + w[i];
+        }
+        (u, next)
     }
 
     /// `δ = err.a·|x|max + err.b·|u|max + err.c` for step `t`, rounded up

@@ -36,7 +36,11 @@ impl Rows {
 
     /// A matrix from its rows, stored one after another (`data.len()` must be `rows · cols`).
     pub fn from_row_major(rows: usize, cols: usize, data: Vec<f64>) -> Rows {
-        assert_eq!(data.len(), rows * cols, "row-major data of the wrong length");
+        assert_eq!(
+            data.len(),
+            rows * cols,
+            "row-major data of the wrong length"
+        );
         Rows { rows, cols, data }
     }
 
@@ -102,7 +106,12 @@ impl Rows {
         Rows {
             rows: self.rows,
             cols: self.cols,
-            data: self.data.iter().zip(&other.data).map(|(a, b)| a + b).collect(),
+            data: self
+                .data
+                .iter()
+                .zip(&other.data)
+                .map(|(a, b)| a + b)
+                .collect(),
         }
     }
 
@@ -202,7 +211,14 @@ mod tests {
     #[test]
     fn products_agree_with_nalgebra_on_both_paths() {
         let mut rng = Rng::new(7);
-        for (k, n, p) in [(3, 2, 5), (1, 1, 1), (40, 30, 20), (64, 64, 64), (2, 0, 3), (0, 4, 2)] {
+        for (k, n, p) in [
+            (3, 2, 5),
+            (1, 1, 1),
+            (40, 30, 20),
+            (64, 64, 64),
+            (2, 0, 3),
+            (0, 4, 2),
+        ] {
             let a = DMatrix::from_fn(k, n, |_, _| rng.uniform(-2.0, 2.0));
             let b = DMatrix::from_fn(n, p, |_, _| rng.uniform(-2.0, 2.0));
             let want = &a * &b;

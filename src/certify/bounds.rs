@@ -759,12 +759,8 @@ fn dual_support(c: &[f64], rows: &[(Vec<f64>, f64)], mu: &[f64], x: &Bx) -> f64 
     }
     let xmax = x.abs_max();
     let k = rows.len() + 2;
-    let err = sum_upper((0..n).map(|j| {
-        mul0(
-            (gamma(k) * mag[j] * 1.0625 + TINY).next_up(),
-            xmax[j],
-        )
-    }));
+    let err =
+        sum_upper((0..n).map(|j| mul0((gamma(k) * mag[j] * 1.0625 + TINY).next_up(), xmax[j])));
     let mh = sum_upper(rows.iter().zip(&mu).map(|((_, h), m)| mul0(*m, *h)));
     sum_upper([dot_box_upper(&r, &x.lo, &x.hi), err, mh])
 }

@@ -15,7 +15,7 @@
 use nalgebra::DMatrix;
 
 use crate::analysis::closed_loop::{Boundary, Cut, Propagator, Step};
-use crate::analysis::partition::{refine, Budget, Stop, Strategy};
+use crate::analysis::partition::{refine_parallel, Budget, Stop, Strategy};
 use crate::analysis::shape::{
     convex_hull, excess, extent_of_points, hull_directions, support_of_points, HULL_MIN_ANGLE,
 };
@@ -768,13 +768,13 @@ fn partition_guided(
     if let Some(limit) = ctl.time_limit {
         budget.seconds = Some(budget.seconds.map_or(limit, |s| s.min(limit)));
     }
-    let evaluated = std::cell::Cell::new(0usize);
+    let evaluated = std::sync::atomic::AtomicUsize::new(0);
     let root = plan.initial.bbox();
-    let r = refine(
+    let r = refine_parallel(
         &root,
         strategy,
         &budget,
-        &mut |c, parent: Option<&Option<Vec<Step>>>| {
+        &|c, parent: Option<&Option<Vec<Step>>>| {
             let region = cell_region(&plan.initial, c);
             if certainly_empty(&region) {
                 let sets = vec![Step::new(region, Vec::new()); plan.horizon + 1];
@@ -782,10 +782,9 @@ fn partition_guided(
             }
             (ctl.progress)(Progress {
                 phase: Phase::Cells,
-                done: evaluated.get(),
+                done: evaluated.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
                 total: Some(budget.calls),
             });
-            evaluated.set(evaluated.get() + 1);
             let sets =
                 propagate_cell_until(plan, &region, parent.and_then(|p| p.as_deref()), &stop);
             let score = match guide {
@@ -822,6 +821,7 @@ fn partition_guided(
             (Some(sets), score)
         },
         ctl.elapsed,
+        ctl.threads,
     );
     let mut leaves = r.leaves;
     // deterministic order: by cell position

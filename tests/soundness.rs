@@ -821,8 +821,9 @@ fn interval_replay_encloses_simulated_trajectories() {
     }
 }
 
-/// Threads for the cells of a uniform partition change nothing: the same
-/// outcome, bound for bound, for 1, 2 and 3 threads.
+/// Threads for the cells of a uniform partition, or for the two children
+/// of each split of a guided one, change nothing: the same outcome, bound
+/// for bound, for 1, 2 and 3 threads.
 #[test]
 fn cell_threads_give_the_same_outcome() {
     use ravel::execute::{execute_with, Control};
@@ -830,6 +831,11 @@ fn cell_threads_give_the_same_outcome() {
         "specs/double_integrator_partitioned.ravel",
         "specs/double_integrator_noisy.ravel",
         "specs/double_integrator_polytope.ravel",
+        // guided partitions: a split's two children on two threads
+        "specs/double_integrator_gsg.ravel",
+        "specs/double_integrator_sg.ravel",
+        "specs/double_integrator_property_guided.ravel",
+        "specs/quadrotor_gsg.ravel",
     ] {
         let source = std::fs::read_to_string(spec).expect("spec");
         let checked = ravel::front_end(

@@ -154,12 +154,90 @@ pub fn refine<T>(
     eval: &mut CellEval<T>,
     elapsed: &dyn Fn() -> f64,
 ) -> Refined<T> {
-    let mut calls = 0usize;
+    let first = eval(root, None);
+    refine_from(
+        root,
+        strategy,
+        budget,
+        first,
+        &mut |b, a, parent| {
+            let vb = eval(b, Some(parent));
+            let va = eval(a, Some(parent));
+            (vb, va)
+        },
+        elapsed,
+    )
+}
+
+/// [`refine`] with the two children of every split evaluated at once, one
+/// on a helper thread (when `threads ≥ 2`). The cells chosen, their values
+/// and the result are exactly those of [`refine`]: only the wall-clock time
+/// changes (each split's children are independent).
+pub fn refine_parallel<T: Send + Clone>(
+    root: &IBox,
+    strategy: Strategy,
+    budget: &Budget,
+    eval: &SharedCellEval<T>,
+    elapsed: &dyn Fn() -> f64,
+    threads: usize,
+) -> Refined<T> {
+    if threads < 2 {
+        return refine(root, strategy, budget, &mut |c, p| eval(c, p), elapsed);
+    }
+    std::thread::scope(|scope| {
+        let (jobs, job_rx) = std::sync::mpsc::channel::<(IBox, T)>();
+        let (res_tx, results) = std::sync::mpsc::channel::<(T, f64)>();
+        scope.spawn(move || {
+            for (cell, parent) in job_rx {
+                if res_tx.send(eval(&cell, Some(&parent))).is_err() {
+                    break;
+                }
+            }
+        });
+        let first = eval(root, None);
+        let r = refine_from(
+            root,
+            strategy,
+            budget,
+            first,
+            &mut |b, a, parent| {
+                let sent = jobs.send((a.clone(), parent.clone())).is_ok();
+                let vb = eval(b, Some(parent));
+                // a helper that failed (it panicked; the scope re-raises it
+                // when it ends) leaves the child to this thread
+                let va = match sent.then(|| results.recv().ok()).flatten() {
+                    Some(v) => v,
+                    None => eval(a, Some(parent)),
+                };
+                (vb, va)
+            },
+            elapsed,
+        );
+        drop(jobs);
+        r
+    })
+}
+
+/// A [`CellEval`] that threads can share.
+pub type SharedCellEval<'e, T> = dyn Fn(&IBox, Option<&T>) -> (T, f64) + Sync + 'e;
+
+/// Evaluates the two children of a split (`b` first, then `a`) given their parent's value.
+type PairEval<'e, T> = dyn FnMut(&IBox, &IBox, &T) -> ((T, f64), (T, f64)) + 'e;
+
+/// The refinement loop, from the root's evaluation `first`.
+fn refine_from<T>(
+    root: &IBox,
+    strategy: Strategy,
+    budget: &Budget,
+    first: (T, f64),
+    pair: &mut PairEval<T>,
+    elapsed: &dyn Fn() -> f64,
+) -> Refined<T> {
+    let mut calls = 1usize;
     let mut order = 0usize;
     let mut done: Vec<Leaf<T>> = Vec::new();
     let mut stop = Stop::Done;
-    let (v, score) = eval(root, None);
-    calls += 1;
+    let (v, score) = first;
     let first = Leaf {
         cell: root.clone(),
         value: v,
@@ -208,13 +286,13 @@ pub fn refine<T>(
             done.push(leaf);
             continue;
         };
-        for c in [b, a] {
-            let (v, score) = eval(&c, Some(&leaf.value));
+        let ((vb, sb), (va, sa)) = pair(&b, &a, &leaf.value);
+        for (c, value, score) in [(b, vb, sb), (a, va, sa)] {
             calls += 1;
             order += 1;
             let l = Leaf {
                 cell: c,
-                value: v,
+                value,
                 score,
             };
             match strategy {
@@ -268,6 +346,18 @@ mod tests {
             assert!(r.calls <= 21, "{strategy:?}: {}", r.calls);
             let cells: Vec<IBox> = r.leaves.iter().map(|l| l.cell.clone()).collect();
             cover_check(&cells, &root);
+            // the same cells, values and order with the children on two threads
+            let eval = |c: &IBox, _: Option<&f64>| (c.lo[1], c.hi[0] - 0.3);
+            let one = refine_parallel(&root, strategy, &budget, &eval, &|| 0.0, 1);
+            let two = refine_parallel(&root, strategy, &budget, &eval, &|| 0.0, 2);
+            assert_eq!((one.calls, one.stop), (two.calls, two.stop));
+            let key = |r: &Refined<f64>| -> Vec<(Vec<f64>, Vec<f64>, f64, f64)> {
+                r.leaves
+                    .iter()
+                    .map(|l| (l.cell.lo.clone(), l.cell.hi.clone(), l.value, l.score))
+                    .collect()
+            };
+            assert_eq!(key(&one), key(&two));
         }
     }
 

@@ -2,7 +2,8 @@
 //! closed-loop cell propagated many times.
 //!
 //! `cargo run --release --example profile_di -- [SPEC] [PROPAGATOR] [REPEATS]`
-//! (defaults: the double integrator, its own propagator, 2000 times).
+//! (defaults: the double integrator, its own propagator, 2000 times;
+//! `WHOLE=1` times the whole `execute` instead of one cell).
 use std::path::Path;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -14,7 +15,9 @@ fn main() {
     let src = std::fs::read_to_string(&path).unwrap();
     let mut c = ravel::front_end(&src, path.parent().unwrap(), &ravel::cli::read_request).unwrap();
     if let Some(p) = args.get(1) {
-        c.propagator = ravel::analysis::closed_loop::Propagator::from_name(p).unwrap();
+        if p != "-" {
+            c.propagator = ravel::analysis::closed_loop::Propagator::from_name(p).unwrap();
+        }
     }
     let repeats: usize = args.get(2).map_or(2000, |r| r.parse().unwrap());
     let plan = ravel::lower::lower(&c);
@@ -27,12 +30,18 @@ fn main() {
         }
         eprintln!();
     }
+    // WHOLE=1: the whole `execute` (sampling, partition, verdicts)
+    let whole = std::env::var_os("WHOLE").is_some();
     // the best of five batches: the least disturbed by other work
     let mut best = f64::INFINITY;
     for _ in 0..5 {
         let t = std::time::Instant::now();
         for _ in 0..repeats.div_ceil(5) {
-            std::hint::black_box(ravel::execute::propagate_cell(&plan, &plan.initial, None));
+            if whole {
+                std::hint::black_box(ravel::execute::execute(&plan, &|| 0.0));
+            } else {
+                std::hint::black_box(ravel::execute::propagate_cell(&plan, &plan.initial, None));
+            }
         }
         best = best.min(t.elapsed().as_secs_f64() / repeats.div_ceil(5) as f64);
     }

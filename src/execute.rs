@@ -311,18 +311,25 @@ fn pick_noise(rng: &mut Rng, b: &IBox) -> Vec<f64> {
 /// noise is extreme half of the time. `None` when no initial state could be
 /// drawn (rejection sampling of a thin polytope).
 pub fn simulate(plan: &Plan, k: usize) -> Option<Trajectory> {
+    simulate_from(plan, k, &plan.initial.special_points())
+}
+
+/// [`simulate`] with the initial set's special points computed once by the caller.
+fn simulate_from(plan: &Plan, k: usize, special: &[Vec<f64>]) -> Option<Trajectory> {
     let cl = &plan.closed_loop;
     let mut rng = sample_rng(plan.seed, k);
-    let special = plan.initial.special_points();
     let start = match special.get(k) {
         Some(p) => p.clone(),
         None => plan.initial.sample(&mut || rng.uniform(0.0, 1.0))?,
     };
+    let h = plan.horizon;
+    let mut states = Vec::with_capacity(h + 1);
+    states.push(start);
     let mut tr = Trajectory {
-        states: vec![start],
-        controls: vec![],
-        process_noise: vec![],
-        sensor_noise: vec![],
+        states,
+        controls: Vec::with_capacity(h),
+        process_noise: Vec::with_capacity(h),
+        sensor_noise: Vec::with_capacity(h),
     };
     for t in 0..plan.horizon {
         let w = pick_noise(&mut rng, &cl.plant.w);
@@ -369,6 +376,7 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
     };
     let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
     let mut drawn = 0;
+    let special = plan.initial.special_points();
     for k in 0..plan.samples {
         if k % 64 == 0 {
             if ctl.out_of_time() {
@@ -381,7 +389,7 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
             });
         }
         drawn += 1;
-        let Some(tr) = simulate(plan, k) else {
+        let Some(tr) = simulate_from(plan, k, &special) else {
             continue;
         };
         // states from the first non-finite one on are not real states (the

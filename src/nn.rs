@@ -135,8 +135,13 @@ impl Network {
     /// simulations give the same bits as they always did, with two buffers
     /// instead of a vector per layer.
     pub fn forward(&self, x: &[f64]) -> Vec<f64> {
-        let mut h = x.to_vec();
-        let mut z = Vec::new();
+        let widest = self.layers.iter().fold(x.len(), |m, l| match l {
+            Layer::Affine { w, .. } => m.max(w.nrows()),
+            Layer::Act(_) => m,
+        });
+        let mut h = Vec::with_capacity(widest);
+        h.extend_from_slice(x);
+        let mut z = Vec::with_capacity(widest);
         for layer in &self.layers {
             match layer {
                 Layer::Affine { w, b } => {

@@ -1,0 +1,437 @@
+//! Speed: the targets of the speed issue and how time scales (`cargo bench --bench speed`).
+//!
+//! Every time is the fastest of repeated runs (at least five, until 0.3 s
+//! have passed): the machine's capability, not its neighbours' load (on a
+//! shared 2-core machine a second thread is intermittently slowed by other
+//! tenants, so a median of two-thread runs measures them). Analysis only
+//! unless the row says otherwise, one thread unless it says `jobs 2`. The
+//! tables:
+//!
+//! 1. the targets (the repository's own controllers), measured and wanted;
+//! 2. cells: the double integrator's Reach-LP over k×k grids, 1 … 4096 cells,
+//!    with one and two threads;
+//! 3. width and depth: CROWN output bounds of random ReLU networks over one
+//!    box, with the multiply-adds done and the rate against this machine's
+//!    measured matrix-multiply rate;
+//! 4. horizon: Reach-LP (linear) and unrolled CROWN (quadratic);
+//! 5. the peak memory of the whole run.
+//!
+//! `--slow` adds the Reach-SDP rows that take minutes (the quadrotor's 12
+//! steps, a 2 → 32 → 32 → 3 controller's one step). A substring argument
+//! keeps only the tables whose title contains it (`cargo bench --bench speed -- cells`).
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector};
+use ravel::analysis::closed_loop::{ClosedLoop, Plant, Propagator};
+use ravel::analysis::crown::{Analysis, Mode};
+use ravel::analysis::partition::Budget;
+use ravel::check::Checked;
+use ravel::execute::{execute_with, propagate_cell, Control};
+use ravel::lower::{lower, Guide, Partitioner, Plan};
+use ravel::nn::{Activation, Layer, Network};
+use ravel::rng::Rng;
+use ravel::sets::{IBox, Region};
+
+/// The fastest of repeated runs of `f`, in seconds.
+fn time(mut f: impl FnMut()) -> f64 {
+    f(); // warm-up
+    let start = Instant::now();
+    let mut best = f64::INFINITY;
+    let mut runs = 0;
+    while runs < 5 || (start.elapsed().as_secs_f64() < 0.3 && runs < 10_000) {
+        let t = Instant::now();
+        f();
+        best = best.min(t.elapsed().as_secs_f64());
+        runs += 1;
+        if start.elapsed().as_secs_f64() > 20.0 {
+            break;
+        }
+    }
+    best
+}
+
+fn show(s: f64) -> String {
+    if s < 1e-3 {
+        format!("{:.1} µs", s * 1e6)
+    } else if s < 1.0 {
+        format!("{:.2} ms", s * 1e3)
+    } else {
+        format!("{s:.2} s")
+    }
+}
+
+fn checked(spec: &str) -> Checked {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(spec);
+    let source = std::fs::read_to_string(&path).expect("spec");
+    ravel::front_end(
+        &source,
+        path.parent().expect("dir"),
+        &ravel::cli::read_request,
+    )
+    .expect("valid spec")
+}
+
+fn plan_of(c: &Checked, prop: Propagator, part: Partitioner, samples: usize) -> Plan {
+    let mut c = c.clone();
+    c.propagator = prop;
+    c.partitioner = part;
+    c.samples = samples;
+    lower(&c)
+}
+
+fn grid(k: usize, dims: usize) -> Partitioner {
+    let mut g = vec![1; dims];
+    g[0] = k;
+    if dims > 1 {
+        g[1] = k;
+    }
+    Partitioner::Uniform(g)
+}
+
+fn whole(dims: usize) -> Partitioner {
+    Partitioner::Uniform(vec![1; dims])
+}
+
+fn run(plan: &Plan, threads: usize) {
+    std::hint::black_box(execute_with(
+        plan,
+        &Control {
+            elapsed: &|| 0.0,
+            time_limit: None,
+            progress: &|_| {},
+            threads,
+        },
+    ));
+}
+
+fn random_relu(rng: &mut Rng, widths: &[usize]) -> Network {
+    let mut layers = Vec::new();
+    for (k, pair) in widths.windows(2).enumerate() {
+        let s = 1.5 / (pair[0] as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(pair[1], pair[0], |_, _| rng.uniform(-s, s)),
+            b: DVector::from_fn(pair[1], |_, _| rng.uniform(-0.2, 0.2)),
+        });
+        if k + 2 < widths.len() {
+            layers.push(Layer::Act(Activation::Relu));
+        }
+    }
+    Network::new(widths[0], layers)
+}
+
+/// Multiply-adds of CROWN's output bounds (every pre-activation bounded by
+/// back-substitution with `[I; −I]`, then the output with `[I; −I]`).
+fn crown_madds(widths: &[usize]) -> f64 {
+    let mut total = 0.0;
+    // bounding the pre-activation of layer j (1-based among affine layers):
+    // 2·n_j rows through affine layers j-1 … 0
+    for j in 1..widths.len() {
+        let rows = 2.0 * widths[j] as f64;
+        for i in (0..j).rev() {
+            total += rows * widths[i + 1] as f64 * widths[i] as f64;
+        }
+    }
+    total
+}
+
+/// This machine's matrix-multiply rate (multiply-adds per second, one thread).
+fn gemm_rate() -> f64 {
+    let n = 512;
+    let a = DMatrix::<f64>::from_fn(n, n, |i, j| ((i * 7 + j) % 13) as f64 - 6.0);
+    let b = DMatrix::<f64>::from_fn(n, n, |i, j| ((i + 3 * j) % 11) as f64 - 5.0);
+    let t = time(|| {
+        std::hint::black_box(&a * &b);
+    });
+    (n * n * n) as f64 / t
+}
+
+fn peak_memory() -> String {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM"))
+                .map(|l| l.trim_start_matches("VmHWM:").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into())
+}
+
+fn machine() -> String {
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = info
+        .lines()
+        .find_map(|l| l.strip_prefix("model name"))
+        .map(|l| l.trim_start_matches([' ', '\t', ':']).to_string())
+        .unwrap_or_else(|| "unknown CPU".into());
+    let threads = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!("{model}, {threads} hardware threads")
+}
+
+fn targets(slow: bool) {
+    println!("\n## Targets (one thread; analysis only unless stated)\n");
+    println!("| Problem | measured | target |");
+    println!("|---|---|---|");
+    let di = checked("specs/double_integrator.ravel");
+    let quad = checked("specs/quadrotor.ravel");
+    let row = |name: &str, t: f64, target: &str| println!("| {name} | {} | {target} |", show(t));
+    let p = plan_of(&di, Propagator::ReachLp, whole(2), 0);
+    row(
+        "DI Reach-LP, 5 steps",
+        time(|| {
+            std::hint::black_box(propagate_cell(&p, &p.initial, None));
+        }),
+        "≤ 15 µs",
+    );
+    let p = plan_of(&di, Propagator::ReachLp, grid(4, 2), 0);
+    row("DI Reach-LP, 16 cells", time(|| run(&p, 1)), "≤ 200 µs");
+    let gsg = Partitioner::Guided {
+        guide: Guide::Gsg,
+        budget: Budget {
+            calls: 32,
+            min_size: 1.0 / 64.0,
+            seconds: None,
+        },
+    };
+    let p = plan_of(&di, Propagator::ReachLp, gsg.clone(), 1000);
+    row(
+        "DI Reach-LP + GSG (32 calls, 1000 samples included)",
+        time(|| run(&p, 1)),
+        "≤ 1 ms",
+    );
+    let p = plan_of(&di, Propagator::CrownUnrolled, whole(2), 0);
+    row(
+        "DI unrolled CROWN",
+        time(|| {
+            std::hint::black_box(propagate_cell(&p, &p.initial, None));
+        }),
+        "≤ 60 µs",
+    );
+    let p = plan_of(&di, Propagator::CrownUnrolled, grid(4, 2), 0);
+    row("DI unrolled CROWN, 16 cells", time(|| run(&p, 1)), "≤ 1 ms");
+    let p = plan_of(&di, Propagator::ReachSdp, whole(2), 0);
+    row("DI Reach-SDP", time(|| run(&p, 1)), "≤ 20 ms");
+    let p = plan_of(&di, Propagator::ReachSdp, grid(4, 2), 0);
+    row("DI Reach-SDP, 16 cells", time(|| run(&p, 1)), "≤ 300 ms");
+    let p = plan_of(&quad, Propagator::ReachLp, whole(6), 0);
+    row(
+        "Quadrotor Reach-LP, 12 steps",
+        time(|| {
+            std::hint::black_box(propagate_cell(&p, &p.initial, None));
+        }),
+        "≤ 150 µs",
+    );
+    let p = plan_of(
+        &quad,
+        Propagator::ReachLp,
+        Partitioner::Uniform(vec![2, 2, 2, 2, 1, 1]),
+        0,
+    );
+    row(
+        "Quadrotor Reach-LP, 16 cells",
+        time(|| run(&p, 1)),
+        "≤ 2.5 ms",
+    );
+    let p = plan_of(&quad, Propagator::CrownUnrolled, whole(6), 0);
+    row(
+        "Quadrotor unrolled CROWN",
+        time(|| {
+            std::hint::black_box(propagate_cell(&p, &p.initial, None));
+        }),
+        "≤ 2 ms",
+    );
+    if slow {
+        let p = plan_of(&quad, Propagator::ReachSdp, whole(6), 0);
+        let t = Instant::now();
+        run(&p, 1);
+        row(
+            "Quadrotor Reach-SDP, 12 steps (one run)",
+            t.elapsed().as_secs_f64(),
+            "≤ 60 s",
+        );
+        let mut rng = Rng::new(11);
+        let net = random_relu(&mut rng, &[2, 32, 32, 3]);
+        let plant = Plant {
+            a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+            b: DMatrix::from_row_slice(2, 3, &[0.5, 0.1, 0.0, 1.0, 0.0, 0.2]),
+            c: DVector::zeros(2),
+            obs: DMatrix::identity(2, 2),
+            w: IBox::point(&[0.0, 0.0]),
+            v: IBox::point(&[0.0, 0.0]),
+            err: None,
+        };
+        let cl = ClosedLoop::new(plant, net);
+        let x0 = Region::Box(IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]));
+        let t = Instant::now();
+        std::hint::black_box(cl.step(
+            0,
+            &x0,
+            Propagator::ReachSdp,
+            &ravel::analysis::closed_loop::Boundary::Box,
+        ));
+        row(
+            "2 → 32 → 32 → 3 ReLU, Reach-SDP, one step (one run)",
+            t.elapsed().as_secs_f64(),
+            "≤ 3 s",
+        );
+    } else {
+        println!("| Quadrotor Reach-SDP, 12 steps | not run (`--slow`) | ≤ 60 s |");
+        println!("| 2 → 32 → 32 → 3 ReLU, Reach-SDP, one step | not run (`--slow`) | ≤ 3 s |");
+    }
+    let exe = env!("CARGO_BIN_EXE_ravel");
+    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator.ravel");
+    row(
+        "Whole process `ravel verify specs/double_integrator.ravel` (2000 samples)",
+        time(|| {
+            let out = Command::new(exe)
+                .arg("verify")
+                .arg(&spec)
+                .output()
+                .expect("ravel runs");
+            assert_eq!(out.status.code(), Some(0));
+        }),
+        "≤ 5 ms",
+    );
+    let p = plan_of(&di, Propagator::ReachLp, grid(16, 2), 0);
+    let (one, two) = (time(|| run(&p, 1)), time(|| run(&p, 2)));
+    println!(
+        "| DI Reach-LP, 256 cells: jobs 1 / jobs 2 | {} / {} ({:.2}×) | ≥ 1.8× |",
+        show(one),
+        show(two),
+        one / two
+    );
+    let p = plan_of(&quad, Propagator::ReachLp, gsg, 1000);
+    let (one, two) = (time(|| run(&p, 1)), time(|| run(&p, 2)));
+    println!("| Quadrotor Reach-LP + GSG (32 calls, 1000 samples): jobs 1 / jobs 2 | {} / {} ({:.2}×) | ≥ 1.8× |", show(one), show(two), one / two);
+}
+
+fn cells() {
+    println!("\n## Cells: DI Reach-LP over k × k grids (5 steps, the whole set first)\n");
+    println!("| cells | jobs 1 | per cell | jobs 2 | speed-up |");
+    println!("|---|---|---|---|---|");
+    let di = checked("specs/double_integrator.ravel");
+    for k in [1usize, 2, 4, 8, 16, 32, 64] {
+        let p = plan_of(&di, Propagator::ReachLp, grid(k, 2), 0);
+        let one = time(|| run(&p, 1));
+        let two = time(|| run(&p, 2));
+        let n = k * k;
+        println!(
+            "| {n} | {} | {} | {} | {:.2}× |",
+            show(one),
+            show(one / n as f64),
+            show(two),
+            one / two
+        );
+    }
+}
+
+fn width_and_depth() {
+    let rate = gemm_rate();
+    println!("\n## Width and depth: CROWN output bounds over one box (random ReLU networks)\n");
+    println!("this machine's 512×512 matrix multiply (nalgebra/matrixmultiply, one thread): {:.2} G multiply-adds/s\n", rate / 1e9);
+    println!("| network | time | multiply-adds | rate | of matmul rate |");
+    println!("|---|---|---|---|---|");
+    let mut rng = Rng::new(5);
+    let mut shapes: Vec<Vec<usize>> = [8usize, 32, 128, 512, 1024]
+        .iter()
+        .map(|&w| vec![6, w, w, 3])
+        .collect();
+    shapes.extend([1usize, 2, 4, 8].into_iter().map(|d| {
+        let mut s = vec![6];
+        s.extend(std::iter::repeat_n(32, d));
+        s.push(3);
+        s
+    }));
+    for widths in shapes {
+        let net = random_relu(&mut rng, &widths);
+        let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);
+        let t = time(|| {
+            let a = Analysis::new(&net, &input, Mode::Crown);
+            std::hint::black_box(a.output_box(Mode::Crown));
+        });
+        let madds = crown_madds(&widths);
+        let name = widths
+            .iter()
+            .map(|w| w.to_string())
+            .collect::<Vec<_>>()
+            .join(" → ");
+        println!(
+            "| {name} | {} | {:.2e} | {:.2} G/s | {:.0} % |",
+            show(t),
+            madds,
+            madds / t / 1e9,
+            100.0 * madds / t / rate
+        );
+    }
+}
+
+fn horizon() {
+    println!("\n## Horizon: one cell of the double integrator\n");
+    println!("| horizon | Reach-LP | per step | unrolled CROWN | per step |");
+    println!("|---|---|---|---|---|");
+    let mut di = checked("specs/double_integrator.ravel");
+    for h in [5usize, 10, 20, 40] {
+        di.horizon = h;
+        let lp = plan_of(&di, Propagator::ReachLp, whole(2), 0);
+        let un = plan_of(&di, Propagator::CrownUnrolled, whole(2), 0);
+        let a = time(|| {
+            std::hint::black_box(propagate_cell(&lp, &lp.initial, None));
+        });
+        let b = time(|| {
+            std::hint::black_box(propagate_cell(&un, &un.initial, None));
+        });
+        println!(
+            "| {h} | {} | {} | {} | {} |",
+            show(a),
+            show(a / h as f64),
+            show(b),
+            show(b / h as f64)
+        );
+    }
+}
+
+fn main() {
+    let filter: Option<String> = std::env::args()
+        .skip(1)
+        .find(|a| !a.starts_with('-'))
+        .filter(|a| !a.is_empty());
+    let slow = std::env::args().any(|a| a == "--slow");
+    let on = |title: &str| filter.as_ref().is_none_or(|f| title.contains(f.as_str()));
+    println!("machine: {}; date: {}", machine(), today());
+    if on("targets") {
+        targets(slow);
+    }
+    if on("cells") {
+        cells();
+    }
+    if on("width") {
+        width_and_depth();
+    }
+    if on("horizon") {
+        horizon();
+    }
+    println!(
+        "\npeak memory (VmHWM) of this benchmark process: {}",
+        peak_memory()
+    );
+}
+
+/// Today's date from the system clock (UTC), for the table's heading.
+fn today() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs()) as i64;
+    // civil-from-days (Howard Hinnant's algorithm)
+    let z = secs.div_euclid(86_400) + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}

@@ -358,7 +358,85 @@ struct MonteCarlo {
     drawn: usize,
 }
 
+/// The Monte Carlo pass. Samples are independent (each has its own random
+/// stream), so with several threads each takes a contiguous range of sample
+/// indices and the partial results are merged in index order: the outcome is
+/// the one thread's, bit for bit (boxes and facet ranges are maxima and
+/// minima; the deepest violation keeps the earliest sample on ties). A 2-D
+/// hull boundary keeps its samples' points in one pass, sequentially (its
+/// point set is pruned as it grows, which depends on the order).
 fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
+    let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
+    let special = plan.initial.special_points();
+    let counter = std::sync::atomic::AtomicUsize::new(0);
+    // below a few hundred samples a thread costs more than it saves
+    let threads = if keep {
+        1
+    } else {
+        ctl.threads.clamp(1, (plan.samples / 256).max(1))
+    };
+    if threads == 1 {
+        return sample_range(plan, ctl, 0..plan.samples, &special, &counter);
+    }
+    let chunk = plan.samples.div_ceil(threads);
+    let parts: Vec<MonteCarlo> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|i| {
+                let range = (i * chunk).min(plan.samples)..((i + 1) * chunk).min(plan.samples);
+                let (special, counter) = (&special, &counter);
+                scope.spawn(move || sample_range(plan, ctl, range, special, counter))
+            })
+            .collect();
+        workers
+            .into_iter()
+            .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    let mut parts = parts.into_iter();
+    let mut all = parts.next().expect("at least one part");
+    for part in parts {
+        all.absorb(part);
+    }
+    all
+}
+
+impl MonteCarlo {
+    /// Merge the results of later samples into these (see [`monte_carlo`]).
+    fn absorb(&mut self, later: MonteCarlo) {
+        for (mine, theirs) in self.sampled.iter_mut().zip(later.sampled) {
+            *mine = match (mine.take(), theirs) {
+                (Some(a), Some(b)) => Some(a.hull(&b)),
+                (a, b) => a.or(b),
+            };
+        }
+        for (mine, theirs) in self.worst.iter_mut().zip(later.worst) {
+            if let Some(t) = theirs {
+                if mine.is_none_or(|m| t.0 > m.0) {
+                    *mine = Some(t);
+                }
+            }
+        }
+        for ((hi, lo), (thi, tlo)) in self.facet_range.iter_mut().zip(later.facet_range) {
+            for (h, t) in hi.iter_mut().zip(thi) {
+                *h = h.max(t);
+            }
+            for (l, t) in lo.iter_mut().zip(tlo) {
+                *l = l.min(t);
+            }
+        }
+        self.drawn += later.drawn;
+    }
+}
+
+/// Samples `range` of the Monte Carlo pass; `counter` counts samples drawn
+/// by every thread (for progress).
+fn sample_range(
+    plan: &Plan,
+    ctl: &Control,
+    range: std::ops::Range<usize>,
+    special: &[Vec<f64>],
+    counter: &std::sync::atomic::AtomicUsize,
+) -> MonteCarlo {
     let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
     let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
     let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
@@ -376,20 +454,22 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
     };
     let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
     let mut drawn = 0;
-    let special = plan.initial.special_points();
-    for k in 0..plan.samples {
-        if k % 64 == 0 {
+    let first = range.start;
+    for k in range {
+        // every 64 samples from the range's start, the first one included
+        if (k - first) % 64 == 0 {
             if ctl.out_of_time() {
                 break;
             }
             (ctl.progress)(Progress {
                 phase: Phase::Sampling,
-                done: k,
+                done: counter.load(std::sync::atomic::Ordering::Relaxed),
                 total: Some(plan.samples),
             });
         }
+        counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         drawn += 1;
-        let Some(tr) = simulate_from(plan, k, &special) else {
+        let Some(tr) = simulate_from(plan, k, special) else {
             continue;
         };
         // states from the first non-finite one on are not real states (the

@@ -137,11 +137,41 @@ pub fn sum_lower<I: IntoIterator<Item = f64>>(terms: I) -> f64 {
 }
 
 /// `a·x` where `x` may be infinite and `a` may be zero: zero times anything is zero.
+#[inline]
 pub fn mul0(a: f64, x: f64) -> f64 {
+    // computed first and then selected: a select, not a branch, so that
+    // loops over it vectorise
+    let p = a * x;
     if a == 0.0 {
         0.0
     } else {
-        a * x
+        p
+    }
+}
+
+/// `max(a·l, a·h)` as a term of an upper bound of `a·x` over `l ≤ x ≤ h`
+/// (zero when `a = 0`, whatever the bounds); branch-free.
+#[inline]
+pub fn term_upper(a: f64, l: f64, h: f64) -> f64 {
+    let (pl, ph) = (a * l, a * h);
+    let t = if a > 0.0 { ph } else { pl };
+    if a == 0.0 {
+        0.0
+    } else {
+        t
+    }
+}
+
+/// `min(a·l, a·h)` as a term of a lower bound of `a·x` over `l ≤ x ≤ h`
+/// (zero when `a = 0`); branch-free.
+#[inline]
+pub fn term_lower(a: f64, l: f64, h: f64) -> f64 {
+    let (pl, ph) = (a * l, a * h);
+    let t = if a > 0.0 { pl } else { ph };
+    if a == 0.0 {
+        0.0
+    } else {
+        t
     }
 }
 

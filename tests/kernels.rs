@@ -3,7 +3,8 @@
 //! `reference` below is back-substitution written the obvious way: nalgebra
 //! matrices, one `sum_upper` per offset, rows copied out, every product from
 //! nalgebra. The analysis's kernels (row-major rows, two buffers, interleaved
-//! sums, the blocked product for wide layers) must give the same bounds up to
+//! sums, the blocked product for wide layers, the exact path for the ±I
+//! layers of control limits) must give the same bounds up to
 //! rounding-error terms, on random ReLU, tanh and sigmoid networks from 2 to
 //! 96 neurons wide (both product paths), and every sampled output must lie
 //! inside both.
@@ -188,7 +189,12 @@ fn fast_kernels_match_the_reference_bound_for_bound() {
     let mut compared = 0;
     for (case, widths) in shapes.iter().cycle().take(36).enumerate() {
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
-        let net = random_network(&mut rng, widths, act);
+        let mut net = random_network(&mut rng, widths, act);
+        if case % 4 == 1 {
+            // control limits: clamp layers with W = ±I (the exact-product path)
+            let m = net.outputs();
+            net = net.with_saturation(&vec![-0.3; m], &vec![0.4; m]);
+        }
         let n = widths[0];
         let centre: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
         let radius = rng.uniform(0.01, 0.8);

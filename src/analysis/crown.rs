@@ -16,7 +16,7 @@ pub use super::dense::Rows;
 use super::relax::{image, relax, Relax};
 use crate::issue::Issue;
 use crate::nn::{Layer, Network};
-use crate::num::{abs_dot, gamma, mul0, Acc, TINY, U};
+use crate::num::{abs_dot, gamma, mul0, term_lower, term_upper, Acc, TINY, U};
 use crate::sets::{IBox, Region};
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
@@ -98,7 +98,7 @@ impl LinearUpper {
                 let mut acc = Acc::ZERO;
                 acc.add(o);
                 for (&a, (&l, &h)) in row[keep..].iter().zip(tail.lo.iter().zip(&tail.hi)) {
-                    acc.add(if a >= 0.0 { mul0(a, h) } else { mul0(a, l) });
+                    acc.add(term_upper(a, l, h));
                 }
                 acc.upper()
             })
@@ -137,13 +137,7 @@ impl LinearUpper {
             .map(|(row, &o)| {
                 let mut acc = Acc::ZERO;
                 for (&a, (&l, &h)) in row.iter().zip(b.lo.iter().zip(&b.hi)) {
-                    acc.add(if a == 0.0 {
-                        0.0
-                    } else if a > 0.0 {
-                        a * h
-                    } else {
-                        a * l
-                    });
+                    acc.add(term_upper(a, l, h));
                 }
                 acc.add(o);
                 acc.upper()
@@ -162,6 +156,21 @@ fn affine_into(
     wz: &[f64],
     out: &mut Rows,
 ) {
+    if let Some(sign) = signed_identity(w) {
+        // W = ±I (the clamp layers of control limits): the product is
+        // exact, so it has no rounding error to account for
+        out.clone_from(coef);
+        if sign < 0.0 {
+            out.negate();
+        }
+        for (row, o) in coef.iter_rows().zip(offset.iter_mut()) {
+            let mut acc = Acc::ZERO;
+            acc.add_products(row, b.as_slice());
+            acc.add(*o);
+            *o = acc.upper();
+        }
+        return;
+    }
     coef.mul_into(w, out);
     let k = gamma(w.nrows() + 2);
     for (row, o) in coef.iter_rows().zip(offset.iter_mut()) {
@@ -171,6 +180,26 @@ fn affine_into(
         acc.add(slack(k, row, wz));
         *o = acc.upper();
     }
+}
+
+/// `Some(s)` when `w = s·I` with `s = ±1`.
+fn signed_identity(w: &DMatrix<f64>) -> Option<f64> {
+    let n = w.nrows();
+    if n != w.ncols() || n == 0 {
+        return None;
+    }
+    let s = w[(0, 0)];
+    if s != 1.0 && s != -1.0 {
+        return None;
+    }
+    for (j, col) in w.as_slice().chunks_exact(n).enumerate() {
+        for (i, &v) in col.iter().enumerate() {
+            if v != if i == j { s } else { 0.0 } {
+                return None;
+            }
+        }
+    }
+    Some(s)
 }
 
 /// One activation layer of back-substitution, in place: each coefficient
@@ -238,13 +267,8 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
         for (i, col) in w.as_slice().chunks_exact(rows).enumerate() {
             let (xl, xh) = (x.lo[i], x.hi[i]);
             for ((l, h), &a) in lo.iter_mut().zip(hi.iter_mut()).zip(col) {
-                if a >= 0.0 {
-                    l.add(mul0(a, xl));
-                    h.add(mul0(a, xh));
-                } else {
-                    l.add(mul0(a, xh));
-                    h.add(mul0(a, xl));
-                }
+                l.add(term_lower(a, xl, xh));
+                h.add(term_upper(a, xl, xh));
             }
         }
     }

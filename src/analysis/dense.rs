@@ -100,6 +100,11 @@ impl Rows {
         }
     }
 
+    /// Negate every entry (exact).
+    pub fn negate(&mut self) {
+        self.data.iter_mut().for_each(|v| *v = -*v);
+    }
+
     /// Entry-wise sum (rounded; the caller accounts for the rounding).
     pub fn plus(&self, other: &Rows) -> Rows {
         assert_eq!((self.rows, self.cols), (other.rows, other.cols));

@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, DVector};
 pub use super::dense::Rows;
 use super::relax::{image, relax, Relax};
 use crate::issue::Issue;
-use crate::nn::{Layer, Network};
+use crate::nn::{Activation, Layer, Network};
 use crate::num::{abs_dot, gamma, mul0, term_lower, term_upper, Acc, TINY, U};
 use crate::sets::{IBox, Region};
 
@@ -350,17 +350,38 @@ impl<'a> Analysis<'a> {
                     let mut next = affine_image(w, b, current);
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     if mode == Mode::Crown && feeds_activation {
-                        let n = w.nrows();
-                        let bound = a.backward(plus_minus_identity(n), i + 1);
-                        let mut both = bound.concretize(input);
-                        if let Some(h) = hook {
-                            for (b, o) in both.iter_mut().zip(h(&bound)) {
-                                *b = b.min(o);
+                        // A ReLU that interval arithmetic already proves
+                        // inactive (z ≤ 0) outputs exactly 0 whatever its
+                        // bounds: it is not worth a back-substitution, and
+                        // skipping it changes no bound (its relaxation is 0,
+                        // its image [0, 0], and its bounds enter no error
+                        // term: they multiply zero coefficients). Active
+                        // ones are bounded: their bounds pass on to the next
+                        // layer's interval image. Tanh and sigmoid relax by
+                        // their bounds: every neuron is bounded.
+                        let relu =
+                            matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
+                        let rows: Vec<usize> = (0..w.nrows())
+                            .filter(|&j| !(relu && next.hi[j] <= 0.0))
+                            .collect();
+                        let k = rows.len();
+                        if k > 0 {
+                            let mut spec = Rows::zeros(2 * k, w.nrows());
+                            for (r, &j) in rows.iter().enumerate() {
+                                spec.row_mut(r)[j] = 1.0;
+                                spec.row_mut(k + r)[j] = -1.0;
                             }
-                        }
-                        for j in 0..n {
-                            next.hi[j] = next.hi[j].min(both[j]);
-                            next.lo[j] = next.lo[j].max(-both[n + j]);
+                            let bound = a.backward(spec, i + 1);
+                            let mut both = bound.concretize(input);
+                            if let Some(h) = hook {
+                                for (b, o) in both.iter_mut().zip(h(&bound)) {
+                                    *b = b.min(o);
+                                }
+                            }
+                            for (r, &j) in rows.iter().enumerate() {
+                                next.hi[j] = next.hi[j].min(both[r]);
+                                next.lo[j] = next.lo[j].max(-both[k + r]);
+                            }
                         }
                     }
                     (next, Vec::new())

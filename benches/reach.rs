@@ -4,8 +4,9 @@
 //! method is run through the whole horizon by [`execute`], the same entry the
 //! CLI uses, and the table prints
 //!
-//! * the runtime of one analysis (mean ± standard deviation over repeated
-//!   runs, at least three, until a second has passed): the reachability
+//! * the runtime of one analysis (the median and, in parentheses, the
+//!   fastest of repeated runs, at least three, until a second has passed;
+//!   the fastest is the least disturbed by other work): the reachability
 //!   analysis of all cells, without Monte Carlo falsification (`samples 0`),
 //!   except for the simulation-guided methods and the hull boundary, whose
 //!   samples (1000) are part of the method and are timed with it;
@@ -19,6 +20,8 @@
 //!
 //! Pass a substring of a method name to run only the matching rows, e.g.
 //! `cargo bench --bench reach -- LP`.
+
+mod common;
 
 use std::path::Path;
 use std::time::Instant;
@@ -106,22 +109,12 @@ fn methods(dims: usize, grid: &[usize], sdp: bool, sdp_cells: bool) -> Vec<Metho
     v
 }
 
-fn machine() -> String {
-    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let model = info
-        .lines()
-        .find_map(|l| l.strip_prefix("model name"))
-        .map(|l| l.trim_start_matches([' ', '\t', ':']).to_string())
-        .unwrap_or_else(|| "unknown CPU".into());
-    let threads = std::thread::available_parallelism().map_or(0, |n| n.get());
-    format!("{model}, {threads} hardware threads available, one used")
-}
-
-fn fmt_time(mean: f64, sd: f64) -> String {
-    if mean < 1.0 {
-        format!("{:.2} ± {:.2} ms", mean * 1e3, sd * 1e3)
+/// `median (best)` of the runs.
+fn fmt_time(median: f64, best: f64) -> String {
+    if median < 1.0 {
+        format!("{:.3} ms ({:.3})", median * 1e3, best * 1e3)
     } else {
-        format!("{mean:.2} ± {sd:.2} s")
+        format!("{median:.2} s ({best:.2})")
     }
 }
 
@@ -132,7 +125,7 @@ fn main() {
         .filter(|a| !a.is_empty());
     let slow = std::env::args().any(|a| a == "--slow");
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    println!("machine: {}", machine());
+    println!("machine: {}, one used", common::machine());
     for (spec, grid, sdp, sdp_cells) in [
         ("specs/double_integrator.ravel", vec![4, 4], true, true),
         ("specs/quadrotor.ravel", vec![2, 2, 2, 2, 1, 1], slow, false),
@@ -166,10 +159,10 @@ fn main() {
             grid.iter().product::<usize>()
         );
         println!(
-            "| {:<26} | {:>22} | {:>12} |",
-            "Algorithm", "Runtime", "Error"
+            "| {:<26} | {:>24} | {:>12} |",
+            "Algorithm", "Runtime: median (best)", "Error"
         );
-        println!("|{:-<28}|{:-<24}|{:-<14}|", "", "", "");
+        println!("|{:-<28}|{:-<26}|{:-<14}|", "", "", "");
         for m in methods(grid.len(), &grid, sdp, sdp_cells) {
             if filter
                 .as_ref()
@@ -194,9 +187,8 @@ fn main() {
                     break;
                 }
             }
-            let n = times.len() as f64;
-            let mean = times.iter().sum::<f64>() / n;
-            let sd = (times.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / n).sqrt();
+            times.sort_by(f64::total_cmp);
+            let (median, best) = (times[times.len() / 2], times[0]);
             let last = outcome.reach.last().expect("steps");
             let error = last.volume() / hull_volume - 1.0;
             let issues = if outcome.solver_issues.is_empty() {
@@ -205,9 +197,9 @@ fn main() {
                 " (solver fallbacks)"
             };
             println!(
-                "| {:<26} | {:>22} | {:>12} |{issues}",
+                "| {:<26} | {:>24} | {:>12} |{issues}",
                 m.name,
-                fmt_time(mean, sd),
+                fmt_time(median, best),
                 if error.abs() < 1e5 {
                     format!("{error:.2}")
                 } else {

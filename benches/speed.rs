@@ -20,6 +20,8 @@
 //! steps, a 2 → 32 → 32 → 3 controller's one step). A substring argument
 //! keeps only the tables whose title contains it (`cargo bench --bench speed -- cells`).
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
@@ -31,7 +33,6 @@ use ravel::analysis::partition::Budget;
 use ravel::check::Checked;
 use ravel::execute::{execute_with, propagate_cell, Control};
 use ravel::lower::{lower, Guide, Partitioner, Plan};
-use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
 use ravel::sets::{IBox, Region};
 
@@ -107,21 +108,6 @@ fn run(plan: &Plan, threads: usize) {
     ));
 }
 
-fn random_relu(rng: &mut Rng, widths: &[usize]) -> Network {
-    let mut layers = Vec::new();
-    for (k, pair) in widths.windows(2).enumerate() {
-        let s = 1.5 / (pair[0] as f64).sqrt();
-        layers.push(Layer::Affine {
-            w: DMatrix::from_fn(pair[1], pair[0], |_, _| rng.uniform(-s, s)),
-            b: DVector::from_fn(pair[1], |_, _| rng.uniform(-0.2, 0.2)),
-        });
-        if k + 2 < widths.len() {
-            layers.push(Layer::Act(Activation::Relu));
-        }
-    }
-    Network::new(widths[0], layers)
-}
-
 /// Multiply-adds of CROWN's output bounds (every pre-activation bounded by
 /// back-substitution with `[I; −I]`, then the output with `[I; −I]`).
 fn crown_madds(widths: &[usize]) -> f64 {
@@ -157,17 +143,6 @@ fn peak_memory() -> String {
                 .map(|l| l.trim_start_matches("VmHWM:").trim().to_string())
         })
         .unwrap_or_else(|| "unknown".into())
-}
-
-fn machine() -> String {
-    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
-    let model = info
-        .lines()
-        .find_map(|l| l.strip_prefix("model name"))
-        .map(|l| l.trim_start_matches([' ', '\t', ':']).to_string())
-        .unwrap_or_else(|| "unknown CPU".into());
-    let threads = std::thread::available_parallelism().map_or(0, |n| n.get());
-    format!("{model}, {threads} hardware threads")
 }
 
 fn targets(slow: bool) {
@@ -252,7 +227,7 @@ fn targets(slow: bool) {
             "≤ 60 s",
         );
         let mut rng = Rng::new(11);
-        let net = random_relu(&mut rng, &[2, 32, 32, 3]);
+        let net = common::random_relu(&mut rng, &[2, 32, 32, 3]);
         let plant = Plant {
             a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
             b: DMatrix::from_row_slice(2, 3, &[0.5, 0.1, 0.0, 1.0, 0.0, 0.2]),
@@ -345,7 +320,7 @@ fn width_and_depth() {
         s
     }));
     for widths in shapes {
-        let net = random_relu(&mut rng, &widths);
+        let net = common::random_relu(&mut rng, &widths);
         let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);
         let t = time(|| {
             let a = Analysis::new(&net, &input, Mode::Crown);
@@ -399,7 +374,7 @@ fn main() {
         .filter(|a| !a.is_empty());
     let slow = std::env::args().any(|a| a == "--slow");
     let on = |title: &str| filter.as_ref().is_none_or(|f| title.contains(f.as_str()));
-    println!("machine: {}; date: {}", machine(), today());
+    println!("machine: {}; date: {}", common::machine(), today());
     if on("targets") {
         targets(slow);
     }

@@ -72,6 +72,32 @@ pub fn mat_vec_into(m: &DMatrix<f64>, x: &[f64], out: &mut Vec<f64>) {
     }
 }
 
+/// [`mat_vec_into`] for `count` vectors at once, stored input-major
+/// (`x[j·count + s]`): `out[i·count + s]` is bit for bit `mat_vec_into`'s
+/// entry `i` for sample `s` (the same products summed in the same order).
+pub fn mat_batch_into(m: &DMatrix<f64>, x: &[f64], count: usize, out: &mut Vec<f64>) {
+    let rows = m.nrows();
+    out.clear();
+    out.resize(rows * count, 0.0);
+    if rows == 0 || count == 0 {
+        return;
+    }
+    for (i, o) in out.chunks_exact_mut(count).enumerate() {
+        for (j, xj) in x.chunks_exact(count).enumerate().take(m.ncols()) {
+            let c = m[(i, j)];
+            if j == 0 {
+                for (o, &x) in o.iter_mut().zip(xj) {
+                    *o = x * c;
+                }
+            } else {
+                for (o, &x) in o.iter_mut().zip(xj) {
+                    *o += x * c;
+                }
+            }
+        }
+    }
+}
+
 /// The logistic sigmoid, evaluated without overflow for large |z|.
 pub fn sigmoid(z: f64) -> f64 {
     if z >= 0.0 {
@@ -148,6 +174,31 @@ impl Network {
                     mat_vec_into(w, &h, &mut z);
                     for (z, b) in z.iter_mut().zip(b.iter()) {
                         *z += b;
+                    }
+                    std::mem::swap(&mut h, &mut z);
+                }
+                Layer::Act(a) => h.iter_mut().for_each(|v| *v = a.eval(*v)),
+            }
+        }
+        h
+    }
+
+    /// [`Network::forward`] of `count` inputs at once, stored input-major
+    /// (`x[i·count + s]` is input `i` of sample `s`; the outputs likewise).
+    /// Every output is bit for bit `forward`'s: each sum runs over the same
+    /// terms in the same order, only the samples are side by side (so the
+    /// loops over them vectorise).
+    pub fn forward_batch(&self, x: &[f64], count: usize) -> Vec<f64> {
+        let mut h = x.to_vec();
+        let mut z = Vec::new();
+        for layer in &self.layers {
+            match layer {
+                Layer::Affine { w, b } => {
+                    mat_batch_into(w, &h, count, &mut z);
+                    for (zi, bi) in z.chunks_exact_mut(count.max(1)).zip(b.iter()) {
+                        for v in zi {
+                            *v += bi;
+                        }
                     }
                     std::mem::swap(&mut h, &mut z);
                 }

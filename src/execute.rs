@@ -591,11 +591,13 @@ fn sample_range(
                 }
                 PropertyKind::Avoid { members, steps } => {
                     let mut best: Option<(f64, usize)> = None;
-                    for t in steps.0..=steps.1.min(valid.saturating_sub(1)) {
-                        if t >= valid {
-                            break;
-                        }
-                        let x = states[t];
+                    let window = states
+                        .iter()
+                        .enumerate()
+                        .take(valid)
+                        .take(steps.1 + 1)
+                        .skip(steps.0);
+                    for (t, &x) in window {
                         for m in members {
                             let rhs = m.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
                             let inside = m.depth(x);

@@ -119,11 +119,7 @@ fn fmt_time(median: f64, best: f64) -> String {
 }
 
 fn main() {
-    let filter: Option<String> = std::env::args()
-        .skip(1)
-        .find(|a| !a.starts_with('-'))
-        .filter(|a| !a.is_empty());
-    let slow = std::env::args().any(|a| a == "--slow");
+    let (filter, slow) = common::args();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     println!("machine: {}, one used", common::machine());
     for (spec, grid, sdp, sdp_cells) in [

@@ -368,11 +368,7 @@ fn horizon() {
 }
 
 fn main() {
-    let filter: Option<String> = std::env::args()
-        .skip(1)
-        .find(|a| !a.starts_with('-'))
-        .filter(|a| !a.is_empty());
-    let slow = std::env::args().any(|a| a == "--slow");
+    let (filter, slow) = common::args();
     let on = |title: &str| filter.as_ref().is_none_or(|f| title.contains(f.as_str()));
     println!("machine: {}; date: {}", common::machine(), today());
     if on("targets") {

@@ -33,3 +33,13 @@ pub fn random_relu(rng: &mut Rng, widths: &[usize]) -> Network {
     }
     Network::new(widths[0], layers)
 }
+
+/// The benchmark's arguments: a filter (the first argument that is not a
+/// flag) and whether `--slow` was given.
+pub fn args() -> (Option<String>, bool) {
+    let filter = std::env::args()
+        .skip(1)
+        .find(|a| !a.starts_with('-'))
+        .filter(|a| !a.is_empty());
+    (filter, std::env::args().any(|a| a == "--slow"))
+}

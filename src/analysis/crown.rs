@@ -3,7 +3,9 @@
 //! CROWN computes, for a specification matrix `S`, linear functions with
 //! `S f(y) ≤ Λ y + c` for every `y` in the input box. Pre-activation bounds of
 //! every hidden layer are themselves computed by CROWN (and intersected with
-//! IBP's), then each neuron is relaxed by [`relax`](super::relax).
+//! IBP's), then each neuron is relaxed by [`relax`](super::relax). A ReLU
+//! whose input IBP already proves non-positive is not back-substituted: it
+//! outputs 0 whatever its bounds, so no bound changes.
 //!
 //! All coefficient arithmetic is done in `f64`; the rounding error of every
 //! matrix product is accounted for by widening the offset with

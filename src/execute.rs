@@ -471,6 +471,8 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
 impl MonteCarlo {
     /// Merge the results of later samples into these (see [`monte_carlo`]).
     fn absorb(&mut self, later: MonteCarlo) {
+        // a hull boundary's points are order-dependent: sampled on one thread only
+        debug_assert!(later.points.iter().all(Vec::is_empty));
         for (mine, theirs) in self.sampled.iter_mut().zip(later.sampled) {
             *mine = match (mine.take(), theirs) {
                 (Some(a), Some(b)) => Some(a.hull(&b)),

@@ -50,31 +50,10 @@ impl Activation {
     }
 }
 
-/// `out = M x` in `f64`, summed column by column (`M₀x₀ + M₁x₁ + …`, the
-/// order of nalgebra's matrix-vector product), into `out`'s storage.
-pub fn mat_vec_into(m: &DMatrix<f64>, x: &[f64], out: &mut Vec<f64>) {
-    let rows = m.nrows();
-    out.clear();
-    out.resize(rows, 0.0);
-    if rows == 0 {
-        return;
-    }
-    for (j, (col, &xj)) in m.as_slice().chunks_exact(rows).zip(x).enumerate() {
-        if j == 0 {
-            for (o, &c) in out.iter_mut().zip(col) {
-                *o = xj * c;
-            }
-        } else {
-            for (o, &c) in out.iter_mut().zip(col) {
-                *o += xj * c;
-            }
-        }
-    }
-}
-
-/// [`mat_vec_into`] for `count` vectors at once, stored input-major
-/// (`x[j·count + s]`): `out[i·count + s]` is bit for bit `mat_vec_into`'s
-/// entry `i` for sample `s` (the same products summed in the same order).
+/// `out = M x` for `count` vectors at once, stored input-major
+/// (`x[j·count + s]` is entry `j` of vector `s`; `out` likewise): each entry
+/// summed column by column, `M₀x₀ + M₁x₁ + …`, the order of nalgebra's
+/// matrix-vector product, whatever `count` is.
 pub fn mat_batch_into(m: &DMatrix<f64>, x: &[f64], count: usize, out: &mut Vec<f64>) {
     let rows = m.nrows();
     out.clear();
@@ -154,33 +133,12 @@ impl Network {
         self.width_at(self.layers.len())
     }
 
-    /// Evaluate the network in `f64`.
-    ///
-    /// Each affine layer is evaluated column by column, `z = W₀h₀ + W₁h₁ + …`
-    /// then `+ b`: the order of nalgebra's matrix-vector product, so
-    /// simulations give the same bits as they always did, with two buffers
-    /// instead of a vector per layer.
+    /// Evaluate the network in `f64`: each affine layer column by column,
+    /// `z = W₀h₀ + W₁h₁ + …` then `+ b` (the order of nalgebra's
+    /// matrix-vector product, so simulations keep their bits; see
+    /// [`Network::forward_batch`], of which this is the batch of one).
     pub fn forward(&self, x: &[f64]) -> Vec<f64> {
-        let widest = self.layers.iter().fold(x.len(), |m, l| match l {
-            Layer::Affine { w, .. } => m.max(w.nrows()),
-            Layer::Act(_) => m,
-        });
-        let mut h = Vec::with_capacity(widest);
-        h.extend_from_slice(x);
-        let mut z = Vec::with_capacity(widest);
-        for layer in &self.layers {
-            match layer {
-                Layer::Affine { w, b } => {
-                    mat_vec_into(w, &h, &mut z);
-                    for (z, b) in z.iter_mut().zip(b.iter()) {
-                        *z += b;
-                    }
-                    std::mem::swap(&mut h, &mut z);
-                }
-                Layer::Act(a) => h.iter_mut().for_each(|v| *v = a.eval(*v)),
-            }
-        }
-        h
+        self.forward_batch(x, 1)
     }
 
     /// [`Network::forward`] of `count` inputs at once, stored input-major

@@ -166,13 +166,8 @@ pub fn term_upper(a: f64, l: f64, h: f64) -> f64 {
 /// (zero when `a = 0`); branch-free.
 #[inline]
 pub fn term_lower(a: f64, l: f64, h: f64) -> f64 {
-    let (pl, ph) = (a * l, a * h);
-    let t = if a > 0.0 { pl } else { ph };
-    if a == 0.0 {
-        0.0
-    } else {
-        t
-    }
+    // min(a·l, a·h) = −max((−a)·l, (−a)·h); negation is exact
+    -term_upper(-a, l, h)
 }
 
 /// Upper bound of `Σ aᵢ xᵢ` over the box `lo ≤ x ≤ hi` (exact coefficients `a`).
@@ -215,9 +210,10 @@ pub fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
 
 /// Upper bound of the error `|Σ aᵢ xᵢ − fl(...)|`-style slack: `k · Σ|aᵢ|·mᵢ`, rounded up,
 /// where `k` is a relative error factor and `m` bounds `|x|`.
+#[inline]
 pub fn slack(k: f64, a: &[f64], m: &[f64]) -> f64 {
-    let s: f64 = a.iter().zip(m).map(|(a, m)| mul0(a.abs(), *m)).sum();
-    (k * s * 1.0625 + TINY).next_up()
+    // the factor 1.0625 also covers the rounding of the sum itself
+    (k * abs_dot(a, m) * 1.0625 + TINY).next_up()
 }
 
 /// The largest absolute value in `[lo, hi]`.

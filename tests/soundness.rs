@@ -863,11 +863,42 @@ fn cell_threads_give_the_same_outcome() {
     }
 }
 
+/// Each step of a one-sample simulation, redone with nalgebra's own
+/// matrix-vector products (the order simulations have always used): the same
+/// controls and states, bit for bit.
+fn nalgebra_replays(plan: &ravel::lower::Plan, tr: &ravel::execute::Trajectory, spec: &str) {
+    let cl = &plan.closed_loop;
+    for t in 0..tr.controls.len() {
+        let x = DVector::from_column_slice(&tr.states[t]);
+        let mut h = cl.plant.obs.transpose() * &x + DVector::from_column_slice(&tr.sensor_noise[t]);
+        for layer in &cl.net.layers {
+            match layer {
+                Layer::Affine { w, b } => h = w * h + b,
+                Layer::Act(a) => h.apply(|z| *z = a.eval(*z)),
+            }
+        }
+        let pl = cl.plant_at(t);
+        let next =
+            &pl.a * &x + &pl.b * &h + &pl.c + DVector::from_column_slice(&tr.process_noise[t]);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(h.as_slice()),
+            bits(&tr.controls[t]),
+            "{spec}: control at step {t}"
+        );
+        assert_eq!(
+            bits(next.as_slice()),
+            bits(&tr.states[t + 1]),
+            "{spec}: state at step {t}"
+        );
+    }
+}
+
 /// The Monte Carlo pass simulates 64 samples side by side; every state must
 /// be bit for bit the one-sample simulation's (which replays
-/// counterexamples), on every shipped spec: noise, observation matrices,
-/// time-varying and continuous-time plants, tanh controllers, ball and
-/// polytope initial sets (rejection sampling).
+/// counterexamples), and that one nalgebra's, on every shipped spec: noise,
+/// observation matrices, time-varying and continuous-time plants, tanh
+/// controllers, ball and polytope initial sets (rejection sampling).
 #[test]
 fn batched_simulation_matches_the_scalar_one_bit_for_bit() {
     let mut specs: Vec<_> = std::fs::read_dir("specs")
@@ -893,6 +924,9 @@ fn batched_simulation_matches_the_scalar_one_bit_for_bit() {
         let batch = ravel::execute::simulate_states(&plan, ks.clone(), &special);
         for (k, got) in ks.zip(batch) {
             let want = ravel::execute::simulate(&plan, k);
+            if let Some(tr) = &want {
+                nalgebra_replays(&plan, tr, &path.display().to_string());
+            }
             match (want, got) {
                 (None, None) => {}
                 (Some(tr), Some(flat)) => {

@@ -20,7 +20,7 @@ use super::partition::{Budget, Strategy};
 use super::sdp;
 use super::shape::Shape;
 use crate::issue::Issue;
-use crate::nn::{mat_batch_into, mat_vec_into, Network};
+use crate::nn::{mat_batch_into, Network};
 use crate::num::{gamma, mul0, slack, sum_upper};
 use crate::sets::{IBox, Region};
 
@@ -335,40 +335,19 @@ impl ClosedLoop {
         self.plant.a.nrows()
     }
 
-    /// One exact step `t`: returns `(u, x⁺)` for state `x` and noise `w`, `v` (in `f64`).
-    ///
-    /// The sums run in the order of nalgebra's products (`y = Cᵀx + v`,
-    /// `x⁺ = ((A x + B u) + c) + w`, each product column by column).
+    /// One exact step `t`: returns `(u, x⁺)` for state `x` and noise `w`, `v`
+    /// (in `f64`; a batch of one, see [`ClosedLoop::simulate_batch`]).
     pub fn simulate(&self, t: usize, x: &[f64], w: &[f64], v: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        // y = Cᵀ x: `obs_xv` is [Cᵀ I]; its first n columns are Cᵀ's
-        let n = x.len();
-        let p = self.plant.obs.ncols();
-        let mut y = vec![0.0; p];
-        for (j, &xj) in x.iter().enumerate() {
-            let col = &self.obs_xv.as_slice()[j * p..(j + 1) * p];
-            for (o, &c) in y.iter_mut().zip(col) {
-                *o = if j == 0 { xj * c } else { *o + xj * c };
-            }
-        }
-        for (o, vi) in y.iter_mut().zip(v) {
-            *o += vi;
-        }
-        let u = self.net.forward(&y);
-        let pl = self.plant_at(t);
-        let mut next = Vec::with_capacity(n);
-        mat_vec_into(&pl.a, x, &mut next);
-        let mut bu = Vec::with_capacity(n);
-        mat_vec_into(&pl.b, &u, &mut bu);
-        for (i, o) in next.iter_mut().enumerate() {
-            *o = ((*o + bu[i]) + pl.c[i]) + w[i];
-        }
-        (u, next)
+        self.simulate_batch(t, x, w, v, 1)
     }
 
-    /// [`ClosedLoop::simulate`] of `count` samples at once, stored
+    /// One exact step `t` of `count` samples at once, stored
     /// coordinate-major (`x[j·count + s]` is coordinate `j` of sample `s`;
-    /// `w`, `v` and the results likewise): `(u, x⁺)`, bit for bit what
-    /// `simulate` gives each sample (the same sums in the same order).
+    /// `w`, `v` and the results likewise): `(u, x⁺)`. The sums run in the
+    /// order of nalgebra's products (`y = Cᵀx + v`, `x⁺ = ((A x + B u) + c) + w`,
+    /// each product column by column) for every `count`, so a sample's bits
+    /// do not depend on its batch (`tests/soundness.rs` checks both against
+    /// nalgebra's own products).
     pub fn simulate_batch(
         &self,
         t: usize,

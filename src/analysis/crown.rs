@@ -18,7 +18,7 @@ pub use super::dense::Rows;
 use super::relax::{image, relax, Relax};
 use crate::issue::Issue;
 use crate::nn::{Activation, Layer, Network};
-use crate::num::{abs_dot, gamma, mul0, term_lower, term_upper, Acc, TINY, U};
+use crate::num::{gamma, mul0, slack, term_lower, term_upper, Acc, U};
 use crate::sets::{IBox, Region};
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
@@ -241,12 +241,6 @@ pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
         }
     }
     acc.into_iter().map(Acc::upper).collect()
-}
-
-/// `k · Σ|aᵢ|·mᵢ` rounded up: a bound on the error of rounded coefficients `a` applied to `|z| ≤ m`.
-#[inline]
-fn slack(k: f64, a: &[f64], m: &[f64]) -> f64 {
-    (k * abs_dot(a, m) * 1.0625 + TINY).next_up()
 }
 
 /// The `2n × n` specification `[I; −I]`: upper bounds, then negated lower bounds.

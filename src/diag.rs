@@ -25,6 +25,8 @@ pub enum Code {
     IndexOutOfRange,
     /// E0105: a value of the wrong kind (a matrix where a vector is expected, …).
     WrongKind,
+    /// E0106: an item or setting of the other kind of spec (system vs network).
+    SpecKind,
     /// E0201: a matrix or vector of the wrong shape.
     Shape,
     /// E0202: matrix rows of different lengths.
@@ -57,6 +59,10 @@ pub enum Code {
     SdpActivation,
     /// E0216: a number, size or count beyond ravel's documented limits.
     Limit,
+    /// E0217: a robustness label that is out of range or cannot be determined.
+    Label,
+    /// E0218: a radius search that cannot be set up.
+    Radius,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -77,7 +83,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 31] = [
+    pub const ALL: [Code; 34] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -85,6 +91,7 @@ impl Code {
         Code::Missing,
         Code::IndexOutOfRange,
         Code::WrongKind,
+        Code::SpecKind,
         Code::Shape,
         Code::Ragged,
         Code::EmptyInterval,
@@ -101,6 +108,8 @@ impl Code {
         Code::Budget,
         Code::SdpActivation,
         Code::Limit,
+        Code::Label,
+        Code::Radius,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -121,6 +130,7 @@ impl Code {
             Code::Missing => "E0103",
             Code::IndexOutOfRange => "E0104",
             Code::WrongKind => "E0105",
+            Code::SpecKind => "E0106",
             Code::Shape => "E0201",
             Code::Ragged => "E0202",
             Code::EmptyInterval => "E0203",
@@ -137,6 +147,8 @@ impl Code {
             Code::Budget => "E0214",
             Code::SdpActivation => "E0215",
             Code::Limit => "E0216",
+            Code::Label => "E0217",
+            Code::Radius => "E0218",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

@@ -48,3 +48,41 @@ pub enum Partitioner {
         budget: Budget,
     },
 }
+
+/// How a network spec bounds its network (the tutorial's Table I propagators).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NetPropagator {
+    /// Interval bound propagation.
+    Ibp,
+    /// Fast-Lin: CROWN with the lower ReLU slope equal to the upper one.
+    FastLin,
+    /// CROWN (adaptive lower ReLU slopes).
+    Crown,
+    /// The quadratic-constraint SDP relaxation (ReLU networks only).
+    Sdp,
+}
+
+impl NetPropagator {
+    /// Every network propagator, in the order of the documentation.
+    pub const ALL: [NetPropagator; 4] = [
+        NetPropagator::Ibp,
+        NetPropagator::FastLin,
+        NetPropagator::Crown,
+        NetPropagator::Sdp,
+    ];
+
+    /// The spec-language name.
+    pub fn name(self) -> &'static str {
+        match self {
+            NetPropagator::Ibp => "ibp",
+            NetPropagator::FastLin => "fast_lin",
+            NetPropagator::Crown => "crown",
+            NetPropagator::Sdp => "sdp",
+        }
+    }
+
+    /// The propagator with this spec-language name.
+    pub fn from_name(name: &str) -> Option<NetPropagator> {
+        NetPropagator::ALL.into_iter().find(|p| p.name() == name)
+    }
+}

@@ -33,7 +33,7 @@ pub mod syntax;
 
 use std::path::{Path, PathBuf};
 
-use check::{Checked, ControllerFile};
+use check::{Checked, ControllerFile, Task};
 use diag::Diagnostic;
 
 /// One file the front end asks the caller to read.
@@ -80,6 +80,26 @@ pub fn front_end_with(
     read: Reader,
     controller: Option<&Path>,
 ) -> Result<Checked, Vec<Diagnostic>> {
+    match front_end_task(source, spec_dir, read, controller)? {
+        Task::System(c) => Ok(*c),
+        Task::Network(_) => Err(vec![diag::Diagnostic::new(
+            diag::Code::SpecKind,
+            syntax::ast::Span::new(0, 0),
+            "this is a network spec, not a system spec",
+        )
+        .label("a network on its own")
+        .hint("this entry point reads closed-loop specs; `ravel verify` reads both kinds")]),
+    }
+}
+
+/// The front end for a spec of either kind (a closed loop or a network on
+/// its own); `controller` overrides the spec's controller or model.
+pub fn front_end_task(
+    source: &str,
+    spec_dir: &Path,
+    read: Reader,
+    controller: Option<&Path>,
+) -> Result<Task, Vec<Diagnostic>> {
     let spec = syntax::parse(source)?;
     let path = match controller {
         Some(c) => Some(c.to_path_buf()),
@@ -122,5 +142,5 @@ pub fn front_end_with(
             external,
         }
     });
-    check::check(&spec, controller.as_ref())
+    check::check_task(&spec, controller.as_ref())
 }

@@ -1,4 +1,5 @@
-//! Lowering: a [`Checked`] spec → an analysis [`Plan`]. Cannot fail.
+//! Lowering: a [`Checked`] spec → an analysis [`Plan`], a checked network
+//! spec → a [`NetPlan`]. Cannot fail.
 //!
 //! Lowering decides *what* to compute: it appends the control saturation to
 //! the network, assembles the closed loop, keeps the partitioner (the cells
@@ -88,7 +89,12 @@ pub struct Plan {
 }
 
 fn summary(c: &Checked) -> String {
-    let net = &c.controller.net;
+    describe(&c.controller)
+}
+
+/// `2 → 5 relu → 5 relu → 1`, with the loader's notes.
+fn describe(c: &crate::onnx::Controller) -> String {
+    let net = &c.net;
     let mut parts = vec![net.inputs.to_string()];
     for (i, layer) in net.layers.iter().enumerate() {
         if let Layer::Act(a) = layer {
@@ -97,10 +103,10 @@ fn summary(c: &Checked) -> String {
     }
     parts.push(net.outputs().to_string());
     let chain = parts.join(" → ");
-    if c.controller.notes.is_empty() {
+    if c.notes.is_empty() {
         chain
     } else {
-        format!("{chain}; {}", c.controller.notes.join(", "))
+        format!("{chain}; {}", c.notes.join(", "))
     }
 }
 
@@ -144,6 +150,68 @@ pub fn lower(c: &Checked) -> Plan {
         horizon: c.horizon,
         propagator: c.propagator,
         properties,
+        samples: c.samples,
+        seed: c.seed,
+    }
+}
+
+/// Everything the executor needs for a network spec, as plain data.
+#[derive(Clone, Debug)]
+pub struct NetPlan {
+    /// The network's name.
+    pub name: String,
+    /// The input vector's name.
+    pub input_name: String,
+    /// The output vector's name.
+    pub output_name: String,
+    /// The model path: as written, or as given on the command line.
+    pub model_path: String,
+    /// SHA-256 of the model file, in hex.
+    pub model_sha256: String,
+    /// The path the model was read from.
+    pub model_resolved: String,
+    /// A one-line description of the network.
+    pub network_summary: String,
+    /// The network.
+    pub net: crate::nn::Network,
+    /// The input set.
+    pub input: Region,
+    /// Its name.
+    pub input_set_name: String,
+    /// The properties, in spec order.
+    pub properties: Vec<crate::check::NetProperty>,
+    /// The radius searches, in spec order.
+    pub radii: Vec<crate::check::RadiusSpec>,
+    /// The propagator.
+    pub propagator: crate::ir::NetPropagator,
+    /// How the input set is split.
+    pub partitioner: Partitioner,
+    /// The output set's shape.
+    pub shape: crate::analysis::shape::Shape,
+    /// Monte Carlo samples.
+    pub samples: usize,
+    /// Monte Carlo seed.
+    pub seed: u64,
+}
+
+/// Lower a checked network spec to a plan.
+pub fn lower_network(c: &crate::check::NetworkChecked) -> NetPlan {
+    NetPlan {
+        name: c.name.clone(),
+        input_name: c.input.0.clone(),
+        output_name: c.output.0.clone(),
+        model_path: c.model_path.clone(),
+        model_sha256: c.model_sha256.clone(),
+        model_resolved: c.model_resolved.clone(),
+        network_summary: describe(&c.model),
+        net: c.model.net.clone(),
+        input: c.input_set.1.clone(),
+        input_set_name: c.input_set.0.clone(),
+        properties: c.properties.clone(),
+        radii: c.radii.clone(),
+        propagator: c.propagator,
+        partitioner: c.partitioner.clone(),
+        shape: c.shape.clone(),
         samples: c.samples,
         seed: c.seed,
     }

@@ -20,7 +20,12 @@ fn comments(src: &str) -> Vec<String> {
 
 fn specs() -> Vec<std::path::PathBuf> {
     let mut v = Vec::new();
-    for dir in ["specs", "specs/invalid", "tests/corpus/specs"] {
+    for dir in [
+        "specs",
+        "specs/invalid",
+        "specs/network",
+        "tests/corpus/specs",
+    ] {
         for e in std::fs::read_dir(dir).expect("folder") {
             let p = e.expect("entry").path();
             if p.extension().is_some_and(|x| x == "ravel") {

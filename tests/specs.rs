@@ -142,16 +142,95 @@ fn certificate_summary(
     s
 }
 
+/// Network specs (`specs/network/`): the verdict of the `// expect:` header,
+/// every sampled output inside the certified output box, every robustness
+/// and radius result consistent with its witnesses; snapshots of the syntax
+/// tree and of the report.
+#[test]
+fn network_specs() {
+    use ravel::execute::network::{execute_network, NetControl};
+    use ravel::execute::Status;
+    insta::glob!("../specs/network", "*.ravel", |path| {
+        let source = std::fs::read_to_string(path).expect("spec is readable");
+        let name = display_name(path);
+        let expect = expect_header(&source);
+        let checked = match ravel::front_end_task(
+            &source,
+            path.parent().expect("spec has a folder"),
+            &ravel::cli::read_request,
+            None,
+        ) {
+            Ok(ravel::check::Task::Network(c)) => c,
+            Ok(ravel::check::Task::System(_)) => panic!("{name} is not a network spec"),
+            Err(d) => panic!(
+                "{name} is a valid spec but has diagnostics:\n{}",
+                render(&d, &name, &source, 100, false)
+            ),
+        };
+        let plan = ravel::lower::lower_network(&checked);
+        let out = execute_network(
+            &plan,
+            &NetControl {
+                elapsed: &|| 0.0,
+                time_limit: None,
+            },
+        );
+        if let (Some(b), Some(s)) = (&out.output.bbox, &out.output.sampled_bbox) {
+            assert!(
+                b.contains_box(s),
+                "{name}: sampled outputs leave the output set"
+            );
+        }
+        for (k, sampled) in out.output.sampled.iter().enumerate() {
+            assert!(
+                *sampled <= out.output.offsets[k],
+                "{name}: facet {k} below a sampled output"
+            );
+        }
+        for p in &out.properties {
+            match p.status {
+                Status::Verified => assert!(p.margin >= 0.0 && p.counterexample.is_none()),
+                Status::Falsified => {
+                    let w = p.counterexample.as_ref().expect("a witness");
+                    assert!(
+                        plan.input.contains_point(&w.input),
+                        "{name}: witness outside"
+                    );
+                    assert_eq!(plan.net.forward(&w.input), w.output);
+                }
+                Status::Unsure => assert!(p.counterexample.is_none()),
+            }
+        }
+        for r in &out.radii {
+            if let (Some(c), Some((a, _))) = (r.certified, &r.attacked) {
+                assert!(c <= *a, "{name}: certified radius above an attacked one");
+            }
+        }
+        assert_eq!(
+            vec![out.verdict.as_str().to_string()],
+            expect,
+            "{name}: verdict differs from its `// expect:` header"
+        );
+        insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
+        let mut report = ravel::report::network::text(&name, &plan, &out, None);
+        if plan.propagator == ravel::ir::NetPropagator::Sdp {
+            report = fewer_decimals(&report);
+        }
+        insta::assert_snapshot!("result", report);
+    });
+}
+
 #[test]
 fn invalid_specs() {
     insta::glob!("../specs/invalid", "*.ravel", |path| {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
         let expect: BTreeSet<String> = expect_header(&source).into_iter().collect();
-        let diags = match ravel::front_end(
+        let diags = match ravel::front_end_task(
             &source,
             path.parent().expect("spec has a folder"),
             &ravel::cli::read_request,
+            None,
         ) {
             Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),
             Err(d) => d,

@@ -288,6 +288,9 @@ pub enum Mode {
     Ibp,
     /// CROWN bounds for every pre-activation (intersected with IBP).
     Crown,
+    /// Fast-Lin: CROWN with the lower ReLU slope equal to the upper one
+    /// (Weng et al. 2018; the tutorial's special case of CROWN).
+    FastLin,
 }
 
 /// A network analysed over one input box: the bounds of every intermediate
@@ -345,7 +348,7 @@ impl<'a> Analysis<'a> {
                 Layer::Affine { w, b } => {
                     let mut next = affine_image(w, b, current);
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
-                    if mode == Mode::Crown && feeds_activation {
+                    if mode != Mode::Ibp && feeds_activation {
                         // A ReLU that interval arithmetic already proves
                         // inactive (z ≤ 0) outputs exactly 0 whatever its
                         // bounds: it is not worth a back-substitution, and
@@ -384,7 +387,19 @@ impl<'a> Analysis<'a> {
                 }
                 Layer::Act(act) => {
                     let rel: Vec<Relax> = (0..current.dim())
-                        .map(|j| relax(*act, current.lo[j], current.hi[j]))
+                        .map(|j| {
+                            let r = relax(*act, current.lo[j], current.hi[j]);
+                            if mode == Mode::FastLin && *act == Activation::Relu {
+                                // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
+                                Relax {
+                                    al: r.au,
+                                    bl: 0.0,
+                                    ..r
+                                }
+                            } else {
+                                r
+                            }
+                        })
                         .collect();
                     let (lo, hi) = (0..current.dim())
                         .map(|j| image(*act, current.lo[j], current.hi[j]))

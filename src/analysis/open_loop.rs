@@ -107,7 +107,7 @@ pub fn cell_offsets(net: &Network, cell: &IBox, mode: Mode, dirs: &DMatrix<f64>)
     let a = Analysis::new(net, cell, mode);
     let out = a.boxes().last().cloned().unwrap_or_else(|| cell.clone());
     let mut b = support_of_box(dirs, &out.lo, &out.hi);
-    if mode == Mode::Crown {
+    if mode != Mode::Ibp {
         for (v, c) in b.iter_mut().zip(a.upper(dirs.clone()).concretize(cell)) {
             *v = v.min(c);
         }

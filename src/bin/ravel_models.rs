@@ -346,6 +346,31 @@ fn main() {
         encode(&quad_net, Storage::RawF32, true).finish(3),
     );
 
+    // a 3-class classifier of the plane for the network specs: the label of
+    // a point of [-1, 1]² is its 120° sector around the origin (sector 0
+    // starts at angle 0), learned as one-hot targets by mean squared error
+    let mut rng = Rng::new(4);
+    let xs: Vec<DVector<f64>> = (0..4000)
+        .map(|_| DVector::from_vec(vec![rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)]))
+        .collect();
+    let ys: Vec<DVector<f64>> = xs
+        .iter()
+        .map(|x| {
+            let angle = x[1].atan2(x[0]).rem_euclid(std::f64::consts::TAU);
+            let k = ((angle / (std::f64::consts::TAU / 3.0)) as usize).min(2);
+            DVector::from_fn(3, |i, _| if i == k { 1.0 } else { 0.0 })
+        })
+        .collect();
+    let mut clf = Mlp::new(&[2, 16, 16, 3], Activation::Relu, &mut rng);
+    clf.train(&xs, &ys, 6000, 3e-3, &mut rng);
+    eprintln!("classifier: MSE {:.2e}", clf.mse(&xs, &ys));
+    let clf_net = clf.network();
+    write(
+        root,
+        "classifier.onnx",
+        encode(&clf_net, Storage::RawF32, false).finish(3),
+    );
+
     // invalid models, one per loader diagnostic
     let inv = root.join("invalid");
     fs::write(

@@ -1,12 +1,13 @@
-//! The `analysis` block: propagator, partitioner and budget, boundary,
-//! samples and seed.
+//! The `analysis` block: propagator, partitioner and budget, boundary (or,
+//! in a network spec, the output shape), samples and seed.
 
 use std::collections::BTreeMap;
 
 use super::{partitioner_names, Ctx, BOUNDARIES, DEFAULT_SAMPLES, PLANNED_PROPAGATORS};
 use crate::analysis::closed_loop::{Boundary, Propagator};
+use crate::analysis::shape::Shape;
 use crate::diag::{did_you_mean, Code, Diagnostic};
-use crate::ir::{Guide, Partitioner};
+use crate::ir::{Guide, NetPropagator, Partitioner};
 use crate::limits::{within, MAX_CELLS, MAX_SAMPLES};
 use crate::syntax::ast::*;
 
@@ -23,14 +24,23 @@ pub(super) struct AnalysisPart {
     pub propagator_span: Option<Span>,
     pub samples: usize,
     pub seed: u64,
+    /// Network specs: the propagator and the output shape.
+    pub net_propagator: Option<NetPropagator>,
+    pub shape: Option<Shape>,
 }
 
 /// Check the (first) analysis block; defaults where it says nothing.
+/// `state` is what a partition splits (the state, or a network's input);
+/// `output` is present for network specs (the output vector shapes are over).
 pub(super) fn analysis(
     cx: &mut Ctx,
     analyses: &[&Analysis],
     state: &Option<(String, usize)>,
+    output: Option<&Option<(String, usize)>>,
 ) -> AnalysisPart {
+    let network = output.is_some();
+    let mut net_propagator = Some(NetPropagator::Crown);
+    let mut shape = Some(Shape::Box);
     let mut propagator = Some(Propagator::ReachLp);
     let mut partition: Option<Partitioner> = state
         .as_ref()
@@ -51,6 +61,7 @@ pub(super) fn analysis(
                 | AnalysisStmt::Uniform(_)
                 | AnalysisStmt::Guided { .. } => "partitioner",
                 AnalysisStmt::Boundary(_) | AnalysisStmt::BoundaryPolytope(_) => "boundary",
+                AnalysisStmt::Shape(_) | AnalysisStmt::ShapePolytope(_) => "shape",
                 AnalysisStmt::Samples(_) => "samples",
                 AnalysisStmt::Seed(_) => "seed",
             };
@@ -60,6 +71,103 @@ pub(super) fn analysis(
             }
             seen.insert(key, st.span);
             match &st.node {
+                AnalysisStmt::Propagator(p) if network => {
+                    net_propagator = NetPropagator::from_name(&p.node);
+                    propagator_span = Some(p.span);
+                    if net_propagator == Some(NetPropagator::Sdp) {
+                        sdp_span = Some(p.span);
+                    }
+                    if net_propagator.is_none() {
+                        let names: Vec<&str> =
+                            NetPropagator::ALL.iter().map(|p| p.name()).collect();
+                        let list = names.join(", ");
+                        let mut d = Diagnostic::new(
+                            Code::UnknownName,
+                            p.span,
+                            format!("unknown network propagator `{}`", p.node),
+                        )
+                        .label("not a network propagator");
+                        d = match (
+                            Propagator::from_name(&p.node),
+                            did_you_mean(&p.node, names.iter().copied()),
+                        ) {
+                            (Some(_), _) => d.hint(format!(
+                                "`{}` bounds a closed loop; a network spec takes one of: {list}",
+                                p.node
+                            )),
+                            (None, Some(s)) => {
+                                d.hint(format!("did you mean `{s}`? Available: {list}"))
+                            }
+                            (None, None) => d.hint(format!("available: {list}")),
+                        };
+                        cx.err(d);
+                    }
+                }
+                AnalysisStmt::Boundary(_) | AnalysisStmt::BoundaryPolytope(_) if network => {
+                    cx.err(
+                        Diagnostic::new(Code::SpecKind, st.span, "`boundary` shapes a system spec's reachable sets")
+                            .label("in a network spec")
+                            .hint("the output set of a network spec is shaped by `shape box`, `shape lower_bounds`, `shape hull` or `shape polytope …`"),
+                    );
+                }
+                AnalysisStmt::Shape(_) | AnalysisStmt::ShapePolytope(_) if !network => {
+                    cx.err(
+                        Diagnostic::new(Code::SpecKind, st.span, "`shape` shapes a network spec's output set")
+                            .label("in a system spec")
+                            .hint("the reachable sets of a system spec are shaped by `boundary box`, `boundary hull` or `boundary polytope …`"),
+                    );
+                }
+                AnalysisStmt::ShapePolytope(v) => {
+                    if let Some(Some((yn, m))) = output {
+                        shape = match cx.boundary_polytope(v, yn, *m) {
+                            Some(Boundary::Polytope(d)) => Some(Shape::Polytope(d)),
+                            _ => None,
+                        };
+                    }
+                }
+                AnalysisStmt::Shape(b) => {
+                    match b.node.as_str() {
+                        "box" => shape = Some(Shape::Box),
+                        "lower_bounds" => shape = Some(Shape::LowerBounds),
+                        "hull" => {
+                            hull_span = Some(b.span);
+                            shape = match output {
+                                Some(Some((_, 2))) | Some(None) | None => Some(Shape::Hull),
+                                Some(Some((yn, m))) => {
+                                    cx.err(
+                                    Diagnostic::new(Code::Boundary, b.span, format!("a convex-hull shape needs a 2-D output, but `{yn}` has {m} components"))
+                                        .label("2-D only")
+                                        .hint("use `shape box` or `shape polytope [[…], …]` with explicit directions"),
+                                );
+                                    None
+                                }
+                            }
+                        }
+                        "polytope" => {
+                            cx.err(
+                            Diagnostic::new(Code::Boundary, b.span, "a polytope shape needs its directions")
+                                .label("no directions")
+                                .hint("write `shape polytope 8` (evenly spread, 2-D outputs) or `shape polytope [[1, 1], [1, -1]]`"),
+                        );
+                            shape = None;
+                        }
+                        other => {
+                            let names = ["box", "lower_bounds", "hull", "polytope"];
+                            let mut d = Diagnostic::new(
+                                Code::UnknownName,
+                                b.span,
+                                format!("unknown output shape `{other}`"),
+                            )
+                            .label("not a shape");
+                            d = match did_you_mean(other, names) {
+                            Some(s) => d.hint(format!("did you mean `{s}`?")),
+                            None => d.hint("available: box, lower_bounds, hull, polytope K, polytope [[…], …]"),
+                        };
+                            cx.err(d);
+                            shape = None;
+                        }
+                    }
+                }
                 AnalysisStmt::Propagator(p) => {
                     propagator = match Propagator::from_name(&p.node) {
                         Some(prop) => {
@@ -172,6 +280,13 @@ pub(super) fn analysis(
                     // the grammar admits exactly the guides' names
                     let g = Guide::from_name(&guide.node).unwrap_or(Guide::Property);
                     guided_span = Some((g, st.span));
+                    if network && g == Guide::Property {
+                        cx.err(
+                            Diagnostic::new(Code::SpecKind, guide.span, "the `property` partitioner refines a closed loop's initial set")
+                                .label("in a network spec")
+                                .hint("a network spec's input set is refined by `sg` or `gsg`, guided by the sampled outputs"),
+                        );
+                    }
                     partition = cx
                         .budget(budget)
                         .map(|budget| Partitioner::Guided { guide: g, budget });
@@ -253,5 +368,7 @@ pub(super) fn analysis(
         propagator_span,
         samples,
         seed,
+        net_propagator,
+        shape,
     }
 }

@@ -16,6 +16,7 @@ use nalgebra::{DMatrix, DVector};
 mod analysis;
 mod controller;
 mod extra;
+mod network;
 mod sets;
 mod system;
 
@@ -30,6 +31,46 @@ use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
 use crate::syntax::ast::*;
 pub use extra::{zero_order_hold, DEFAULT_BUDGET};
+pub use network::{is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec};
+
+/// A checked spec of either kind.
+#[derive(Clone, Debug)]
+pub enum Task {
+    /// A closed loop (`system` spec).
+    System(Box<Checked>),
+    /// A network on its own (`network` spec).
+    Network(Box<NetworkChecked>),
+}
+
+/// Check a parsed spec of either kind (see [`is_network_spec`]).
+pub fn check_task(
+    spec: &Spec,
+    controller: Option<&ControllerFile>,
+) -> Result<Task, Vec<Diagnostic>> {
+    if !is_network_spec(spec) {
+        return check(spec, controller).map(|c| Task::System(Box::new(c)));
+    }
+    let mut cx = Ctx {
+        diags: Vec::new(),
+        numbers: 0,
+    };
+    let checked = network::check_network(&mut cx, spec, controller);
+    match checked {
+        Some(c) if cx.diags.is_empty() => Ok(Task::Network(Box::new(c))),
+        _ => {
+            if cx.diags.is_empty() {
+                cx.diags.push(
+                    Diagnostic::new(Code::Missing, Span::new(0, 0), "the spec is incomplete")
+                        .label("here")
+                        .hint("see docs/language.md"),
+                );
+            }
+            cx.diags
+                .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
+            Err(cx.diags)
+        }
+    }
+}
 
 /// The controller file as read by the caller.
 #[derive(Clone, Debug)]
@@ -114,10 +155,13 @@ pub struct Checked {
     pub seed: u64,
 }
 
-/// The path of the spec's controller, for the caller to read before [`check`].
+/// The path of the spec's controller (or a network spec's model), for the
+/// caller to read before [`check`].
 pub fn controller_path(spec: &Spec) -> Option<&Spanned<String>> {
+    let network = is_network_spec(spec);
     spec.items.iter().find_map(|i| match i {
-        Item::Controller(p) => Some(p),
+        Item::Controller(p) if !network => Some(p),
+        Item::Model(p) if network => Some(p),
         _ => None,
     })
 }
@@ -725,8 +769,15 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
             Item::Avoid(a) => avoids.push(a),
             Item::Horizon(h) => horizons.push(h),
             Item::Analysis(a) => analyses.push(a),
+            Item::Network(_)
+            | Item::Model(_)
+            | Item::Input(_)
+            | Item::Require(_)
+            | Item::Robust(_)
+            | Item::Radius(_) => {}
         }
     }
+    network::network_items_in_system(cx, spec);
     for (what, spans) in [
         (
             "the system",
@@ -849,7 +900,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     );
     let horizon = horizon(cx, it.horizons.first().copied());
     let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
-    let an = analysis::analysis(cx, &it.analyses, &sp.state);
+    let an = analysis::analysis(cx, &it.analyses, &sp.state, None);
     let (sys, state, control, time, time_span) =
         (sp.sys, sp.state, sp.control, sp.time, sp.time_span);
     let (mut plant, per_step_lists, limits) = (pp.plant, pp.per_step_lists, pp.limits);

@@ -261,7 +261,7 @@ struct Loaded {
     /// The spec's path, and the controller's when it was overridden (for people).
     display: String,
     source: String,
-    result: Result<crate::check::Checked, Vec<Diagnostic>>,
+    result: Result<crate::check::Task, Vec<Diagnostic>>,
 }
 
 /// Files with extension `ext` under `path` (a file is itself; a folder is
@@ -346,7 +346,7 @@ fn load_with(path: &Path, controller: Option<&Path>) -> Result<Loaded, String> {
     let source =
         String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let result = crate::front_end_with(&source, dir, &read_request, controller);
+    let result = crate::front_end_task(&source, dir, &read_request, controller);
     let display = match controller {
         Some(c) => format!(
             "{name} with controller {}",

@@ -67,6 +67,55 @@ pub enum Item {
     Horizon(Spanned<u64>),
     /// `analysis { … }`
     Analysis(Analysis),
+    /// `network NAME { input x[n] output y[m] }`
+    Network(NetworkDecl),
+    /// `model "path"`
+    Model(Spanned<String>),
+    /// `input NAME = set`
+    Input(SetDef),
+    /// `require NAME = set`
+    Require(SetDef),
+    /// `robust NAME [label K]`
+    Robust(RobustDef),
+    /// `radius NAME for PROPERTY (budget…)`
+    Radius(RadiusDef),
+}
+
+/// `network NAME { … }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetworkDecl {
+    /// The network's name.
+    pub name: Spanned<String>,
+    /// `input x[n]`: name and dimension (absent if not written).
+    pub input: Vec<(Spanned<String>, Spanned<u64>)>,
+    /// `output y[m]`: name and dimension.
+    pub output: Vec<(Spanned<String>, Spanned<u64>)>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// `robust NAME [label K]`
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobustDef {
+    /// The property's name.
+    pub name: Spanned<String>,
+    /// The label, if given (else the centre's).
+    pub label: Option<Spanned<u64>>,
+    /// The whole item.
+    pub span: Span,
+}
+
+/// `radius NAME for PROPERTY (max s, tolerance t)`
+#[derive(Clone, Debug, PartialEq)]
+pub struct RadiusDef {
+    /// The search's name.
+    pub name: Spanned<String>,
+    /// The property whose radius is searched.
+    pub property: Spanned<String>,
+    /// `(name, value)` budget items.
+    pub budget: Vec<(Spanned<String>, Spanned<f64>)>,
+    /// The whole item.
+    pub span: Span,
 }
 
 /// `system NAME { … }`
@@ -282,6 +331,10 @@ pub enum AnalysisStmt {
         /// `(name, value)` budget items.
         budget: Vec<(Spanned<String>, Spanned<f64>)>,
     },
+    /// `shape NAME` (network specs)
+    Shape(Spanned<String>),
+    /// `shape polytope K` or `shape polytope [[…], …]` (network specs)
+    ShapePolytope(Spanned<Value>),
     /// `samples N`
     Samples(Spanned<u64>),
     /// `seed N`

@@ -32,7 +32,7 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
     Some(match r {
         Rule::EOI => "end of file",
         Rule::item => {
-            "a top-level item (system, controller, initial, goal, avoid, horizon, analysis)"
+            "a top-level item (system, controller, initial, goal, avoid, horizon, analysis; or network, model, input, require, robust, radius)"
         }
         Rule::system_stmt => "a system statement (state, control, NAME = value, NAME in box(…))",
         Rule::state_decl => "`state`",
@@ -40,8 +40,11 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::bound_decl => "`NAME in box(…)`",
         Rule::assign => "`NAME = value`",
         Rule::analysis_stmt => {
-            "an analysis statement (propagator, partitioner, boundary, samples, seed)"
+            "an analysis statement (propagator, partitioner, boundary, shape, samples, seed)"
         }
+        Rule::network_stmt => "a network statement (input x[n], output y[m])",
+        Rule::input_decl => "`input`",
+        Rule::output_decl => "`output`",
         Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
         Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => {
             "a set: box(…), { … } or ball(…)"
@@ -257,6 +260,65 @@ impl Builder {
                 })
             }
             Rule::horizon => Item::Horizon(self.integer(inner.next().expect("horizon value"))),
+            Rule::network => {
+                let name = self.ident(inner.next().expect("network name"));
+                let (mut input, mut output) = (Vec::new(), Vec::new());
+                for st in inner {
+                    let is_input = st.as_rule() == Rule::input_decl;
+                    let mut parts = st.into_inner();
+                    let n = self.ident(parts.next().expect("vector name"));
+                    let d = self.integer(parts.next().expect("dimension"));
+                    if is_input {
+                        input.push((n, d));
+                    } else {
+                        output.push((n, d));
+                    }
+                }
+                Item::Network(NetworkDecl {
+                    name,
+                    input,
+                    output,
+                    span: s,
+                })
+            }
+            Rule::model => {
+                let lit = inner.next().expect("model path");
+                let text = lit.as_str();
+                Item::Model(Spanned {
+                    node: text[1..text.len() - 1].to_string(),
+                    span: span(&lit),
+                })
+            }
+            Rule::input_set | Rule::require => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let def = SetDef { name, set, span: s };
+                if rule == Rule::input_set {
+                    Item::Input(def)
+                } else {
+                    Item::Require(def)
+                }
+            }
+            Rule::robust => {
+                let name = self.ident(inner.next().expect("property name"));
+                let label = inner.next().map(|l| self.integer(l));
+                Item::Robust(RobustDef {
+                    name,
+                    label,
+                    span: s,
+                })
+            }
+            Rule::radius => {
+                let name = self.ident(inner.next().expect("radius name"));
+                let property = self.ident(inner.next().expect("property name"));
+                let budget = inner.next().map(|b| self.budget(b)).unwrap_or_default();
+                Item::Radius(RadiusDef {
+                    name,
+                    property,
+                    budget,
+                    span: s,
+                })
+            }
             Rule::analysis => {
                 let stmts = inner.map(|st| self.analysis_stmt(st)).collect();
                 Item::Analysis(Analysis { stmts, span: s })
@@ -500,6 +562,18 @@ impl Builder {
         }
     }
 
+    /// `(name value, …)` budget items.
+    fn budget(&mut self, b: P) -> Vec<(Spanned<String>, Spanned<f64>)> {
+        b.into_inner()
+            .map(|item| {
+                let mut kv = item.into_inner();
+                let k = self.ident(kv.next().expect("budget name"));
+                let v = self.number(kv.next().expect("budget value"));
+                (k, v)
+            })
+            .collect()
+    }
+
     fn analysis_stmt(&mut self, p: P) -> Spanned<AnalysisStmt> {
         let s = span(&p);
         let rule = p.as_rule();
@@ -517,24 +591,12 @@ impl Builder {
                         node: g.as_str().to_string(),
                         span: span(&g),
                     };
-                    let budget = it
-                        .next()
-                        .map(|b| {
-                            b.into_inner()
-                                .map(|item| {
-                                    let mut kv = item.into_inner();
-                                    let k = self.ident(kv.next().expect("budget name"));
-                                    let v = self.number(kv.next().expect("budget value"));
-                                    (k, v)
-                                })
-                                .collect()
-                        })
-                        .unwrap_or_default();
+                    let budget = it.next().map(|b| self.budget(b)).unwrap_or_default();
                     AnalysisStmt::Guided { guide, budget }
                 }
                 _ => AnalysisStmt::Partitioner(self.ident(arg)),
             },
-            Rule::boundary => match arg.as_rule() {
+            Rule::boundary | Rule::shape => match arg.as_rule() {
                 Rule::boundary_polytope => {
                     let d = arg.into_inner().next().expect("directions");
                     let ds = span(&d);
@@ -553,8 +615,14 @@ impl Builder {
                                 .collect(),
                         ),
                     };
-                    AnalysisStmt::BoundaryPolytope(Spanned { node, span: ds })
+                    let node = Spanned { node, span: ds };
+                    if rule == Rule::shape {
+                        AnalysisStmt::ShapePolytope(node)
+                    } else {
+                        AnalysisStmt::BoundaryPolytope(node)
+                    }
                 }
+                _ if rule == Rule::shape => AnalysisStmt::Shape(self.ident(arg)),
                 _ => AnalysisStmt::Boundary(self.ident(arg)),
             },
             Rule::samples => AnalysisStmt::Samples(self.integer(arg)),

@@ -15,6 +15,8 @@ use crate::sets::{IBox, Region};
 /// The identifier of the JSON result schema.
 pub const SCHEMA: &str = "ravel-report/1";
 
+pub mod network;
+
 /// Format a number in ravel's one float format: fixed with 6 decimals for
 /// ordinary magnitudes, scientific otherwise.
 pub fn num(x: f64) -> String {
@@ -31,11 +33,11 @@ pub fn num(x: f64) -> String {
     }
 }
 
-fn interval(lo: f64, hi: f64) -> String {
+pub(crate) fn interval(lo: f64, hi: f64) -> String {
     format!("[{:>10}, {:>10}]", num(lo), num(hi))
 }
 
-fn vector(v: &[f64]) -> String {
+pub(crate) fn vector(v: &[f64]) -> String {
     format!(
         "[{}]",
         v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", ")
@@ -287,7 +289,7 @@ pub fn final_error(out: &Outcome) -> Option<f64> {
     (v > 0.0).then(|| last.volume() / v - 1.0)
 }
 
-fn f(x: f64) -> Value {
+pub(crate) fn f(x: f64) -> Value {
     if x.is_finite() {
         json!(x)
     } else {

@@ -14,6 +14,8 @@
 
 use nalgebra::DMatrix;
 
+pub mod network;
+
 use crate::analysis::closed_loop::{Boundary, Cut, Propagator, Step};
 use crate::analysis::partition::{refine_parallel, Budget, Stop, Strategy};
 use crate::analysis::shape::{

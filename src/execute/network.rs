@@ -1,0 +1,951 @@
+//! Execution of a network spec: a [`NetPlan`] → a [`NetOutcome`]: the output
+//! set in the chosen shape, a verdict per property, and the bracket of every
+//! radius search.
+//!
+//! * Every bound is an upper bound of `d·f(x)` over (a cell of) the input set
+//!   for a direction `d`: the shape's directions and each property's rows
+//!   (`require` rows, the negated rows of `avoid` members, `y_j − y_K` for
+//!   robustness) are bounded together, cell by cell. A cell's bounds are
+//!   intersected with its parent's; the union's bound is the largest over
+//!   the cells, which cover the input set.
+//! * A property is VERIFIED when those bounds prove it (`require`: every row
+//!   within its right-hand side; `avoid`: on every cell some row of every
+//!   member strictly separates it; `robust`: `y_K − y_j > 0` for every
+//!   `j ≠ K`), FALSIFIED when an input of the set provably violates it (an
+//!   outward-rounded interval enclosure of `f(x)` violates it as a whole),
+//!   and UNSURE otherwise. A bound that is not finite, or a solver issue on
+//!   the way, never proves anything.
+//! * A radius search scales the input set about its centre by `s`: bisection
+//!   on `s` with the plan's analysis gives the largest certified scale, and a
+//!   gradient-free attack (samples, then coordinate search) the smallest
+//!   scale with a confirmed violation. The true radius lies between them.
+
+use nalgebra::DMatrix;
+
+use crate::analysis::crown::{Analysis, Mode};
+use crate::analysis::partition::{refine, Stop, Strategy};
+use crate::analysis::sdp;
+use crate::analysis::shape::{excess, extent_of_points, support_of_box, support_of_points};
+use crate::check::{NetPropertyKind, RadiusSpec};
+use crate::execute::Status;
+use crate::ir::{Guide, NetPropagator, Partitioner};
+use crate::issue::Issue;
+use crate::lower::NetPlan;
+use crate::nn::Network;
+use crate::num::{dot_box_upper, gamma, sum_upper};
+use crate::rng::Rng;
+use crate::sets::{IBox, Norm, Region};
+
+/// The output set: certified offsets along the shape's directions.
+#[derive(Clone, Debug)]
+pub struct OutputBounds {
+    /// The directions `D`, one per row.
+    pub directions: DMatrix<f64>,
+    /// Certified `max d·f(x)` over the input set (`+∞`: no bound).
+    pub offsets: Vec<f64>,
+    /// `max d·f(x)` over the sampled inputs (`−∞` without samples).
+    pub sampled: Vec<f64>,
+    /// The output's bounding box, when the shape has one.
+    pub bbox: Option<IBox>,
+    /// The sampled outputs' bounding box.
+    pub sampled_bbox: Option<IBox>,
+}
+
+/// What kind of network property a result is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NetKind {
+    /// Inequalities that must hold.
+    Require,
+    /// A set the outputs must avoid.
+    Avoid,
+    /// The label is the same on the whole input set.
+    Robust,
+}
+
+impl NetKind {
+    /// The keyword used in specs and reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            NetKind::Require => "require",
+            NetKind::Avoid => "avoid",
+            NetKind::Robust => "robust",
+        }
+    }
+}
+
+/// An input that violates a property, with its output.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Witness {
+    /// The input (inside the input set).
+    pub input: Vec<f64>,
+    /// The network's output at it (f64 evaluation).
+    pub output: Vec<f64>,
+}
+
+/// The result for one network property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetPropertyResult {
+    /// The property's name.
+    pub name: String,
+    /// Which kind.
+    pub kind: NetKind,
+    /// The verdict.
+    pub status: Status,
+    /// VERIFIED/UNSURE: the certified margin (negative when the proof
+    /// failed, `−∞` without a finite bound). FALSIFIED: minus the violation.
+    pub margin: f64,
+    /// Robustness: the label, and the certified margin `min (y_K − y_j)`
+    /// against every other label `j`.
+    pub label: Option<usize>,
+    /// Robustness: `(j, certified lower bound of y_K − y_j)` for every `j ≠ K`.
+    pub label_margins: Vec<(usize, f64)>,
+    /// FALSIFIED only: the violating input.
+    pub counterexample: Option<Witness>,
+}
+
+/// The bracket found by a radius search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RadiusResult {
+    /// The search's name.
+    pub name: String,
+    /// The property's name.
+    pub property: String,
+    /// The largest scale at which the property was certified (`None`: not
+    /// even at the centre).
+    pub certified: Option<f64>,
+    /// The smallest scale at which an attack found a confirmed violation
+    /// (`None`: none up to `max`), with the violating input.
+    pub attacked: Option<(f64, Witness)>,
+    /// The largest scale tried.
+    pub max: f64,
+    /// The bisection tolerance.
+    pub tolerance: f64,
+    /// The input set's radius along each input at scale 1 (box half-widths
+    /// or ball radii): scale `s` means radius `s·r`.
+    pub unit: Vec<f64>,
+    /// Analyses run.
+    pub analyses: usize,
+}
+
+/// Everything the execution of a network spec found.
+#[derive(Clone, Debug)]
+pub struct NetOutcome {
+    /// The output set.
+    pub output: OutputBounds,
+    /// Per-property results, in plan order.
+    pub properties: Vec<NetPropertyResult>,
+    /// Per-search results, in plan order.
+    pub radii: Vec<RadiusResult>,
+    /// FALSIFIED if any property is, VERIFIED if all are (vacuously with
+    /// none), else UNSURE.
+    pub verdict: Status,
+    /// The final cells of the input set's partition (bounding boxes).
+    pub partition: Vec<IBox>,
+    /// Why partitioning stopped.
+    pub partition_stop: Stop,
+    /// Cells bounded (parents included).
+    pub calls: usize,
+    /// Solver statuses that forced a fallback bound.
+    pub solver_issues: Vec<Issue>,
+    /// Whether some bound overflowed (it was then no bound at all).
+    pub overflow: bool,
+    /// Monte Carlo samples drawn.
+    pub samples_drawn: usize,
+}
+
+/// Progress and limits for [`execute_network`].
+pub struct NetControl<'a> {
+    /// Seconds since the start.
+    pub elapsed: &'a (dyn Fn() -> f64 + Sync),
+    /// Stop refining (and searching) after this many seconds; what is
+    /// unfinished stays unproven.
+    pub time_limit: Option<f64>,
+}
+
+/// The rows bounded for one analysis: the shape's, then each property's.
+struct Rows {
+    dirs: DMatrix<f64>,
+    /// `ranges[p]`: the rows of property `p`.
+    ranges: Vec<std::ops::Range<usize>>,
+    /// How many rows belong to the shape.
+    shape_rows: usize,
+}
+
+/// The rows of property `kind` (robustness for label `label`), over `m` outputs.
+fn property_rows(kind: &NetPropertyKind, label: Option<usize>, m: usize) -> Vec<Vec<f64>> {
+    match kind {
+        NetPropertyKind::Require(p) => p.rows.iter().map(|(a, _)| a.clone()).collect(),
+        NetPropertyKind::Avoid(members) => members
+            .iter()
+            .flat_map(|p| p.rows.iter().map(|(a, _)| a.iter().map(|v| -v).collect()))
+            .collect(),
+        NetPropertyKind::Robust(_) => {
+            let k = label.unwrap_or(0);
+            (0..m)
+                .filter(|&j| j != k)
+                .map(|j| {
+                    let mut r = vec![0.0; m];
+                    r[j] = 1.0;
+                    r[k] = -1.0;
+                    r
+                })
+                .collect()
+        }
+    }
+}
+
+fn stack(shape: &DMatrix<f64>, props: &[Vec<Vec<f64>>], m: usize) -> Rows {
+    let total = shape.nrows() + props.iter().map(Vec::len).sum::<usize>();
+    let mut dirs = DMatrix::zeros(total, m);
+    dirs.view_mut((0, 0), (shape.nrows(), m)).copy_from(shape);
+    let mut at = shape.nrows();
+    let mut ranges = Vec::new();
+    for rows in props {
+        let start = at;
+        for r in rows {
+            for (j, v) in r.iter().enumerate() {
+                dirs[(at, j)] = *v;
+            }
+            at += 1;
+        }
+        ranges.push(start..at);
+    }
+    Rows {
+        dirs,
+        ranges,
+        shape_rows: shape.nrows(),
+    }
+}
+
+/// Certified upper bounds of every row of `dirs` over `cell` (`+∞` where
+/// there is none), and the solver issues met.
+pub fn cell_bounds(
+    net: &Network,
+    cell: &Region,
+    prop: NetPropagator,
+    dirs: &DMatrix<f64>,
+) -> (Vec<f64>, Vec<Issue>) {
+    let none = || vec![f64::INFINITY; dirs.nrows()];
+    let bbox = cell.bbox();
+    if !bbox.is_finite() {
+        return (none(), Vec::new());
+    }
+    let mode = match prop {
+        NetPropagator::Ibp => Mode::Ibp,
+        NetPropagator::FastLin => Mode::FastLin,
+        NetPropagator::Crown | NetPropagator::Sdp => Mode::Crown,
+    };
+    let a = Analysis::new(net, &bbox, mode);
+    if !a.is_finite() {
+        return (none(), Vec::new());
+    }
+    let out = a.output_box(mode);
+    let mut b = support_of_box(dirs, &out.lo, &out.hi);
+    let mut issues = Vec::new();
+    if mode != Mode::Ibp {
+        let (crown, iss) = a.upper(dirs.clone()).concretize_region(cell);
+        issues.extend(iss);
+        for (v, c) in b.iter_mut().zip(crown) {
+            if c.is_finite() {
+                *v = v.min(c);
+            }
+        }
+    }
+    if prop == NetPropagator::Sdp {
+        let (s, iss) = sdp_bounds(net, cell, &bbox, dirs);
+        issues.extend(iss);
+        for (v, c) in b.iter_mut().zip(s) {
+            if c.is_finite() {
+                *v = v.min(c);
+            }
+        }
+    }
+    // a NaN is no bound
+    for v in &mut b {
+        if v.is_nan() {
+            *v = f64::INFINITY;
+        }
+    }
+    (b, issues)
+}
+
+/// SDP bounds of every row over `cell` (see [`crate::analysis::sdp`]): the
+/// output `W_L h_L + b_L` of the merged network, the merge error and the
+/// rounding of the objective added.
+fn sdp_bounds(
+    net: &Network,
+    cell: &Region,
+    bbox: &IBox,
+    dirs: &DMatrix<f64>,
+) -> (Vec<f64>, Vec<Issue>) {
+    let n = bbox.dim();
+    let none = vec![f64::INFINITY; dirs.nrows()];
+    let Some(merged) = sdp::merge(net, &DMatrix::identity(n, n), bbox) else {
+        return (none, vec![Issue::SdpNeedsRelu]);
+    };
+    let rows: Vec<(Vec<f64>, f64)> = match cell {
+        Region::Polytope { rows, .. } => rows.clone(),
+        _ => Vec::new(),
+    };
+    let prog = sdp::StepSdp::new(&merged, bbox, &rows);
+    let Some((wl, bl)) = merged.layers.last() else {
+        return (none, Vec::new());
+    };
+    if merged.layers.len() < 2 {
+        // an affine network: CROWN is exact up to rounding already
+        return (none, Vec::new());
+    }
+    let h_max = prog.last_hidden_max();
+    let h_off = prog.last_hidden();
+    let mut out = Vec::with_capacity(dirs.nrows());
+    let mut issues = Vec::new();
+    for r in 0..dirs.nrows() {
+        let d: Vec<f64> = dirs.row(r).iter().copied().collect();
+        let mut phi = vec![0.0; prog.dim()];
+        for k in 0..wl.ncols() {
+            phi[h_off + k] = (0..wl.nrows()).map(|j| d[j] * wl[(j, k)]).sum();
+        }
+        // |φ_k − exact| ≤ γ(m)·Σ|d_j||W_jk|; the objective's error is that times |h_k|
+        let size = sum_upper(
+            (0..wl.ncols())
+                .map(|k| sum_upper((0..wl.nrows()).map(|j| (d[j] * wl[(j, k)]).abs())) * h_max[k]),
+        );
+        let round = (gamma(wl.nrows() + wl.ncols() + 4) * size * 1.0625 + 1e-300).next_up();
+        let konst = sum_upper(
+            (0..wl.nrows())
+                .map(|j| d[j] * bl[j])
+                .chain((0..wl.nrows()).map(|j| d[j].abs() * merged.err[j]))
+                .chain([
+                    round,
+                    gamma(wl.nrows() + 2)
+                        * sum_upper((0..wl.nrows()).map(|j| (d[j] * bl[j]).abs())),
+                ]),
+        );
+        let last = prog.dim() - 1;
+        phi[last] = konst;
+        let b = prog.bound(&phi);
+        issues.extend(b.issue);
+        out.push(b.value);
+    }
+    (out, issues)
+}
+
+/// The bounds of one analysis of the whole input set.
+struct Bounded {
+    /// Per final cell: its box and its bounds.
+    cells: Vec<(IBox, Vec<f64>)>,
+    /// The largest bound over the cells, per row.
+    union: Vec<f64>,
+    calls: usize,
+    stop: Stop,
+    issues: Vec<Issue>,
+}
+
+/// Bound every row of `dirs` over `region` with the plan's propagator and
+/// partitioner; `sampled`/`extent` guide SG and GSG.
+fn bound_all(
+    plan: &NetPlan,
+    region: &Region,
+    dirs: &DMatrix<f64>,
+    sampled: &[f64],
+    extent: &[f64],
+    ctl: &NetControl,
+) -> Bounded {
+    let mut issues = Vec::new();
+    let within = |b: Vec<f64>, parent: Option<&Vec<f64>>| -> Vec<f64> {
+        match parent {
+            Some(p) => b.iter().zip(p).map(|(a, q)| a.min(*q)).collect(),
+            None => b,
+        }
+    };
+    let (cells, calls, stop) = match &plan.partitioner {
+        Partitioner::Uniform(grid) => {
+            let (root, iss) = cell_bounds(&plan.net, region, plan.propagator, dirs);
+            issues.extend(iss);
+            if grid.iter().all(|k| *k == 1) {
+                (vec![(region.bbox(), root)], 1, Stop::Grid)
+            } else {
+                let parts = region.grid(grid);
+                let n = parts.len() + 1;
+                let mut cells = Vec::with_capacity(parts.len());
+                for c in parts {
+                    let (b, iss) = cell_bounds(&plan.net, &c, plan.propagator, dirs);
+                    issues.extend(iss);
+                    cells.push((c.bbox(), within(b, Some(&root))));
+                }
+                (cells, n, Stop::Grid)
+            }
+        }
+        Partitioner::Guided { guide, budget } => {
+            let strategy = match guide {
+                Guide::Sg => Strategy::Sg,
+                _ => Strategy::Gsg,
+            };
+            let mut budget = *budget;
+            if let Some(limit) = ctl.time_limit {
+                let left = (limit - (ctl.elapsed)()).max(0.0);
+                budget.seconds = Some(budget.seconds.map_or(left, |s| s.min(left)));
+            }
+            let root = region.bbox();
+            let r = refine(
+                &root,
+                strategy,
+                &budget,
+                &mut |c: &IBox, parent: Option<&Vec<f64>>| {
+                    let cell = match region {
+                        Region::Polytope { rows, .. } => Region::Polytope {
+                            bbox: c.clone(),
+                            rows: rows.clone(),
+                        },
+                        // a ball's cell is covered by its box (an over-approximation)
+                        Region::Ball { .. } if parent.is_some() => Region::Box(c.clone()),
+                        _ if parent.is_none() => region.clone(),
+                        _ => Region::Box(c.clone()),
+                    };
+                    let (b, iss) = cell_bounds(&plan.net, &cell, plan.propagator, dirs);
+                    issues.extend(iss);
+                    let b = within(b, parent);
+                    let s = excess(&b, sampled, extent);
+                    (b, s)
+                },
+                ctl.elapsed,
+            );
+            let cells = r.leaves.into_iter().map(|l| (l.cell, l.value)).collect();
+            (cells, r.calls, r.stop)
+        }
+    };
+    let union = (0..dirs.nrows())
+        .map(|k| {
+            cells
+                .iter()
+                .map(|(_, b)| b[k])
+                .fold(f64::NEG_INFINITY, f64::max)
+        })
+        .collect();
+    issues.sort_by_key(|i| format!("{i:?}"));
+    issues.dedup();
+    Bounded {
+        cells,
+        union,
+        calls,
+        stop,
+        issues,
+    }
+}
+
+/// The certified margin of property `kind` from the bounds of its rows
+/// (`rows` indexes them in each cell's bounds): positive proves it.
+/// Robustness also gives the margin per other label.
+fn certified_margin(
+    kind: &NetPropertyKind,
+    label: Option<usize>,
+    m: usize,
+    b: &Bounded,
+    rows: &std::ops::Range<usize>,
+) -> (f64, Vec<(usize, f64)>) {
+    let clean = |v: f64| if v.is_nan() { f64::NEG_INFINITY } else { v };
+    match kind {
+        NetPropertyKind::Require(p) => {
+            let margin = p
+                .rows
+                .iter()
+                .zip(rows.clone())
+                .map(|((_, h), k)| clean(h - b.union[k]))
+                .fold(f64::INFINITY, f64::min);
+            (margin, Vec::new())
+        }
+        NetPropertyKind::Avoid(members) => {
+            // per cell and member: the best separating row, lower bound of a·y − h
+            let mut margin = f64::INFINITY;
+            for (_, cb) in &b.cells {
+                let mut at = rows.start;
+                for p in members {
+                    let mut best = f64::NEG_INFINITY;
+                    for (_, h) in &p.rows {
+                        // cb[at] bounds −a·y from above: a·y ≥ −cb[at]
+                        best = best.max(clean(-cb[at] - h));
+                        at += 1;
+                    }
+                    margin = margin.min(best);
+                }
+            }
+            (margin, Vec::new())
+        }
+        NetPropertyKind::Robust(_) => {
+            let k = label.unwrap_or(0);
+            let per: Vec<(usize, f64)> = (0..m)
+                .filter(|&j| j != k)
+                .zip(rows.clone())
+                .map(|(j, r)| (j, clean(-b.union[r])))
+                .collect();
+            let margin = per.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+            (margin, per)
+        }
+    }
+}
+
+/// Whether the certified margin proves the property.
+fn proves(kind: &NetPropertyKind, margin: f64) -> bool {
+    margin.is_finite()
+        && match kind {
+            NetPropertyKind::Require(_) => margin >= 0.0,
+            NetPropertyKind::Avoid(_) | NetPropertyKind::Robust(_) => margin > 0.0,
+        }
+}
+
+/// How much `y` violates the property (positive: violated in f64).
+fn violation(kind: &NetPropertyKind, label: Option<usize>, y: &[f64]) -> f64 {
+    let dot = |a: &[f64]| a.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
+    let v = match kind {
+        NetPropertyKind::Require(p) => p
+            .rows
+            .iter()
+            .map(|(a, h)| dot(a) - h)
+            .fold(f64::NEG_INFINITY, f64::max),
+        NetPropertyKind::Avoid(members) => members
+            .iter()
+            .map(|p| {
+                -p.rows
+                    .iter()
+                    .map(|(a, h)| dot(a) - h)
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .fold(f64::NEG_INFINITY, f64::max),
+        NetPropertyKind::Robust(_) => {
+            let k = label.unwrap_or(0);
+            (0..y.len())
+                .filter(|&j| j != k)
+                .map(|j| y[j] - y[k])
+                .fold(f64::NEG_INFINITY, f64::max)
+        }
+    };
+    if v.is_nan() {
+        f64::NEG_INFINITY
+    } else {
+        v
+    }
+}
+
+/// Whether the input `x` of `region` provably violates the property: `x`
+/// certainly lies in the region, and an outward-rounded enclosure of `f(x)`
+/// violates it as a whole.
+fn confirm(
+    net: &Network,
+    region: &Region,
+    kind: &NetPropertyKind,
+    label: Option<usize>,
+    x: &[f64],
+) -> bool {
+    if !region.contains_point(x) {
+        return false;
+    }
+    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
+    if !a.is_finite() {
+        return false;
+    }
+    let y = a.output_box(Mode::Ibp);
+    let lower = |a: &[f64]| -dot_box_upper(&a.iter().map(|v| -v).collect::<Vec<_>>(), &y.lo, &y.hi);
+    match kind {
+        NetPropertyKind::Require(p) => p.rows.iter().any(|(a, h)| lower(a) > *h),
+        NetPropertyKind::Avoid(members) => members.iter().any(|p| {
+            p.rows
+                .iter()
+                .all(|(a, h)| dot_box_upper(a, &y.lo, &y.hi) <= *h)
+        }),
+        NetPropertyKind::Robust(_) => {
+            let k = label.unwrap_or(0);
+            (0..y.dim()).filter(|&j| j != k).any(|j| {
+                let mut a = vec![0.0; y.dim()];
+                a[j] = 1.0;
+                a[k] = -1.0;
+                lower(&a) >= 0.0
+            })
+        }
+    }
+}
+
+/// The centre of a box or ball (`None` for a polytope).
+fn centre(region: &Region) -> Option<Vec<f64>> {
+    match region {
+        Region::Box(b) => Some(
+            b.lo.iter()
+                .zip(&b.hi)
+                .map(|(l, h)| l + 0.5 * (h - l))
+                .collect(),
+        ),
+        Region::Ball { center, .. } => Some(center.clone()),
+        Region::Polytope { .. } => None,
+    }
+}
+
+/// The radius at scale 1 along each input: box half-widths or ball radii.
+fn unit_radius(region: &Region) -> Vec<f64> {
+    match region {
+        Region::Box(b) => b.lo.iter().zip(&b.hi).map(|(l, h)| 0.5 * (h - l)).collect(),
+        Region::Ball { radius, .. } => radius.clone(),
+        Region::Polytope { bbox, .. } => vec![0.0; bbox.dim()],
+    }
+}
+
+/// The input set scaled about its centre by `s`, rounded outward.
+fn scaled(region: &Region, s: f64) -> Region {
+    match region {
+        Region::Box(b) => {
+            let c = centre(region).unwrap_or_default();
+            let r = unit_radius(region);
+            Region::Box(IBox::new(
+                (0..b.dim())
+                    .map(|i| crate::num::sum_lower([c[i], -(s * r[i]).next_up()]))
+                    .collect(),
+                (0..b.dim())
+                    .map(|i| sum_upper([c[i], (s * r[i]).next_up()]))
+                    .collect(),
+            ))
+        }
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => Region::Ball {
+            center: center.clone(),
+            radius: radius.iter().map(|r| (s * r).next_up()).collect(),
+            norm: *norm,
+        },
+        Region::Polytope { .. } => region.clone(),
+    }
+}
+
+/// The smallest scale whose set holds `x` (its gauge about the centre),
+/// rounded up.
+fn gauge(region: &Region, x: &[f64]) -> f64 {
+    let (c, r) = (centre(region).unwrap_or_default(), unit_radius(region));
+    let d: Vec<f64> = (0..x.len())
+        .map(|i| {
+            let gap = (x[i] - c[i]).abs();
+            if r[i] > 0.0 {
+                gap / r[i]
+            } else if gap > 0.0 {
+                f64::INFINITY
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let len = match region {
+        Region::Ball { norm: Norm::L1, .. } => d.iter().sum(),
+        Region::Ball { norm: Norm::L2, .. } => d.iter().map(|v| v * v).sum::<f64>().sqrt(),
+        _ => d.iter().fold(0.0f64, |a, v| a.max(*v)),
+    };
+    (len * (1.0 + 1e-12)).next_up()
+}
+
+/// Pull `x` into the region (a box: clamp; a ball: clamp, then towards the
+/// centre); `None` for a polytope point outside.
+fn project(region: &Region, x: Vec<f64>) -> Option<Vec<f64>> {
+    let b = region.bbox();
+    let mut x: Vec<f64> = x
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v.clamp(b.lo[i], b.hi[i]))
+        .collect();
+    if let Region::Ball { center, .. } = region {
+        let g = gauge(region, &x);
+        if g > 1.0 {
+            let f = (1.0 - 1e-9) / g;
+            for (xi, ci) in x.iter_mut().zip(center) {
+                *xi = ci + (*xi - ci) * f;
+            }
+        }
+    }
+    region.contains_point(&x).then_some(x)
+}
+
+/// Search `region` for a confirmed violation: the sampled inputs first (the
+/// worst ones start a coordinate search with halving steps). Deterministic.
+fn attack(
+    net: &Network,
+    region: &Region,
+    kind: &NetPropertyKind,
+    label: Option<usize>,
+    starts: &[Vec<f64>],
+    evaluations: usize,
+) -> Option<Witness> {
+    let score = |x: &[f64]| violation(kind, label, &net.forward(x));
+    let mut ranked: Vec<(f64, &Vec<f64>)> = starts.iter().map(|x| (score(x), x)).collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let found = |x: &[f64]| confirm(net, region, kind, label, x);
+    for (v, x) in ranked.iter().take(8) {
+        if *v >= 0.0 && found(x) {
+            return Some(Witness {
+                input: x.to_vec(),
+                output: net.forward(x),
+            });
+        }
+    }
+    let b = region.bbox();
+    let per_start = evaluations / ranked.len().clamp(1, 4);
+    for (v0, x0) in ranked.iter().take(4) {
+        let (mut x, mut v) = ((*x0).clone(), *v0);
+        let mut step: Vec<f64> = (0..b.dim()).map(|i| 0.25 * (b.hi[i] - b.lo[i])).collect();
+        let mut spent = 0;
+        while spent < per_start && step.iter().any(|s| *s > 1e-12) {
+            let mut improved = false;
+            for i in 0..x.len() {
+                for sign in [1.0, -1.0] {
+                    let mut y = x.clone();
+                    y[i] += sign * step[i];
+                    let Some(y) = project(region, y) else {
+                        continue;
+                    };
+                    spent += 1;
+                    let w = score(&y);
+                    if w > v {
+                        (x, v) = (y, w);
+                        improved = true;
+                    }
+                }
+            }
+            if v >= 0.0 && found(&x) {
+                return Some(Witness {
+                    output: net.forward(&x),
+                    input: x,
+                });
+            }
+            if !improved {
+                for s in &mut step {
+                    *s *= 0.5;
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Sampled inputs of a region: its special points, then seeded random points.
+fn sample_region(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = Rng::new(seed);
+    let mut pts = region.special_points();
+    pts.truncate(n);
+    let mut tries = 0;
+    while pts.len() < n && tries < 4 * n + 16 {
+        tries += 1;
+        if let Some(p) = region.sample(&mut || rng.unit()) {
+            pts.push(p);
+        }
+    }
+    pts
+}
+
+/// Execute a network plan.
+pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
+    let m = plan.net.outputs();
+    // ---- Monte Carlo ----
+    let inputs = sample_region(&plan.input, plan.samples, plan.seed);
+    let outputs: Vec<Vec<f64>> = inputs.iter().map(|x| plan.net.forward(x)).collect();
+    // robustness labels: the centre's when not given
+    let nominal = centre(&plan.input).map(|c| argmax(&plan.net.forward(&c)));
+    let labels: Vec<Option<usize>> = plan
+        .properties
+        .iter()
+        .map(|p| match p.kind {
+            NetPropertyKind::Robust(Some(k)) => Some(k),
+            NetPropertyKind::Robust(None) => nominal,
+            _ => None,
+        })
+        .collect();
+    // ---- the bounds ----
+    let shape_dirs = plan.shape.directions(m, &outputs);
+    let prop_rows: Vec<Vec<Vec<f64>>> = plan
+        .properties
+        .iter()
+        .zip(&labels)
+        .map(|(p, l)| property_rows(&p.kind, *l, m))
+        .collect();
+    let rows = stack(&shape_dirs, &prop_rows, m);
+    let sampled = support_of_points(&rows.dirs, &outputs);
+    let extent = extent_of_points(&rows.dirs, &outputs);
+    let b = bound_all(plan, &plan.input, &rows.dirs, &sampled, &extent, ctl);
+    let overflow = b.union.iter().any(|v| !v.is_finite());
+    // ---- verdicts ----
+    let mut properties = Vec::new();
+    for (k, p) in plan.properties.iter().enumerate() {
+        let kind = match p.kind {
+            NetPropertyKind::Require(_) => NetKind::Require,
+            NetPropertyKind::Avoid(_) => NetKind::Avoid,
+            NetPropertyKind::Robust(_) => NetKind::Robust,
+        };
+        let label = labels[k];
+        let (margin, label_margins) = certified_margin(&p.kind, label, m, &b, &rows.ranges[k]);
+        let mut result = NetPropertyResult {
+            name: p.name.clone(),
+            kind,
+            status: Status::Unsure,
+            margin,
+            label,
+            label_margins,
+            counterexample: None,
+        };
+        if proves(&p.kind, margin) && b.issues.is_empty() {
+            result.status = Status::Verified;
+        } else if let Some(w) = attack(&plan.net, &plan.input, &p.kind, label, &inputs, 2000) {
+            result.status = Status::Falsified;
+            result.margin = -violation(&p.kind, label, &w.output).max(0.0);
+            result.counterexample = Some(w);
+        }
+        properties.push(result);
+    }
+    // ---- radius searches ----
+    let radii = plan
+        .radii
+        .iter()
+        .map(|r| radius_search(plan, r, &labels, ctl))
+        .collect();
+    let verdict = if properties.iter().any(|p| p.status == Status::Falsified) {
+        Status::Falsified
+    } else if properties.iter().all(|p| p.status == Status::Verified) {
+        Status::Verified
+    } else {
+        Status::Unsure
+    };
+    let shape_rows = 0..rows.shape_rows;
+    let offsets: Vec<f64> = b.union[shape_rows.clone()].to_vec();
+    let sampled_shape: Vec<f64> = sampled[shape_rows].to_vec();
+    let bbox = bbox_of(&shape_dirs, &offsets);
+    let sampled_bbox = bbox_of(&shape_dirs, &sampled_shape).filter(|_| !outputs.is_empty());
+    NetOutcome {
+        output: OutputBounds {
+            directions: shape_dirs,
+            offsets,
+            sampled: sampled_shape,
+            bbox,
+            sampled_bbox,
+        },
+        properties,
+        radii,
+        verdict,
+        partition: b.cells.iter().map(|c| c.0.clone()).collect(),
+        partition_stop: b.stop,
+        calls: b.calls,
+        solver_issues: b.issues,
+        overflow,
+        samples_drawn: inputs.len(),
+    }
+}
+
+/// The first index of the largest value.
+fn argmax(y: &[f64]) -> usize {
+    let mut best = 0;
+    for (j, v) in y.iter().enumerate() {
+        if *v > y[best] {
+            best = j;
+        }
+    }
+    best
+}
+
+/// The box described by the first `2m` offsets when the directions start with `±e_i`.
+fn bbox_of(dirs: &DMatrix<f64>, offsets: &[f64]) -> Option<IBox> {
+    let m = dirs.ncols();
+    let is_box = dirs.nrows() >= 2 * m
+        && (0..m).all(|i| {
+            (0..m).all(|j| {
+                dirs[(i, j)] == if i == j { 1.0 } else { 0.0 }
+                    && dirs[(m + i, j)] == if i == j { -1.0 } else { 0.0 }
+            })
+        });
+    is_box.then(|| {
+        IBox::new(
+            offsets[m..2 * m].iter().map(|v| -v).collect(),
+            offsets[..m].to_vec(),
+        )
+    })
+}
+
+/// The certified/attacked bracket of one radius search.
+fn radius_search(
+    plan: &NetPlan,
+    r: &RadiusSpec,
+    labels: &[Option<usize>],
+    ctl: &NetControl,
+) -> RadiusResult {
+    let m = plan.net.outputs();
+    let p = &plan.properties[r.property];
+    let label = labels[r.property];
+    let rows = stack(
+        &DMatrix::zeros(0, m),
+        &[property_rows(&p.kind, label, m)],
+        m,
+    );
+    let mut analyses = 0;
+    let out_of_time = || ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t);
+    let mut certifies = |s: f64| -> bool {
+        analyses += 1;
+        let region = scaled(&plan.input, s);
+        let pts = sample_region(&region, plan.samples.min(1000), plan.seed);
+        let outs: Vec<Vec<f64>> = pts.iter().map(|x| plan.net.forward(x)).collect();
+        let sampled = support_of_points(&rows.dirs, &outs);
+        let extent = extent_of_points(&rows.dirs, &outs);
+        let b = bound_all(plan, &region, &rows.dirs, &sampled, &extent, ctl);
+        let (margin, _) = certified_margin(&p.kind, label, m, &b, &rows.ranges[0]);
+        proves(&p.kind, margin) && b.issues.is_empty()
+    };
+    // certified: bisection on the largest proven scale
+    let certified = if certifies(r.max) {
+        Some(r.max)
+    } else if !certifies(0.0) {
+        None
+    } else {
+        let (mut lo, mut hi) = (0.0, r.max);
+        while hi - lo > r.tolerance && !out_of_time() {
+            let mid = lo + 0.5 * (hi - lo);
+            if certifies(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Some(lo)
+    };
+    // attacked: the smallest gauge of a confirmed violation
+    let attack_at = |s: f64, seed: u64| -> Option<Witness> {
+        let region = scaled(&plan.input, s);
+        let pts = sample_region(&region, plan.samples.clamp(64, 1000), seed);
+        attack(&plan.net, &region, &p.kind, label, &pts, 2000)
+    };
+    let mut attacked: Option<(f64, Witness)> = None;
+    if certified != Some(r.max) {
+        if let Some(w) = attack_at(r.max, plan.seed) {
+            attacked = Some((gauge(&plan.input, &w.input), w));
+            let mut lo = certified.unwrap_or(0.0);
+            let mut round = 1;
+            while let Some((hi, _)) = &attacked {
+                if hi - lo <= r.tolerance || out_of_time() {
+                    break;
+                }
+                let mid = lo + 0.5 * (hi - lo);
+                match attack_at(mid, plan.seed.wrapping_add(round)) {
+                    Some(w) => {
+                        let g = gauge(&plan.input, &w.input);
+                        if g < *hi {
+                            attacked = Some((g, w));
+                        } else {
+                            lo = mid;
+                        }
+                    }
+                    None => lo = mid,
+                }
+                round += 1;
+            }
+        }
+    }
+    RadiusResult {
+        name: r.name.clone(),
+        property: p.name.clone(),
+        certified,
+        attacked,
+        max: r.max,
+        tolerance: r.tolerance,
+        unit: unit_radius(&plan.input),
+        analyses,
+    }
+}

@@ -632,3 +632,50 @@ fn plots_are_svg_documents_with_the_sets() {
     assert_eq!(o.status.code(), Some(2));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Network specs go through the same commands: exit codes by verdict, JSON
+/// of the same family (`kind: network`), JUnit cases per property, and a
+/// clear error where a feature is not built for them yet.
+#[test]
+fn network_specs_through_the_binary() {
+    let (code, stdout, _) = ravel(&["verify", "specs/network/classifier_robust.ravel"]);
+    assert_eq!(code, 0, "{stdout}");
+    assert!(stdout.contains("robust sector  VERIFIED"), "{stdout}");
+    let (code, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "json",
+        "specs/network/classifier_falsified.ravel",
+    ]);
+    assert_eq!(code, 1);
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let r = &v["results"][0];
+    assert_eq!(r["kind"], "network");
+    assert_eq!(r["verdict"], "FALSIFIED");
+    let x = r["properties"][0]["counterexample"]["input"]
+        .as_array()
+        .expect("a witness");
+    assert_eq!(x.len(), 2);
+    let (code, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "junit",
+        "specs/network/policy_output_set.ravel",
+    ]);
+    assert_eq!(code, 0);
+    assert!(stdout.contains("name=\"require bounded\""), "{stdout}");
+    let (code, _, stderr) = ravel(&["check", "specs/network/policy_output_set.ravel"]);
+    assert_eq!(code, 0, "{stderr}");
+    let dir = std::env::temp_dir().join(format!("ravel-net-cert-{}", std::process::id()));
+    let cert = dir.join("c.json");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let (code, _, stderr) = ravel(&[
+        "verify",
+        "--certificate",
+        cert.to_str().expect("utf-8"),
+        "specs/network/policy_output_set.ravel",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("not supported yet"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

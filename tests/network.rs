@@ -1,0 +1,327 @@
+//! Network specs: Monte Carlo soundness of every output bound (random ReLU,
+//! tanh and sigmoid networks; every propagator, partitioner, shape and input
+//! set kind), verdicts that agree with sampled outputs, and radius searches
+//! whose bracket contains a radius known in closed form.
+
+use nalgebra::{DMatrix, DVector};
+use ravel::analysis::partition::Budget;
+use ravel::analysis::shape::Shape;
+use ravel::check::{NetProperty, NetPropertyKind, RadiusSpec};
+use ravel::execute::network::{execute_network, NetControl, NetOutcome};
+use ravel::execute::Status;
+use ravel::ir::{Guide, NetPropagator, Partitioner};
+use ravel::lower::NetPlan;
+use ravel::nn::{Activation, Layer, Network};
+use ravel::rng::Rng;
+use ravel::sets::{IBox, Norm, Polytope, Region};
+
+fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
+    let depth = 1 + rng.below(2);
+    let mut layers = Vec::new();
+    let mut width = inputs;
+    for k in 0..=depth {
+        let out = if k == depth {
+            outputs
+        } else {
+            2 + rng.below(6)
+        };
+        let scale = 1.5 / (width as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(out, width, |_, _| rng.normal() * scale),
+            b: DVector::from_fn(out, |_, _| rng.normal() * 0.3),
+        });
+        if k < depth {
+            layers.push(Layer::Act(act));
+        }
+        width = out;
+    }
+    Network::new(inputs, layers)
+}
+
+fn plan(net: Network, input: Region, props: Vec<NetProperty>) -> NetPlan {
+    NetPlan {
+        name: "test".into(),
+        input_name: "x".into(),
+        output_name: "y".into(),
+        model_path: String::new(),
+        model_sha256: String::new(),
+        model_resolved: String::new(),
+        network_summary: String::new(),
+        net,
+        input,
+        input_set_name: "X".into(),
+        properties: props,
+        radii: Vec::new(),
+        propagator: NetPropagator::Crown,
+        partitioner: Partitioner::Uniform(vec![1, 1]),
+        shape: Shape::Box,
+        samples: 200,
+        seed: 7,
+    }
+}
+
+fn run(p: &NetPlan) -> NetOutcome {
+    execute_network(
+        p,
+        &NetControl {
+            elapsed: &|| 0.0,
+            time_limit: None,
+        },
+    )
+}
+
+/// Points of the region other than the executor's samples (another seed).
+fn probe(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = Rng::new(seed);
+    let mut pts = region.special_points();
+    while pts.len() < n {
+        if let Some(p) = region.sample(&mut || rng.unit()) {
+            pts.push(p);
+        }
+    }
+    pts
+}
+
+#[test]
+fn output_bounds_contain_every_sampled_output() {
+    let mut rng = Rng::new(2026);
+    let mut checked = 0;
+    for case in 0..48 {
+        let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
+        let m = 1 + rng.below(3);
+        let net = random_network(&mut rng, 2, m, act);
+        let c = [rng.normal(), rng.normal()];
+        let r = [0.2 + rng.unit(), 0.2 + rng.unit()];
+        let input = match case / 3 % 3 {
+            0 => Region::Box(IBox::new(
+                vec![c[0] - r[0], c[1] - r[1]],
+                vec![c[0] + r[0], c[1] + r[1]],
+            )),
+            1 => Region::Ball {
+                center: c.to_vec(),
+                radius: r.to_vec(),
+                norm: [Norm::L1, Norm::L2, Norm::LInf][case % 3],
+            },
+            _ => {
+                let bbox = IBox::new(
+                    vec![c[0] - r[0], c[1] - r[1]],
+                    vec![c[0] + r[0], c[1] + r[1]],
+                );
+                Region::Polytope {
+                    bbox,
+                    rows: vec![(vec![1.0, 1.0], c[0] + c[1] + 0.5 * (r[0] + r[1]))],
+                }
+            }
+        };
+        let props = vec![NetProperty {
+            name: "p".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(vec![1.0; m], 0.3)],
+            }),
+        }];
+        for (k, propagator) in NetPropagator::ALL.into_iter().enumerate() {
+            if propagator == NetPropagator::Sdp && (act != Activation::Relu || case % 2 == 1) {
+                continue; // ReLU only; and every other case, to keep the suite short
+            }
+            let mut p = plan(net.clone(), input.clone(), props.clone());
+            p.propagator = propagator;
+            p.partitioner = match (case + k) % 4 {
+                0 => Partitioner::Uniform(vec![1, 1]),
+                1 => Partitioner::Uniform(vec![3, 2]),
+                g => Partitioner::Guided {
+                    guide: if g == 2 { Guide::Sg } else { Guide::Gsg },
+                    budget: Budget {
+                        calls: 9,
+                        min_size: 0.01,
+                        seconds: None,
+                    },
+                },
+            };
+            p.shape = match (case + 2 * k) % 4 {
+                0 => Shape::Box,
+                1 => Shape::LowerBounds,
+                2 => Shape::Polytope(DMatrix::from_fn(2, m, |i, j| {
+                    if (i + j) % 2 == 0 {
+                        1.0
+                    } else {
+                        -0.5
+                    }
+                })),
+                _ => Shape::Hull,
+            };
+            let out = run(&p);
+            let d = &out.output.directions;
+            for x in probe(&input, 300, case as u64) {
+                let y = net.forward(&x);
+                for row in 0..d.nrows() {
+                    let v: f64 = (0..m).map(|j| d[(row, j)] * y[j]).sum();
+                    assert!(
+                        v <= out.output.offsets[row] + 1e-9 * (1.0 + v.abs()),
+                        "case {case} {propagator:?}: facet {row} bound {} below sampled {v}",
+                        out.output.offsets[row]
+                    );
+                }
+                let pv: f64 = y.iter().sum::<f64>() - 0.3;
+                if pv > 1e-9 {
+                    assert_ne!(
+                        out.properties[0].status,
+                        Status::Verified,
+                        "case {case} {propagator:?}: VERIFIED but x = {x:?} violates it"
+                    );
+                }
+            }
+            if let Some(w) = &out.properties[0].counterexample {
+                assert!(input.contains_point(&w.input));
+                assert!(w.output.iter().sum::<f64>() > 0.3);
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked >= 150, "only {checked} cases ran");
+}
+
+/// Propagators are ordered: CROWN is never looser than IBP on one cell, and
+/// SDP (intersected with CROWN) never looser than CROWN.
+#[test]
+fn propagators_are_ordered() {
+    let mut rng = Rng::new(11);
+    for case in 0..12 {
+        let net = random_network(&mut rng, 2, 2, Activation::Relu);
+        let input = Region::Box(IBox::new(vec![-0.5, -0.3], vec![0.4, 0.6]));
+        let bound = |prop| {
+            let mut p = plan(net.clone(), input.clone(), Vec::new());
+            p.propagator = prop;
+            run(&p).output.offsets
+        };
+        let (ibp, crown, sdp) = (
+            bound(NetPropagator::Ibp),
+            bound(NetPropagator::Crown),
+            bound(NetPropagator::Sdp),
+        );
+        for k in 0..ibp.len() {
+            assert!(crown[k] <= ibp[k], "case {case}: CROWN looser than IBP");
+            assert!(sdp[k] <= crown[k], "case {case}: SDP looser than CROWN");
+        }
+    }
+}
+
+/// `y = w·x + b` on the box `c ± s·r`: `max y = w·c + b + s·Σ|w_i| r_i`, so
+/// `y ≤ t` holds exactly up to `s* = (t − w·c − b) / Σ|w_i| r_i`. The
+/// certified scale must lie below `s*` and the attacked one above it, each
+/// within a few tolerances; the same for a ReLU of it (same `s*`).
+#[test]
+fn radius_bracket_contains_the_true_radius() {
+    let mut rng = Rng::new(5);
+    for case in 0..8 {
+        let w = [rng.normal(), rng.normal()];
+        let b = rng.normal() * 0.1;
+        let c = [rng.normal() * 0.2, rng.normal() * 0.2];
+        let r = [0.1 + rng.unit() * 0.2, 0.1 + rng.unit() * 0.2];
+        let t = w[0] * c[0] + w[1] * c[1] + b + 0.5 + rng.unit();
+        let s_true = (t - w[0] * c[0] - w[1] * c[1] - b) / (w[0].abs() * r[0] + w[1].abs() * r[1]);
+        let affine = Layer::Affine {
+            w: DMatrix::from_row_slice(1, 2, &w),
+            b: DVector::from_element(1, b),
+        };
+        // the ReLU variant: relu(y) ≤ t with t > 0 is y ≤ t
+        let net = if case % 2 == 0 {
+            Network::new(2, vec![affine])
+        } else {
+            Network::new(2, vec![affine, Layer::Act(Activation::Relu)])
+        };
+        let input = Region::Box(IBox::new(
+            vec![c[0] - r[0], c[1] - r[1]],
+            vec![c[0] + r[0], c[1] + r[1]],
+        ));
+        let mut p = plan(
+            net,
+            input,
+            vec![NetProperty {
+                name: "below".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![1.0], t)],
+                }),
+            }],
+        );
+        let tol = 1e-3 * s_true.max(1.0);
+        p.radii = vec![RadiusSpec {
+            name: "eps".into(),
+            property: 0,
+            max: 4.0 * s_true,
+            tolerance: tol,
+        }];
+        let out = run(&p);
+        let rr = &out.radii[0];
+        let cert = rr.certified.expect("certified near the centre");
+        let (att, wit) = rr.attacked.as_ref().expect("an attack beyond s*");
+        assert!(
+            cert <= s_true * (1.0 + 1e-9),
+            "case {case}: certified {cert} above the true radius {s_true}"
+        );
+        assert!(
+            *att >= s_true * (1.0 - 1e-9),
+            "case {case}: attacked {att} below the true radius {s_true}"
+        );
+        assert!(
+            cert >= s_true - 2.0 * tol,
+            "case {case}: certified {cert} far below {s_true}"
+        );
+        assert!(
+            *att <= s_true * 1.05 + tol,
+            "case {case}: attacked {att} far above {s_true}"
+        );
+        assert!(
+            wit.output[0] > t,
+            "case {case}: the witness does not violate"
+        );
+    }
+}
+
+/// Robustness: a verified label holds at every sampled input, a falsified
+/// one comes with an input whose label differs.
+#[test]
+fn robustness_verdicts_agree_with_samples() {
+    let mut rng = Rng::new(99);
+    let mut seen = [0usize; 3];
+    for case in 0..40 {
+        let net = random_network(&mut rng, 2, 3, Activation::Relu);
+        let c = vec![rng.normal(), rng.normal()];
+        let input = Region::Ball {
+            center: c.clone(),
+            radius: vec![0.02 + 0.3 * rng.unit(); 2],
+            norm: Norm::LInf,
+        };
+        let mut p = plan(
+            net.clone(),
+            input.clone(),
+            vec![NetProperty {
+                name: "r".into(),
+                kind: NetPropertyKind::Robust(None),
+            }],
+        );
+        p.partitioner = Partitioner::Uniform(vec![2, 2]);
+        let out = run(&p);
+        let res = &out.properties[0];
+        let k = res.label.expect("a label");
+        let label = |y: &[f64]| (0..y.len()).filter(|&j| j != k).all(|j| y[k] > y[j]);
+        match res.status {
+            Status::Verified => {
+                seen[0] += 1;
+                for x in probe(&input, 300, case) {
+                    assert!(
+                        label(&net.forward(&x)),
+                        "case {case}: verified but {x:?} differs"
+                    );
+                }
+            }
+            Status::Falsified => {
+                seen[1] += 1;
+                let w = res.counterexample.as_ref().expect("witness");
+                assert!(input.contains_point(&w.input));
+                assert!(!label(&w.output), "case {case}: witness keeps the label");
+            }
+            Status::Unsure => seen[2] += 1,
+        }
+    }
+    assert!(seen[0] > 0 && seen[1] > 0, "verdicts seen: {seen:?}");
+}

@@ -896,8 +896,13 @@ fn radius_search(
         None
     } else {
         let (mut lo, mut hi) = (0.0, r.max);
-        while hi - lo > r.tolerance && !out_of_time() {
+        // at most 64 halvings: a tolerance below f64's spacing ends when
+        // the midpoint can no longer be told from an end
+        for _ in 0..64 {
             let mid = lo + 0.5 * (hi - lo);
+            if hi - lo <= r.tolerance || mid <= lo || mid >= hi || out_of_time() {
+                break;
+            }
             if certifies(mid) {
                 lo = mid;
             } else {
@@ -919,10 +924,11 @@ fn radius_search(
             let mut lo = certified.unwrap_or(0.0);
             let mut round = 1;
             while let Some((hi, _)) = &attacked {
-                if hi - lo <= r.tolerance || out_of_time() {
+                let mid = lo + 0.5 * (hi - lo);
+                if hi - lo <= r.tolerance || mid <= lo || mid >= *hi || round > 64 || out_of_time()
+                {
                     break;
                 }
-                let mid = lo + 0.5 * (hi - lo);
                 match attack_at(mid, plan.seed.wrapping_add(round)) {
                     Some(w) => {
                         let g = gauge(&plan.input, &w.input);

@@ -3,6 +3,9 @@
 //! set kind), verdicts that agree with sampled outputs, and radius searches
 //! whose bracket contains a radius known in closed form.
 
+mod common;
+
+use common::random_network;
 use nalgebra::{DMatrix, DVector};
 use ravel::analysis::partition::Budget;
 use ravel::analysis::shape::Shape;
@@ -14,29 +17,6 @@ use ravel::lower::NetPlan;
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
 use ravel::sets::{IBox, Norm, Polytope, Region};
-
-fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
-    let depth = 1 + rng.below(2);
-    let mut layers = Vec::new();
-    let mut width = inputs;
-    for k in 0..=depth {
-        let out = if k == depth {
-            outputs
-        } else {
-            2 + rng.below(6)
-        };
-        let scale = 1.5 / (width as f64).sqrt();
-        layers.push(Layer::Affine {
-            w: DMatrix::from_fn(out, width, |_, _| rng.normal() * scale),
-            b: DVector::from_fn(out, |_, _| rng.normal() * 0.3),
-        });
-        if k < depth {
-            layers.push(Layer::Act(act));
-        }
-        width = out;
-    }
-    Network::new(inputs, layers)
-}
 
 fn plan(net: Network, input: Region, props: Vec<NetProperty>) -> NetPlan {
     NetPlan {
@@ -89,7 +69,7 @@ fn output_bounds_contain_every_sampled_output() {
     for case in 0..48 {
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
         let m = 1 + rng.below(3);
-        let net = random_network(&mut rng, 2, m, act);
+        let net = random_network(&mut rng, 2, m, act, (2, 6));
         let c = [rng.normal(), rng.normal()];
         let r = [0.2 + rng.unit(), 0.2 + rng.unit()];
         let input = match case / 3 % 3 {
@@ -186,7 +166,7 @@ fn output_bounds_contain_every_sampled_output() {
 fn propagators_are_ordered() {
     let mut rng = Rng::new(11);
     for case in 0..12 {
-        let net = random_network(&mut rng, 2, 2, Activation::Relu);
+        let net = random_network(&mut rng, 2, 2, Activation::Relu, (2, 6));
         let input = Region::Box(IBox::new(vec![-0.5, -0.3], vec![0.4, 0.6]));
         let bound = |prop| {
             let mut p = plan(net.clone(), input.clone(), Vec::new());
@@ -284,7 +264,7 @@ fn robustness_verdicts_agree_with_samples() {
     let mut rng = Rng::new(99);
     let mut seen = [0usize; 3];
     for case in 0..40 {
-        let net = random_network(&mut rng, 2, 3, Activation::Relu);
+        let net = random_network(&mut rng, 2, 3, Activation::Relu, (2, 6));
         let c = vec![rng.normal(), rng.normal()];
         let input = Region::Ball {
             center: c.clone(),

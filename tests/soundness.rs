@@ -4,37 +4,17 @@
 //! with box and polytope boundaries, box and ℓp-ball initial sets, and
 //! time-varying plants.
 
+mod common;
+
+use common::random_network;
 use nalgebra::{DMatrix, DVector};
 use ravel::analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
 use ravel::analysis::crown::{Analysis, Mode};
-use ravel::nn::{Activation, Layer, Network};
+use ravel::nn::{Activation, Layer};
 use ravel::rng::Rng;
 use ravel::sets::{IBox, Norm, Region};
 
 const PROPAGATORS: [Propagator; 6] = Propagator::ALL;
-
-fn random_network(rng: &mut Rng, inputs: usize, outputs: usize, act: Activation) -> Network {
-    let depth = 1 + rng.below(3);
-    let mut layers = Vec::new();
-    let mut width = inputs;
-    for k in 0..=depth {
-        let out = if k == depth {
-            outputs
-        } else {
-            2 + rng.below(7)
-        };
-        let scale = 1.5 / (width as f64).sqrt();
-        layers.push(Layer::Affine {
-            w: DMatrix::from_fn(out, width, |_, _| rng.normal() * scale),
-            b: DVector::from_fn(out, |_, _| rng.normal() * 0.3),
-        });
-        if k < depth {
-            layers.push(Layer::Act(act));
-        }
-        width = out;
-    }
-    Network::new(inputs, layers)
-}
 
 struct Case {
     cl: ClosedLoop,
@@ -75,7 +55,7 @@ fn random_case(seed: u64) -> Case {
     };
     let w = noise(&mut rng, n);
     let v = noise(&mut rng, p);
-    let mut net = random_network(&mut rng, p, m, act);
+    let mut net = random_network(&mut rng, p, m, act, (3, 7));
     if limited {
         let lo: Vec<f64> = (0..m).map(|_| -rng.uniform(0.2, 1.0)).collect();
         let hi: Vec<f64> = (0..m).map(|_| rng.uniform(0.2, 1.0)).collect();
@@ -343,7 +323,7 @@ fn network_bounds_contain_network_outputs() {
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
         let inputs = 1 + rng.below(4);
         let outputs = 1 + rng.below(3);
-        let net = random_network(&mut rng, inputs, outputs, act);
+        let net = random_network(&mut rng, inputs, outputs, act, (3, 7));
         let c: Vec<f64> = (0..inputs).map(|_| rng.normal()).collect();
         let r = rng.uniform(0.01, 1.5);
         let input = IBox::new(
@@ -373,7 +353,7 @@ fn linear_bounds_hold_pointwise() {
     for seed in 0..30u64 {
         let mut rng = Rng::new(5000 + seed);
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
-        let net = random_network(&mut rng, 2, 2, act);
+        let net = random_network(&mut rng, 2, 2, act, (3, 7));
         let input = IBox::new(vec![-0.7, -0.2], vec![0.4, 0.9]);
         let a = Analysis::new(&net, &input, Mode::Crown);
         let spec = DMatrix::from_row_slice(2, 2, &[1.0, -0.5, -1.0, 0.25]);
@@ -409,7 +389,7 @@ fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
         let n = 1 + rng.below(3);
         let m = 1 + rng.below(3);
-        let net = random_network(&mut rng, n, m, act);
+        let net = random_network(&mut rng, n, m, act, (3, 7));
         let lo: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 0.0)).collect();
         let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(0.2, 1.5)).collect();
         let input = IBox::new(lo, hi);

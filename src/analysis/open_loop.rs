@@ -87,6 +87,19 @@ impl OutputSet {
     }
 }
 
+/// The offsets of a union of cells: the largest of the cells' offsets per
+/// direction (`−∞` without cells).
+pub fn union_offsets<C>(cells: &[(C, Vec<f64>)], rows: usize) -> Vec<f64> {
+    (0..rows)
+        .map(|k| {
+            cells
+                .iter()
+                .map(|(_, b)| b[k])
+                .fold(f64::NEG_INFINITY, f64::max)
+        })
+        .collect()
+}
+
 /// `n` input points of a box: its lowest and highest corners first, then
 /// uniform points from a SplitMix64 stream seeded with `seed`.
 pub fn sample_inputs(input: &IBox, n: usize, seed: u64) -> Vec<Vec<f64>> {
@@ -172,14 +185,7 @@ pub fn output_set(
             (cells, r.calls, r.stop)
         }
     };
-    let offsets = (0..directions.nrows())
-        .map(|k| {
-            cells
-                .iter()
-                .map(|(_, b)| b[k])
-                .fold(f64::NEG_INFINITY, f64::max)
-        })
-        .collect();
+    let offsets = union_offsets(&cells, directions.nrows());
     OutputSet {
         directions,
         offsets,

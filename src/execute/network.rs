@@ -414,14 +414,7 @@ fn bound_all(
             (cells, r.calls, r.stop)
         }
     };
-    let union = (0..dirs.nrows())
-        .map(|k| {
-            cells
-                .iter()
-                .map(|(_, b)| b[k])
-                .fold(f64::NEG_INFINITY, f64::max)
-        })
-        .collect();
+    let union = crate::analysis::open_loop::union_offsets(&cells, dirs.nrows());
     issues.sort_by_key(|i| format!("{i:?}"));
     issues.dedup();
     Bounded {

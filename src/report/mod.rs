@@ -44,15 +44,15 @@ pub(crate) fn vector(v: &[f64]) -> String {
     )
 }
 
-fn partition_text(plan: &Plan, out: &Outcome) -> String {
-    let cells = out.partition.len();
-    match &plan.partitioner {
+/// How the set was partitioned, for people (`cells` final cells, why it stopped).
+pub(crate) fn partition_text(partitioner: &Partitioner, cells: usize, stop: Stop) -> String {
+    match partitioner {
         Partitioner::Uniform(grid) if grid.iter().all(|k| *k == 1) => {
             "no partition (1 cell)".into()
         }
         Partitioner::Uniform(grid) => format!("uniform partition {grid:?} ({cells} cells)"),
         Partitioner::Guided { guide, budget } => {
-            let why = match out.partition_stop {
+            let why = match stop {
                 Stop::Done | Stop::Grid => "every cell settled".to_string(),
                 Stop::Calls if budget.calls == 1 => "budget of 1 cell evaluation spent".to_string(),
                 Stop::Calls => format!("budget of {} cell evaluations spent", budget.calls),
@@ -120,7 +120,7 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
     s += &format!(
         "  analysis    {}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
-        partition_text(plan, out),
+        partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         boundary_text(&plan.boundary),
         plan.samples,
         plan.seed
@@ -289,6 +289,22 @@ pub fn final_error(out: &Outcome) -> Option<f64> {
     (v > 0.0).then(|| last.volume() / v - 1.0)
 }
 
+/// The partitioner's name in JSON reports.
+pub(crate) fn partitioner_name(p: &Partitioner) -> &'static str {
+    match p {
+        Partitioner::Uniform(_) => "uniform",
+        Partitioner::Guided { guide, .. } => guide.name(),
+    }
+}
+
+/// A uniform partition's grid in JSON reports (`null` for guided ones).
+pub(crate) fn partition_grid(p: &Partitioner) -> Value {
+    match p {
+        Partitioner::Uniform(grid) => json!(grid),
+        Partitioner::Guided { .. } => Value::Null,
+    }
+}
+
 pub(crate) fn f(x: f64) -> Value {
     if x.is_finite() {
         json!(x)
@@ -367,14 +383,8 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         "model_error": plan.closed_loop.plant.err.as_ref().map(|e| f(e.max())),
         "analysis": {
             "propagator": plan.propagator.name(),
-            "partitioner": match &plan.partitioner {
-                Partitioner::Uniform(_) => "uniform",
-                Partitioner::Guided { guide, .. } => guide.name(),
-            },
-            "partition": match &plan.partitioner {
-                Partitioner::Uniform(grid) => json!(grid),
-                Partitioner::Guided { .. } => Value::Null,
-            },
+            "partitioner": partitioner_name(&plan.partitioner),
+            "partition": partition_grid(&plan.partitioner),
             "partition_stop": out.partition_stop.as_str(),
             "cells": out.partition.len(),
             "boundary": match &plan.boundary {

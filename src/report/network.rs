@@ -4,12 +4,10 @@
 
 use serde_json::{json, Value};
 
-use super::{f, interval, num, vector};
-use crate::analysis::partition::Stop;
+use super::{f, interval, num, partition_grid, partition_text, partitioner_name, vector};
 use crate::analysis::shape::Shape;
 use crate::execute::network::{NetOutcome, Witness};
 use crate::execute::Status;
-use crate::ir::Partitioner;
 use crate::lower::NetPlan;
 use crate::sets::{IBox, Norm, Region};
 
@@ -28,24 +26,6 @@ fn shape_name(s: &Shape) -> &'static str {
         Shape::Box => "box",
         Shape::Polytope(_) => "polytope",
         Shape::Hull => "hull",
-    }
-}
-
-fn partition_text(plan: &NetPlan, out: &NetOutcome) -> String {
-    let cells = out.partition.len();
-    match &plan.partitioner {
-        Partitioner::Uniform(grid) if grid.iter().all(|k| *k == 1) => {
-            "no partition (1 cell)".into()
-        }
-        Partitioner::Uniform(grid) => format!("uniform partition {grid:?} ({cells} cells)"),
-        Partitioner::Guided { guide, budget } => {
-            let why = match out.partition_stop {
-                Stop::Done | Stop::Grid => "every cell settled".to_string(),
-                Stop::Calls => format!("budget of {} cell evaluations spent", budget.calls),
-                Stop::Time => "time budget spent".to_string(),
-            };
-            format!("{} partition ({cells} cells, {why})", guide.name())
-        }
     }
 }
 
@@ -123,7 +103,7 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
     s += &format!(
         "  analysis    {}, {}, {} output shape, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
-        partition_text(plan, out),
+        partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         shape_text(&plan.shape),
         plan.samples,
         plan.seed
@@ -313,14 +293,8 @@ pub fn json(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
         "model": { "path": plan.model_path, "resolved": plan.model_resolved, "sha256": plan.model_sha256, "network": plan.network_summary },
         "analysis": {
             "propagator": plan.propagator.name(),
-            "partitioner": match &plan.partitioner {
-                Partitioner::Uniform(_) => "uniform",
-                Partitioner::Guided { guide, .. } => guide.name(),
-            },
-            "partition": match &plan.partitioner {
-                Partitioner::Uniform(grid) => json!(grid),
-                Partitioner::Guided { .. } => Value::Null,
-            },
+            "partitioner": partitioner_name(&plan.partitioner),
+            "partition": partition_grid(&plan.partitioner),
             "partition_stop": out.partition_stop.as_str(),
             "cells": out.partition.len(),
             "shape": shape_name(&plan.shape),

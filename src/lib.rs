@@ -30,6 +30,7 @@ pub mod report;
 pub mod rng;
 pub mod sets;
 pub mod syntax;
+pub mod vnnlib;
 
 use std::path::{Path, PathBuf};
 

@@ -679,3 +679,51 @@ fn network_specs_through_the_binary() {
     assert!(stderr.contains("not supported yet"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `import-vnnlib` prints a spec that verifies, writes one whose model path
+/// is relative to its folder with `--output`, and exits 2 on what it does
+/// not support or a network whose sizes differ.
+#[test]
+fn import_vnnlib_through_the_binary() {
+    let (code, stdout, stderr) = ravel(&[
+        "import-vnnlib",
+        "tests/data/vnnlib/robust_box.vnnlib",
+        "--network",
+        "models/classifier.onnx",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("avoid unsafe ="), "{stdout}");
+    let dir = std::env::temp_dir().join(format!("ravel-vnnlib-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let spec = dir.join("robust_box.ravel");
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib",
+        "tests/data/vnnlib/robust_box.vnnlib",
+        "--network",
+        "models/classifier.onnx",
+        "--output",
+        spec.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, _) = ravel(&["verify", spec.to_str().expect("utf-8")]);
+    assert_eq!(code, 0, "{stdout}");
+    assert!(stdout.contains("avoid unsafe  VERIFIED"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&dir);
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib",
+        "tests/data/vnnlib/mixed.vnnlib",
+        "--network",
+        "models/classifier.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("mixed.vnnlib:7:9"), "{stderr}");
+    // the property declares 3 outputs; the double integrator's controller has 1
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib",
+        "tests/data/vnnlib/robust_box.vnnlib",
+        "--network",
+        "models/double_integrator.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0305"), "{stderr}");
+}

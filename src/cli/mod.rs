@@ -105,6 +105,20 @@ enum Cmd {
         #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
         fail_on: batch::FailOn,
     },
+    /// Translate a VNN-LIB property into a ravel network spec (printed, or
+    /// written with --output), checked against the network before it is
+    /// shown. Exit code 0, or 2 with the line of what is not supported.
+    ImportVnnlib {
+        /// The property file (.vnnlib).
+        property: PathBuf,
+        /// The ONNX network the property is about.
+        #[arg(long, value_name = "NET.onnx")]
+        network: PathBuf,
+        /// Write the spec to this file (the model path in it is then made
+        /// relative to the file's folder) instead of standard output.
+        #[arg(long, value_name = "FILE")]
+        output: Option<PathBuf>,
+    },
     /// Re-check certificates written by `verify --certificate`, without
     /// trusting the analysis: VALID, INVALID (with the first false claim) or
     /// UNSUPPORTED. Exit code 0 (all valid), 1 (some invalid), 2 (some
@@ -677,6 +691,95 @@ fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
     ExitCode::from(code)
 }
 
+/// `path` as seen from the folder `dir` (both made absolute; `..` where
+/// they part), or `path` itself when either cannot be resolved.
+fn relative_to(dir: &Path, path: &Path) -> PathBuf {
+    let (Ok(d), Ok(p)) = (dir.canonicalize(), path.canonicalize()) else {
+        return path.to_path_buf();
+    };
+    let (dc, pc): (Vec<_>, Vec<_>) = (d.components().collect(), p.components().collect());
+    let common = dc.iter().zip(&pc).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..dc.len() {
+        out.push("..");
+    }
+    for c in &pc[common..] {
+        out.push(c);
+    }
+    out
+}
+
+/// `ravel import-vnnlib`: the spec, checked by the front end with the network.
+fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: bool) -> ExitCode {
+    let name = crate::diag::sanitize(&property.display().to_string());
+    let fail = |msg: String| {
+        err(&format!("error: {msg}\n"));
+        ExitCode::from(exit::INPUT_ERROR)
+    };
+    let bytes = match read_request(&crate::ReadRequest {
+        path: property.to_path_buf(),
+        inside: None,
+        max_bytes: crate::limits::MAX_SPEC_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => return fail(format!("cannot read `{name}`: {e}")),
+    };
+    let Ok(text) = String::from_utf8(bytes) else {
+        return fail(format!("`{name}` is not UTF-8 text"));
+    };
+    let dir = match output.and_then(Path::parent) {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let model = if output.is_some() {
+        relative_to(&dir, network)
+    } else {
+        network.to_path_buf()
+    };
+    let stem = property
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ident: String = stem
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let ident = match ident.chars().next() {
+        Some(c) if c.is_ascii_alphabetic() || c == '_' => ident,
+        _ => format!("n_{ident}"),
+    };
+    let spec = match crate::vnnlib::import(
+        &text,
+        &model.display().to_string(),
+        &ident,
+        &property.display().to_string(),
+    ) {
+        Ok(s) => s,
+        Err(e) => return fail(format!("{name}:{}:{}: {}", e.line, e.column, e.message)),
+    };
+    // the spec must check with the network (sizes included) before anyone sees it
+    if let Err(d) = crate::front_end_task(&spec, &dir, &read_request, None) {
+        err(&render(&d, "(imported spec)", &spec, 100, color));
+        return fail(format!("the spec imported from `{name}` does not check"));
+    }
+    match output {
+        Some(file) => match std::fs::write(file, &spec) {
+            Ok(()) => ExitCode::from(exit::VERIFIED),
+            Err(e) => fail(format!(
+                "cannot write `{}`: {e}",
+                crate::diag::sanitize(&file.display().to_string())
+            )),
+        },
+        None => {
+            if out(spec.trim_end()).is_err() {
+                return ExitCode::from(exit::BROKEN_PIPE);
+            }
+            ExitCode::from(exit::VERIFIED)
+        }
+    }
+}
+
 /// Run the CLI with the process arguments.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -776,5 +879,10 @@ pub fn main() -> ExitCode {
         }
         Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
         Cmd::Fmt { specs, check } => fmt_files(&specs, check),
+        Cmd::ImportVnnlib {
+            property,
+            network,
+            output,
+        } => import_vnnlib(&property, &network, output.as_deref(), color),
     }
 }

@@ -63,6 +63,8 @@ pub enum Code {
     Label,
     /// E0218: a radius search that cannot be set up.
     Radius,
+    /// E0219: observations or ε of a select block that cannot be used (CSV cells, widths, values).
+    Observations,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -83,7 +85,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 34] = [
+    pub const ALL: [Code; 35] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -110,6 +112,7 @@ impl Code {
         Code::Limit,
         Code::Label,
         Code::Radius,
+        Code::Observations,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -149,6 +152,7 @@ impl Code {
             Code::Limit => "E0216",
             Code::Label => "E0217",
             Code::Radius => "E0218",
+            Code::Observations => "E0219",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

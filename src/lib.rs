@@ -13,6 +13,7 @@ pub mod certificate;
 pub mod certify;
 pub mod check;
 pub mod cli;
+pub mod demo;
 pub mod diag;
 pub mod execute;
 pub mod expm;
@@ -143,5 +144,17 @@ pub fn front_end_task(
             external,
         }
     });
-    check::check_task(&spec, controller.as_ref())
+    let data: check::DataFiles = check::data_paths(&spec)
+        .into_iter()
+        .map(|p| {
+            let bytes = read(&ReadRequest {
+                path: spec_dir.join(&p),
+                inside: None,
+                max_bytes: limits::MAX_SPEC_BYTES,
+                whole: true,
+            });
+            (p, bytes)
+        })
+        .collect();
+    check::check_task(&spec, controller.as_ref(), &data)
 }

@@ -174,10 +174,12 @@ pub struct NetPlan {
     pub network_summary: String,
     /// The network.
     pub net: crate::nn::Network,
-    /// The input set.
-    pub input: Region,
+    /// The input set (absent in a spec that only selects actions).
+    pub input: Option<Region>,
     /// Its name.
     pub input_set_name: String,
+    /// The robust action selections, in spec order.
+    pub selects: Vec<crate::check::SelectSpec>,
     /// The properties, in spec order.
     pub properties: Vec<crate::check::NetProperty>,
     /// The radius searches, in spec order.
@@ -205,8 +207,13 @@ pub fn lower_network(c: &crate::check::NetworkChecked) -> NetPlan {
         model_resolved: c.model_resolved.clone(),
         network_summary: describe(&c.model),
         net: c.model.net.clone(),
-        input: c.input_set.1.clone(),
-        input_set_name: c.input_set.0.clone(),
+        input: c.input_set.as_ref().map(|i| i.1.clone()),
+        input_set_name: c
+            .input_set
+            .as_ref()
+            .map(|i| i.0.clone())
+            .unwrap_or_default(),
+        selects: c.selects.clone(),
         properties: c.properties.clone(),
         radii: c.radii.clone(),
         propagator: c.propagator,

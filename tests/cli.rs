@@ -312,12 +312,20 @@ fn one_spec_many_controllers_and_folders() {
     // a folder of specs (the invalid ones: every one an ERROR, none lost)
     let (code, out, _) = ravel(&["verify", "specs/invalid", "--no-timing"]);
     assert_eq!(code, 2);
+    let ravel_files = |d: std::fs::ReadDir| {
+        d.filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "ravel"))
+        })
+        .count()
+    };
     let n = std::fs::read_dir("specs/invalid")
-        .map(|d| d.count())
+        .map(ravel_files)
         .unwrap_or_else(|_| {
-            std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/specs/invalid"))
-                .expect("folder")
-                .count()
+            ravel_files(
+                std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/specs/invalid"))
+                    .expect("folder"),
+            )
         });
     assert!(out.contains(&format!("summary: {n} ERROR")), "{out}");
 
@@ -726,4 +734,66 @@ fn import_vnnlib_through_the_binary() {
     ]);
     assert_eq!(code, 2);
     assert!(stderr.contains("E0305"), "{stderr}");
+}
+
+/// The CARRL demonstration runs at a small size: a table of average returns
+/// for the nominal policy and CARRL at three radii, five adversary strengths.
+#[test]
+fn carrl_demonstration_runs() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ravel-carrl-demo"))
+        .args(["--episodes", "2", "--steps", "15"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = text.lines().collect();
+    assert_eq!(rows.len(), 6, "{text}");
+    for row in &rows[2..] {
+        let values: Vec<f64> = row
+            .split_whitespace()
+            .rev()
+            .take(5)
+            .map(|v| v.parse().expect("a number"))
+            .collect();
+        // 15 steps of reward at most 1, or a crash (−5) earlier
+        assert!(values.iter().all(|v| (-5.0..=15.0).contains(v)), "{row}");
+    }
+    let bad = Command::new(env!("CARGO_BIN_EXE_ravel-carrl-demo"))
+        .args(["--episodes", "0"])
+        .output()
+        .expect("runs");
+    assert_eq!(bad.status.code(), Some(2));
+}
+
+/// `--format csv` prints the robust action selections of network specs.
+#[test]
+fn carrl_csv_output() {
+    let (code, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "csv",
+        "specs/network/lane_carrl.ravel",
+    ]);
+    assert_eq!(code, 0);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(
+        lines[0],
+        "spec,select,observation,action,lower,upper,nominal,robust,robust_optimal"
+    );
+    // 3 inline and 6 file observations, 3 actions each
+    assert_eq!(lines.len(), 1 + 9 * 3, "{stdout}");
+    for l in &lines[1..] {
+        let cells: Vec<&str> = l.split(',').collect();
+        assert_eq!(cells.len(), 9, "{l}");
+        let (lo, hi): (f64, f64) = (
+            cells[4].parse().expect("lower"),
+            cells[5].parse().expect("upper"),
+        );
+        assert!(lo <= hi, "{l}");
+    }
 }

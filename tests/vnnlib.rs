@@ -54,7 +54,10 @@ fn robustness_disjunction_becomes_a_union() {
     );
     assert_eq!(
         plan.input,
-        Region::Box(ravel::sets::IBox::new(vec![0.55, 0.25], vec![0.65, 0.35]))
+        Some(Region::Box(ravel::sets::IBox::new(
+            vec![0.55, 0.25],
+            vec![0.65, 0.35]
+        )))
     );
     assert_eq!(out.verdict.as_str(), "VERIFIED");
 }
@@ -80,7 +83,7 @@ fn conjunction_with_coefficients_and_strict_comparisons() {
 #[test]
 fn polytope_inputs_stay_a_polytope() {
     let (plan, out) = run("polytope_input");
-    let Region::Polytope { rows, bbox } = &plan.input else {
+    let Some(Region::Polytope { rows, bbox }) = &plan.input else {
         panic!("not a polytope: {:?}", plan.input)
     };
     // the row x0 + x1 <= 0.9, possibly scaled

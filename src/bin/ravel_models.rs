@@ -371,6 +371,39 @@ fn main() {
         encode(&clf_net, Storage::RawF32, false).finish(3),
     );
 
+    // a Q-network for the CARRL demonstration: the optimal action values of
+    // the lane-keeping task (ravel::demo), scaled by 1/20, fitted by MSE
+    let values = ravel::demo::Values::solve(61, 51, 300);
+    let mut rng = Rng::new(5);
+    let xs: Vec<DVector<f64>> = (0..6000)
+        .map(|_| DVector::from_vec(vec![rng.uniform(-1.5, 1.5), rng.uniform(-2.5, 2.5)]))
+        .collect();
+    let ys: Vec<DVector<f64>> = xs
+        .iter()
+        .map(|x| DVector::from_fn(3, |a, _| values.q([x[0], x[1]], a) / 20.0))
+        .collect();
+    let mut qnet = Mlp::new(&[2, 32, 32, 3], Activation::Relu, &mut rng);
+    qnet.train(&xs, &ys, 12000, 2e-3, &mut rng);
+    let agree = xs
+        .iter()
+        .zip(&ys)
+        .filter(|(x, y)| {
+            let q = qnet.network().forward(x.as_slice());
+            let best = |v: &[f64]| (0..3).fold(0, |b, j| if v[j] > v[b] { j } else { b });
+            best(&q) == best(y.as_slice())
+        })
+        .count();
+    eprintln!(
+        "lane Q-network: MSE {:.2e}, greedy action as the optimal one on {:.1} % of the training states",
+        qnet.mse(&xs, &ys),
+        100.0 * agree as f64 / xs.len() as f64
+    );
+    write(
+        root,
+        "lane_q.onnx",
+        encode(&qnet.network(), Storage::RawF32, false).finish(3),
+    );
+
     // invalid models, one per loader diagnostic
     let inv = root.join("invalid");
     fs::write(

@@ -17,6 +17,7 @@ mod analysis;
 mod controller;
 mod extra;
 mod network;
+mod select;
 mod sets;
 mod system;
 
@@ -31,7 +32,35 @@ use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use crate::sets::{IBox, Polytope, Region};
 use crate::syntax::ast::*;
 pub use extra::{zero_order_hold, DEFAULT_BUDGET};
-pub use network::{is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec};
+pub use network::{
+    is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec, SelectSpec,
+    MAX_OBSERVATIONS,
+};
+
+/// Data files a spec names (observation CSVs), as read by the caller:
+/// the path as written in the spec → the bytes or the read error.
+pub type DataFiles = BTreeMap<String, Result<Vec<u8>, String>>;
+
+/// The data files a spec names, for the caller to read before [`check_task`]
+/// (paths as written, relative to the spec's folder).
+pub fn data_paths(spec: &Spec) -> Vec<String> {
+    let mut v: Vec<String> = spec
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Select(d) => Some(d),
+            _ => None,
+        })
+        .flat_map(|d| d.stmts.iter())
+        .filter_map(|st| match &st.node {
+            SelectStmt::File(p) => Some(p.node.clone()),
+            _ => None,
+        })
+        .collect();
+    v.sort();
+    v.dedup();
+    v
+}
 
 /// A checked spec of either kind.
 #[derive(Clone, Debug)]
@@ -46,6 +75,7 @@ pub enum Task {
 pub fn check_task(
     spec: &Spec,
     controller: Option<&ControllerFile>,
+    data: &DataFiles,
 ) -> Result<Task, Vec<Diagnostic>> {
     if !is_network_spec(spec) {
         return check(spec, controller).map(|c| Task::System(Box::new(c)));
@@ -54,7 +84,7 @@ pub fn check_task(
         diags: Vec::new(),
         numbers: 0,
     };
-    let checked = network::check_network(&mut cx, spec, controller);
+    let checked = network::check_network(&mut cx, spec, controller, data);
     match checked {
         Some(c) if cx.diags.is_empty() => Ok(Task::Network(Box::new(c))),
         _ => {
@@ -774,7 +804,8 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
             | Item::Input(_)
             | Item::Require(_)
             | Item::Robust(_)
-            | Item::Radius(_) => {}
+            | Item::Radius(_)
+            | Item::Select(_) => {}
         }
     }
     network::network_items_in_system(cx, spec);

@@ -66,8 +66,10 @@ pub struct NetworkChecked {
     pub model_resolved: String,
     /// The loaded model.
     pub model: Controller,
-    /// The input set's name and region.
-    pub input_set: (String, Region),
+    /// The input set's name and region (absent in a spec that only selects actions).
+    pub input_set: Option<(String, Region)>,
+    /// The robust action selections.
+    pub selects: Vec<SelectSpec>,
     /// The properties, in source order.
     pub properties: Vec<NetProperty>,
     /// The radius searches, in source order.
@@ -83,6 +85,22 @@ pub struct NetworkChecked {
     /// Monte Carlo seed.
     pub seed: u64,
 }
+
+/// Robust action selection (CARRL): every observation's ε-ball.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectSpec {
+    /// Its name.
+    pub name: String,
+    /// The ball's radius per input.
+    pub epsilon: Vec<f64>,
+    /// The ball's norm.
+    pub norm: crate::sets::Norm,
+    /// The observations (each of the input size).
+    pub observations: Vec<Vec<f64>>,
+}
+
+/// The most observations of one select block.
+pub const MAX_OBSERVATIONS: usize = 1_000_000;
 
 /// Defaults of a radius search: the declared set's scale, and a bracket of 1e-3 of it.
 const DEFAULT_RADIUS_MAX: f64 = 1.0;
@@ -156,6 +174,7 @@ pub(super) fn item_span(item: &Item) -> Span {
         Item::Analysis(a) => a.span,
         Item::Robust(r) => r.span,
         Item::Radius(r) => r.span,
+        Item::Select(r) => r.span,
     }
 }
 
@@ -173,6 +192,7 @@ pub fn is_network_spec(spec: &Spec) -> bool {
                         | Item::Require(_)
                         | Item::Robust(_)
                         | Item::Radius(_)
+                        | Item::Select(_)
                 )
             }))
 }
@@ -187,6 +207,7 @@ pub(super) fn network_items_in_system(cx: &mut Ctx, spec: &Spec) {
             Item::Require(_) => "`require`",
             Item::Robust(_) => "`robust`",
             Item::Radius(_) => "`radius`",
+            Item::Select(_) => "`select`",
             _ => continue,
         };
         wrong_kind(cx, item_span(item), what, false);
@@ -198,6 +219,7 @@ pub(super) fn check_network(
     cx: &mut Ctx,
     spec: &Spec,
     model: Option<&ControllerFile>,
+    data: &super::DataFiles,
 ) -> Option<NetworkChecked> {
     let whole = Span::new(0, 0);
     let mut networks: Vec<&NetworkDecl> = Vec::new();
@@ -207,8 +229,10 @@ pub(super) fn check_network(
     // properties in source order: (name, span, what)
     let mut props: Vec<&Item> = Vec::new();
     let mut radii: Vec<&RadiusDef> = Vec::new();
+    let mut select_defs: Vec<&SelectDef> = Vec::new();
     for item in &spec.items {
         match item {
+            Item::Select(d) => select_defs.push(d),
             Item::Network(n) => networks.push(n),
             Item::Model(m) => models.push(m),
             Item::Input(i) => inputs.push(i),
@@ -261,7 +285,8 @@ pub(super) fn check_network(
     if models.is_empty() && path_override.is_none() {
         missing(cx, "model", "`model \"path/to/network.onnx\"`");
     }
-    if inputs.is_empty() {
+    // a spec that only selects actions needs no input set
+    if inputs.is_empty() && (select_defs.is_empty() || !props.is_empty() || !radii.is_empty()) {
         missing(cx, "input set", "`input X = box(x[0] in [lo, hi], …)`");
     }
 
@@ -590,6 +615,23 @@ pub(super) fn check_network(
         }
     }
 
+    // ---- robust action selection ----
+    let mut selects = Vec::new();
+    for d in &select_defs {
+        if let Some(first) = names.get(d.name.node.as_str()) {
+            cx.duplicate(&format!("the name `{}`", d.name.node), *first, d.name.span);
+            all_ok = false;
+            continue;
+        }
+        names.insert(&d.name.node, d.name.span);
+        if let (Some((xn, n)), Some((_, m))) = (&input, &output) {
+            match super::select::select(cx, d, xn, *n, *m, data) {
+                Some(s) => selects.push(s),
+                None => all_ok = false,
+            }
+        }
+    }
+
     // ---- analysis ----
     let an = analysis::analysis(cx, &analyses, &input, Some(&output));
     if let (Some(span), Some(c)) = (an.sdp_span, &net) {
@@ -670,7 +712,8 @@ pub(super) fn check_network(
         model_sha256: sha,
         model_resolved: model.map(|f| f.resolved.clone()).unwrap_or_default(),
         model: net?,
-        input_set: input_set?,
+        input_set,
+        selects,
         properties,
         radii: radius_specs,
         propagator: an.net_propagator?,

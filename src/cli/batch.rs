@@ -145,6 +145,8 @@ struct Item {
     json: Value,
     /// The JUnit `<testsuite>` element.
     junit: String,
+    /// CSV rows of robust action selections (no header).
+    csv: String,
 }
 
 /// XML text with the five special characters escaped and control
@@ -199,6 +201,7 @@ fn error_item(
         stderr,
         json,
         junit: junit_error(&suite, message, message),
+        csv: String::new(),
     }
 }
 
@@ -358,6 +361,7 @@ fn run(
         stderr,
         json,
         junit,
+        csv: String::new(),
     }
 }
 
@@ -456,6 +460,7 @@ fn run_network(
         stderr,
         json,
         junit,
+        csv: crate::report::network::csv_rows(&l.name, &outcome),
     }
 }
 
@@ -631,6 +636,7 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
     let mut suites = String::new();
     let mut skipped = 0usize;
     let mut broken = false;
+    let mut header = false;
     let mut emit = |item: Item, counts: &mut Counts| -> bool {
         count(counts, item.class);
         skipped += item.junit.matches("<skipped ").count();
@@ -650,6 +656,20 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
                 }
             }
             Format::Junit => suites += &item.junit,
+            Format::Csv => {
+                if !item.stderr.is_empty() {
+                    err(&item.stderr);
+                }
+                if !header {
+                    header = true;
+                    if out(crate::report::network::CSV_HEADER).is_err() {
+                        return false;
+                    }
+                }
+                if !item.csv.is_empty() && out(item.csv.trim_end()).is_err() {
+                    return false;
+                }
+            }
         }
         true
     };
@@ -734,7 +754,7 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
             };
             out(&format!("summary: {}{time}", summary(&counts)))
         }
-        Format::Text => Ok(()),
+        Format::Text | Format::Csv => Ok(()),
         Format::Json => {
             let mut doc = json!({ "schema": crate::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(&counts), "results": results });
             shard_fields(&mut doc);

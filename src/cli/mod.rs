@@ -188,6 +188,9 @@ enum Format {
     Jsonl,
     /// JUnit XML: a test suite per pair, a test case per property.
     Junit,
+    /// CSV of robust action selections (network specs with `select`): one
+    /// row per observation and action, after a header line.
+    Csv,
 }
 
 /// Write to standard output; `Err(())` when it is closed (e.g. piped into

@@ -151,6 +151,39 @@ pub struct NetOutcome {
     pub overflow: bool,
     /// Monte Carlo samples drawn.
     pub samples_drawn: usize,
+    /// Per select block: the robust action selection of every observation.
+    pub selections: Vec<Selection>,
+}
+
+/// One observation's robust action selection (CARRL).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActionChoice {
+    /// Certified lower bound of every action's value over the ε-ball
+    /// (`−∞`: no finite bound).
+    pub lower: Vec<f64>,
+    /// Certified upper bound of every action's value over the ball.
+    pub upper: Vec<f64>,
+    /// The action with the largest value at the observation itself.
+    pub nominal: usize,
+    /// The action with the largest certified lower bound (CARRL's choice).
+    pub robust: usize,
+    /// Whether the robust action's lower bound is at least every other
+    /// action's upper bound: it is the best action for every observation of
+    /// the ball (never with a solver issue on the way).
+    pub robust_optimal: bool,
+}
+
+/// The results of one select block, in observation order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Selection {
+    /// The block's name.
+    pub name: String,
+    /// The ball's radius per input.
+    pub epsilon: Vec<f64>,
+    /// The observations.
+    pub observations: Vec<Vec<f64>>,
+    /// One choice per observation.
+    pub choices: Vec<ActionChoice>,
 }
 
 /// Progress and limits for [`execute_network`].
@@ -729,14 +762,97 @@ fn sample_region(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {
     pts
 }
 
+/// The CARRL choice for one observation `o`: certified bounds of every
+/// action's value over the ball around `o` (the plan's propagator and
+/// partitioner), the nominal and the robust action.
+pub fn choose(
+    plan: &NetPlan,
+    o: &[f64],
+    epsilon: &[f64],
+    norm: Norm,
+    ctl: &NetControl,
+) -> ActionChoice {
+    let m = plan.net.outputs();
+    let region = Region::Ball {
+        center: o.to_vec(),
+        radius: epsilon.to_vec(),
+        norm,
+    };
+    let dirs = crate::analysis::shape::Shape::Box.directions(m, &[]);
+    // samples only guide refinement: drawn only for a guided partitioner
+    let (sampled, extent) = match plan.partitioner {
+        Partitioner::Guided { .. } => {
+            let pts = sample_region(&region, plan.samples, plan.seed);
+            let outs: Vec<Vec<f64>> = pts.iter().map(|x| plan.net.forward(x)).collect();
+            (
+                support_of_points(&dirs, &outs),
+                extent_of_points(&dirs, &outs),
+            )
+        }
+        Partitioner::Uniform(_) => (vec![f64::NEG_INFINITY; 2 * m], vec![0.0; 2 * m]),
+    };
+    let b = bound_all(plan, &region, &dirs, &sampled, &extent, ctl);
+    let upper: Vec<f64> = b.union[..m].to_vec();
+    let lower: Vec<f64> = b.union[m..].iter().map(|v| -v).collect();
+    let robust = argmax(&lower);
+    let robust_optimal = b.issues.is_empty()
+        && lower[robust].is_finite()
+        && (0..m)
+            .filter(|&j| j != robust)
+            .all(|j| upper[j].is_finite() && lower[robust] >= upper[j]);
+    ActionChoice {
+        nominal: argmax(&plan.net.forward(o)),
+        lower,
+        upper,
+        robust,
+        robust_optimal,
+    }
+}
+
 /// Execute a network plan.
 pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
     let m = plan.net.outputs();
+    let selections: Vec<Selection> = plan
+        .selects
+        .iter()
+        .map(|s| Selection {
+            name: s.name.clone(),
+            epsilon: s.epsilon.clone(),
+            observations: s.observations.clone(),
+            choices: s
+                .observations
+                .iter()
+                .map(|o| choose(plan, o, &s.epsilon, s.norm, ctl))
+                .collect(),
+        })
+        .collect();
+    let Some(input) = &plan.input else {
+        // a spec that only selects actions: no input set, no properties
+        return NetOutcome {
+            output: OutputBounds {
+                directions: DMatrix::zeros(0, m),
+                offsets: Vec::new(),
+                sampled: Vec::new(),
+                bbox: None,
+                sampled_bbox: None,
+            },
+            properties: Vec::new(),
+            radii: Vec::new(),
+            verdict: Status::Verified,
+            partition: Vec::new(),
+            partition_stop: Stop::Grid,
+            calls: 0,
+            solver_issues: Vec::new(),
+            overflow: false,
+            samples_drawn: 0,
+            selections,
+        };
+    };
     // ---- Monte Carlo ----
-    let inputs = sample_region(&plan.input, plan.samples, plan.seed);
+    let inputs = sample_region(input, plan.samples, plan.seed);
     let outputs: Vec<Vec<f64>> = inputs.iter().map(|x| plan.net.forward(x)).collect();
     // robustness labels: the centre's when not given
-    let nominal = centre(&plan.input).map(|c| argmax(&plan.net.forward(&c)));
+    let nominal = centre(input).map(|c| argmax(&plan.net.forward(&c)));
     let labels: Vec<Option<usize>> = plan
         .properties
         .iter()
@@ -757,7 +873,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
     let rows = stack(&shape_dirs, &prop_rows, m);
     let sampled = support_of_points(&rows.dirs, &outputs);
     let extent = extent_of_points(&rows.dirs, &outputs);
-    let b = bound_all(plan, &plan.input, &rows.dirs, &sampled, &extent, ctl);
+    let b = bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl);
     let overflow = b.union.iter().any(|v| !v.is_finite());
     // ---- verdicts ----
     let mut properties = Vec::new();
@@ -780,7 +896,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         };
         if proves(&p.kind, margin) && b.issues.is_empty() {
             result.status = Status::Verified;
-        } else if let Some(w) = attack(&plan.net, &plan.input, &p.kind, label, &inputs, 2000) {
+        } else if let Some(w) = attack(&plan.net, input, &p.kind, label, &inputs, 2000) {
             result.status = Status::Falsified;
             result.margin = -violation(&p.kind, label, &w.output).max(0.0);
             result.counterexample = Some(w);
@@ -791,7 +907,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
     let radii = plan
         .radii
         .iter()
-        .map(|r| radius_search(plan, r, &labels, ctl))
+        .map(|r| radius_search(plan, input, r, &labels, ctl))
         .collect();
     let verdict = if properties.iter().any(|p| p.status == Status::Falsified) {
         Status::Falsified
@@ -822,6 +938,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         solver_issues: b.issues,
         overflow,
         samples_drawn: inputs.len(),
+        selections,
     }
 }
 
@@ -857,6 +974,7 @@ fn bbox_of(dirs: &DMatrix<f64>, offsets: &[f64]) -> Option<IBox> {
 /// The certified/attacked bracket of one radius search.
 fn radius_search(
     plan: &NetPlan,
+    input: &Region,
     r: &RadiusSpec,
     labels: &[Option<usize>],
     ctl: &NetControl,
@@ -873,7 +991,7 @@ fn radius_search(
     let out_of_time = || ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t);
     let mut certifies = |s: f64| -> bool {
         analyses += 1;
-        let region = scaled(&plan.input, s);
+        let region = scaled(input, s);
         let pts = sample_region(&region, plan.samples.min(1000), plan.seed);
         let outs: Vec<Vec<f64>> = pts.iter().map(|x| plan.net.forward(x)).collect();
         let sampled = support_of_points(&rows.dirs, &outs);
@@ -906,14 +1024,14 @@ fn radius_search(
     };
     // attacked: the smallest gauge of a confirmed violation
     let attack_at = |s: f64, seed: u64| -> Option<Witness> {
-        let region = scaled(&plan.input, s);
+        let region = scaled(input, s);
         let pts = sample_region(&region, plan.samples.clamp(64, 1000), seed);
         attack(&plan.net, &region, &p.kind, label, &pts, 2000)
     };
     let mut attacked: Option<(f64, Witness)> = None;
     if certified != Some(r.max) {
         if let Some(w) = attack_at(r.max, plan.seed) {
-            attacked = Some((gauge(&plan.input, &w.input), w));
+            attacked = Some((gauge(input, &w.input), w));
             let mut lo = certified.unwrap_or(0.0);
             let mut round = 1;
             while let Some((hi, _)) = &attacked {
@@ -924,7 +1042,7 @@ fn radius_search(
                 }
                 match attack_at(mid, plan.seed.wrapping_add(round)) {
                     Some(w) => {
-                        let g = gauge(&plan.input, &w.input);
+                        let g = gauge(input, &w.input);
                         if g < *hi {
                             attacked = Some((g, w));
                         } else {
@@ -944,7 +1062,7 @@ fn radius_search(
         attacked,
         max: r.max,
         tolerance: r.tolerance,
-        unit: unit_radius(&plan.input),
+        unit: unit_radius(input),
         analyses,
     }
 }

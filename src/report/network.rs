@@ -70,44 +70,8 @@ pub fn output_error(out: &NetOutcome) -> Option<f64> {
     (v > 0.0 && b.is_finite()).then(|| b.volume() / v - 1.0)
 }
 
-fn witness_text(plan: &NetPlan, w: &Witness) -> String {
-    format!(
-        "{} = {} gives {} = {}",
-        plan.input_name,
-        vector(&w.input),
-        plan.output_name,
-        vector(&w.output)
-    )
-}
-
-/// A human-readable report of a network spec. `timing_ms` adds a timing line.
-pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option<f64>) -> String {
-    let mut s = format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
-    s += &format!(
-        "  network     {} (input {}[{}], output {}[{}])\n",
-        plan.name,
-        plan.input_name,
-        plan.net.inputs,
-        plan.output_name,
-        plan.net.outputs()
-    );
-    s += &format!(
-        "  model       {} ({})\n",
-        plan.model_path, plan.network_summary
-    );
-    s += &format!(
-        "  input       {} = {}\n",
-        plan.input_set_name,
-        region_text(&plan.input_name, &plan.input)
-    );
-    s += &format!(
-        "  analysis    {}, {}, {} output shape, {} Monte Carlo samples (seed {})\n\n",
-        plan.propagator.name(),
-        partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
-        shape_text(&plan.shape),
-        plan.samples,
-        plan.seed
-    );
+fn output_text(plan: &NetPlan, out: &NetOutcome) -> String {
+    let mut s = String::new();
     s += "  output set (certified, then the sampled outputs)\n";
     let m = plan.net.outputs();
     let y = &plan.output_name;
@@ -154,6 +118,131 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
             i.as_str()
         );
     }
+    s
+}
+
+/// The robust action selections: per observation, the nominal and CARRL
+/// actions and every action's certified value interval (text shows at most
+/// 20 observations per block; JSON and CSV have all).
+fn selections_text(plan: &NetPlan, out: &NetOutcome) -> String {
+    let mut s = String::new();
+    for sel in &out.selections {
+        let certified = sel.choices.iter().filter(|c| c.robust_optimal).count();
+        let changed = sel.choices.iter().filter(|c| c.robust != c.nominal).count();
+        if plan.input.is_some() || !std::ptr::eq(sel, &out.selections[0]) {
+            s += "\n";
+        }
+        s += &format!(
+            "  select {} (ε = {}): {} observations, {certified} certified robust-optimal, {changed} where CARRL's action differs from the nominal one\n",
+            sel.name,
+            vector(&sel.epsilon),
+            sel.choices.len()
+        );
+        for (k, (o, c)) in sel
+            .observations
+            .iter()
+            .zip(&sel.choices)
+            .enumerate()
+            .take(20)
+        {
+            let bounds: Vec<String> = (0..c.lower.len())
+                .map(|j| format!("{j}: {}", interval(c.lower[j], c.upper[j])))
+                .collect();
+            s += &format!(
+                "  {k:>4}  {} = {}  nominal {}  robust {}{}\n        {}\n",
+                plan.input_name,
+                vector(o),
+                c.nominal,
+                c.robust,
+                if c.robust_optimal {
+                    " (certified optimal)"
+                } else {
+                    ""
+                },
+                bounds.join("  ")
+            );
+        }
+        if sel.choices.len() > 20 {
+            s += &format!(
+                "  … {} more (see the JSON or CSV output)\n",
+                sel.choices.len() - 20
+            );
+        }
+    }
+    s
+}
+
+/// The robust action selections as CSV rows (no header): one row per
+/// observation and action.
+pub fn csv_rows(spec_name: &str, out: &NetOutcome) -> String {
+    let mut s = String::new();
+    let name = spec_name.replace([',', '"', '\n', '\r'], "_");
+    for sel in &out.selections {
+        for (k, c) in sel.choices.iter().enumerate() {
+            for j in 0..c.lower.len() {
+                s += &format!(
+                    "{name},{},{k},{j},{},{},{},{},{}\n",
+                    sel.name,
+                    num(c.lower[j]),
+                    num(c.upper[j]),
+                    u8::from(j == c.nominal),
+                    u8::from(j == c.robust),
+                    u8::from(c.robust_optimal)
+                );
+            }
+        }
+    }
+    s
+}
+
+/// The header of [`csv_rows`].
+pub const CSV_HEADER: &str =
+    "spec,select,observation,action,lower,upper,nominal,robust,robust_optimal";
+
+fn witness_text(plan: &NetPlan, w: &Witness) -> String {
+    format!(
+        "{} = {} gives {} = {}",
+        plan.input_name,
+        vector(&w.input),
+        plan.output_name,
+        vector(&w.output)
+    )
+}
+
+/// A human-readable report of a network spec. `timing_ms` adds a timing line.
+pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option<f64>) -> String {
+    let mut s = format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
+    s += &format!(
+        "  network     {} (input {}[{}], output {}[{}])\n",
+        plan.name,
+        plan.input_name,
+        plan.net.inputs,
+        plan.output_name,
+        plan.net.outputs()
+    );
+    s += &format!(
+        "  model       {} ({})\n",
+        plan.model_path, plan.network_summary
+    );
+    if let Some(input) = &plan.input {
+        s += &format!(
+            "  input       {} = {}\n",
+            plan.input_set_name,
+            region_text(&plan.input_name, input)
+        );
+    }
+    s += &format!(
+        "  analysis    {}, {}, {} output shape, {} Monte Carlo samples (seed {})\n\n",
+        plan.propagator.name(),
+        partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
+        shape_text(&plan.shape),
+        plan.samples,
+        plan.seed
+    );
+    if plan.input.is_some() {
+        s += &output_text(plan, out);
+    }
+    s += &selections_text(plan, out);
     if !out.properties.is_empty() {
         s += "\n  properties\n";
         let width = out
@@ -224,7 +313,15 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
             );
         }
     }
-    s += &format!("\n  verdict: {}\n", out.verdict.as_str());
+    s += &format!(
+        "\n  verdict: {}{}\n",
+        out.verdict.as_str(),
+        if out.properties.is_empty() {
+            " (no properties to check)"
+        } else {
+            ""
+        }
+    );
     if let Some(ms) = timing_ms {
         s += &format!(
             "  time: {ms:.3} ms ({} cell bounds, {} samples)\n",
@@ -288,7 +385,7 @@ pub fn json(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
         "kind": "network",
         "verdict": out.verdict.as_str(),
         "network": plan.name,
-        "input": { "name": plan.input_name, "dim": plan.net.inputs },
+        "input": { "name": plan.input_name, "dim": plan.net.inputs, "set": plan.input.is_some().then(|| plan.input_set_name.clone()) },
         "output": { "name": plan.output_name, "dim": plan.net.outputs() },
         "model": { "path": plan.model_path, "resolved": plan.model_resolved, "sha256": plan.model_sha256, "network": plan.network_summary },
         "analysis": {
@@ -313,6 +410,18 @@ pub fn json(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
         "overflow": out.overflow,
         "solver_issues": out.solver_issues.iter().map(|i| json!({ "status": i.as_str() })).collect::<Vec<_>>(),
         "samples_drawn": out.samples_drawn,
+        "selections": out.selections.iter().map(|sel| json!({
+            "name": sel.name,
+            "epsilon": sel.epsilon.iter().map(|v| f(*v)).collect::<Vec<_>>(),
+            "choices": sel.observations.iter().zip(&sel.choices).map(|(o, c)| json!({
+                "observation": o.iter().map(|v| f(*v)).collect::<Vec<_>>(),
+                "lower": c.lower.iter().map(|v| f(*v)).collect::<Vec<_>>(),
+                "upper": c.upper.iter().map(|v| f(*v)).collect::<Vec<_>>(),
+                "nominal": c.nominal,
+                "robust": c.robust,
+                "robust_optimal": c.robust_optimal,
+            })).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
     });
     if let Some(ms) = timing_ms {
         v["time_ms"] = json!(ms);

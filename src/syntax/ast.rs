@@ -79,6 +79,32 @@ pub enum Item {
     Robust(RobustDef),
     /// `radius NAME for PROPERTY (budget…)`
     Radius(RadiusDef),
+    /// `select NAME { … }`
+    Select(SelectDef),
+}
+
+/// `select NAME { epsilon …  norm …  observations … }`
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectDef {
+    /// Its name.
+    pub name: Spanned<String>,
+    /// Its statements in order.
+    pub stmts: Vec<Spanned<SelectStmt>>,
+    /// The whole block.
+    pub span: Span,
+}
+
+/// A statement of a select block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SelectStmt {
+    /// `epsilon r` or `epsilon [r, …]`
+    Epsilon(Spanned<Value>),
+    /// `norm p`
+    Norm(Spanned<String>),
+    /// `observations [[…], …]`
+    Inline(Spanned<Value>),
+    /// `observations "file.csv"`
+    File(Spanned<String>),
 }
 
 /// `network NAME { … }`

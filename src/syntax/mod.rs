@@ -43,6 +43,7 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
             "an analysis statement (propagator, partitioner, boundary, shape, samples, seed)"
         }
         Rule::network_stmt => "a network statement (input x[n], output y[m])",
+        Rule::select_stmt => "a select statement (epsilon, norm, observations)",
         Rule::input_decl => "`input`",
         Rule::output_decl => "`output`",
         Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
@@ -308,6 +309,48 @@ impl Builder {
                     span: s,
                 })
             }
+            Rule::select => {
+                let name = self.ident(inner.next().expect("select name"));
+                let stmts = inner
+                    .map(|st| {
+                        let ss = span(&st);
+                        let rule = st.as_rule();
+                        let arg = st.into_inner().next().expect("select argument");
+                        let asp = span(&arg);
+                        let node = match (rule, arg.as_rule()) {
+                            (Rule::norm_stmt, _) => SelectStmt::Norm(Spanned {
+                                node: arg.as_str().to_string(),
+                                span: asp,
+                            }),
+                            (_, Rule::string) => {
+                                let text = arg.as_str();
+                                SelectStmt::File(Spanned {
+                                    node: text[1..text.len() - 1].to_string(),
+                                    span: asp,
+                                })
+                            }
+                            (Rule::epsilon_stmt, Rule::number) => SelectStmt::Epsilon(Spanned {
+                                node: Value::Scalar(self.number(arg).node),
+                                span: asp,
+                            }),
+                            (Rule::epsilon_stmt, _) => SelectStmt::Epsilon(Spanned {
+                                node: Value::Vector(self.numbers(arg)),
+                                span: asp,
+                            }),
+                            _ => SelectStmt::Inline(Spanned {
+                                node: self.value_of(arg),
+                                span: asp,
+                            }),
+                        };
+                        Spanned { node, span: ss }
+                    })
+                    .collect();
+                Item::Select(SelectDef {
+                    name,
+                    stmts,
+                    span: s,
+                })
+            }
             Rule::radius => {
                 let name = self.ident(inner.next().expect("radius name"));
                 let property = self.ident(inner.next().expect("property name"));
@@ -398,6 +441,11 @@ impl Builder {
 
     fn value(&mut self, p: P) -> Value {
         let v = p.into_inner().next().expect("value kind");
+        self.value_of(v)
+    }
+
+    /// A value from its inner pair (a matrix, vector, constructor or number).
+    fn value_of(&mut self, v: P) -> Value {
         match v.as_rule() {
             Rule::matrix => Value::Matrix(
                 v.into_inner()

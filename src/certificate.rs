@@ -374,3 +374,111 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
     }
     cert
 }
+
+/// The problem of a network spec as a certificate records it (and `ravel
+/// certify` compares it with the spec's, number for number).
+pub fn network_problem_json(plan: &crate::lower::NetPlan) -> Value {
+    use crate::check::NetPropertyKind;
+    use crate::sets::Region;
+    let rows = |r: &[(Vec<f64>, f64)]| -> Value {
+        r.iter().map(|(a, b)| json!({ "a": a, "b": b })).collect()
+    };
+    let bx = |b: &crate::sets::IBox| json!({ "lo": b.lo, "hi": b.hi });
+    let input = match &plan.input {
+        Some(Region::Box(b)) => json!({ "box": bx(b) }),
+        Some(Region::Ball {
+            center,
+            radius,
+            norm,
+        }) => json!({ "ball": { "center": center, "radius": radius, "norm": norm.name() } }),
+        Some(Region::Polytope { bbox, rows: r }) => {
+            json!({ "polytope": { "bbox": bx(bbox), "rows": rows(r) } })
+        }
+        None => Value::Null,
+    };
+    let props: Vec<Value> = plan
+        .properties
+        .iter()
+        .map(|p| match &p.kind {
+            NetPropertyKind::Require(poly) => {
+                json!({ "name": p.name, "kind": "require", "rows": rows(&poly.rows) })
+            }
+            NetPropertyKind::Avoid(members) => json!({
+                "name": p.name,
+                "kind": "avoid",
+                "members": members.iter().map(|m| rows(&m.rows)).collect::<Vec<_>>(),
+            }),
+            NetPropertyKind::Robust(label) => {
+                json!({ "name": p.name, "kind": "robust", "label": label })
+            }
+        })
+        .collect();
+    json!({
+        "kind": "network",
+        "inputs": plan.net.inputs,
+        "outputs": plan.net.outputs(),
+        "input": input,
+        "properties": props,
+    })
+}
+
+/// The certificate of a network spec's result: the problem, the verdicts
+/// (a counterexample's input; robustness labels) and, when some property is
+/// VERIFIED, the final cells of the input set's partition as evidence —
+/// checked here by the checker itself, and marked unsupported when its own
+/// box bounds do not prove what the analysis proved.
+pub fn build_network(
+    plan: &crate::lower::NetPlan,
+    outcome: &crate::execute::network::NetOutcome,
+    id: &Identity,
+) -> Value {
+    let verdicts: Vec<Value> = outcome
+        .properties
+        .iter()
+        .map(|r| {
+            let mut v = json!({ "property": r.name, "kind": r.kind.as_str(), "status": r.status.as_str(), "label": r.label });
+            if let (Status::Falsified, Some(w)) = (r.status, &r.counterexample) {
+                v["input"] = json!(w.input);
+            }
+            v
+        })
+        .collect();
+    let any_verified = outcome
+        .properties
+        .iter()
+        .any(|r| r.status == Status::Verified);
+    let mut cert = json!({
+        "format": FORMAT,
+        "tool": { "name": "ravel", "version": env!("CARGO_PKG_VERSION") },
+        "spec": { "path": id.spec_path, "sha256": id.spec_sha256 },
+        "controller": {
+            "path": plan.model_resolved,
+            "sha256": plan.model_sha256,
+            "network_sha256": network_sha256(&plan.net),
+        },
+        "analysis": { "propagator": plan.propagator.name(), "cells": outcome.partition.len() },
+        "problem": network_problem_json(plan),
+        "verdicts": verdicts,
+        "evidence": json!({ "status": "none" }),
+    });
+    if !any_verified {
+        return cert;
+    }
+    cert["evidence"] = json!({
+        "status": "checkable",
+        "cells": outcome.partition.iter().map(|c| json!({ "lo": c.lo, "hi": c.hi })).collect::<Vec<_>>(),
+    });
+    let report = certify::check(&cert, &plan.net);
+    if let Some(why) = report.evidence_failure {
+        cert["evidence"] = json!({
+            "status": "unsupported",
+            "reason": format!(
+                "the checker's own box bounds do not prove the verdict ({why}): the analysis ({}) used bounds tighter than the checker re-derives (ball or polytope concretisation, SDP), or its verdict is wrong",
+                plan.propagator.name()
+            ),
+        });
+    } else if let Answer::Unreadable(e) = report.answer {
+        cert["evidence"] = json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+    }
+    cert
+}

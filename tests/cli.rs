@@ -683,6 +683,17 @@ fn network_specs_through_the_binary() {
         cert.to_str().expect("utf-8"),
         "specs/network/policy_output_set.ravel",
     ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, _) = ravel(&["certify", cert.to_str().expect("utf-8")]);
+    assert_eq!(code, 0, "{stdout}");
+    assert!(stdout.starts_with("VALID"), "{stdout}");
+    assert!(stdout.contains("bounded: VERIFIED (checked)"), "{stdout}");
+    let (code, _, stderr) = ravel(&[
+        "verify",
+        "--plot",
+        dir.to_str().expect("utf-8"),
+        "specs/network/policy_output_set.ravel",
+    ]);
     assert_eq!(code, 2);
     assert!(stderr.contains("not supported yet"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);

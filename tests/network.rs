@@ -378,3 +378,62 @@ fn carrl_bounds_contain_sampled_values() {
         "no observation certified optimal: the test checks nothing"
     );
 }
+
+/// Network certificates: a wrong VERIFIED forced through the writer is
+/// marked unsupported (the checker's own bounds do not prove it), and the
+/// same claim with checkable evidence is INVALID; a forged counterexample
+/// outside the input set, or one that does not violate, is INVALID too.
+#[test]
+fn network_certificates_catch_false_claims() {
+    use ravel::certify::{check, Answer};
+    let mut rng = Rng::new(8);
+    let net = random_network(&mut rng, 2, 1, Activation::Relu, (2, 6));
+    let input = Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]));
+    let y = net.forward(&[0.0, 0.0])[0];
+    // false: the output at the centre is above y − 1
+    let p = plan(
+        net.clone(),
+        input,
+        vec![NetProperty {
+            name: "false".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(vec![1.0], y - 1.0)],
+            }),
+        }],
+    );
+    let mut out = run(&p);
+    assert_eq!(out.properties[0].status, Status::Falsified);
+    let id = ravel::certificate::Identity {
+        spec_path: "t".into(),
+        spec_sha256: String::new(),
+    };
+    let honest = ravel::certificate::build_network(&p, &out, &id);
+    assert_eq!(check(&honest, &net).answer, Answer::Valid);
+    // a counterexample moved outside the input set
+    let mut moved = honest.clone();
+    moved["verdicts"][0]["input"] = serde_json::json!([3.0, 0.0]);
+    assert!(matches!(check(&moved, &net).answer, Answer::Invalid(_)));
+    // the verdict forced to VERIFIED
+    out.properties[0].status = Status::Verified;
+    out.properties[0].counterexample = None;
+    let forced = ravel::certificate::build_network(&p, &out, &id);
+    assert_eq!(forced["evidence"]["status"], "unsupported");
+    assert!(matches!(
+        check(&forced, &net).answer,
+        Answer::Unsupported(_)
+    ));
+    let mut forged = forced.clone();
+    forged["evidence"] = serde_json::json!({
+        "status": "checkable",
+        "cells": [{ "lo": [-1.0, -1.0], "hi": [1.0, 1.0] }],
+    });
+    assert!(matches!(check(&forged, &net).answer, Answer::Invalid(_)));
+    // junk never panics
+    for junk in [
+        serde_json::json!({}),
+        serde_json::json!({ "format": "ravel-certificate/1", "problem": { "kind": "network" } }),
+        serde_json::json!({ "format": "ravel-certificate/1", "problem": { "kind": "network", "inputs": 2, "outputs": 1, "input": { "ball": { "center": [0, 0], "radius": [-1, 1], "norm": "2" } }, "properties": [] }, "verdicts": [] }),
+    ] {
+        assert!(matches!(check(&junk, &net).answer, Answer::Unreadable(_)));
+    }
+}

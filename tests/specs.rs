@@ -213,6 +213,25 @@ fn network_specs() {
             expect,
             "{name}: verdict differs from its `// expect:` header"
         );
+        // the category guard of certificates: every shipped network spec's is VALID
+        let cert = ravel::certificate::build_network(
+            &plan,
+            &out,
+            &ravel::certificate::Identity {
+                spec_path: name.clone(),
+                spec_sha256: String::new(),
+            },
+        );
+        let text = serde_json::to_string(&cert).expect("serialisable");
+        let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
+        assert_eq!(back, cert, "{name}: certificate does not round-trip");
+        let checked = ravel::certify::check(&back, &plan.net);
+        assert_eq!(
+            checked.answer,
+            ravel::certify::Answer::Valid,
+            "{name}: certificate not VALID: {:?}",
+            checked.properties
+        );
         insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
         let mut report = ravel::report::network::text(&name, &plan, &out, None);
         if plan.propagator == ravel::ir::NetPropagator::Sdp {

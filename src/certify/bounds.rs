@@ -655,6 +655,24 @@ impl<'a> NetBounds<'a> {
         out
     }
 
+    /// Upper bounds of `s·f(y)` over the input box for every row `s` of
+    /// `spec`: back-substitution, intersected with the output box's support.
+    pub fn rows_upper(&self, spec: &DMatrix<f64>) -> Vec<f64> {
+        let out = self.boxes.last().unwrap_or(&self.boxes[0]);
+        let back = self.linear(spec.clone()).over(&self.boxes[0]);
+        (0..spec.nrows())
+            .map(|r| {
+                let row: Vec<f64> = spec.row(r).iter().copied().collect();
+                let ibp = crate::num::dot_box_upper(&row, &out.lo, &out.hi);
+                if back[r].is_nan() {
+                    ibp
+                } else {
+                    ibp.min(back[r])
+                }
+            })
+            .collect()
+    }
+
     /// `S π(y) ≤ G y + h` over the input box, for specification rows `S`.
     fn linear(&self, spec: DMatrix<f64>) -> Linear {
         let rows = spec.nrows();

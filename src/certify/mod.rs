@@ -42,6 +42,7 @@
 
 pub mod bounds;
 mod cover;
+pub mod network;
 
 use serde_json::Value;
 
@@ -447,8 +448,18 @@ fn facet(i: usize, upper: bool) -> String {
     )
 }
 
-/// Check one certificate against the controller `net` (saturation included).
+/// Check one certificate against the controller `net` (saturation
+/// included), or, for a network spec's certificate, against its model.
 pub fn check(cert: &Value, net: &Network) -> Report {
+    if cert
+        .get("problem")
+        .and_then(|p| p.get("kind"))
+        .and_then(Value::as_str)
+        == Some("network")
+        && cert.get("format").and_then(Value::as_str) == Some(FORMAT)
+    {
+        return network::check(cert, net);
+    }
     let mut report = Report {
         answer: Answer::Valid,
         properties: Vec::new(),

@@ -244,7 +244,7 @@ fn run(
     let checked = match &l.result {
         Ok(crate::check::Task::System(c)) => (**c).clone(),
         Ok(crate::check::Task::Network(c)) => {
-            return run_network(index, controller, &l, c, opts);
+            return run_network(index, path, controller, &l, c, opts, cert_dir);
         }
         Err(d) => {
             let text = render(d, &l.display, &l.source, 100, opts.color);
@@ -390,10 +390,12 @@ fn stdout_plain(
 /// Run one network spec (no output; everything is returned).
 fn run_network(
     index: usize,
+    path: &Path,
     controller: Option<&Path>,
     l: &super::Loaded,
     checked: &crate::check::NetworkChecked,
     opts: &Options,
+    cert_dir: Option<&Path>,
 ) -> Item {
     let started = Instant::now();
     let plan = crate::lower::lower_network(checked);
@@ -413,25 +415,38 @@ fn run_network(
     if let Some(c) = controller {
         json["controller"] = json!(c.display().to_string());
     }
-    // not built yet for network specs: said, never silently skipped
-    for (asked, key, what) in [
-        (
-            opts.certificate.is_some(),
-            "certificate_error",
-            "certificates",
-        ),
-        (opts.plot.is_some(), "plot_error", "plots"),
-    ] {
-        if asked {
+    if let Some(target) = &opts.certificate {
+        let file = match cert_dir {
+            Some(d) => d.join(super::certificate_name(path, controller)),
+            None => target.clone(),
+        };
+        let id = crate::certificate::Identity {
+            spec_path: path.display().to_string(),
+            spec_sha256: crate::check::sha256_hex(l.source.as_bytes()),
+        };
+        let cert = crate::certificate::build_network(&plan, &outcome, &id);
+        let text = serde_json::to_string(&cert).unwrap_or_default();
+        if let Err(e) = std::fs::write(&file, text + "\n") {
             let msg = format!(
-                "{what} of network specs are not supported yet (`{}`)",
-                l.display
+                "cannot write certificate `{}`: {e}",
+                crate::diag::sanitize(&file.display().to_string())
             );
             stderr += &format!("error: {msg}\n");
-            json[key] = json!(msg);
+            json["certificate_error"] = json!(msg);
             json["verdict"] = json!("ERROR");
             class = Class::Error;
         }
+    }
+    // not built yet for network specs: said, never silently skipped
+    if opts.plot.is_some() {
+        let msg = format!(
+            "plots of network specs are not supported yet (`{}`)",
+            l.display
+        );
+        stderr += &format!("error: {msg}\n");
+        json["plot_error"] = json!(msg);
+        json["verdict"] = json!("ERROR");
+        class = Class::Error;
     }
     let stdout = match opts.format {
         Format::Text => crate::report::network::text(

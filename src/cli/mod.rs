@@ -516,8 +516,8 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         return unreadable(format!("spec `{spec_name}` is not UTF-8 text"));
     };
     let dir = spec_path.parent().unwrap_or(Path::new("."));
-    let checked = match crate::front_end_with(&source, dir, &read_request, Some(&ctrl_path)) {
-        Ok(c) => c,
+    let task = match crate::front_end_task(&source, dir, &read_request, Some(&ctrl_path)) {
+        Ok(t) => t,
         Err(d) => {
             return unreadable(format!(
                 "spec `{spec_name}` with controller `{}` does not check ({} error(s); run `ravel check`)",
@@ -526,18 +526,27 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             ))
         }
     };
-    let plan = crate::lower::lower(&checked);
-    if plan.controller_sha256 != hash("controller", "sha256") {
+    // the model, its hashes and the problem as the spec states it
+    let (net, sha, problem) = match &task {
+        crate::check::Task::System(c) => {
+            let plan = crate::lower::lower(c);
+            let problem = crate::certificate::problem_json(&plan);
+            (plan.closed_loop.net, plan.controller_sha256, problem)
+        }
+        crate::check::Task::Network(c) => {
+            let plan = crate::lower::lower_network(c);
+            let problem = crate::certificate::network_problem_json(&plan);
+            (plan.net, plan.model_sha256, problem)
+        }
+    };
+    if sha != hash("controller", "sha256") {
         return invalid("the controller file is not the one certified (SHA-256 differs)".into());
     }
-    if crate::certificate::network_sha256(&plan.closed_loop.net)
-        != hash("controller", "network_sha256")
-    {
+    if crate::certificate::network_sha256(&net) != hash("controller", "network_sha256") {
         return invalid(
             "the controller's network (external data included) is not the one certified".into(),
         );
     }
-    let problem = crate::certificate::problem_json(&plan);
     if let Some(d) = first_difference(
         &problem,
         cert.get("problem").unwrap_or(&Value::Null),
@@ -548,7 +557,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             crate::diag::sanitize(&d)
         ));
     }
-    let report = crate::certify::check(&cert, &plan.closed_loop.net);
+    let report = crate::certify::check(&cert, &net);
     let (code, head) = match &report.answer {
         Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
         Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),
@@ -556,8 +565,10 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         Answer::Unreadable(_) => (exit::INPUT_ERROR, "UNREADABLE ".to_string()),
     };
     let mut text = format!("{head} {name} ({spec_name}");
-    if report.cells > 0 {
+    if report.cells > 0 && report.steps > 0 {
         text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
+    } else if report.cells > 0 {
+        text += &format!(", {} cell(s)", report.cells);
     }
     text += ")";
     match &report.answer {

@@ -207,11 +207,17 @@ fn report(kind: &str, k: usize, input: &[u8], why: &str) -> String {
 #[ignore = "fuzzing campaign: run by hand with RAVEL_FUZZ_SECONDS"]
 fn fuzz_front_end() {
     let mut seeds: Vec<Vec<u8>> = Vec::new();
-    for dir in ["specs", "specs/invalid", "tests/corpus/specs"] {
+    for dir in [
+        "specs",
+        "specs/invalid",
+        "specs/network",
+        "tests/corpus/specs",
+    ] {
         for p in files(&root().join(dir), "ravel") {
             seeds.push(std::fs::read(&p).expect("seed"));
         }
     }
+    let csv = std::fs::read(root().join("specs/network/lane_observations.csv")).expect("csv");
     let mut models: BTreeMap<String, Vec<u8>> = BTreeMap::new();
     for p in files(&root().join("models"), "onnx") {
         let name = p
@@ -228,6 +234,9 @@ fn fuzz_front_end() {
         let name = r.path.file_name().and_then(|n| n.to_str()).unwrap_or("");
         if name.ends_with(".data") {
             return Ok(data.iter().copied().take(r.max_bytes as usize).collect());
+        }
+        if name.ends_with(".csv") {
+            return Ok(csv.clone());
         }
         models
             .get(name)
@@ -261,10 +270,15 @@ fn fuzz_front_end() {
                 Err(ravel::fmt::Error::Changed) => panic!("fmt would change the meaning"),
                 Err(ravel::fmt::Error::Syntax(_)) => {}
             }
-            match ravel::front_end(&source, Path::new("specs"), &reader) {
-                Ok(c) => {
+            match ravel::front_end_task(&source, Path::new("specs"), &reader, None) {
+                Ok(ravel::check::Task::System(c)) => {
                     let plan = ravel::lower::lower(&c);
                     assert!(plan.horizon >= 1);
+                    true
+                }
+                Ok(ravel::check::Task::Network(c)) => {
+                    let plan = ravel::lower::lower_network(&c);
+                    assert_eq!(plan.net.inputs, c.input.1);
                     true
                 }
                 Err(d) => {

@@ -404,6 +404,16 @@ fn main() {
         encode(&qnet.network(), Storage::RawF32, false).finish(3),
     );
 
+    // a random 2 → 8 → 8 → 2 sigmoid map of the plane, for output sets in
+    // two dimensions (hull shapes) of a network spec
+    let mut rng = Rng::new(6);
+    let planar = Mlp::new(&[2, 8, 8, 2], Activation::Sigmoid, &mut rng).network();
+    write(
+        root,
+        "planar_sigmoid.onnx",
+        encode(&planar, Storage::RawF32, true).finish(2),
+    );
+
     // invalid models, one per loader diagnostic
     let inv = root.join("invalid");
     fs::write(

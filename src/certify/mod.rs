@@ -85,6 +85,29 @@ pub struct Report {
 
 type R<T> = Result<T, String>;
 
+impl Report {
+    /// A report with nothing checked yet.
+    fn empty() -> Report {
+        Report {
+            answer: Answer::Valid,
+            properties: Vec::new(),
+            cells: 0,
+            steps: 0,
+            evidence_failure: None,
+        }
+    }
+}
+
+/// The answer from the first false claim and the first claim that could
+/// not be checked.
+fn decide(invalid: Option<String>, unsupported: Option<String>) -> Answer {
+    match (invalid, unsupported) {
+        (Some(m), _) => Answer::Invalid(m),
+        (None, Some(m)) => Answer::Unsupported(m),
+        (None, None) => Answer::Valid,
+    }
+}
+
 fn get<'a>(v: &'a Value, key: &str) -> R<&'a Value> {
     v.get(key).ok_or_else(|| format!("missing field `{key}`"))
 }
@@ -460,13 +483,7 @@ pub fn check(cert: &Value, net: &Network) -> Report {
     {
         return network::check(cert, net);
     }
-    let mut report = Report {
-        answer: Answer::Valid,
-        properties: Vec::new(),
-        cells: 0,
-        steps: 0,
-        evidence_failure: None,
-    };
+    let mut report = Report::empty();
     match check_inner(cert, net, &mut report) {
         Ok(answer) => report.answer = answer,
         Err(e) => report.answer = Answer::Unreadable(e),
@@ -578,11 +595,7 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
         }
     }
-    Ok(match (invalid, unsupported) {
-        (Some(m), _) => Answer::Invalid(m),
-        (None, Some(m)) => Answer::Unsupported(m),
-        (None, None) => Answer::Valid,
-    })
+    Ok(decide(invalid, unsupported))
 }
 
 /// Check the VERIFIED evidence; the outer error is an unreadable

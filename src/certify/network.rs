@@ -27,7 +27,7 @@ use serde_json::Value;
 
 use super::bounds::{network_box, Bx, NetBounds};
 use super::cover::covers;
-use super::{get, num, uint, vector, Answer, Report, R};
+use super::{decide, get, num, uint, vector, Answer, Report, R};
 use crate::nn::Network;
 use crate::num::{dot_box_upper, sum_lower, sum_upper};
 
@@ -291,13 +291,7 @@ fn proves(net: &Network, cell: &Bx, p: &Prop, label: usize, m: usize) -> Result<
 
 /// Check a network certificate against the model `net`.
 pub fn check(cert: &Value, net: &Network) -> Report {
-    let mut report = Report {
-        answer: Answer::Valid,
-        properties: Vec::new(),
-        cells: 0,
-        steps: 0,
-        evidence_failure: None,
-    };
+    let mut report = Report::empty();
     match inner(cert, net, &mut report) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
@@ -484,9 +478,5 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
         }
     }
-    Ok(match (invalid, unsupported) {
-        (Some(m), _) => Answer::Invalid(m),
-        (None, Some(m)) => Answer::Unsupported(m),
-        (None, None) => Answer::Valid,
-    })
+    Ok(decide(invalid, unsupported))
 }

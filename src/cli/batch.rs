@@ -292,22 +292,11 @@ fn run(
     let mut json = crate::report::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
     json["index"] = json!(index);
     if let Some(target) = &opts.certificate {
-        let file = match cert_dir {
-            Some(d) => d.join(super::certificate_name(path, controller)),
-            None => target.clone(),
-        };
-        let id = crate::certificate::Identity {
-            spec_path: path.display().to_string(),
-            spec_sha256: crate::check::sha256_hex(l.source.as_bytes()),
-        };
+        let id = identity(path, &l.source);
         let cert = crate::certificate::build(&plan, &outcome, &id);
-        let text = serde_json::to_string(&cert).unwrap_or_default();
-        if let Err(e) = std::fs::write(&file, text + "\n") {
-            let msg = format!(
-                "cannot write certificate `{}`: {e}",
-                crate::diag::sanitize(&file.display().to_string())
-            );
-            stderr = format!("error: {msg}\n");
+        let file = certificate_file(target, cert_dir, path, controller);
+        if let Err(msg) = write_certificate(&file, &cert) {
+            stderr += &format!("error: {msg}\n");
             json["certificate_error"] = json!(msg);
             json["verdict"] = json!("ERROR");
             class = Class::Error;
@@ -387,6 +376,39 @@ fn stdout_plain(
     crate::report::text(name, plan, outcome, None)
 }
 
+/// Who a certificate is about: the spec's path and hash.
+fn identity(path: &Path, source: &str) -> crate::certificate::Identity {
+    crate::certificate::Identity {
+        spec_path: path.display().to_string(),
+        spec_sha256: crate::check::sha256_hex(source.as_bytes()),
+    }
+}
+
+/// Where a pair's certificate goes: the `--certificate` file, or a file
+/// named after the pair in the certificate folder.
+fn certificate_file(
+    target: &Path,
+    cert_dir: Option<&Path>,
+    path: &Path,
+    controller: Option<&Path>,
+) -> PathBuf {
+    match cert_dir {
+        Some(d) => d.join(super::certificate_name(path, controller)),
+        None => target.to_path_buf(),
+    }
+}
+
+/// Write a certificate; the error message for people.
+fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
+    let text = serde_json::to_string(cert).unwrap_or_default();
+    std::fs::write(file, text + "\n").map_err(|e| {
+        format!(
+            "cannot write certificate `{}`: {e}",
+            crate::diag::sanitize(&file.display().to_string())
+        )
+    })
+}
+
 /// Run one network spec (no output; everything is returned).
 fn run_network(
     index: usize,
@@ -416,21 +438,10 @@ fn run_network(
         json["controller"] = json!(c.display().to_string());
     }
     if let Some(target) = &opts.certificate {
-        let file = match cert_dir {
-            Some(d) => d.join(super::certificate_name(path, controller)),
-            None => target.clone(),
-        };
-        let id = crate::certificate::Identity {
-            spec_path: path.display().to_string(),
-            spec_sha256: crate::check::sha256_hex(l.source.as_bytes()),
-        };
+        let id = identity(path, &l.source);
         let cert = crate::certificate::build_network(&plan, &outcome, &id);
-        let text = serde_json::to_string(&cert).unwrap_or_default();
-        if let Err(e) = std::fs::write(&file, text + "\n") {
-            let msg = format!(
-                "cannot write certificate `{}`: {e}",
-                crate::diag::sanitize(&file.display().to_string())
-            );
+        let file = certificate_file(target, cert_dir, path, controller);
+        if let Err(msg) = write_certificate(&file, &cert) {
             stderr += &format!("error: {msg}\n");
             json["certificate_error"] = json!(msg);
             json["verdict"] = json!("ERROR");

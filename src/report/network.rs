@@ -86,9 +86,15 @@ fn output_text(plan: &NetPlan, out: &NetOutcome) -> String {
                     .unwrap_or_default();
                 s += &format!("  {y}[{i}] ∈ {}{sampled}\n", interval(b.lo[i], b.hi[i]));
             }
-            let extra = out.output.directions.nrows() - 2 * m;
-            if extra > 0 {
-                s += &format!("  and {extra} more facets (see the JSON report)\n");
+            let d = &out.output.directions;
+            for k in 2 * m..d.nrows() {
+                let dir: Vec<f64> = d.row(k).iter().copied().collect();
+                s += &format!(
+                    "  {} · {y} ≤ {:>10}   sampled {:>10}\n",
+                    vector(&dir),
+                    num(out.output.offsets[k]),
+                    num(out.output.sampled[k])
+                );
             }
         }
         (None, _) => {

@@ -437,3 +437,35 @@ fn network_certificates_catch_false_claims() {
         assert!(matches!(check(&junk, &net).answer, Answer::Unreadable(_)));
     }
 }
+
+/// Past the time limit (a clock that is always late, so nothing depends on
+/// timing): grid cells keep the whole set's bounds (valid for any part), so
+/// the output set is the unpartitioned one, and CARRL observations get no
+/// bounds and no claim.
+#[test]
+fn time_limit_keeps_every_bound_sound() {
+    use ravel::check::SelectSpec;
+    let mut rng = Rng::new(4);
+    let net = random_network(&mut rng, 2, 3, Activation::Relu, (2, 6));
+    let input = Region::Box(IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]));
+    let mut p = plan(net, input, Vec::new());
+    let whole = run(&p).output.offsets;
+    p.partitioner = Partitioner::Uniform(vec![4, 4]);
+    p.selects = vec![SelectSpec {
+        name: "s".into(),
+        epsilon: vec![0.1, 0.1],
+        norm: Norm::LInf,
+        observations: vec![vec![0.0, 0.0]],
+    }];
+    let late = execute_network(
+        &p,
+        &NetControl {
+            elapsed: &|| 10.0,
+            time_limit: Some(1.0),
+        },
+    );
+    assert_eq!(late.partition_stop, ravel::analysis::partition::Stop::Time);
+    assert_eq!(late.output.offsets, whole);
+    let c = &late.selections[0].choices[0];
+    assert!(c.lower.iter().all(|v| *v == f64::NEG_INFINITY) && !c.robust_optimal);
+}

@@ -168,6 +168,10 @@ pub struct ActionChoice {
     /// The action with the largest certified lower bound (CARRL's choice).
     pub robust: usize,
     /// Whether the robust action's lower bound is at least every other
+    /// action's upper bound (after the time limit, observations get no
+    /// bounds, `±∞`, the nominal action and `false`).
+    ///
+    /// In short: whether the robust action's lower bound is at least every other
     /// action's upper bound: it is the best action for every observation of
     /// the ball (never with a solver issue on the way).
     pub robust_optimal: bool,
@@ -401,12 +405,20 @@ fn bound_all(
                 let parts = region.grid(grid);
                 let n = parts.len() + 1;
                 let mut cells = Vec::with_capacity(parts.len());
+                let mut stop = Stop::Grid;
                 for c in parts {
+                    // past the time limit a cell keeps the whole set's bounds
+                    // (valid for any part of it)
+                    if stop == Stop::Time || ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t) {
+                        stop = Stop::Time;
+                        cells.push((c.bbox(), root.clone()));
+                        continue;
+                    }
                     let (b, iss) = cell_bounds(&plan.net, &c, plan.propagator, dirs);
                     issues.extend(iss);
                     cells.push((c.bbox(), within(b, Some(&root))));
                 }
-                (cells, n, Stop::Grid)
+                (cells, n, stop)
             }
         }
         Partitioner::Guided { guide, budget } => {
@@ -822,7 +834,22 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             choices: s
                 .observations
                 .iter()
-                .map(|o| choose(plan, o, &s.epsilon, s.norm, ctl))
+                .map(|o| {
+                    if ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t) {
+                        // past the time limit: no bound, no claim
+                        let m = plan.net.outputs();
+                        let nominal = argmax(&plan.net.forward(o));
+                        ActionChoice {
+                            lower: vec![f64::NEG_INFINITY; m],
+                            upper: vec![f64::INFINITY; m],
+                            nominal,
+                            robust: nominal,
+                            robust_optimal: false,
+                        }
+                    } else {
+                        choose(plan, o, &s.epsilon, s.norm, ctl)
+                    }
+                })
                 .collect(),
         })
         .collect();

@@ -50,6 +50,9 @@ pub(crate) fn partition_text(partitioner: &Partitioner, cells: usize, stop: Stop
         Partitioner::Uniform(grid) if grid.iter().all(|k| *k == 1) => {
             "no partition (1 cell)".into()
         }
+        Partitioner::Uniform(grid) if stop == Stop::Time => format!(
+            "uniform partition {grid:?} ({cells} cells; the time limit left some with the whole set's bounds)"
+        ),
         Partitioner::Uniform(grid) => format!("uniform partition {grid:?} ({cells} cells)"),
         Partitioner::Guided { guide, budget } => {
             let why = match stop {

@@ -144,6 +144,16 @@ fn selections_text(plan: &NetPlan, out: &NetOutcome) -> String {
             vector(&sel.epsilon),
             sel.choices.len()
         );
+        let unbounded = sel
+            .choices
+            .iter()
+            .filter(|c| c.lower.iter().all(|v| !v.is_finite()))
+            .count();
+        if unbounded > 0 {
+            s += &format!(
+                "  {unbounded} observations without finite bounds (time limit or overflow): no claim about them\n"
+            );
+        }
         for (k, (o, c)) in sel
             .observations
             .iter()

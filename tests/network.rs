@@ -47,6 +47,7 @@ fn run(p: &NetPlan) -> NetOutcome {
         &NetControl {
             elapsed: &|| 0.0,
             time_limit: None,
+            threads: 1,
         },
     )
 }
@@ -462,10 +463,58 @@ fn time_limit_keeps_every_bound_sound() {
         &NetControl {
             elapsed: &|| 10.0,
             time_limit: Some(1.0),
+            threads: 1,
         },
     );
     assert_eq!(late.partition_stop, ravel::analysis::partition::Stop::Time);
     assert_eq!(late.output.offsets, whole);
     let c = &late.selections[0].choices[0];
     assert!(c.lower.iter().all(|v| *v == f64::NEG_INFINITY) && !c.robust_optimal);
+}
+
+/// Grid cells and CARRL observations on several threads: the same outcome,
+/// number for number, as on one.
+#[test]
+fn threads_never_change_a_network_result() {
+    use ravel::check::SelectSpec;
+    let mut rng = Rng::new(12);
+    let net = random_network(&mut rng, 2, 3, Activation::Relu, (2, 6));
+    let input = Region::Ball {
+        center: vec![0.1, -0.2],
+        radius: vec![0.4, 0.3],
+        norm: Norm::L2,
+    };
+    let mut p = plan(
+        net,
+        input,
+        vec![NetProperty {
+            name: "r".into(),
+            kind: NetPropertyKind::Robust(None),
+        }],
+    );
+    p.partitioner = Partitioner::Uniform(vec![5, 3]);
+    p.selects = vec![SelectSpec {
+        name: "s".into(),
+        epsilon: vec![0.05, 0.02],
+        norm: Norm::LInf,
+        observations: (0..23).map(|k| vec![0.1 * k as f64 - 1.0, 0.5]).collect(),
+    }];
+    let with = |threads| {
+        execute_network(
+            &p,
+            &NetControl {
+                elapsed: &|| 0.0,
+                time_limit: None,
+                threads,
+            },
+        )
+    };
+    let one = with(1);
+    for threads in [2, 3, 8] {
+        let many = with(threads);
+        assert_eq!(many.output.offsets, one.output.offsets, "{threads} threads");
+        assert_eq!(many.partition, one.partition);
+        assert_eq!(many.properties, one.properties);
+        assert_eq!(many.selections, one.selections);
+    }
 }

@@ -173,6 +173,7 @@ fn network_specs() {
             &NetControl {
                 elapsed: &|| 0.0,
                 time_limit: None,
+                threads: 1,
             },
         );
         if let (Some(b), Some(s)) = (&out.output.bbox, &out.output.sampled_bbox) {

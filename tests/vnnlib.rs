@@ -29,6 +29,7 @@ fn run(name: &str) -> (ravel::lower::NetPlan, ravel::execute::network::NetOutcom
         &NetControl {
             elapsed: &|| 0.0,
             time_limit: None,
+            threads: 1,
         },
     );
     (plan, out)

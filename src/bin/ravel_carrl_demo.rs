@@ -47,6 +47,7 @@ impl Policy<'_> {
                 let ctl = NetControl {
                     elapsed: &|| 0.0,
                     time_limit: None,
+                    threads: 1,
                 };
                 choose(self.plan, obs, &[e, e], Norm::LInf, &ctl).robust
             }

@@ -244,7 +244,7 @@ fn run(
     let checked = match &l.result {
         Ok(crate::check::Task::System(c)) => (**c).clone(),
         Ok(crate::check::Task::Network(c)) => {
-            return run_network(index, path, controller, &l, c, opts, cert_dir);
+            return run_network(index, path, controller, &l, c, opts, cert_dir, cell_threads);
         }
         Err(d) => {
             let text = render(d, &l.display, &l.source, 100, opts.color);
@@ -418,6 +418,7 @@ fn run_network(
     checked: &crate::check::NetworkChecked,
     opts: &Options,
     cert_dir: Option<&Path>,
+    cell_threads: usize,
 ) -> Item {
     let started = Instant::now();
     let plan = crate::lower::lower_network(checked);
@@ -426,6 +427,7 @@ fn run_network(
         &crate::execute::network::NetControl {
             elapsed: &|| started.elapsed().as_secs_f64(),
             time_limit: opts.time_limit,
+            threads: cell_threads,
         },
     );
     let ms = started.elapsed().as_secs_f64() * 1e3;

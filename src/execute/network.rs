@@ -197,6 +197,39 @@ pub struct NetControl<'a> {
     /// Stop refining (and searching) after this many seconds; what is
     /// unfinished stays unproven.
     pub time_limit: Option<f64>,
+    /// Threads for uniform-grid cells and CARRL observations (results are
+    /// put back in index order: the same for every count).
+    pub threads: usize,
+}
+
+impl NetControl<'_> {
+    fn late(&self) -> bool {
+        self.time_limit.is_some_and(|t| (self.elapsed)() > t)
+    }
+}
+
+/// `f` applied to every item, on up to `threads` threads (contiguous
+/// chunks), results in item order.
+fn map_ordered<T: Sync, U: Send>(
+    items: &[T],
+    threads: usize,
+    f: &(dyn Fn(&T) -> U + Sync),
+) -> Vec<U> {
+    let threads = threads.clamp(1, items.len().max(1));
+    if threads == 1 {
+        return items.iter().map(f).collect();
+    }
+    let chunk = items.len().div_ceil(threads);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|part| scope.spawn(move || part.iter().map(f).collect::<Vec<U>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    })
 }
 
 /// The rows bounded for one analysis: the shape's, then each property's.
@@ -404,19 +437,28 @@ fn bound_all(
             } else {
                 let parts = region.grid(grid);
                 let n = parts.len() + 1;
-                let mut cells = Vec::with_capacity(parts.len());
-                let mut stop = Stop::Grid;
-                for c in parts {
-                    // past the time limit a cell keeps the whole set's bounds
-                    // (valid for any part of it)
-                    if stop == Stop::Time || ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t) {
-                        stop = Stop::Time;
-                        cells.push((c.bbox(), root.clone()));
-                        continue;
+                // past the time limit a cell keeps the whole set's bounds
+                // (valid for any part of it)
+                let done = map_ordered(&parts, ctl.threads, &|c: &Region| {
+                    if ctl.late() {
+                        return None;
                     }
-                    let (b, iss) = cell_bounds(&plan.net, &c, plan.propagator, dirs);
-                    issues.extend(iss);
-                    cells.push((c.bbox(), within(b, Some(&root))));
+                    let (b, iss) = cell_bounds(&plan.net, c, plan.propagator, dirs);
+                    Some((within(b, Some(&root)), iss))
+                });
+                let mut stop = Stop::Grid;
+                let mut cells = Vec::with_capacity(parts.len());
+                for (c, r) in parts.iter().zip(done) {
+                    match r {
+                        Some((b, iss)) => {
+                            issues.extend(iss);
+                            cells.push((c.bbox(), b));
+                        }
+                        None => {
+                            stop = Stop::Time;
+                            cells.push((c.bbox(), root.clone()));
+                        }
+                    }
                 }
                 (cells, n, stop)
             }
@@ -831,26 +873,22 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             name: s.name.clone(),
             epsilon: s.epsilon.clone(),
             observations: s.observations.clone(),
-            choices: s
-                .observations
-                .iter()
-                .map(|o| {
-                    if ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t) {
-                        // past the time limit: no bound, no claim
-                        let m = plan.net.outputs();
-                        let nominal = argmax(&plan.net.forward(o));
-                        ActionChoice {
-                            lower: vec![f64::NEG_INFINITY; m],
-                            upper: vec![f64::INFINITY; m],
-                            nominal,
-                            robust: nominal,
-                            robust_optimal: false,
-                        }
-                    } else {
-                        choose(plan, o, &s.epsilon, s.norm, ctl)
+            choices: map_ordered(&s.observations, ctl.threads, &|o: &Vec<f64>| {
+                if ctl.late() {
+                    // past the time limit: no bound, no claim
+                    let m = plan.net.outputs();
+                    let nominal = argmax(&plan.net.forward(o));
+                    ActionChoice {
+                        lower: vec![f64::NEG_INFINITY; m],
+                        upper: vec![f64::INFINITY; m],
+                        nominal,
+                        robust: nominal,
+                        robust_optimal: false,
                     }
-                })
-                .collect(),
+                } else {
+                    choose(plan, o, &s.epsilon, s.norm, ctl)
+                }
+            }),
         })
         .collect();
     let Some(input) = &plan.input else {
@@ -1015,7 +1053,7 @@ fn radius_search(
         m,
     );
     let mut analyses = 0;
-    let out_of_time = || ctl.time_limit.is_some_and(|t| (ctl.elapsed)() > t);
+    let out_of_time = || ctl.late();
     let mut certifies = |s: f64| -> bool {
         analyses += 1;
         let region = scaled(input, s);

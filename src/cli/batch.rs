@@ -244,7 +244,15 @@ fn run(
     let checked = match &l.result {
         Ok(crate::check::Task::System(c)) => (**c).clone(),
         Ok(crate::check::Task::Network(c)) => {
-            return run_network(index, path, controller, &l, c, opts, cert_dir, cell_threads);
+            return run_network(
+                index,
+                (path, controller),
+                &l,
+                c,
+                opts,
+                cert_dir,
+                cell_threads,
+            );
         }
         Err(d) => {
             let text = render(d, &l.display, &l.source, 100, opts.color);
@@ -412,8 +420,7 @@ fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
 /// Run one network spec (no output; everything is returned).
 fn run_network(
     index: usize,
-    path: &Path,
-    controller: Option<&Path>,
+    (path, controller): (&Path, Option<&Path>),
     l: &super::Loaded,
     checked: &crate::check::NetworkChecked,
     opts: &Options,

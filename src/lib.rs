@@ -147,12 +147,17 @@ pub fn front_end_task(
     let data: check::DataFiles = check::data_paths(&spec)
         .into_iter()
         .map(|p| {
-            let bytes = read(&ReadRequest {
-                path: spec_dir.join(&p),
-                inside: None,
-                max_bytes: limits::MAX_SPEC_BYTES,
-                whole: true,
-            });
+            // observation files stay in the spec's folder, under the same
+            // rules as a model's external data (checked before any read)
+            let bytes = match onnx::normalise_location(&p) {
+                None => Err("observation files must lie in the spec's folder (a relative path without `..`)".to_string()),
+                Some(rel) => read(&ReadRequest {
+                    path: spec_dir.join(rel),
+                    inside: Some(spec_dir.to_path_buf()),
+                    max_bytes: limits::MAX_SPEC_BYTES,
+                    whole: true,
+                }),
+            };
             (p, bytes)
         })
         .collect();

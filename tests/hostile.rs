@@ -351,3 +351,56 @@ fn control_characters_in_names_are_escaped() {
     );
     assert!(text.contains("\\u{1b}"), "{text}");
 }
+
+/// Observation files of a `select` block are read from the spec's folder
+/// only: `..`, absolute paths and (through the CLI's reader) links leaving
+/// it are refused before anything is read.
+#[test]
+fn observation_files_stay_in_the_spec_folder() {
+    use std::cell::RefCell;
+    let asked: RefCell<Vec<ravel::ReadRequest>> = RefCell::new(Vec::new());
+    let model = std::fs::read("models/lane_q.onnx").expect("model");
+    let reader = |r: &ravel::ReadRequest| -> Result<Vec<u8>, String> {
+        asked.borrow_mut().push(r.clone());
+        if r.path.extension().is_some_and(|e| e == "onnx") {
+            Ok(model.clone())
+        } else {
+            Ok(b"0,0\n".to_vec())
+        }
+    };
+    for path in ["../x.csv", "/etc/passwd", "a/../../x.csv", "C:x.csv"] {
+        asked.borrow_mut().clear();
+        let spec = format!(
+            "network q {{ input s[2] output q[3] }}\nmodel \"m.onnx\"\nselect s {{ epsilon 0.1 observations \"{path}\" }}\n"
+        );
+        let r = ravel::front_end_task(&spec, std::path::Path::new("specs"), &reader, None);
+        let d = r.expect_err(path);
+        assert!(
+            d.iter().any(|x| x.code.as_str() == "E0219"),
+            "{path}: {d:?}"
+        );
+        assert!(
+            asked
+                .borrow()
+                .iter()
+                .all(|q| q.path.extension().is_some_and(|e| e == "onnx")),
+            "{path}: a data file was requested"
+        );
+    }
+    // a plain name is requested inside the spec's folder, confined to it
+    asked.borrow_mut().clear();
+    let spec = "network q { input s[2] output q[3] }\nmodel \"m.onnx\"\nselect s { epsilon 0.1 observations \"./o.csv\" }\n";
+    assert!(ravel::front_end_task(spec, std::path::Path::new("specs"), &reader, None).is_ok());
+    let csv: Vec<_> = asked
+        .borrow()
+        .iter()
+        .filter(|q| q.path.extension().is_some_and(|e| e == "csv"))
+        .cloned()
+        .collect();
+    assert_eq!(csv.len(), 1);
+    assert_eq!(csv[0].path, std::path::Path::new("specs/o.csv"));
+    assert_eq!(
+        csv[0].inside.as_deref(),
+        Some(std::path::Path::new("specs"))
+    );
+}

@@ -518,3 +518,37 @@ fn threads_never_change_a_network_result() {
         assert_eq!(many.selections, one.selections);
     }
 }
+
+/// "The label of the centre" when the centre's outputs tie: no label is
+/// certain there, so no input can refute it (UNSURE, no radius attack),
+/// while a named label is refuted as usual.
+#[test]
+fn a_tied_centre_refutes_nothing() {
+    // y = (x0, −x0): tied at the centre x0 = 0
+    let net = Network::new(
+        1,
+        vec![Layer::Affine {
+            w: DMatrix::from_row_slice(2, 1, &[1.0, -1.0]),
+            b: DVector::zeros(2),
+        }],
+    );
+    let input = Region::Box(IBox::new(vec![-1.0], vec![1.0]));
+    let prop = |label| NetProperty {
+        name: "r".into(),
+        kind: NetPropertyKind::Robust(label),
+    };
+    let mut p = plan(net.clone(), input.clone(), vec![prop(None)]);
+    p.partitioner = Partitioner::Uniform(vec![1]);
+    p.radii = vec![RadiusSpec {
+        name: "e".into(),
+        property: 0,
+        max: 1.0,
+        tolerance: 0.01,
+    }];
+    let out = run(&p);
+    assert_eq!(out.properties[0].status, Status::Unsure);
+    assert!(out.radii[0].attacked.is_none());
+    let mut q = plan(net, input, vec![prop(Some(0))]);
+    q.partitioner = Partitioner::Uniform(vec![1]);
+    assert_eq!(run(&q).properties[0].status, Status::Falsified);
+}

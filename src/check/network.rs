@@ -197,6 +197,16 @@ pub fn is_network_spec(spec: &Spec) -> bool {
             }))
 }
 
+/// Whether `name` is not taken yet (it is taken now); a duplicate is reported.
+fn fresh<'a>(cx: &mut Ctx, names: &mut BTreeMap<&'a str, Span>, name: &'a Spanned<String>) -> bool {
+    if let Some(first) = names.get(name.node.as_str()) {
+        cx.duplicate(&format!("the name `{}`", name.node), *first, name.span);
+        return false;
+    }
+    names.insert(&name.node, name.span);
+    true
+}
+
 /// Report the items of a network spec in a system spec.
 pub(super) fn network_items_in_system(cx: &mut Ctx, spec: &Spec) {
     for item in &spec.items {
@@ -499,12 +509,10 @@ pub(super) fn check_network(
             }
             _ => continue,
         };
-        if let Some(first) = names.get(name.node.as_str()) {
-            cx.duplicate(&format!("the name `{}`", name.node), *first, name.span);
+        if !fresh(cx, &mut names, name) {
             all_ok = false;
             continue;
         }
-        names.insert(&name.node, name.span);
         match kind {
             Some(kind) => {
                 index.insert(name.node.clone(), properties.len());
@@ -520,12 +528,10 @@ pub(super) fn check_network(
     // ---- radius searches ----
     let mut radius_specs = Vec::new();
     for r in &radii {
-        if let Some(first) = names.get(r.name.node.as_str()) {
-            cx.duplicate(&format!("the name `{}`", r.name.node), *first, r.name.span);
+        if !fresh(cx, &mut names, &r.name) {
             all_ok = false;
             continue;
         }
-        names.insert(&r.name.node, r.name.span);
         let property = match index.get(&r.property.node) {
             Some(k) => Some(*k),
             None => {
@@ -618,12 +624,10 @@ pub(super) fn check_network(
     // ---- robust action selection ----
     let mut selects = Vec::new();
     for d in &select_defs {
-        if let Some(first) = names.get(d.name.node.as_str()) {
-            cx.duplicate(&format!("the name `{}`", d.name.node), *first, d.name.span);
+        if !fresh(cx, &mut names, &d.name) {
             all_ok = false;
             continue;
         }
-        names.insert(&d.name.node, d.name.span);
         if let (Some((xn, n)), Some((_, m))) = (&input, &output) {
             match super::select::select(cx, d, xn, *n, *m, data) {
                 Some(s) => selects.push(s),

@@ -234,7 +234,7 @@ pub(super) fn select(
                         p.span,
                         format!("cannot read `{}`: {}", sanitize(&p.node), sanitize(e)),
                         "this file",
-                        "paths are relative to the spec file's folder",
+                        "observation files are read from the spec file's folder or a folder below it (no `..`, no absolute path, no link leaving it)",
                     );
                     ok = false;
                 }

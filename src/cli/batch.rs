@@ -304,10 +304,11 @@ fn run(
         let cert = crate::certificate::build(&plan, &outcome, &id);
         let file = certificate_file(target, cert_dir, path, controller);
         if let Err(msg) = write_certificate(&file, &cert) {
-            stderr += &format!("error: {msg}\n");
-            json["certificate_error"] = json!(msg);
-            json["verdict"] = json!("ERROR");
-            class = Class::Error;
+            fail_item(
+                (&mut json, &mut stderr, &mut class),
+                "certificate_error",
+                &msg,
+            );
         }
     }
     if let Some(dir) = &opts.plot {
@@ -333,10 +334,7 @@ fn run(
             })
         };
         if let Err(msg) = result {
-            stderr += &format!("error: {msg}\n");
-            json["plot_error"] = json!(msg);
-            json["verdict"] = json!("ERROR");
-            class = Class::Error;
+            fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
         }
     }
     let stdout = match opts.format {
@@ -382,6 +380,15 @@ fn stdout_plain(
     outcome: &crate::execute::Outcome,
 ) -> String {
     crate::report::text(name, plan, outcome, None)
+}
+
+/// Turn an item into an ERROR: the message on standard error and in the
+/// JSON result under `key`.
+fn fail_item((json, stderr, class): (&mut Value, &mut String, &mut Class), key: &str, msg: &str) {
+    *stderr += &format!("error: {msg}\n");
+    json[key] = json!(msg);
+    json["verdict"] = json!("ERROR");
+    *class = Class::Error;
 }
 
 /// Who a certificate is about: the spec's path and hash.
@@ -451,10 +458,11 @@ fn run_network(
         let cert = crate::certificate::build_network(&plan, &outcome, &id);
         let file = certificate_file(target, cert_dir, path, controller);
         if let Err(msg) = write_certificate(&file, &cert) {
-            stderr += &format!("error: {msg}\n");
-            json["certificate_error"] = json!(msg);
-            json["verdict"] = json!("ERROR");
-            class = Class::Error;
+            fail_item(
+                (&mut json, &mut stderr, &mut class),
+                "certificate_error",
+                &msg,
+            );
         }
     }
     // not built yet for network specs: said, never silently skipped
@@ -463,10 +471,7 @@ fn run_network(
             "plots of network specs are not supported yet (`{}`)",
             l.display
         );
-        stderr += &format!("error: {msg}\n");
-        json["plot_error"] = json!(msg);
-        json["verdict"] = json!("ERROR");
-        class = Class::Error;
+        fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
     }
     let stdout = match opts.format {
         Format::Text => crate::report::network::text(

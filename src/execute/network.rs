@@ -168,12 +168,9 @@ pub struct ActionChoice {
     /// The action with the largest certified lower bound (CARRL's choice).
     pub robust: usize,
     /// Whether the robust action's lower bound is at least every other
-    /// action's upper bound (after the time limit, observations get no
-    /// bounds, `±∞`, the nominal action and `false`).
-    ///
-    /// In short: whether the robust action's lower bound is at least every other
     /// action's upper bound: it is the best action for every observation of
-    /// the ball (never with a solver issue on the way).
+    /// the ball (never with a solver issue on the way). Observations past
+    /// the time limit get no bounds (`±∞`), the nominal action and `false`.
     pub robust_optimal: bool,
 }
 
@@ -918,6 +915,18 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
     let outputs: Vec<Vec<f64>> = inputs.iter().map(|x| plan.net.forward(x)).collect();
     // robustness labels: the centre's when not given
     let nominal = centre(input).map(|c| argmax(&plan.net.forward(&c)));
+    // A violation of "the centre's label" only counts when the centre's label
+    // is certain: an outward-rounded enclosure of f(centre) has it strictly
+    // largest (an f64 argmax of nearly tied outputs may not be the exact one).
+    let centre_certain = match (centre(input), nominal) {
+        (Some(c), Some(k)) => strictly_largest(&plan.net, &c, k),
+        _ => false,
+    };
+    let may_falsify: Vec<bool> = plan
+        .properties
+        .iter()
+        .map(|p| !matches!(p.kind, NetPropertyKind::Robust(None)) || centre_certain)
+        .collect();
     let labels: Vec<Option<usize>> = plan
         .properties
         .iter()
@@ -961,7 +970,10 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         };
         if proves(&p.kind, margin) && b.issues.is_empty() {
             result.status = Status::Verified;
-        } else if let Some(w) = attack(&plan.net, input, &p.kind, label, &inputs, 2000) {
+        } else if let Some(w) = may_falsify[k]
+            .then(|| attack(&plan.net, input, &p.kind, label, &inputs, 2000))
+            .flatten()
+        {
             result.status = Status::Falsified;
             result.margin = -violation(&p.kind, label, &w.output).max(0.0);
             result.counterexample = Some(w);
@@ -972,7 +984,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
     let radii = plan
         .radii
         .iter()
-        .map(|r| radius_search(plan, input, r, &labels, ctl))
+        .map(|r| radius_search(plan, input, r, &labels, may_falsify[r.property], ctl))
         .collect();
     let verdict = if properties.iter().any(|p| p.status == Status::Falsified) {
         Status::Falsified
@@ -1005,6 +1017,22 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         samples_drawn: inputs.len(),
         selections,
     }
+}
+
+/// Whether an outward-rounded enclosure of `f(x)` has output `k` strictly
+/// larger than every other output.
+fn strictly_largest(net: &Network, x: &[f64], k: usize) -> bool {
+    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
+    if !a.is_finite() {
+        return false;
+    }
+    let y = a.output_box(Mode::Ibp);
+    (0..y.dim()).filter(|&j| j != k).all(|j| {
+        let mut d = vec![0.0; y.dim()];
+        d[j] = 1.0;
+        d[k] = -1.0;
+        dot_box_upper(&d, &y.lo, &y.hi) < 0.0
+    })
 }
 
 /// The first index of the largest value.
@@ -1042,6 +1070,7 @@ fn radius_search(
     input: &Region,
     r: &RadiusSpec,
     labels: &[Option<usize>],
+    may_falsify: bool,
     ctl: &NetControl,
 ) -> RadiusResult {
     let m = plan.net.outputs();
@@ -1094,7 +1123,7 @@ fn radius_search(
         attack(&plan.net, &region, &p.kind, label, &pts, 2000)
     };
     let mut attacked: Option<(f64, Witness)> = None;
-    if certified != Some(r.max) {
+    if certified != Some(r.max) && may_falsify {
         if let Some(w) = attack_at(r.max, plan.seed) {
             attacked = Some((gauge(input, &w.input), w));
             let mut lo = certified.unwrap_or(0.0);

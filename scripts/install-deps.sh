@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs the one system library ravel needs: OpenBLAS/LAPACK, which the SDP
-# back-end (clarabel's `sdp` feature) links against. Idempotent; does nothing
-# when the library is already installed.
+# back-end (clarabel's `sdp` feature) calls; src/blas.rs opens
+# libopenblas.so.0 on the first SDP solve. The -dev package brings the
+# threaded build (safe to call from several threads, which --jobs needs).
+# Idempotent; does nothing when the library is already installed.
 set -euo pipefail
 if [ -e /usr/lib/x86_64-linux-gnu/libopenblas.so ] || [ -e /usr/lib/aarch64-linux-gnu/libopenblas.so ] \
    || ldconfig -p 2>/dev/null | grep -q 'libopenblas\.so '; then

@@ -29,6 +29,8 @@ pub enum Issue {
     NonFiniteEigenvalues,
     /// Reach-SDP was asked to encode a network that is not ReLU-only.
     SdpNeedsRelu,
+    /// The BLAS/LAPACK library the SDP solver calls could not be loaded.
+    NoBlas,
 }
 
 /// An untrusted solver status.
@@ -85,6 +87,7 @@ impl Issue {
             Issue::NonFiniteSolution => "non-finite solution",
             Issue::NonFiniteEigenvalues => "eigenvalues not finite",
             Issue::SdpNeedsRelu => "SDP needs a ReLU network",
+            Issue::NoBlas => "SDP solver's BLAS/LAPACK (libopenblas.so.0) not loadable",
             Issue::Status(Lp, s) => s.as_str(),
             Issue::Status(Sdp, s) => match s {
                 Status::Unsolved => "SDP unsolved",

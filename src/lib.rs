@@ -9,6 +9,7 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 pub mod analysis;
+pub mod blas;
 pub mod certificate;
 pub mod certify;
 pub mod check;

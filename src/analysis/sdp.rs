@@ -139,23 +139,6 @@ pub fn merge(net: &Network, pre: &DMatrix<f64>, input: &IBox) -> Option<MergedNe
     })
 }
 
-#[allow(unsafe_code)]
-extern "C" {
-    /// OpenBLAS's thread-count switch (the library `build.rs` links).
-    fn openblas_set_num_threads(n: std::os::raw::c_int);
-}
-
-/// The SDPs are small: OpenBLAS's threads only add overhead (and fight
-/// the caller's own parallelism), so they are switched off once. This is the
-/// crate's only `unsafe` (the crate denies it everywhere else).
-#[allow(unsafe_code)]
-fn single_threaded_blas() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    // SAFETY: a plain setter of OpenBLAS's global thread count, called once
-    // before the first solve; it takes an int and touches no Rust memory.
-    ONCE.call_once(|| unsafe { openblas_set_num_threads(1) });
-}
-
 /// A sparse symmetric quadratic form, accumulated as triplets `(i, j, value)` with `i ≤ j`.
 #[derive(Default)]
 struct Form {
@@ -326,7 +309,10 @@ impl<'a> StepSdp<'a> {
 
     /// A certified upper bound of `φᵀv` (φ over v's coordinates, constant in the last).
     pub fn bound(&self, phi: &[f64]) -> SdpBound {
-        single_threaded_blas();
+        // Clarabel's PSD cone calls BLAS/LAPACK, loaded on first use
+        if crate::blas::load().is_err() {
+            return none(Issue::NoBlas);
+        }
         let n = self.dim;
         let one = n - 1;
         let cons = self.constraints();

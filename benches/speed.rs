@@ -367,6 +367,96 @@ fn horizon() {
     }
 }
 
+/// Final-step error against analysis time, with and without optimised
+/// slopes: the error of one `execute` (1000 samples, not timed), the time
+/// of the analysis alone (`propagate_cell` of every cell, fastest run).
+fn tightness() {
+    println!("\n## Tightness per time: final-step error against analysis time (one thread)\n");
+    println!("| problem | method | optimise_slopes | analysis time | final-step error |");
+    println!("|---|---|---|---|---|");
+    let rows: [(&str, &str, Propagator, usize, &[usize]); 5] = [
+        (
+            "DI",
+            "specs/double_integrator.ravel",
+            Propagator::ReachLp,
+            1,
+            &[0, 1, 2, 3, 5],
+        ),
+        (
+            "DI",
+            "specs/double_integrator.ravel",
+            Propagator::ReachLp,
+            4,
+            &[0, 3],
+        ),
+        (
+            "DI",
+            "specs/double_integrator.ravel",
+            Propagator::CrownUnrolled,
+            1,
+            &[0, 1, 2, 3, 5],
+        ),
+        (
+            "quadrotor",
+            "specs/quadrotor.ravel",
+            Propagator::ReachLp,
+            1,
+            &[0, 1, 3, 10],
+        ),
+        (
+            "quadrotor",
+            "specs/quadrotor.ravel",
+            Propagator::CrownUnrolled,
+            1,
+            &[0, 1, 3],
+        ),
+    ];
+    for (name, spec, prop, k, steps) in rows {
+        let c = checked(spec);
+        let dims = c.plants[0].a.nrows();
+        for &st in steps {
+            let mut plan = plan_of(&c, prop, grid(k, dims), 1000);
+            plan.closed_loop.slope_steps = st;
+            let err = ravel::report::final_error(&execute_with(
+                &plan,
+                &Control {
+                    elapsed: &|| 0.0,
+                    time_limit: None,
+                    progress: &|_| {},
+                    threads: 1,
+                },
+            ));
+            let mut timed = plan.clone();
+            timed.samples = 0;
+            let cells = timed.initial.bbox();
+            let parts: Vec<Region> = match &timed.partitioner {
+                Partitioner::Uniform(g) => cells.grid(g).into_iter().map(Region::Box).collect(),
+                _ => vec![timed.initial.clone()],
+            };
+            let t = time(|| {
+                for cell in &parts {
+                    std::hint::black_box(propagate_cell(&timed, cell, None));
+                }
+            });
+            let cells_text = if parts.len() > 1 {
+                format!(", {} cells", parts.len())
+            } else {
+                String::new()
+            };
+            println!(
+                "| {name} | {}{cells_text} | {st} | {} | {} |",
+                prop.name(),
+                show(t),
+                err.map_or("—".into(), |e| if e < 1e-3 {
+                    format!("{e:.1e}")
+                } else {
+                    format!("{e:.4}")
+                })
+            );
+        }
+    }
+}
+
 fn main() {
     let (filter, slow) = common::args();
     let on = |title: &str| filter.as_ref().is_none_or(|f| title.contains(f.as_str()));
@@ -382,6 +472,9 @@ fn main() {
     }
     if on("horizon") {
         horizon();
+    }
+    if on("tightness") {
+        tightness();
     }
     println!(
         "\npeak memory (VmHWM) of this benchmark process: {}",

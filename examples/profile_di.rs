@@ -20,7 +20,11 @@ fn main() {
         }
     }
     let repeats: usize = args.get(2).map_or(2000, |r| r.parse().unwrap());
-    let plan = ravel::lower::lower(&c);
+    let mut plan = ravel::lower::lower(&c);
+    // SLOPES=k: k slope-optimisation steps per back-substitution
+    if let Some(k) = std::env::var("SLOPES").ok().and_then(|k| k.parse().ok()) {
+        plan.closed_loop.slope_steps = k;
+    }
     if std::env::var_os("SHOW_LAYERS").is_some() {
         for l in &plan.closed_loop.net.layers {
             match l {
@@ -46,4 +50,18 @@ fn main() {
         best = best.min(t.elapsed().as_secs_f64() / repeats.div_ceil(5) as f64);
     }
     eprintln!("{:.2} µs per cell (best of 5 batches)", best * 1e6);
+    if whole {
+        let out = ravel::execute::execute(&plan, &|| 0.0);
+        eprintln!("final-step error {:?}", ravel::report::final_error(&out));
+        if std::env::var_os("SHOW_SETS").is_some() {
+            for (r, s) in out.reach.iter().zip(&out.sampled) {
+                eprintln!(
+                    "  {:?} {:?} | sampled {:?}",
+                    r.lo,
+                    r.hi,
+                    s.as_ref().map(|s| (&s.lo, &s.hi))
+                );
+            }
+        }
+    }
 }

@@ -65,6 +65,8 @@ pub enum Code {
     Radius,
     /// E0219: observations or ε of a select block that cannot be used (CSV cells, widths, values).
     Observations,
+    /// E0220: slope optimisation with a propagator that has no slopes to optimise.
+    SlopeSteps,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -85,7 +87,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 35] = [
+    pub const ALL: [Code; 36] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -113,6 +115,7 @@ impl Code {
         Code::Label,
         Code::Radius,
         Code::Observations,
+        Code::SlopeSteps,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -153,6 +156,7 @@ impl Code {
             Code::Label => "E0217",
             Code::Radius => "E0218",
             Code::Observations => "E0219",
+            Code::SlopeSteps => "E0220",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

@@ -163,6 +163,7 @@ fn is_keyword(w: &str) -> bool {
             | "boundary"
             | "samples"
             | "seed"
+            | "optimise_slopes"
             | "norm"
     )
 }

@@ -19,6 +19,10 @@ pub const MAX_DIM: u64 = 1000;
 pub const MAX_HORIZON: u64 = 10_000;
 /// Largest number of Monte Carlo samples.
 pub const MAX_SAMPLES: u64 = 1_000_000;
+
+/// The most slope-optimisation steps (`optimise_slopes N`): each step costs
+/// about two back-substitutions per bounded row.
+pub const MAX_SLOPE_STEPS: u64 = 1000;
 /// Largest number of simulated steps, `samples × horizon`.
 pub const MAX_SIMULATED_STEPS: u64 = 50_000_000;
 /// Largest number of cells of a uniform grid.

@@ -140,7 +140,8 @@ pub fn lower(c: &Checked) -> Plan {
         controller_sha256: c.controller_sha256.clone(),
         controller_resolved: c.controller_resolved.clone(),
         network_summary: summary(c),
-        closed_loop: ClosedLoop::time_varying(c.plants.clone(), net),
+        closed_loop: ClosedLoop::time_varying(c.plants.clone(), net)
+            .with_slope_steps(c.slope_steps),
         dt: c.dt,
         limits: c.limits.clone(),
         initial: c.initial.1.clone(),
@@ -194,6 +195,8 @@ pub struct NetPlan {
     pub samples: usize,
     /// Monte Carlo seed.
     pub seed: u64,
+    /// Projected-gradient steps on the lower ReLU slopes of CROWN (0: CROWN's own).
+    pub slope_steps: usize,
 }
 
 /// Lower a checked network spec to a plan.
@@ -221,5 +224,6 @@ pub fn lower_network(c: &crate::check::NetworkChecked) -> NetPlan {
         shape: c.shape.clone(),
         samples: c.samples,
         seed: c.seed,
+        slope_steps: c.slope_steps,
     }
 }

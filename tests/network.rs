@@ -38,6 +38,7 @@ fn plan(net: Network, input: Region, props: Vec<NetProperty>) -> NetPlan {
         shape: Shape::Box,
         samples: 200,
         seed: 7,
+        slope_steps: 0,
     }
 }
 
@@ -107,6 +108,10 @@ fn output_bounds_contain_every_sampled_output() {
             }
             let mut p = plan(net.clone(), input.clone(), props.clone());
             p.propagator = propagator;
+            // optimised slopes on every other CROWN case
+            if propagator == NetPropagator::Crown && case % 2 == 0 {
+                p.slope_steps = 4;
+            }
             p.partitioner = match (case + k) % 4 {
                 0 => Partitioner::Uniform(vec![1, 1]),
                 1 => Partitioner::Uniform(vec![3, 2]),
@@ -162,26 +167,33 @@ fn output_bounds_contain_every_sampled_output() {
     assert!(checked >= 150, "only {checked} cases ran");
 }
 
-/// Propagators are ordered: CROWN is never looser than IBP on one cell, and
-/// SDP (intersected with CROWN) never looser than CROWN.
+/// Propagators are ordered: CROWN is never looser than IBP on one cell,
+/// CROWN with optimised slopes never looser than CROWN, and SDP (intersected
+/// with CROWN) never looser than CROWN.
 #[test]
 fn propagators_are_ordered() {
     let mut rng = Rng::new(11);
     for case in 0..12 {
         let net = random_network(&mut rng, 2, 2, Activation::Relu, (2, 6));
         let input = Region::Box(IBox::new(vec![-0.5, -0.3], vec![0.4, 0.6]));
-        let bound = |prop| {
+        let bound = |prop, slope_steps| {
             let mut p = plan(net.clone(), input.clone(), Vec::new());
             p.propagator = prop;
+            p.slope_steps = slope_steps;
             run(&p).output.offsets
         };
-        let (ibp, crown, sdp) = (
-            bound(NetPropagator::Ibp),
-            bound(NetPropagator::Crown),
-            bound(NetPropagator::Sdp),
+        let (ibp, crown, alpha, sdp) = (
+            bound(NetPropagator::Ibp, 0),
+            bound(NetPropagator::Crown, 0),
+            bound(NetPropagator::Crown, 6),
+            bound(NetPropagator::Sdp, 0),
         );
         for k in 0..ibp.len() {
             assert!(crown[k] <= ibp[k], "case {case}: CROWN looser than IBP");
+            assert!(
+                alpha[k] <= crown[k],
+                "case {case}: optimised slopes looser than CROWN"
+            );
             assert!(sdp[k] <= crown[k], "case {case}: SDP looser than CROWN");
         }
     }

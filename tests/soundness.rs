@@ -926,3 +926,116 @@ fn batched_simulation_matches_the_scalar_one_bit_for_bit() {
     }
     assert!(compared > 10_000, "{compared}");
 }
+
+/// Optimised slopes (`optimise_slopes`): Reach-LP and unrolled CROWN with
+/// 4 projected-gradient steps per back-substitution keep every simulated
+/// trajectory inside (their own bounds and the intersected ones, whole and
+/// partitioned X0); one step from the same box is never looser than with
+/// CROWN's own slopes, and on some ReLU loops strictly tighter.
+#[test]
+fn optimised_slopes_keep_every_trajectory_inside() {
+    let mut checked = 0usize;
+    let mut tighter = 0usize;
+    for seed in 0..45u64 {
+        let case = random_case(seed);
+        let cl = case.cl.clone().with_slope_steps(4);
+        let n = case.x0.dim();
+        let cells = case.x0.grid(&vec![2; n]);
+        let mut boundaries = vec![Boundary::Box];
+        if n == 2 {
+            boundaries.push(Boundary::spread(6));
+        }
+        if let Region::Box(_) = case.x0 {
+            let plain = case
+                .cl
+                .step_alone(0, &case.x0, Propagator::ReachLp, &Boundary::Box);
+            let slopes = cl.step_alone(0, &case.x0, Propagator::ReachLp, &Boundary::Box);
+            let (p, s) = (plain.set.bbox(), slopes.set.bbox());
+            for i in 0..n {
+                let tol = |v: f64| 1e-12 * (1.0 + v.abs());
+                assert!(
+                    s.hi[i] <= p.hi[i] + tol(p.hi[i]) && s.lo[i] >= p.lo[i] - tol(p.lo[i]),
+                    "{}: optimised slopes looser in x[{i}]: {s:?} vs {p:?}",
+                    case.label
+                );
+                if s.hi[i] < p.hi[i] - 1e-9 || s.lo[i] > p.lo[i] + 1e-9 {
+                    tighter += 1;
+                }
+            }
+        }
+        for boundary in &boundaries {
+            for prop in [Propagator::ReachLp, Propagator::CrownUnrolled] {
+                let whole = reach(&cl, &case.x0, case.horizon, prop, boundary, false);
+                let own = reach(&cl, &case.x0, case.horizon, prop, boundary, true);
+                let parts: Vec<Vec<Region>> = cells
+                    .iter()
+                    .map(|c| reach(&cl, c, case.horizon, prop, boundary, false))
+                    .collect();
+                let mut rng = Rng::new(seed * 7919 + 3);
+                for _ in 0..60 {
+                    let mut x = initial_point(&mut rng, &case.x0);
+                    let cell = cells
+                        .iter()
+                        .position(|c| c.bbox().contains_point(&x))
+                        .expect("the grid covers X0");
+                    for t in 0..=case.horizon {
+                        for (sets, what) in
+                            [(&whole, "whole"), (&own, "own"), (&parts[cell], "cell")]
+                        {
+                            assert!(
+                                inside(&sets[t], &x),
+                                "{} {prop:?} {boundary:?} {what} with optimised slopes: step {t} state {x:?} outside {:?}",
+                                case.label,
+                                sets[t]
+                            );
+                        }
+                        checked += 1;
+                        if t < case.horizon {
+                            x = advance(&mut rng, &cl, t, &x);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 20_000, "only {checked} states were checked");
+    assert!(tighter > 0, "optimised slopes never tightened a step");
+}
+
+/// The optimised linear functions themselves (not only their bound over the
+/// box) hold at every sampled input, and their bound over the box is never
+/// above CROWN's own.
+#[test]
+fn optimised_linear_bounds_hold_pointwise() {
+    let mut tighter = 0;
+    for seed in 0..30u64 {
+        let mut rng = Rng::new(7000 + seed);
+        let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 7));
+        let input = IBox::new(vec![-0.7, -0.2], vec![0.4, 0.9]);
+        let a = Analysis::new(&net, &input, Mode::Crown);
+        let spec = DMatrix::from_row_slice(2, 2, &[1.0, -0.5, -1.0, 0.25]);
+        let plain = a.upper(spec.clone()).concretize(&input);
+        let bound = a.upper_optimised(spec.clone(), 8, None);
+        for (r, (o, p)) in bound.concretize(&input).iter().zip(&plain).enumerate() {
+            assert!(
+                *o <= *p,
+                "seed {seed} row {r}: optimised {o} above CROWN's {p}"
+            );
+            tighter += usize::from(*o < *p - 1e-9);
+        }
+        for _ in 0..500 {
+            let x = sample_point(&mut rng, &input);
+            let y = DVector::from_vec(net.forward(&x));
+            let s = &spec * y;
+            for r in 0..2 {
+                let lin: f64 =
+                    (0..2).map(|i| bound.coef.get(r, i) * x[i]).sum::<f64>() + bound.offset[r];
+                assert!(s[r] <= lin + 1e-12, "seed {seed} row {r}: {} > {lin}", s[r]);
+            }
+        }
+    }
+    assert!(
+        tighter > 5,
+        "optimised slopes tightened only {tighter} rows"
+    );
+}

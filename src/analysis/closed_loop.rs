@@ -229,6 +229,15 @@ impl Step {
 }
 
 /// Whether every entry is finite.
+/// The corner of `b` where `coef · z` is largest (the upper end where a
+/// coefficient is non-negative).
+fn corner(coef: &[f64], b: &IBox) -> Vec<f64> {
+    coef.iter()
+        .zip(b.lo.iter().zip(&b.hi))
+        .map(|(&c, (&l, &u))| if c >= 0.0 { u } else { l })
+        .collect()
+}
+
 fn all_finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
@@ -265,6 +274,10 @@ pub struct ClosedLoop {
     obs_xv: DMatrix<f64>,
     /// The dynamics per step (one entry: time-invariant).
     dynamics: Vec<Dynamics>,
+    /// Projected-gradient steps on the lower ReLU slopes of each
+    /// back-substitution through the controller (0: CROWN's own slopes;
+    /// see [`Analysis::upper_optimised`]).
+    pub slope_steps: usize,
 }
 
 impl ClosedLoop {
@@ -306,7 +319,14 @@ impl ClosedLoop {
             net,
             obs_xv,
             dynamics,
+            slope_steps: 0,
         }
+    }
+
+    /// The same loop with `steps` slope-optimisation steps per back-substitution.
+    pub fn with_slope_steps(mut self, steps: usize) -> ClosedLoop {
+        self.slope_steps = steps;
+        self
     }
 
     /// The dynamics of step `t`.
@@ -750,9 +770,26 @@ impl ClosedLoop {
         let mb_abs = bound.coef.abs().mul(&d.plant.b.abs());
         let u_abs = analysis.output_box(Mode::Ibp).abs_max();
         let p = self.plant.obs.ncols();
+        let xv_abs = x.product(v).abs_max();
+        // with optimised slopes, each row's measure is what this step makes
+        // of it: the control part composed with y = Cᵀx + v and added to the
+        // direct part, over the box of x (and its maximiser, mapped to y)
+        let objective = |r: usize, cand: &LinearUpper| -> (f64, Vec<f64>) {
+            let over_xv = cand.through_affine(&self.obs_xv, &DVector::zeros(p), &xv_abs);
+            let v_star = corner(&over_xv.coef.row(0)[n..], v);
+            let direct_r = LinearUpper {
+                coef: Rows::from_row_major(1, n, direct.coef.row(r).to_vec()),
+                offset: vec![direct.offset[r]],
+            };
+            let total = direct_r.add(&over_xv.split_concretize(n, v), &abs_x);
+            let mut xv_star = corner(total.coef.row(0), x);
+            xv_star.extend(v_star);
+            let y_star = &self.obs_xv * DVector::from_vec(xv_star);
+            (total.concretize(x)[0], y_star.as_slice().to_vec())
+        };
         let mut control = analysis
-            .upper(spec)
-            .through_affine(&self.obs_xv, &DVector::zeros(p), &x.product(v).abs_max())
+            .upper_optimised(spec, self.slope_steps, Some(&objective))
+            .through_affine(&self.obs_xv, &DVector::zeros(p), &xv_abs)
             .split_concretize(n, v);
         for (o, row) in control.offset.iter_mut().zip(mb_abs.iter_rows()) {
             *o = sum_upper([*o, slack(k, row, &u_abs)]);

@@ -278,6 +278,12 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
     )
 }
 
+/// What [`Analysis::upper_optimised`] minimises for row `r`, given that
+/// row's one-row bound over the network input: its value (the smaller the
+/// better; any measure, every candidate is sound) and the network input at
+/// which it is attained (where the slope gradient is taken).
+pub type Objective<'o> = dyn Fn(usize, &LinearUpper) -> (f64, Vec<f64>) + 'o;
+
 /// Other certified upper bounds of a linear bound's rows (see [`Analysis::with_hook`]).
 pub type BoundHook<'h> = dyn Fn(&LinearUpper) -> Vec<f64> + 'h;
 
@@ -452,6 +458,20 @@ impl<'a> Analysis<'a> {
 
     /// Back-substitute a bound on the value at position `end` down to the input.
     fn backward(&self, spec: Rows, end: usize) -> LinearUpper {
+        self.backward_with(spec, end, &self.relax, None)
+    }
+
+    /// [`Analysis::backward`] with the given relaxations (any sound ones:
+    /// the optimised slopes of [`Analysis::upper_optimised`]); with `trace`,
+    /// the first row's coefficients on each activation's output are
+    /// recorded (`trace[i]` for activation layer `i`).
+    fn backward_with(
+        &self,
+        spec: Rows,
+        end: usize,
+        relax: &[Vec<Relax>],
+        mut trace: Option<&mut [Vec<f64>]>,
+    ) -> LinearUpper {
         let mut coef = spec;
         let mut offset = vec![0.0; coef.nrows()];
         // two buffers in turn: an affine layer writes the other one, an
@@ -464,11 +484,145 @@ impl<'a> Analysis<'a> {
                     std::mem::swap(&mut coef, &mut spare);
                 }
                 Layer::Act(_) => {
-                    relaxation_in_place(&mut coef, &mut offset, &self.relax[i], &self.abs[i]);
+                    if let Some(t) = trace.as_deref_mut() {
+                        t[i].clear();
+                        t[i].extend_from_slice(coef.row(0));
+                    }
+                    relaxation_in_place(&mut coef, &mut offset, &relax[i], &self.abs[i]);
                 }
             }
         }
         LinearUpper { coef, offset }
+    }
+
+    /// [`Analysis::upper`] with the lower slopes of unstable ReLUs optimised
+    /// per row (α-CROWN-style, Xu et al. 2021): `steps` steps of projected
+    /// gradient descent on the row's `objective` (by default its bound over
+    /// the input box; a caller that composes the bound further passes the
+    /// measure it cares about), each slope
+    /// kept in `[0, 1]`. Any slope in `[0, 1]` gives a sound lower line
+    /// (`a·z ≤ relu(z)`, intercept 0), and every iterate is evaluated with
+    /// the same certified arithmetic as [`Analysis::upper`]; each row keeps
+    /// the iterate with the smallest objective, starting from CROWN's own
+    /// slopes, so by that measure the result is never looser than
+    /// [`Analysis::upper`]'s. Intermediate bounds are not re-optimised.
+    ///
+    /// The gradient: CROWN's bound is the maximum of the objective over the
+    /// relaxed network (every `h` between its two lines); at the maximiser
+    /// (the input box's corner the final coefficients point to, pushed
+    /// forward through the lines each coefficient's sign selected), the
+    /// derivative in a lower slope `a` is `c·ẑ`, with `c < 0` the
+    /// coefficient on the neuron's output and `ẑ` its pre-activation value.
+    pub fn upper_optimised(
+        &self,
+        spec: impl Into<Rows>,
+        steps: usize,
+        objective: Option<&Objective>,
+    ) -> LinearUpper {
+        let spec = spec.into();
+        let mut best = self.upper(spec.clone());
+        let end = self.net.layers.len();
+        let unstable = |r: &Relax| r.au > 0.0 && r.au < 1.0;
+        if steps == 0 || !self.relax.iter().flatten().any(unstable) {
+            return best;
+        }
+        let input = &self.boxes[0];
+        let own = |_: usize, cand: &LinearUpper| -> (f64, Vec<f64>) {
+            let corner = cand
+                .coef
+                .row(0)
+                .iter()
+                .zip(input.lo.iter().zip(&input.hi))
+                .map(|(&c, (&l, &u))| if c >= 0.0 { u } else { l })
+                .collect();
+            (cand.concretize(input)[0], corner)
+        };
+        let objective = objective.unwrap_or(&own);
+        let mut trace = vec![Vec::new(); end];
+        for r in 0..spec.nrows() {
+            let row = Rows::from_row_major(1, spec.ncols(), spec.row(r).to_vec());
+            let mut relax = self.relax.clone();
+            let mut cand = self.backward_with(row.clone(), end, &relax, Some(&mut trace));
+            let mut at = objective(r, &cand).1;
+            // measured against the row `upper` gave, so never worse than it
+            let mut best_value = objective(
+                r,
+                &LinearUpper {
+                    coef: Rows::from_row_major(1, best.coef.ncols(), best.coef.row(r).to_vec()),
+                    offset: vec![best.offset[r]],
+                },
+            )
+            .0;
+            for k in 0..steps {
+                let grad = self.slope_gradient(&at, &relax, &trace);
+                let gmax = grad.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+                if !(gmax > 0.0 && gmax.is_finite()) {
+                    break;
+                }
+                let rate = 0.5 * 0.8f64.powi(k as i32) / gmax;
+                let mut moved = false;
+                for (rel, g) in relax.iter_mut().zip(&grad) {
+                    for (rl, gj) in rel.iter_mut().zip(g) {
+                        if *gj != 0.0 {
+                            let al = (rl.al - rate * gj).clamp(0.0, 1.0);
+                            moved |= al != rl.al;
+                            rl.al = al;
+                        }
+                    }
+                }
+                if !moved {
+                    // every slope the gradient pushes is at its bound
+                    break;
+                }
+                cand = self.backward_with(row.clone(), end, &relax, Some(&mut trace));
+                let (v, point) = objective(r, &cand);
+                at = point;
+                if v < best_value {
+                    best_value = v;
+                    best.coef.row_mut(r).copy_from_slice(cand.coef.row(0));
+                    best.offset[r] = cand.offset[0];
+                }
+            }
+        }
+        best
+    }
+
+    /// The derivative of a one-row bound at the network input `at` (its
+    /// maximiser; the bound was computed with `relax`, and its coefficients
+    /// on each activation's output are in `trace`) in
+    /// the lower slope of every unstable ReLU (0 elsewhere); plain `f64`,
+    /// it only steers the search.
+    fn slope_gradient(
+        &self,
+        at: &[f64],
+        relax: &[Vec<Relax>],
+        trace: &[Vec<f64>],
+    ) -> Vec<Vec<f64>> {
+        let mut h = at.to_vec();
+        let mut grad = vec![Vec::new(); relax.len()];
+        for (i, layer) in self.net.layers.iter().enumerate() {
+            match layer {
+                Layer::Affine { w, b } => {
+                    h = (w * DVector::from_column_slice(&h) + b).as_slice().to_vec()
+                }
+                Layer::Act(act) => {
+                    let relu = *act == Activation::Relu;
+                    grad[i] = vec![0.0; h.len()];
+                    for (j, z) in h.iter_mut().enumerate() {
+                        let (rl, c) = (relax[i][j], trace[i][j]);
+                        if c >= 0.0 {
+                            *z = rl.au * *z + rl.bu;
+                        } else {
+                            if relu && rl.au > 0.0 && rl.au < 1.0 {
+                                grad[i][j] = c * *z;
+                            }
+                            *z = rl.al * *z + rl.bl;
+                        }
+                    }
+                }
+            }
+        }
+        grad
     }
 }
 

@@ -213,6 +213,7 @@ fn main() -> ExitCode {
         shape: Shape::Box,
         samples: 0,
         seed: 0,
+        slope_steps: 0,
     };
     let mut rows: Vec<(String, Vec<f64>)> = Vec::new();
     let policies: Vec<(String, Option<f64>)> = std::iter::once(("nominal".to_string(), None))

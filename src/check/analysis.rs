@@ -8,7 +8,7 @@ use crate::analysis::closed_loop::{Boundary, Propagator};
 use crate::analysis::shape::Shape;
 use crate::diag::{did_you_mean, Code, Diagnostic};
 use crate::ir::{Guide, NetPropagator, Partitioner};
-use crate::limits::{within, MAX_CELLS, MAX_SAMPLES};
+use crate::limits::{within, MAX_CELLS, MAX_SAMPLES, MAX_SLOPE_STEPS};
 use crate::syntax::ast::*;
 
 /// The checked analysis choices (each `None` when it had an error), with
@@ -24,6 +24,8 @@ pub(super) struct AnalysisPart {
     pub propagator_span: Option<Span>,
     pub samples: usize,
     pub seed: u64,
+    /// Slope-optimisation steps (0: CROWN's own slopes).
+    pub slope_steps: usize,
     /// Network specs: the propagator and the output shape.
     pub net_propagator: Option<NetPropagator>,
     pub shape: Option<Shape>,
@@ -52,6 +54,8 @@ pub(super) fn analysis(
     let mut propagator_span = None;
     let mut samples = DEFAULT_SAMPLES;
     let mut seed = 0u64;
+    let mut slope_steps = 0usize;
+    let mut slopes_span = None;
     if let Some(an) = analyses.first() {
         let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
         for st in &an.stmts {
@@ -64,6 +68,7 @@ pub(super) fn analysis(
                 AnalysisStmt::Shape(_) | AnalysisStmt::ShapePolytope(_) => "shape",
                 AnalysisStmt::Samples(_) => "samples",
                 AnalysisStmt::Seed(_) => "seed",
+                AnalysisStmt::OptimiseSlopes(_) => "optimise_slopes",
             };
             if let Some(first) = seen.get(key) {
                 cx.duplicate(&format!("`{key}`"), *first, st.span);
@@ -354,7 +359,54 @@ pub(super) fn analysis(
                     }
                 }
                 AnalysisStmt::Seed(s) => seed = s.node,
+                AnalysisStmt::OptimiseSlopes(s) => {
+                    if s.node > MAX_SLOPE_STEPS {
+                        cx.err(
+                            Diagnostic::new(
+                                Code::Limit,
+                                s.span,
+                                format!("more than {MAX_SLOPE_STEPS} slope-optimisation steps"),
+                            )
+                            .label("too many")
+                            .hint("a few steps (3 to 20) give most of the gain"),
+                        );
+                    } else {
+                        slope_steps = s.node as usize;
+                        slopes_span = Some(st.span);
+                    }
+                }
             }
+        }
+    }
+    // optimised slopes need a propagator that back-substitutes through the
+    // controller's ReLU relaxations
+    if let Some(span) = slopes_span.filter(|_| slope_steps > 0) {
+        let refused = if network {
+            net_propagator
+                .filter(|p| !matches!(p, NetPropagator::Crown | NetPropagator::Sdp))
+                .map(|p| (p.name(), "crown, sdp"))
+        } else {
+            propagator
+                .filter(|p| {
+                    !matches!(
+                        p,
+                        Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp
+                    )
+                })
+                .map(|p| (p.name(), "reach_lp, crown_unrolled, reach_sdp"))
+        };
+        if let Some((name, takes)) = refused {
+            cx.err(
+                Diagnostic::new(
+                    Code::SlopeSteps,
+                    span,
+                    format!("propagator `{name}` has no slopes to optimise"),
+                )
+                .label("no effect with this propagator")
+                .hint(format!(
+                    "slopes are optimised by the propagators {takes}; remove this line or change the propagator"
+                )),
+            );
         }
     }
 
@@ -368,6 +420,7 @@ pub(super) fn analysis(
         propagator_span,
         samples,
         seed,
+        slope_steps,
         net_propagator,
         shape,
     }

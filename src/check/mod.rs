@@ -183,6 +183,8 @@ pub struct Checked {
     pub samples: usize,
     /// Monte Carlo seed.
     pub seed: u64,
+    /// Projected-gradient steps on the lower ReLU slopes (0: CROWN's own).
+    pub slope_steps: usize,
 }
 
 /// The path of the spec's controller (or a network spec's model), for the
@@ -1112,6 +1114,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             boundary: boundary?,
             samples,
             seed,
+            slope_steps: an.slope_steps,
         })
     })();
     assembled.ok_or_else(|| {

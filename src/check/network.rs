@@ -84,6 +84,8 @@ pub struct NetworkChecked {
     pub samples: usize,
     /// Monte Carlo seed.
     pub seed: u64,
+    /// Projected-gradient steps on the lower ReLU slopes (0: CROWN's own).
+    pub slope_steps: usize,
 }
 
 /// Robust action selection (CARRL): every observation's ε-ball.
@@ -725,5 +727,6 @@ pub(super) fn check_network(
         shape: an.shape?,
         samples: an.samples,
         seed: an.seed,
+        slope_steps: an.slope_steps,
     })
 }

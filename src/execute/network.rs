@@ -285,11 +285,13 @@ fn stack(shape: &DMatrix<f64>, props: &[Vec<Vec<f64>>], m: usize) -> Rows {
 }
 
 /// Certified upper bounds of every row of `dirs` over `cell` (`+∞` where
-/// there is none), and the solver issues met.
+/// there is none), and the solver issues met; CROWN's lower ReLU slopes are
+/// optimised `slope_steps` times per row (0: CROWN's own).
 pub fn cell_bounds(
     net: &Network,
     cell: &Region,
     prop: NetPropagator,
+    slope_steps: usize,
     dirs: &DMatrix<f64>,
 ) -> (Vec<f64>, Vec<Issue>) {
     let none = || vec![f64::INFINITY; dirs.nrows()];
@@ -310,7 +312,9 @@ pub fn cell_bounds(
     let mut b = support_of_box(dirs, &out.lo, &out.hi);
     let mut issues = Vec::new();
     if mode != Mode::Ibp {
-        let (crown, iss) = a.upper(dirs.clone()).concretize_region(cell);
+        let (crown, iss) = a
+            .upper_optimised(dirs.clone(), slope_steps, None)
+            .concretize_region(cell);
         issues.extend(iss);
         for (v, c) in b.iter_mut().zip(crown) {
             if c.is_finite() {
@@ -427,7 +431,8 @@ fn bound_all(
     };
     let (cells, calls, stop) = match &plan.partitioner {
         Partitioner::Uniform(grid) => {
-            let (root, iss) = cell_bounds(&plan.net, region, plan.propagator, dirs);
+            let (root, iss) =
+                cell_bounds(&plan.net, region, plan.propagator, plan.slope_steps, dirs);
             issues.extend(iss);
             if grid.iter().all(|k| *k == 1) {
                 (vec![(region.bbox(), root)], 1, Stop::Grid)
@@ -440,7 +445,8 @@ fn bound_all(
                     if ctl.late() {
                         return None;
                     }
-                    let (b, iss) = cell_bounds(&plan.net, c, plan.propagator, dirs);
+                    let (b, iss) =
+                        cell_bounds(&plan.net, c, plan.propagator, plan.slope_steps, dirs);
                     Some((within(b, Some(&root)), iss))
                 });
                 let mut stop = Stop::Grid;
@@ -486,7 +492,8 @@ fn bound_all(
                         _ if parent.is_none() => region.clone(),
                         _ => Region::Box(c.clone()),
                     };
-                    let (b, iss) = cell_bounds(&plan.net, &cell, plan.propagator, dirs);
+                    let (b, iss) =
+                        cell_bounds(&plan.net, &cell, plan.propagator, plan.slope_steps, dirs);
                     issues.extend(iss);
                     let b = within(b, parent);
                     let s = excess(&b, sampled, extent);

@@ -121,8 +121,9 @@ pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
         plan.network_summary
     );
     s += &format!(
-        "  analysis    {}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
+        "  analysis    {}{}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
+        slopes_text(plan.closed_loop.slope_steps),
         partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         boundary_text(&plan.boundary),
         plan.samples,
@@ -282,6 +283,15 @@ fn counterexample_text(plan: &Plan, tr: &Trajectory) -> String {
     s
 }
 
+/// ` (slopes optimised, N steps)` after the propagator's name, when they are.
+pub fn slopes_text(steps: usize) -> String {
+    match steps {
+        0 => String::new(),
+        1 => " (slopes optimised, 1 step)".to_string(),
+        k => format!(" (slopes optimised, {k} steps)"),
+    }
+}
+
 /// The tutorial's error measure at the final step: the volume of the reachable
 /// bounding box over the volume of the sampled states' bounding box, minus 1
 /// (`None` without samples or when the sampled hull is flat).
@@ -398,6 +408,7 @@ pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>)
             },
             "samples": plan.samples,
             "seed": plan.seed,
+            "slope_steps": plan.closed_loop.slope_steps,
         },
         "reachable": steps,
         "final_error": final_error(out).map(f),

@@ -248,8 +248,9 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
         );
     }
     s += &format!(
-        "  analysis    {}, {}, {} output shape, {} Monte Carlo samples (seed {})\n\n",
+        "  analysis    {}{}, {}, {} output shape, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
+        super::slopes_text(plan.slope_steps),
         partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         shape_text(&plan.shape),
         plan.samples,
@@ -413,6 +414,7 @@ pub fn json(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
             "shape": shape_name(&plan.shape),
             "samples": plan.samples,
             "seed": plan.seed,
+            "slope_steps": plan.slope_steps,
         },
         "output_set": {
             "facets": facets,

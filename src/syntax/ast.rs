@@ -365,4 +365,6 @@ pub enum AnalysisStmt {
     Samples(Spanned<u64>),
     /// `seed N`
     Seed(Spanned<u64>),
+    /// `optimise_slopes N`
+    OptimiseSlopes(Spanned<u64>),
 }

@@ -675,6 +675,7 @@ impl Builder {
             },
             Rule::samples => AnalysisStmt::Samples(self.integer(arg)),
             Rule::seed => AnalysisStmt::Seed(self.integer(arg)),
+            Rule::optimise_slopes => AnalysisStmt::OptimiseSlopes(self.integer(arg)),
             other => unreachable!("grammar analysis rule {other:?}"),
         };
         Spanned { node, span: s }

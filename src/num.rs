@@ -76,6 +76,14 @@ impl Acc {
         n: 0,
     };
 
+    /// A sum of one term.
+    #[inline]
+    pub fn of(t: f64) -> Acc {
+        let mut a = Acc::ZERO;
+        a.add(t);
+        a
+    }
+
     /// Add one term (a value at most one rounding away from its exact value).
     #[inline]
     pub fn add(&mut self, t: f64) {

@@ -537,17 +537,28 @@ impl ClosedLoop {
                 // never looser than CL-CROWN (CL-CROWN's control box is also
                 // intersected with IBP, which Reach-LP's per-facet bound is not)
                 let analysis = Analysis::new(&self.net, &y, Mode::Crown);
-                let u = analysis.output_box(Mode::Crown);
-                if !(analysis.is_finite() && u.is_finite()) {
+                if !analysis.is_finite() {
                     return Step::overflowed(n, Vec::new());
                 }
+                // the facets' bound and CL-CROWN's control box, from one
+                // back-substitution through the controller
+                let (bound, u) = self.back_step_with(
+                    t,
+                    &LinearUpper::of_spec(facets.clone()),
+                    &analysis,
+                    &bbox,
+                    true,
+                );
+                let Some(u) = u.filter(IBox::is_finite) else {
+                    return Step::overflowed(n, Vec::new());
+                };
                 if !alone {
                     let (separate, more) = self
                         .push_control_box(t, facets.clone(), &bbox, &u)
                         .concretize_region(x);
                     extra = Some((separate, more));
                 }
-                self.back_step(t, &LinearUpper::of_spec(facets.clone()), &analysis, &bbox)
+                bound
             }
             Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
                 let u = match prop {
@@ -757,6 +768,21 @@ impl ClosedLoop {
         analysis: &Analysis,
         x: &IBox,
     ) -> LinearUpper {
+        self.back_step_with(t, bound, analysis, x, false).0
+    }
+
+    /// [`ClosedLoop::back_step`], and with `control_box` also the CROWN
+    /// control box (`analysis.output_box(Mode::Crown)`), from the same
+    /// back-substitution through the controller (see
+    /// [`Analysis::upper_and_output_box`]).
+    fn back_step_with(
+        &self,
+        t: usize,
+        bound: &LinearUpper,
+        analysis: &Analysis,
+        x: &IBox,
+        control_box: bool,
+    ) -> (LinearUpper, Option<IBox>) {
         let n = self.states();
         let (w, v) = (&self.plant.w, &self.plant.v);
         let d = self.at(t);
@@ -787,8 +813,15 @@ impl ClosedLoop {
             let y_star = &self.obs_xv * DVector::from_vec(xv_star);
             (total.concretize(x)[0], y_star.as_slice().to_vec())
         };
-        let mut control = analysis
-            .upper_optimised(spec, self.slope_steps, Some(&objective))
+        let (over_y, u) = if control_box {
+            let (over_y, u) =
+                analysis.upper_and_output_box(spec, self.slope_steps, Some(&objective));
+            (over_y, Some(u))
+        } else {
+            let over_y = analysis.upper_optimised(spec, self.slope_steps, Some(&objective));
+            (over_y, None)
+        };
+        let mut control = over_y
             .through_affine(&self.obs_xv, &DVector::zeros(p), &xv_abs)
             .split_concretize(n, v);
         for (o, row) in control.offset.iter_mut().zip(mb_abs.iter_rows()) {
@@ -798,7 +831,7 @@ impl ClosedLoop {
         if let Some(delta) = self.model_delta(t, x, &u_abs) {
             Self::add_model_error(&mut out.offset, &bound.coef, &delta);
         }
-        out
+        (out, u)
     }
 
     /// The unrolled propagator: reachable sets of steps `0..=horizon` from

@@ -63,12 +63,13 @@ impl LinearUpper {
         b: &DVector<f64>,
         wz: &[f64],
     ) -> LinearUpper {
-        let mut out = LinearUpper {
-            coef: Rows::zeros(0, 0),
-            offset: self.offset.clone(),
-        };
-        affine_into(&self.coef, &mut out.offset, w, b, wz, &mut out.coef);
-        out
+        let mut coef = Rows::zeros(0, 0);
+        let mut acc: Vec<Acc> = self.offset.iter().map(|&o| Acc::of(o)).collect();
+        affine_into(&self.coef, &mut acc, w, b, wz, &mut coef);
+        LinearUpper {
+            coef,
+            offset: acc.into_iter().map(Acc::upper).collect(),
+        }
     }
 
     /// The sum of two bounds on the same variables (`|z| ≤ abs_in`).
@@ -150,9 +151,13 @@ impl LinearUpper {
 
 /// One affine layer of back-substitution: `out = coef · W`, and each offset
 /// raised by `coefᵣ · b` and the product's rounding error `γ·|coefᵣ|·wz`.
+/// The offsets are running sums ([`Acc`]) over every layer passed so far:
+/// rounded once, at the end of the back-substitution, with the error bound
+/// of all their terms (each term is one rounding from its value, as
+/// [`Acc`] requires, whichever layer added it).
 fn affine_into(
     coef: &Rows,
-    offset: &mut [f64],
+    offset: &mut [Acc],
     w: &DMatrix<f64>,
     b: &DVector<f64>,
     wz: &[f64],
@@ -165,22 +170,16 @@ fn affine_into(
         if sign < 0.0 {
             out.negate();
         }
-        for (row, o) in coef.iter_rows().zip(offset.iter_mut()) {
-            let mut acc = Acc::ZERO;
+        for (row, acc) in coef.iter_rows().zip(offset.iter_mut()) {
             acc.add_products(row, b.as_slice());
-            acc.add(*o);
-            *o = acc.upper();
         }
         return;
     }
     coef.mul_into(w, out);
     let k = gamma(w.nrows() + 2);
-    for (row, o) in coef.iter_rows().zip(offset.iter_mut()) {
-        let mut acc = Acc::ZERO;
+    for (row, acc) in coef.iter_rows().zip(offset.iter_mut()) {
         acc.add_products(row, b.as_slice());
-        acc.add(*o);
         acc.add(slack(k, row, wz));
-        *o = acc.upper();
     }
 }
 
@@ -208,10 +207,8 @@ fn signed_identity(w: &DMatrix<f64>) -> Option<f64> {
 /// `l` of `h = σ(z)` becomes `l·a` with the upper relaxation's slope `a`
 /// when `l ≥ 0` (the lower one's otherwise), and its intercept times `l` goes
 /// into the offset, with the products' rounding error (`|z| ≤ abs_in`).
-fn relaxation_in_place(coef: &mut Rows, offset: &mut [f64], rel: &[Relax], abs_in: &[f64]) {
-    for (r, o) in offset.iter_mut().enumerate() {
-        let mut acc = Acc::ZERO;
-        acc.add(*o);
+fn relaxation_in_place(coef: &mut Rows, offset: &mut [Acc], rel: &[Relax], abs_in: &[f64]) {
+    for (r, acc) in offset.iter_mut().enumerate() {
         let row = coef.row_mut(r);
         for (c, rl) in row.iter_mut().zip(rel) {
             let l = *c;
@@ -226,7 +223,6 @@ fn relaxation_in_place(coef: &mut Rows, offset: &mut [f64], rel: &[Relax], abs_i
             }
         }
         acc.add(slack(2.0 * U, row, abs_in));
-        *o = acc.upper();
     }
 }
 
@@ -354,7 +350,14 @@ impl<'a> Analysis<'a> {
                 Layer::Affine { w, b } => {
                     let mut next = affine_image(w, b, current);
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
-                    if mode != Mode::Ibp && feeds_activation {
+                    // On the network's first layer (an affine map of the
+                    // input box) CROWN's bound is interval arithmetic's
+                    // with the product's rounding slack added: never
+                    // tighter, so without a hook (which may bound it
+                    // otherwise) the back-substitution is skipped (same
+                    // bounds, bit for bit).
+                    let useful = i > 0 || hook.is_some();
+                    if mode != Mode::Ibp && feeds_activation && useful {
                         // A ReLU that interval arithmetic already proves
                         // inactive (z ≤ 0) outputs exactly 0 whatever its
                         // bounds: it is not worth a back-substitution, and
@@ -443,12 +446,51 @@ impl<'a> Analysis<'a> {
             return ibp;
         }
         let m = ibp.dim();
-        let both = self
-            .upper(plus_minus_identity(m))
-            .concretize(&self.boxes[0]);
+        self.crown_box(ibp, &self.upper(plus_minus_identity(m)))
+    }
+
+    /// The output box from the bounds `pm` of `[I; −I]`, intersected with IBP's `ibp`.
+    fn crown_box(&self, ibp: IBox, pm: &LinearUpper) -> IBox {
+        let m = ibp.dim();
+        let both = pm.concretize(&self.boxes[0]);
         let lo = (0..m).map(|j| ibp.lo[j].max(-both[m + j])).collect();
         let hi = (0..m).map(|j| ibp.hi[j].min(both[j])).collect();
         IBox::new(lo, hi)
+    }
+
+    /// [`Analysis::upper_optimised`] of `spec` and the CROWN
+    /// [`Analysis::output_box`] together. With CROWN's own slopes both come
+    /// from one back-substitution of the stacked rows `[I; −I; spec]`, at
+    /// one pass's per-layer cost instead of two. Every row is
+    /// back-substituted on its own, so each bound is the one the two calls
+    /// give: bit for bit while products are per-row dot products, up to
+    /// rounding where the blocked product of wide layers takes over (its
+    /// summation order depends on the number of rows; sound either way).
+    pub fn upper_and_output_box(
+        &self,
+        spec: Rows,
+        steps: usize,
+        objective: Option<&Objective>,
+    ) -> (LinearUpper, IBox) {
+        let ibp = self
+            .boxes
+            .last()
+            .cloned()
+            .unwrap_or_else(|| self.boxes[0].clone());
+        let m = ibp.dim();
+        if steps > 0 || spec.ncols() != m {
+            let u = self.crown_box(ibp, &self.upper(plus_minus_identity(m)));
+            return (self.upper_optimised(spec, steps, objective), u);
+        }
+        let all = self.upper(plus_minus_identity(m).stacked(&spec));
+        let (pm_coef, coef) = all.coef.split_rows(2 * m);
+        let mut offset = all.offset;
+        let rest = offset.split_off(2 * m);
+        let pm = LinearUpper {
+            coef: pm_coef,
+            offset,
+        };
+        (LinearUpper { coef, offset: rest }, self.crown_box(ibp, &pm))
     }
 
     /// CROWN: `S f(y) ≤ Λ y + c` over the input box, for a `k × outputs` matrix `S`.
@@ -473,7 +515,7 @@ impl<'a> Analysis<'a> {
         mut trace: Option<&mut [Vec<f64>]>,
     ) -> LinearUpper {
         let mut coef = spec;
-        let mut offset = vec![0.0; coef.nrows()];
+        let mut offset = vec![Acc::ZERO; coef.nrows()];
         // two buffers in turn: an affine layer writes the other one, an
         // activation rewrites its rows in place
         let mut spare = Rows::zeros(0, 0);
@@ -492,7 +534,10 @@ impl<'a> Analysis<'a> {
                 }
             }
         }
-        LinearUpper { coef, offset }
+        LinearUpper {
+            coef,
+            offset: offset.into_iter().map(Acc::upper).collect(),
+        }
     }
 
     /// [`Analysis::upper`] with the lower slopes of unstable ReLUs optimised

@@ -82,6 +82,24 @@ impl Rows {
         DMatrix::from_row_slice(self.rows, self.cols, &self.data)
     }
 
+    /// `self` above `other` (same number of columns).
+    pub fn stacked(&self, other: &Rows) -> Rows {
+        assert_eq!(self.cols, other.cols, "stacking rows of different widths");
+        let mut data = Vec::with_capacity(self.data.len() + other.data.len());
+        data.extend_from_slice(&self.data);
+        data.extend_from_slice(&other.data);
+        Rows::from_row_major(self.rows + other.rows, self.cols, data)
+    }
+
+    /// The first `at` rows and the rest.
+    pub fn split_rows(mut self, at: usize) -> (Rows, Rows) {
+        let at = at.min(self.rows);
+        let rest = self.data.split_off(at * self.cols);
+        let tail = Rows::from_row_major(self.rows - at, self.cols, rest);
+        self.rows = at;
+        (self, tail)
+    }
+
     /// The first `keep` columns.
     pub fn first_columns(&self, keep: usize) -> Rows {
         let mut data = Vec::with_capacity(self.rows * keep);

@@ -4,7 +4,10 @@
 //!
 //! # The program
 //! With `v = (ξ, h₁, …, h_L, 1)`, where `ξ = (x, v_noise)` is the step's
-//! input and `h_k` the post-activations of the ReLU layers, every fact used
+//! input and `h_k` the post-activations of the ReLU layers (only the
+//! neurons the step's pre-activation bounds do not prove stable, and the
+//! last hidden layer: stable neurons are substituted, see [`StepSdp`]),
+//! every fact used
 //! is a quadratic form `vᵀS v ≥ 0` (or `= 0`) that holds on every feasible `v`:
 //! the input polytope's rows `rᵢ = gᵢ − Gᵢξ ≥ 0` and their pairwise products
 //! `rᵢ rⱼ ≥ 0`; per neuron `h ≥ 0`, `h ≥ z`, `h (h − z) = 0`, and the triangle
@@ -24,7 +27,8 @@
 //! is set up on a "merged" ReLU network (consecutive affine layers, and the
 //! observation map `y = Cᵀx + v`, multiplied out in `f64`); the difference to
 //! the exact network is bounded layer by layer (ReLU is 1-Lipschitz) and
-//! added to the bound. Statuses other than `Solved`/`AlmostSolved` give no
+//! added to the bound, and so is the rounding of substituting stable
+//! neurons. Statuses other than `Solved`/`AlmostSolved` give no
 //! SDP bound: the caller keeps its Reach-LP bound and reports the issue.
 
 use clarabel::algebra::CscMatrix;
@@ -178,40 +182,155 @@ pub struct SdpBound {
     pub issue: Option<Issue>,
 }
 
+/// A neuron the SDP keeps as a coordinate of `v`.
+struct Kept {
+    /// Its coordinate in `v`.
+    h: usize,
+    /// Its pre-activation as a sparse affine form over `v` (the constant on
+    /// the last coordinate).
+    z: Vec<(usize, f64)>,
+    /// Bounds of that form on the step's input set.
+    l: f64,
+    u: f64,
+}
+
 /// The data of one step's SDPs, shared by all facets.
-pub struct StepSdp<'a> {
-    net: &'a MergedNet,
-    /// Input rows `G ξ ≤ g` (the region's rows and the box of ξ).
+///
+/// # Stable neurons are not variables
+/// A neuron whose pre-activation bounds (of the merged network, on the
+/// step's input box) prove it inactive (`u ≤ 0`) outputs 0 there, and an
+/// active one (`l ≥ 0`) outputs its pre-activation: both are affine in the
+/// layer's input, so they are substituted into the next layer instead of
+/// becoming coordinates of `v` (the last hidden layer is always kept, so
+/// callers can write the output's objective over it). `v = (ξ, kept
+/// neurons, 1)` and every kept neuron's pre-activation is an affine form
+/// over the coordinates before it. On the quadrotor every neuron of a step
+/// can be stable: `v` then has 1 + 12 + 3 coordinates instead of 83.
+///
+/// The forms are computed in `f64`; the network they define (the "folded"
+/// one: stable neurons substituted, kept ones `relu` of their form) differs
+/// from the merged network by at most `err[i]` at each coordinate `i`
+/// (rounding of the substituted coefficients, carried through every later
+/// layer; ReLU is 1-Lipschitz). The SDP's facts are facts of the folded
+/// network (its pre-activation bounds are the merged ones widened by that
+/// error), and [`StepSdp::bound`] adds `Σ |φᵢ|·err[i]`, so the bound holds
+/// for the merged network's values, exactly as before.
+pub struct StepSdp {
+    /// Input rows `G ξ ≤ g` (the extra rows, then ξ's box).
     rows: Vec<(Vec<f64>, f64)>,
-    /// Pre-activation boxes of the hidden layers (merged network).
-    pre: Vec<IBox>,
+    /// The kept neurons, layer by layer.
+    kept: Vec<Kept>,
     /// Dimension of ξ.
     d0: usize,
-    /// Offsets of each hidden layer in v.
-    offsets: Vec<usize>,
+    /// Coordinate of the last hidden layer's first neuron in v.
+    last: usize,
+    /// `|vᵢ|` bounds (the folded network's values).
+    vmax: Vec<f64>,
+    /// `|vᵢ(folded) − vᵢ(merged)|` bounds.
+    err: Vec<f64>,
     /// Dimension of v.
     dim: usize,
     /// `R² ≥ ‖v‖²`.
     radius2: f64,
 }
 
-impl<'a> StepSdp<'a> {
+impl StepSdp {
     /// Prepare the SDPs of one step: `xi` bounds ξ, `rows` are extra input rows on ξ.
-    pub fn new(net: &'a MergedNet, xi: &IBox, rows: &[(Vec<f64>, f64)]) -> StepSdp<'a> {
+    pub fn new(net: &MergedNet, xi: &IBox, rows: &[(Vec<f64>, f64)]) -> StepSdp {
         let d0 = xi.dim();
         let analysis = Analysis::new(&net.net, xi, Mode::Crown);
         let boxes = analysis_boxes(&analysis);
-        let mut pre = Vec::new();
-        let mut offsets = Vec::new();
-        let mut at = d0;
-        let mut radius2 = 1.0 + xi.abs_max().iter().map(|m| m * m).sum::<f64>();
-        for (k, _) in net.layers.iter().enumerate().take(net.layers.len() - 1) {
-            let z = boxes[2 * k + 1].clone();
-            offsets.push(at);
-            at += z.dim();
-            radius2 += z.hi.iter().map(|h| h.max(0.0) * h.max(0.0)).sum::<f64>();
-            pre.push(z);
+        let hidden = net.layers.len() - 1;
+        let total: usize = net.layers[..hidden].iter().map(|(w, _)| w.nrows()).sum();
+        // slots: 0 the constant, 1..=d0 ξ, then kept neurons in order
+        let slots = 1 + d0 + total;
+        let mut smax = vec![0.0; slots];
+        smax[0] = 1.0;
+        smax[1..=d0].copy_from_slice(&xi.abs_max());
+        let mut used = 1 + d0;
+        // the current layer's outputs: (dense form over slots, error vs merged)
+        let mut prev: Vec<(Vec<f64>, f64)> = (0..d0)
+            .map(|i| {
+                let mut f = vec![0.0; slots];
+                f[1 + i] = 1.0;
+                (f, 0.0)
+            })
+            .collect();
+        let mut kept_slots: Vec<(usize, Vec<f64>, f64, f64, f64)> = Vec::new();
+        let mut last_slot = used;
+        for (k, (w, b)) in net.layers[..hidden].iter().enumerate() {
+            let z_box = &boxes[2 * k + 1];
+            let is_last = k + 1 == hidden;
+            if is_last {
+                last_slot = used;
+            }
+            let gam = gamma(w.ncols() + 2);
+            let mut next = Vec::with_capacity(w.nrows());
+            for j in 0..w.nrows() {
+                let mut f = vec![0.0; slots];
+                let mut fabs = vec![0.0; slots];
+                f[0] = b[j];
+                fabs[0] = b[j].abs();
+                let mut prop = Vec::with_capacity(w.ncols());
+                for (c, (pf, pe)) in prev.iter().enumerate() {
+                    let wc = w[(j, c)];
+                    if wc == 0.0 {
+                        continue;
+                    }
+                    for s in 0..used {
+                        if pf[s] != 0.0 {
+                            f[s] += wc * pf[s];
+                            fabs[s] += (wc * pf[s]).abs();
+                        }
+                    }
+                    prop.push(wc.abs() * pe);
+                }
+                // |computed form − exact composition| · |v| over the box
+                let size = sum_upper((0..used).map(|s| fabs[s] * smax[s]));
+                let round = (gam * size * 1.0625 + 1e-300).next_up();
+                let err_z = sum_upper(prop.into_iter().chain([round]));
+                let (l, u) = (z_box.lo[j], z_box.hi[j]);
+                if !is_last && u <= 0.0 {
+                    next.push((vec![0.0; slots], 0.0));
+                } else if !is_last && l >= 0.0 {
+                    next.push((f, err_z));
+                } else {
+                    let (lw, uw) = ((l - err_z).next_down(), (u + err_z).next_up());
+                    let slot = used;
+                    used += 1;
+                    smax[slot] = uw.max(0.0);
+                    kept_slots.push((slot, f, lw, uw, err_z));
+                    let mut unit = vec![0.0; slots];
+                    unit[slot] = 1.0;
+                    next.push((unit, err_z));
+                }
+            }
+            prev = next;
         }
+        let dim = used; // ξ, kept, and the constant (slot 0 moves to the end)
+        let one = dim - 1;
+        let index = |s: usize| if s == 0 { one } else { s - 1 };
+        let mut vmax = vec![0.0; dim];
+        let mut err = vec![0.0; dim];
+        for s in 0..used {
+            vmax[index(s)] = smax[s];
+        }
+        let kept: Vec<Kept> = kept_slots
+            .into_iter()
+            .map(|(slot, f, l, u, e)| {
+                err[index(slot)] = e;
+                Kept {
+                    h: index(slot),
+                    z: (0..used)
+                        .filter(|&s| f[s] != 0.0)
+                        .map(|s| (index(s), f[s]))
+                        .collect(),
+                    l,
+                    u,
+                }
+            })
+            .collect();
+        let radius2 = sum_upper(vmax.iter().map(|m| m * m));
         let mut all_rows: Vec<(Vec<f64>, f64)> = rows.to_vec();
         for i in 0..d0 {
             let mut e = vec![0.0; d0];
@@ -221,12 +340,13 @@ impl<'a> StepSdp<'a> {
             all_rows.push((e, -xi.lo[i]));
         }
         StepSdp {
-            net,
             rows: all_rows,
-            pre,
+            kept,
             d0,
-            offsets,
-            dim: at + 1,
+            last: index(last_slot),
+            vmax,
+            err,
+            dim,
             radius2: radius2 * (1.0 + 1e-12),
         }
     }
@@ -261,47 +381,38 @@ impl<'a> StepSdp<'a> {
                 out.push((f, true));
             }
         }
-        // neurons
-        for (k, z_box) in self.pre.iter().enumerate() {
-            let (w, b) = &self.net.layers[k];
-            let in_off = if k == 0 { 0 } else { self.offsets[k - 1] };
-            for j in 0..z_box.dim() {
-                let hj = self.offsets[k] + j;
-                let mut z: Vec<(usize, f64)> = (0..w.ncols())
-                    .filter(|c| w[(j, *c)] != 0.0)
-                    .map(|c| (in_off + c, w[(j, c)]))
-                    .collect();
-                z.push((one, b[j]));
-                let h = [(hj, 1.0)];
-                let mut h_minus_z: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, -x)).collect();
-                h_minus_z.push((hj, 1.0));
-                let (l, u) = (z_box.lo[j], z_box.hi[j]);
+        // kept neurons
+        for n in &self.kept {
+            let z = &n.z;
+            let h = [(n.h, 1.0)];
+            let mut h_minus_z: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, -x)).collect();
+            h_minus_z.push((n.h, 1.0));
+            let (l, u) = (n.l, n.u);
+            let mut f = Form::default();
+            f.outer(1.0, &h, &unit);
+            out.push((f, true));
+            let mut f = Form::default();
+            f.outer(1.0, &h_minus_z, &unit);
+            out.push((f, true));
+            let mut f = Form::default();
+            f.outer(1.0, &h, &h_minus_z);
+            out.push((f, false));
+            if u <= 0.0 {
                 let mut f = Form::default();
-                f.outer(1.0, &h, &unit);
+                f.outer(-1.0, &h, &unit);
                 out.push((f, true));
+            } else if l >= 0.0 {
                 let mut f = Form::default();
-                f.outer(1.0, &h_minus_z, &unit);
+                f.outer(-1.0, &h_minus_z, &unit);
                 out.push((f, true));
+            } else if u.is_finite() && l.is_finite() {
+                // u (z − l) − (u − l) h ≥ 0
+                let mut t: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, u * x)).collect();
+                t.push((one, -u * l));
+                t.push((n.h, -(u - l)));
                 let mut f = Form::default();
-                f.outer(1.0, &h, &h_minus_z);
-                out.push((f, false));
-                if u <= 0.0 {
-                    let mut f = Form::default();
-                    f.outer(-1.0, &h, &unit);
-                    out.push((f, true));
-                } else if l >= 0.0 {
-                    let mut f = Form::default();
-                    f.outer(-1.0, &h_minus_z, &unit);
-                    out.push((f, true));
-                } else if u.is_finite() && l.is_finite() {
-                    // u (z − l) − (u − l) h ≥ 0
-                    let mut t: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, u * x)).collect();
-                    t.push((one, -u * l));
-                    t.push((hj, -(u - l)));
-                    let mut f = Form::default();
-                    f.outer(1.0, &t, &unit);
-                    out.push((f, true));
-                }
+                f.outer(1.0, &t, &unit);
+                out.push((f, true));
             }
         }
         out
@@ -435,7 +546,13 @@ impl<'a> StepSdp<'a> {
             return none(Issue::NonFiniteEigenvalues);
         }
         let lam_bound = sum_upper([lam, err_f, 100.0 * n as f64 * U * norm_f]);
-        let value = sum_upper([d, lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12)]);
+        // the folded network's values differ from the merged one's by `err`
+        let folding = sum_upper(phi.iter().zip(&self.err).map(|(p, e)| p.abs() * e));
+        let value = sum_upper([
+            d,
+            lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12),
+            folding,
+        ]);
         SdpBound { value, issue: None }
     }
 
@@ -446,15 +563,18 @@ impl<'a> StepSdp<'a> {
 
     /// Largest magnitude of each neuron of the last hidden layer.
     pub fn last_hidden_max(&self) -> Vec<f64> {
-        self.pre
-            .last()
-            .map(|z| z.hi.iter().map(|h| h.max(0.0)).collect())
-            .unwrap_or_default()
+        self.vmax[self.last..self.dim - 1].to_vec()
     }
 
-    /// Offset of the last hidden layer in v.
+    /// Offset of the last hidden layer in v (its neurons are always kept).
     pub fn last_hidden(&self) -> usize {
-        *self.offsets.last().unwrap_or(&self.d0)
+        self.last
+    }
+
+    /// How many coordinates `v` has beyond ξ and the constant: the neurons
+    /// the SDP could not substitute away.
+    pub fn kept_neurons(&self) -> usize {
+        self.kept.len()
     }
 
     /// Dimension of v.

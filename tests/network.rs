@@ -564,3 +564,60 @@ fn a_tied_centre_refutes_nothing() {
     q.partitioner = Partitioner::Uniform(vec![1]);
     assert_eq!(run(&q).properties[0].status, Status::Falsified);
 }
+
+/// Reach-SDP substitutes the neurons its bounds prove stable: over small
+/// boxes most are, and the bounds (with the substitution's rounding added)
+/// still contain every sampled output; over one box the SDP keeps every
+/// neuron it cannot prove stable. Non-vacuous: some programs keep no
+/// neuron but the last layer, some keep more.
+#[test]
+fn sdp_with_stable_neurons_substituted_contains_every_output() {
+    use ravel::analysis::sdp::{merge, StepSdp};
+    let mut rng = Rng::new(4242);
+    let (mut folded_all, mut kept_some) = (0, 0);
+    for case in 0..16 {
+        let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 8));
+        let c = [rng.normal(), rng.normal()];
+        let r = [0.02, 0.3][case % 2];
+        let b = IBox::new(vec![c[0] - r, c[1] - r], vec![c[0] + r, c[1] + r]);
+        let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
+        let prog = StepSdp::new(&merged, &b, &[]);
+        let last = merged.layers.last().expect("output layer").0.ncols();
+        if prog.kept_neurons() == last {
+            folded_all += 1;
+        } else {
+            kept_some += 1;
+        }
+        // the SDP's own bound of d·y for four directions (not intersected
+        // with CROWN's): φ over the last hidden layer, the output layer's
+        // bias and the merge error in the constant, a generous 1e-9 for the
+        // rounding of φ
+        let (wl, bl) = merged.layers.last().expect("output layer");
+        let samples = probe(&Region::Box(b.clone()), 300, case as u64);
+        for d in [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.5], [0.3, -1.0]] {
+            let mut phi = vec![0.0; prog.dim()];
+            for k in 0..wl.ncols() {
+                phi[prog.last_hidden() + k] = (0..2).map(|j| d[j] * wl[(j, k)]).sum();
+            }
+            phi[prog.dim() - 1] = (0..2)
+                .map(|j| d[j] * bl[j] + d[j].abs() * merged.err[j])
+                .sum::<f64>()
+                + 1e-9;
+            let bound = prog.bound(&phi);
+            assert!(bound.issue.is_none(), "case {case}: {:?}", bound.issue);
+            for x in &samples {
+                let y = net.forward(x);
+                let v = d[0] * y[0] + d[1] * y[1];
+                assert!(
+                    v <= bound.value,
+                    "case {case} {d:?}: SDP bound {} below sampled {v}",
+                    bound.value
+                );
+            }
+        }
+    }
+    assert!(
+        folded_all > 0 && kept_some > 0,
+        "{folded_all} all-stable, {kept_some} with unstable neurons"
+    );
+}

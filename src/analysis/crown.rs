@@ -355,8 +355,20 @@ impl<'a> Analysis<'a> {
                     // with the product's rounding slack added: never
                     // tighter, so without a hook (which may bound it
                     // otherwise) the back-substitution is skipped (same
-                    // bounds, bit for bit).
-                    let useful = i > 0 || hook.is_some();
+                    // bounds, bit for bit). Likewise after an activation of
+                    // one neuron (the clamp of a single control): its
+                    // input's bounds are CROWN's already, and CROWN of
+                    // `w·σ(z) + b` substitutes a relaxation line of σ and
+                    // then the very linear bound of `z` (scaled; same
+                    // signs, same relaxations) that gave z's bound, so it
+                    // comes to the line at z's bound, which is never below
+                    // σ's interval image: up to rounding, no tighter than
+                    // interval arithmetic from z's bounds.
+                    let after_one_neuron = i >= 2
+                        && matches!(net.layers[i - 1], Layer::Act(_))
+                        && matches!(net.layers[i - 2], Layer::Affine { .. })
+                        && a.boxes[i].dim() == 1;
+                    let useful = hook.is_some() || (i > 0 && !after_one_neuron);
                     if mode != Mode::Ibp && feeds_activation && useful {
                         // A ReLU that interval arithmetic already proves
                         // inactive (z ≤ 0) outputs exactly 0 whatever its

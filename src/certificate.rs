@@ -222,6 +222,7 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
                 w: &w,
                 v: &v,
                 net: &cl.net,
+                slopes: cl.slope_steps,
             };
             let fail =
                 |e: Trouble| format!("the checker's bound of cell {c} at step {}: {e}", t + 1);
@@ -302,7 +303,13 @@ fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String>
         cells.push(cell);
     }
     let mode = if unrolled { "unrolled" } else { "one_step" };
-    Ok(json!({ "status": "checkable", "mode": mode, "steps": steps, "cells": cells }))
+    Ok(json!({
+        "status": "checkable",
+        "mode": mode,
+        "slope_steps": cl.slope_steps,
+        "steps": steps,
+        "cells": cells,
+    }))
 }
 
 /// The certificate of one (spec, controller) result.

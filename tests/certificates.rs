@@ -564,3 +564,54 @@ fn mutated_certificates_never_panic() {
         }
     }
 }
+
+/// Optimised slopes: a goal (`x[1] ≤ 0.23` at the double integrator's last
+/// step) that Reach-LP proves only with `optimise_slopes 5`; its certificate
+/// is VALID because the checker runs its own slope search (the number of
+/// steps is in the evidence). The same certificate with the search switched
+/// off is INVALID (its claims are tighter than CROWN's own slopes prove),
+/// and an absurd step count is unreadable, never VALID. Unrolled too.
+#[test]
+fn optimised_slopes_are_checked_by_the_checkers_own_search() {
+    use ravel::lower::PropertyKind;
+    for (spec, steps) in [
+        ("specs/double_integrator.ravel", 5),
+        ("specs/double_integrator_unrolled.ravel", 3),
+    ] {
+        let source = std::fs::read_to_string(spec).expect("spec readable");
+        let dir = Path::new(spec).parent().expect("folder");
+        let checked = ravel::front_end(&source, dir, &ravel::cli::read_request).expect("valid");
+        let mut plan = ravel::lower::lower(&checked);
+        plan.closed_loop.slope_steps = steps;
+        for q in &mut plan.properties {
+            if let PropertyKind::Goal(g) = &mut q.kind {
+                for (a, b) in &mut g.rows {
+                    if a[..] == [0.0, 1.0] {
+                        *b = if steps == 5 { 0.23 } else { -0.03 };
+                    }
+                }
+            }
+        }
+        let outcome = ravel::execute::execute(&plan, &|| 0.0);
+        assert_eq!(outcome.verdict, ravel::execute::Status::Verified, "{spec}");
+        let id = ravel::certificate::Identity {
+            spec_path: spec.to_string(),
+            spec_sha256: String::new(),
+        };
+        let cert = ravel::certificate::build(&plan, &outcome, &id);
+        assert_eq!(cert["evidence"]["slope_steps"], steps, "{spec}");
+        assert_eq!(answer(&cert, &plan), Answer::Valid, "{spec}");
+        let mut off = cert.clone();
+        off["evidence"]["slope_steps"] = 0.into();
+        assert!(
+            matches!(answer(&off, &plan), Answer::Invalid(_)),
+            "{spec}: claims proven only by optimised slopes must fail without them"
+        );
+        let mut absurd = cert.clone();
+        absurd["evidence"]["slope_steps"] = 1_000_000.into();
+        assert!(
+            matches!(answer(&absurd, &plan), Answer::Unreadable(_)),
+            "{spec}: an absurd step count is unreadable"
+        );
+    }
+}

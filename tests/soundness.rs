@@ -687,7 +687,8 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
         };
         // one-step chains and unrolled chains
         let mut chains = Vec::new();
-        for unrolled in [false, true] {
+        // (with the checker's own slope search: every candidate must be sound)
+        for (unrolled, slopes) in [(false, 0), (true, 0), (false, 3), (true, 3)] {
             let mut links = Chain::new(Start::Box, unrolled);
             let mut chain = vec![x0b.clone()];
             for t in 0..case.horizon {
@@ -697,6 +698,7 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
                     w: &w,
                     v: &v,
                     net: &case.cl.net,
+                    slopes,
                 };
                 let st = links
                     .step(lp, &chain[t], Start::Box, None, None)
@@ -712,6 +714,7 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
             w: &w,
             v: &v,
             net: &case.cl.net,
+            slopes: 0,
         };
         let (first, witness) = lp0.step(&x0b, &Start::Box, None).expect("finite");
         assert_eq!(

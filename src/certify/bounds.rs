@@ -241,6 +241,10 @@ impl Linear {
     }
 }
 
+/// What [`NetBounds::linear_optimised`] minimises for row `r`: the
+/// candidate row's value (any measure) and the network input attaining it.
+type Measure<'m> = dyn Fn(usize, &Linear) -> (f64, Vec<f64>) + 'm;
+
 /// The relaxation of one ReLU on `[l, u]`: `al·z + bl ≤ relu(z) ≤ au·z + bu`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Lines {
@@ -673,6 +677,115 @@ impl<'a> NetBounds<'a> {
             .collect()
     }
 
+    /// [`NetBounds::backward`] of one row with the given relaxation
+    /// lines, recording the row's coefficients on each activation's output.
+    fn backward_traced(
+        &self,
+        mut bound: Linear,
+        lines: &[Vec<Lines>],
+        trace: &mut [Vec<f64>],
+    ) -> Linear {
+        for i in (0..self.net.layers.len()).rev() {
+            let zmax = self.boxes[i].abs_max();
+            bound = match &self.net.layers[i] {
+                Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
+                Layer::Act(_) => {
+                    trace[i] = bound.coef.row(0).iter().copied().collect();
+                    bound.through_relax(&lines[i], &zmax)
+                }
+            };
+        }
+        bound
+    }
+
+    /// [`NetBounds::linear`] with the lower slopes of the unstable ReLUs
+    /// searched per row: `steps` steps of projected gradient on
+    /// `measure(row, candidate) = (value, input where it is attained)`,
+    /// the best candidate kept (CROWN's own lines to begin with). The
+    /// checker's own search: a lower line `a·z` with `a ∈ [0, 1]` lies
+    /// below `relu` everywhere, so every candidate is a sound bound
+    /// whatever the search does; only how tight it is depends on it.
+    fn linear_optimised(&self, spec: DMatrix<f64>, steps: usize, measure: &Measure) -> Linear {
+        let mut best = self.linear(spec.clone());
+        let layers = self.net.layers.len();
+        let unstable = |i: usize, l: &Lines| {
+            matches!(self.net.layers[i], Layer::Act(Activation::Relu)) && l.au > 0.0 && l.au < 1.0
+        };
+        for r in 0..spec.nrows() {
+            let row = Linear {
+                coef: spec.rows(r, 1).into_owned(),
+                off: vec![0.0],
+            };
+            let mut lines = self.lines.clone();
+            let mut trace = vec![Vec::new(); layers];
+            let mut cand = self.backward_traced(row.clone(), &lines, &mut trace);
+            let mut at = measure(r, &cand).1;
+            let own = Linear {
+                coef: best.coef.rows(r, 1).into_owned(),
+                off: vec![best.off[r]],
+            };
+            let mut best_value = measure(r, &own).0;
+            for k in 0..steps {
+                // gradient: forward from `at` through the lines the row's signs chose
+                let mut h = at.clone();
+                let mut grad: Vec<Vec<f64>> = vec![Vec::new(); layers];
+                for (i, layer) in self.net.layers.iter().enumerate() {
+                    match layer {
+                        Layer::Affine { w, b } => {
+                            h = (0..w.nrows())
+                                .map(|j| {
+                                    (0..w.ncols()).map(|c| w[(j, c)] * h[c]).sum::<f64>() + b[j]
+                                })
+                                .collect();
+                        }
+                        Layer::Act(_) => {
+                            grad[i] = vec![0.0; h.len()];
+                            for (j, z) in h.iter_mut().enumerate() {
+                                let (l, c) = (lines[i][j], trace[i].get(j).copied().unwrap_or(0.0));
+                                if c >= 0.0 {
+                                    *z = l.au * *z + l.bu;
+                                } else {
+                                    if unstable(i, &l) {
+                                        grad[i][j] = c * *z;
+                                    }
+                                    *z = l.al * *z + l.bl;
+                                }
+                            }
+                        }
+                    }
+                }
+                let gmax = grad.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+                if !(gmax > 0.0 && gmax.is_finite()) {
+                    break;
+                }
+                let rate = 0.5 * 0.8f64.powi(k as i32) / gmax;
+                let mut moved = false;
+                for (i, g) in grad.iter().enumerate() {
+                    for (j, gj) in g.iter().enumerate() {
+                        if *gj != 0.0 {
+                            let al = (lines[i][j].al - rate * gj).clamp(0.0, 1.0);
+                            moved |= al != lines[i][j].al;
+                            lines[i][j].al = al;
+                            lines[i][j].bl = 0.0;
+                        }
+                    }
+                }
+                if !moved {
+                    break;
+                }
+                cand = self.backward_traced(row.clone(), &lines, &mut trace);
+                let (v, point) = measure(r, &cand);
+                at = point;
+                if v < best_value {
+                    best_value = v;
+                    best.coef.set_row(r, &cand.coef.row(0));
+                    best.off[r] = cand.off[0];
+                }
+            }
+        }
+        best
+    }
+
     /// `S π(y) ≤ G y + h` over the input box, for specification rows `S`.
     fn linear(&self, spec: DMatrix<f64>) -> Linear {
         let rows = spec.nrows();
@@ -870,6 +983,10 @@ pub struct Loop<'a> {
     pub v: &'a Bx,
     /// The controller, saturation included.
     pub net: &'a Network,
+    /// Slope-optimisation steps of every back-substitution through the
+    /// controller (the analysis's `optimise_slopes`; see
+    /// [`NetBounds::linear_optimised`]).
+    pub slopes: usize,
 }
 
 impl Loop<'_> {
@@ -976,8 +1093,42 @@ impl Loop<'_> {
         let lb = mul(&lin.coef, &self.plant.b);
         let ax = abs_times(&self.plant.a, &xmax);
         let bu = abs_times(&self.plant.b, &umax);
-        let net = nb.linear(lb);
         let ct = self.obs.transpose();
+        let net = if self.slopes == 0 {
+            nb.linear(lb)
+        } else {
+            // a candidate row over y, measured by what this step makes of
+            // it: L A x + G Cᵀx over x's box, G v over v's box, offsets
+            let measure = |r: usize, cand: &Linear| -> (f64, Vec<f64>) {
+                let g: Vec<f64> = cand.coef.row(0).iter().copied().collect();
+                let total: Vec<f64> = (0..n)
+                    .map(|j| la[(r, j)] + (0..g.len()).map(|k| g[k] * ct[(k, j)]).sum::<f64>())
+                    .collect();
+                let xs: Vec<f64> = (0..n)
+                    .map(|j| if total[j] >= 0.0 { x.hi[j] } else { x.lo[j] })
+                    .collect();
+                let vs: Vec<f64> = (0..g.len())
+                    .map(|k| {
+                        if g[k] >= 0.0 {
+                            self.v.hi[k]
+                        } else {
+                            self.v.lo[k]
+                        }
+                    })
+                    .collect();
+                let value = sum_upper(
+                    (0..n)
+                        .map(|j| mul0(total[j], xs[j]))
+                        .chain((0..g.len()).map(|k| mul0(g[k], vs[k])))
+                        .chain([cand.off[0]]),
+                );
+                let ys = (0..g.len())
+                    .map(|k| (0..n).map(|j| ct[(k, j)] * xs[j]).sum::<f64>() + vs[k])
+                    .collect();
+                (value, ys)
+            };
+            nb.linear_optimised(lb, self.slopes, &measure)
+        };
         let gc = mul(&net.coef, &ct);
         let cx = abs_times(&ct, &xmax);
         let coef = la + gc;

@@ -31,7 +31,9 @@
 //! its problem (parse, check, lower), and `serde_json`. It does not call
 //! the propagators, the partitioners, the LP or SDP solvers or the Monte
 //! Carlo simulation; nothing it uses was computed by them except the
-//! numbers in the certificate, which it checks.
+//! numbers in the certificate, which it checks. With `slope_steps` in the
+//! evidence it searches its own lower ReLU slopes (`bounds.rs`); any slope
+//! in [0, 1] is sound, so the search is not trusted either.
 //!
 //! # What it does not check yet
 //!
@@ -444,13 +446,14 @@ impl Problem {
         })
     }
 
-    fn at<'a>(&'a self, t: usize, net: &'a Network) -> Loop<'a> {
+    fn at<'a>(&'a self, t: usize, net: &'a Network, slopes: usize) -> Loop<'a> {
         Loop {
             plant: &self.plants[t.min(self.plants.len() - 1)],
             obs: &self.obs,
             w: &self.w,
             v: &self.v,
             net,
+            slopes,
         }
     }
 
@@ -620,6 +623,18 @@ fn evidence(
         Some("one_step") => false,
         _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
     };
+    // the analysis's `optimise_slopes`: the checker searches its own slopes
+    // (absent in certificates written before the setting existed: 0)
+    let slopes = match ev.get("slope_steps") {
+        None => 0,
+        Some(v) => uint(v, "evidence.slope_steps")?,
+    };
+    if slopes as u64 > crate::limits::MAX_SLOPE_STEPS {
+        return Err(format!(
+            "{slopes} slope-optimisation steps: more than the {} any analysis makes",
+            crate::limits::MAX_SLOPE_STEPS
+        ));
+    }
     let cells_json = get(ev, "cells")?
         .as_array()
         .ok_or("`evidence.cells` must be an array")?;
@@ -699,7 +714,7 @@ fn evidence(
                 .collect::<R<Vec<_>>>()?;
             let prev = &chain[k];
             let stepped = links.step(
-                problem.at(k, net),
+                problem.at(k, net, slopes),
                 prev,
                 start_k,
                 directions.as_ref(),
@@ -888,7 +903,7 @@ fn replay(
         if !problem.v.contains(&v) {
             return Ok(Err(format!("has sensor noise outside its box at step {t}")));
         }
-        match problem.at(t, net).enclose(&x, &w, &v) {
+        match problem.at(t, net, 0).enclose(&x, &w, &v) {
             Some(next) => x = next,
             None => return Ok(Err(format!("overflows at step {}", t + 1))),
         }

@@ -473,6 +473,7 @@ pub fn build_network(
     }
     cert["evidence"] = json!({
         "status": "checkable",
+        "slope_steps": plan.slope_steps,
         "cells": outcome.partition.iter().map(|c| json!({ "lo": c.lo, "hi": c.hi })).collect::<Vec<_>>(),
     });
     let report = certify::check(&cert, &plan.net);

@@ -621,3 +621,55 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
         "{folded_all} all-stable, {kept_some} with unstable neurons"
     );
 }
+
+/// A network property only optimised slopes prove: its certificate records
+/// the step count and is VALID through the checker's own slope search, and
+/// INVALID with the search switched off.
+#[test]
+fn network_certificates_check_optimised_slopes() {
+    use ravel::certify::{check, Answer};
+    use ravel::execute::network::cell_bounds;
+    let mut rng = Rng::new(31);
+    let mut found = 0;
+    for case in 0..40 {
+        let net = random_network(&mut rng, 2, 1, Activation::Relu, (4, 8));
+        let input = Region::Box(IBox::new(vec![-1.0, -0.5], vec![0.5, 1.0]));
+        let dirs = DMatrix::from_row_slice(1, 1, &[1.0]);
+        let crown = cell_bounds(&net, &input, NetPropagator::Crown, 0, &dirs).0[0];
+        let alpha = cell_bounds(&net, &input, NetPropagator::Crown, 8, &dirs).0[0];
+        assert!(alpha <= crown, "case {case}: optimised slopes looser");
+        if alpha >= crown - 1e-3 {
+            continue;
+        }
+        let t = 0.5 * (alpha + crown);
+        let mut p = plan(
+            net.clone(),
+            input,
+            vec![NetProperty {
+                name: "needs_slopes".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![1.0], t)],
+                }),
+            }],
+        );
+        p.samples = 0;
+        p.slope_steps = 8;
+        let out = run(&p);
+        assert_eq!(out.properties[0].status, Status::Verified, "case {case}");
+        let id = ravel::certificate::Identity {
+            spec_path: "t".into(),
+            spec_sha256: String::new(),
+        };
+        let cert = ravel::certificate::build_network(&p, &out, &id);
+        assert_eq!(cert["evidence"]["slope_steps"], 8);
+        assert_eq!(check(&cert, &net).answer, Answer::Valid, "case {case}");
+        let mut off = cert.clone();
+        off["evidence"]["slope_steps"] = 0.into();
+        assert!(
+            matches!(check(&off, &net).answer, Answer::Invalid(_)),
+            "case {case}: only the slopes prove it"
+        );
+        found += 1;
+    }
+    assert!(found >= 3, "only {found} cases needed the slopes");
+}

@@ -660,10 +660,30 @@ impl<'a> NetBounds<'a> {
     }
 
     /// Upper bounds of `s·f(y)` over the input box for every row `s` of
-    /// `spec`: back-substitution, intersected with the output box's support.
-    pub fn rows_upper(&self, spec: &DMatrix<f64>) -> Vec<f64> {
+    /// `spec`: back-substitution (with `slopes` steps of the checker's own
+    /// slope search, measured over the input box), intersected with the
+    /// output box's support.
+    pub fn rows_upper(&self, spec: &DMatrix<f64>, slopes: usize) -> Vec<f64> {
         let out = self.boxes.last().unwrap_or(&self.boxes[0]);
-        let back = self.linear(spec.clone()).over(&self.boxes[0]);
+        let input = &self.boxes[0];
+        let back = if slopes == 0 {
+            self.linear(spec.clone()).over(input)
+        } else {
+            let measure = |_: usize, cand: &Linear| -> (f64, Vec<f64>) {
+                let corner = (0..input.lo.len())
+                    .map(|j| {
+                        if cand.coef[(0, j)] >= 0.0 {
+                            input.hi[j]
+                        } else {
+                            input.lo[j]
+                        }
+                    })
+                    .collect();
+                (cand.over(input)[0], corner)
+            };
+            self.linear_optimised(spec.clone(), slopes, &measure)
+                .over(input)
+        };
         (0..spec.nrows())
             .map(|r| {
                 let row: Vec<f64> = spec.row(r).iter().copied().collect();

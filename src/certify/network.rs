@@ -246,12 +246,17 @@ fn violates(p: &Prop, label: usize, y: &Bx) -> bool {
 
 /// Whether the checker's bounds over `cell` prove the property; `Err` with
 /// the first failing row otherwise.
-fn proves(net: &Network, cell: &Bx, p: &Prop, label: usize, m: usize) -> Result<(), String> {
+fn proves(
+    net: &Network,
+    cell: &Bx,
+    p: &Prop,
+    (label, m, slopes): (usize, usize, usize),
+) -> Result<(), String> {
     let nb = NetBounds::new(net, cell, None).map_err(|t| t.to_string())?;
     match p {
         Prop::Require(rows) => {
             let spec = DMatrix::from_fn(rows.len(), m, |r, c| rows[r].0[c]);
-            for (k, (u, (_, b))) in nb.rows_upper(&spec).iter().zip(rows).enumerate() {
+            for (k, (u, (_, b))) in nb.rows_upper(&spec, slopes).iter().zip(rows).enumerate() {
                 // a NaN bound proves nothing
                 let holds = u <= b;
                 if !holds {
@@ -263,7 +268,7 @@ fn proves(net: &Network, cell: &Bx, p: &Prop, label: usize, m: usize) -> Result<
             for (k, rows) in members.iter().enumerate() {
                 let spec = DMatrix::from_fn(rows.len(), m, |r, c| -rows[r].0[c]);
                 let sep = nb
-                    .rows_upper(&spec)
+                    .rows_upper(&spec, slopes)
                     .iter()
                     .zip(rows)
                     .map(|(u, (_, b))| -u - b)
@@ -276,7 +281,7 @@ fn proves(net: &Network, cell: &Bx, p: &Prop, label: usize, m: usize) -> Result<
         }
         Prop::Robust(_) => {
             let spec = robust_rows(label, m);
-            for (k, u) in nb.rows_upper(&spec).iter().enumerate() {
+            for (k, u) in nb.rows_upper(&spec, slopes).iter().enumerate() {
                 let below = *u < 0.0;
                 if !below {
                     return Err(format!(
@@ -428,6 +433,17 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
         let ev = get(cert, "evidence")?;
         match get(ev, "status")?.as_str() {
             Some("checkable") => {
+                // `optimise_slopes`: the checker's own slope search
+                let slopes = match ev.get("slope_steps") {
+                    None => 0,
+                    Some(v) => uint(v, "evidence.slope_steps")?,
+                };
+                if slopes as u64 > crate::limits::MAX_SLOPE_STEPS {
+                    return Err(format!(
+                        "{slopes} slope-optimisation steps: more than the {} any analysis makes",
+                        crate::limits::MAX_SLOPE_STEPS
+                    ));
+                }
                 let cells: Vec<Bx> = get(ev, "cells")?
                     .as_array()
                     .ok_or("`cells` must be an array")?
@@ -444,12 +460,14 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                     }
                     Ok(()) => verified.iter().find_map(|&(i, label)| {
                         cells.iter().enumerate().find_map(|(c, cell)| {
-                            proves(net, cell, &props[i].1, label, m).err().map(|e| {
-                                format!(
-                                    "property `{}`, cell {c}: {e}",
-                                    crate::diag::sanitize(&props[i].0)
-                                )
-                            })
+                            proves(net, cell, &props[i].1, (label, m, slopes))
+                                .err()
+                                .map(|e| {
+                                    format!(
+                                        "property `{}`, cell {c}: {e}",
+                                        crate::diag::sanitize(&props[i].0)
+                                    )
+                                })
                         })
                     }),
                 };

@@ -601,6 +601,23 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
     Ok(decide(invalid, unsupported))
 }
 
+/// The analysis's `optimise_slopes` from the evidence (the checker then
+/// searches its own slopes; absent in certificates written before the
+/// setting existed: 0), within the analysis's own limit.
+fn slope_steps(ev: &Value) -> R<usize> {
+    let slopes = match ev.get("slope_steps") {
+        None => 0,
+        Some(v) => uint(v, "evidence.slope_steps")?,
+    };
+    if slopes as u64 > crate::limits::MAX_SLOPE_STEPS {
+        return Err(format!(
+            "{slopes} slope-optimisation steps: more than the {} any analysis makes",
+            crate::limits::MAX_SLOPE_STEPS
+        ));
+    }
+    Ok(slopes)
+}
+
 /// Check the VERIFIED evidence; the outer error is an unreadable
 /// certificate, the inner one the first false claim.
 fn evidence(
@@ -623,18 +640,7 @@ fn evidence(
         Some("one_step") => false,
         _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
     };
-    // the analysis's `optimise_slopes`: the checker searches its own slopes
-    // (absent in certificates written before the setting existed: 0)
-    let slopes = match ev.get("slope_steps") {
-        None => 0,
-        Some(v) => uint(v, "evidence.slope_steps")?,
-    };
-    if slopes as u64 > crate::limits::MAX_SLOPE_STEPS {
-        return Err(format!(
-            "{slopes} slope-optimisation steps: more than the {} any analysis makes",
-            crate::limits::MAX_SLOPE_STEPS
-        ));
-    }
+    let slopes = slope_steps(ev)?;
     let cells_json = get(ev, "cells")?
         .as_array()
         .ok_or("`evidence.cells` must be an array")?;

@@ -434,16 +434,7 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
         match get(ev, "status")?.as_str() {
             Some("checkable") => {
                 // `optimise_slopes`: the checker's own slope search
-                let slopes = match ev.get("slope_steps") {
-                    None => 0,
-                    Some(v) => uint(v, "evidence.slope_steps")?,
-                };
-                if slopes as u64 > crate::limits::MAX_SLOPE_STEPS {
-                    return Err(format!(
-                        "{slopes} slope-optimisation steps: more than the {} any analysis makes",
-                        crate::limits::MAX_SLOPE_STEPS
-                    ));
-                }
+                let slopes = super::slope_steps(ev)?;
                 let cells: Vec<Bx> = get(ev, "cells")?
                     .as_array()
                     .ok_or("`cells` must be an array")?

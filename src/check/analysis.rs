@@ -344,34 +344,17 @@ pub(super) fn analysis(
                     }
                 }
                 AnalysisStmt::Samples(s) => {
-                    if s.node > MAX_SAMPLES {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::Limit,
-                                s.span,
-                                format!("more than {MAX_SAMPLES} samples"),
-                            )
-                            .label("too many")
-                            .hint("use fewer samples"),
-                        );
-                    } else {
-                        samples = s.node as usize;
+                    let what = format!("more than {MAX_SAMPLES} samples");
+                    if let Some(k) = at_most(cx, s, MAX_SAMPLES, what, "use fewer samples") {
+                        samples = k;
                     }
                 }
                 AnalysisStmt::Seed(s) => seed = s.node,
                 AnalysisStmt::OptimiseSlopes(s) => {
-                    if s.node > MAX_SLOPE_STEPS {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::Limit,
-                                s.span,
-                                format!("more than {MAX_SLOPE_STEPS} slope-optimisation steps"),
-                            )
-                            .label("too many")
-                            .hint("a few steps (3 to 20) give most of the gain"),
-                        );
-                    } else {
-                        slope_steps = s.node as usize;
+                    let what = format!("more than {MAX_SLOPE_STEPS} slope-optimisation steps");
+                    let hint = "a few steps (3 to 20) give most of the gain";
+                    if let Some(k) = at_most(cx, s, MAX_SLOPE_STEPS, what, hint) {
+                        slope_steps = k;
                         slopes_span = Some(st.span);
                     }
                 }
@@ -424,4 +407,23 @@ pub(super) fn analysis(
         net_propagator,
         shape,
     }
+}
+
+/// `Some(count)` when `count ≤ max`; otherwise an E0216 limit diagnostic.
+fn at_most(
+    cx: &mut Ctx,
+    count: &Spanned<u64>,
+    max: u64,
+    what: String,
+    hint: &str,
+) -> Option<usize> {
+    if count.node > max {
+        cx.err(
+            Diagnostic::new(Code::Limit, count.span, what)
+                .label("too many")
+                .hint(hint.to_string()),
+        );
+        return None;
+    }
+    usize::try_from(count.node).ok()
 }

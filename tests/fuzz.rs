@@ -97,6 +97,7 @@ const TOKENS: &[&str] = &[
     "calls 100000",
     "horizon 10000",
     "samples 1000000",
+    "optimise_slopes 100",
     "time continuous dt 1e300",
     "polytope 1000",
     "boundary hull",

@@ -281,6 +281,22 @@ fn specs(dir: &Path) -> usize {
             sub("samples     100", "samples     10000000"),
         ),
         (
+            "slopes_huge",
+            "E0216",
+            "more than 100 slope-optimisation steps",
+            sub(
+                "samples     100",
+                "samples     100\n    optimise_slopes 1000000",
+            ),
+        ),
+        (
+            "slopes_without_back_substitution",
+            "E0220",
+            "optimised slopes with interval arithmetic",
+            sub("samples     100", "samples     100\n    optimise_slopes 5")
+                .replace("propagator  reach_lp", "propagator  ibp_separate"),
+        ),
+        (
             "simulated_steps",
             "E0216",
             "samples × horizon beyond 5e7",

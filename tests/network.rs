@@ -673,3 +673,43 @@ fn network_certificates_check_optimised_slopes() {
     }
     assert!(found >= 3, "only {found} cases needed the slopes");
 }
+
+/// An input pinned to a point (lo = hi, as exactly known noise is) is a
+/// constant of the SDP, not a variable; a polytope row through it moves its
+/// term to the right-hand side. The bound still contains every output of
+/// the inputs that satisfy the row.
+#[test]
+fn sdp_with_a_pinned_input_contains_every_output() {
+    use ravel::analysis::sdp::{merge, StepSdp};
+    let mut rng = Rng::new(777);
+    for case in 0..8 {
+        let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 6));
+        let b = IBox::new(vec![-0.5, 0.3], vec![0.5, 0.3]);
+        let rows = vec![(vec![1.0, 1.0], 0.5)]; // x0 + x1 ≤ 0.5, so x0 ≤ 0.2
+        let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
+        let prog = StepSdp::new(&merged, &b, &rows);
+        let (wl, bl) = merged.layers.last().expect("output layer");
+        for d in [[1.0, 0.0], [0.0, -1.0], [0.7, 0.7]] {
+            let mut phi = vec![0.0; prog.dim()];
+            for k in 0..wl.ncols() {
+                phi[prog.last_hidden() + k] = (0..2).map(|j| d[j] * wl[(j, k)]).sum();
+            }
+            phi[prog.dim() - 1] = (0..2)
+                .map(|j| d[j] * bl[j] + d[j].abs() * merged.err[j])
+                .sum::<f64>()
+                + 1e-9;
+            let bound = prog.bound(&phi);
+            assert!(bound.issue.is_none(), "case {case}: {:?}", bound.issue);
+            for k in 0..=200 {
+                let x = [-0.5 + 0.7 * k as f64 / 200.0, 0.3];
+                let y = net.forward(&x);
+                let v = d[0] * y[0] + d[1] * y[1];
+                assert!(
+                    v <= bound.value,
+                    "case {case} {d:?}: bound {} below {v}",
+                    bound.value
+                );
+            }
+        }
+    }
+}

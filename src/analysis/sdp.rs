@@ -216,14 +216,21 @@ struct Kept {
 /// error), and [`StepSdp::bound`] adds `Σ |φᵢ|·err[i]`, so the bound holds
 /// for the merged network's values, exactly as before.
 pub struct StepSdp {
-    /// Input rows `G ξ ≤ g` (the extra rows, then ξ's box).
+    /// Input rows `G ξ ≤ g` over the free coordinates of ξ (the extra rows,
+    /// then ξ's box).
     rows: Vec<(Vec<f64>, f64)>,
     /// The kept neurons, layer by layer.
     kept: Vec<Kept>,
     /// Dimension of ξ.
     d0: usize,
+    /// Each coordinate of ξ: its coordinate in v, or its value when ξ's box
+    /// pins it to a point (a noise input that is exactly known, say): such
+    /// a coordinate is a constant, not a variable.
+    xi_at: Vec<Result<usize, f64>>,
     /// Coordinate of the last hidden layer's first neuron in v.
     last: usize,
+    /// Neurons in the last hidden layer.
+    last_len: usize,
     /// `|vᵢ|` bounds (the folded network's values).
     vmax: Vec<f64>,
     /// `|vᵢ(folded) − vᵢ(merged)|` bounds.
@@ -248,11 +255,16 @@ impl StepSdp {
         smax[0] = 1.0;
         smax[1..=d0].copy_from_slice(&xi.abs_max());
         let mut used = 1 + d0;
-        // the current layer's outputs: (dense form over slots, error vs merged)
+        // the current layer's outputs: (dense form over slots, error vs
+        // merged); a coordinate of ξ pinned to a point is that constant
         let mut prev: Vec<(Vec<f64>, f64)> = (0..d0)
             .map(|i| {
                 let mut f = vec![0.0; slots];
-                f[1 + i] = 1.0;
+                if xi.lo[i] == xi.hi[i] {
+                    f[0] = xi.lo[i];
+                } else {
+                    f[1 + i] = 1.0;
+                }
                 (f, 0.0)
             })
             .collect();
@@ -307,12 +319,29 @@ impl StepSdp {
             }
             prev = next;
         }
-        let dim = used; // ξ, kept, and the constant (slot 0 moves to the end)
+        // v = (free coordinates of ξ, kept neurons, 1)
+        let mut xi_at = Vec::with_capacity(d0);
+        let mut free = 0;
+        for i in 0..d0 {
+            if xi.lo[i] == xi.hi[i] {
+                xi_at.push(Err(xi.lo[i]));
+            } else {
+                xi_at.push(Ok(free));
+                free += 1;
+            }
+        }
+        let dim = free + (used - 1 - d0) + 1;
         let one = dim - 1;
-        let index = |s: usize| if s == 0 { one } else { s - 1 };
+        // slots of pinned coordinates never occur in a form
+        let index = |s: usize| match s {
+            0 => one,
+            s if s <= d0 => xi_at[s - 1].unwrap_or(one),
+            s => free + (s - 1 - d0),
+        };
         let mut vmax = vec![0.0; dim];
         let mut err = vec![0.0; dim];
-        for s in 0..used {
+        vmax[one] = 1.0;
+        for s in (1..used).filter(|&s| s > d0 || xi_at[s - 1].is_ok()) {
             vmax[index(s)] = smax[s];
         }
         let kept: Vec<Kept> = kept_slots
@@ -331,19 +360,40 @@ impl StepSdp {
             })
             .collect();
         let radius2 = sum_upper(vmax.iter().map(|m| m * m));
-        let mut all_rows: Vec<(Vec<f64>, f64)> = rows.to_vec();
-        for i in 0..d0 {
-            let mut e = vec![0.0; d0];
-            e[i] = 1.0;
-            all_rows.push((e.clone(), xi.hi[i]));
-            e[i] = -1.0;
-            all_rows.push((e, -xi.lo[i]));
+        // rows over the free coordinates: a pinned coordinate's term moves
+        // to the right-hand side, rounded up (the row stays valid)
+        let mut all_rows: Vec<(Vec<f64>, f64)> = rows
+            .iter()
+            .map(|(a, g)| {
+                let mut a_free = vec![0.0; free];
+                let mut rhs = vec![*g];
+                for (&ai, at) in a.iter().zip(&xi_at) {
+                    match at {
+                        Ok(j) => a_free[*j] = ai,
+                        Err(c) => rhs.push(-(ai * c)),
+                    }
+                }
+                (a_free, sum_upper(rhs))
+            })
+            .collect();
+        for (i, at) in xi_at.iter().enumerate() {
+            if let Ok(j) = at {
+                let mut e = vec![0.0; free];
+                e[*j] = 1.0;
+                all_rows.push((e.clone(), xi.hi[i]));
+                e[*j] = -1.0;
+                all_rows.push((e, -xi.lo[i]));
+            }
         }
+        let last_len = net.layers[hidden].0.ncols();
+        let last = index(last_slot);
         StepSdp {
             rows: all_rows,
             kept,
             d0,
-            last: index(last_slot),
+            xi_at,
+            last,
+            last_len,
             vmax,
             err,
             dim,
@@ -418,8 +468,23 @@ impl StepSdp {
         out
     }
 
-    /// A certified upper bound of `φᵀv` (φ over v's coordinates, constant in the last).
-    pub fn bound(&self, phi: &[f64]) -> SdpBound {
+    /// A certified upper bound of `φᵀv`, with `φ` over the coordinates of
+    /// [`StepSdp::dim`]: ξ, then the kept neurons ([`StepSdp::last_hidden`]
+    /// is where the last hidden layer starts), the constant last.
+    pub fn bound(&self, phi_full: &[f64]) -> SdpBound {
+        // φ on v: pinned coordinates of ξ move into a constant of their own
+        let mut phi = vec![0.0; self.dim];
+        let mut pinned = Vec::new();
+        for (i, at) in self.xi_at.iter().enumerate() {
+            match at {
+                Ok(j) => phi[*j] = phi_full[i],
+                Err(c) => pinned.push(phi_full[i] * c),
+            }
+        }
+        let rest = self.dim - self.free();
+        phi[self.free()..].copy_from_slice(&phi_full[self.d0..self.d0 + rest]);
+        let pinned = sum_upper(pinned);
+        let phi = &phi[..];
         // Clarabel's PSD cone calls BLAS/LAPACK, loaded on first use
         if crate::blas::load().is_err() {
             return none(Issue::NoBlas);
@@ -552,6 +617,7 @@ impl StepSdp {
             d,
             lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12),
             folding,
+            pinned,
         ]);
         SdpBound { value, issue: None }
     }
@@ -563,12 +629,18 @@ impl StepSdp {
 
     /// Largest magnitude of each neuron of the last hidden layer.
     pub fn last_hidden_max(&self) -> Vec<f64> {
-        self.vmax[self.last..self.dim - 1].to_vec()
+        self.vmax[self.last..self.last + self.last_len].to_vec()
     }
 
-    /// Offset of the last hidden layer in v (its neurons are always kept).
+    /// Where the last hidden layer starts among φ's coordinates (its
+    /// neurons are always kept).
     pub fn last_hidden(&self) -> usize {
-        self.last
+        self.last - self.free() + self.d0
+    }
+
+    /// The free coordinates of ξ (the ones not pinned to a point).
+    fn free(&self) -> usize {
+        self.xi_at.iter().filter(|a| a.is_ok()).count()
     }
 
     /// How many coordinates `v` has beyond ξ and the constant: the neurons
@@ -577,9 +649,10 @@ impl StepSdp {
         self.kept.len()
     }
 
-    /// Dimension of v.
+    /// Number of φ's coordinates ([`StepSdp::bound`]): ξ, the kept
+    /// neurons, the constant.
     pub fn dim(&self) -> usize {
-        self.dim
+        self.dim - self.free() + self.d0
     }
 }
 

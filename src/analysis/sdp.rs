@@ -206,6 +206,10 @@ struct Kept {
 /// neurons, 1)` and every kept neuron's pre-activation is an affine form
 /// over the coordinates before it. On the quadrotor every neuron of a step
 /// can be stable: `v` then has 1 + 12 + 3 coordinates instead of 83.
+/// Likewise a coordinate of ξ that its box pins to a point (noise that is
+/// exactly zero) is a constant, not a coordinate of `v`: its rows' terms
+/// move to the right-hand side (rounded up) and `φ`'s coefficient on it to
+/// a constant of the bound.
 ///
 /// The forms are computed in `f64`; the network they define (the "folded"
 /// one: stable neurons substituted, kept ones `relu` of their form) differs

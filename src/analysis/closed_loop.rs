@@ -612,7 +612,8 @@ impl ClosedLoop {
     /// Reach-SDP bounds of every facet for states in `x` at step `t` (see
     /// [`super::sdp`]); `+∞` where the solver's answer was not usable, and the
     /// issue is reported. A network that is not ReLU-only gives `+∞` everywhere
-    /// (`check` rejects that combination).
+    /// (`check` rejects that combination), and so does an affine one (no
+    /// hidden layer: Reach-LP, which the step intersects with, is exact).
     fn reach_sdp(&self, t: usize, x: &Region, facets: &DMatrix<f64>) -> (Vec<f64>, Vec<Issue>) {
         let n = self.states();
         let p = self.plant.obs.ncols();
@@ -624,6 +625,11 @@ impl ClosedLoop {
                 vec![Issue::SdpNeedsRelu],
             );
         };
+        if merged.layers.len() < 2 {
+            // an affine controller: Reach-LP is exact up to rounding already,
+            // and the SDP has no neuron to encode
+            return (vec![f64::INFINITY; facets.nrows()], Vec::new());
+        }
         let rows: Vec<(Vec<f64>, f64)> = match x {
             Region::Polytope { rows, .. } => rows
                 .iter()
@@ -966,6 +972,35 @@ mod tests {
 
     /// The Reach-SDP facet bounds alone (before they meet Reach-LP's) must
     /// cover a plant whose matrices are only known up to a model error.
+    #[test]
+    fn reach_sdp_on_an_affine_controller_does_not_fail() {
+        // no hidden layer at all (no ReLU, no control limits): the SDP has
+        // no neuron to encode; the step must still be bounded
+        let net = Network::new(
+            2,
+            vec![Layer::Affine {
+                w: DMatrix::from_row_slice(1, 2, &[-0.4, -0.9]),
+                b: DVector::from_column_slice(&[0.1]),
+            }],
+        );
+        let zero = IBox::new(vec![0.0; 2], vec![0.0; 2]);
+        let plant = Plant {
+            a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+            b: DMatrix::from_row_slice(2, 1, &[0.5, 1.0]),
+            c: DVector::zeros(2),
+            obs: DMatrix::identity(2, 2),
+            w: zero.clone(),
+            v: IBox::new(vec![-0.01, 0.0], vec![0.01, 0.0]),
+            err: None,
+        };
+        let cl = ClosedLoop::new(plant, net);
+        let x = Region::Box(IBox::new(vec![1.0, -1.0], vec![2.0, 0.5]));
+        let lp = cl.step(0, &x, Propagator::ReachLp, &Boundary::Box);
+        let sdp = cl.step(0, &x, Propagator::ReachSdp, &Boundary::Box);
+        let (a, b) = (lp.set.bbox(), sdp.set.bbox());
+        assert!(b.is_finite() && a.contains_box(&b), "{b:?} vs {a:?}");
+    }
+
     #[test]
     fn reach_sdp_bounds_cover_the_model_error() {
         let net = Network::new(

@@ -389,7 +389,12 @@ impl StepSdp {
                 all_rows.push((e, -xi.lo[i]));
             }
         }
-        let last_len = net.layers[hidden].0.ncols();
+        // (no hidden layer: an affine network, nothing in the last layer)
+        let last_len = if hidden == 0 {
+            0
+        } else {
+            net.layers[hidden].0.ncols()
+        };
         let last = index(last_slot);
         StepSdp {
             rows: all_rows,

@@ -354,11 +354,6 @@ fn sdp_bounds(
     let Some(merged) = sdp::merge(net, &DMatrix::identity(n, n), bbox) else {
         return (none, vec![Issue::SdpNeedsRelu]);
     };
-    let rows: Vec<(Vec<f64>, f64)> = match cell {
-        Region::Polytope { rows, .. } => rows.clone(),
-        _ => Vec::new(),
-    };
-    let prog = sdp::StepSdp::new(&merged, bbox, &rows);
     let Some((wl, bl)) = merged.layers.last() else {
         return (none, Vec::new());
     };
@@ -366,6 +361,11 @@ fn sdp_bounds(
         // an affine network: CROWN is exact up to rounding already
         return (none, Vec::new());
     }
+    let rows: Vec<(Vec<f64>, f64)> = match cell {
+        Region::Polytope { rows, .. } => rows.clone(),
+        _ => Vec::new(),
+    };
+    let prog = sdp::StepSdp::new(&merged, bbox, &rows);
     let h_max = prog.last_hidden_max();
     let h_off = prog.last_hidden();
     let mut out = Vec::with_capacity(dirs.nrows());

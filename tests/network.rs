@@ -565,6 +565,27 @@ fn a_tied_centre_refutes_nothing() {
     assert_eq!(run(&q).properties[0].status, Status::Falsified);
 }
 
+/// The SDP's own bound of `d·y` for a two-output merged network (not
+/// intersected with CROWN's): φ over the last hidden layer, the output
+/// layer's bias and the merge error in the constant, a generous 1e-9 for
+/// the rounding of φ.
+fn sdp_output_bound(
+    prog: &ravel::analysis::sdp::StepSdp,
+    merged: &ravel::analysis::sdp::MergedNet,
+    d: [f64; 2],
+) -> ravel::analysis::sdp::SdpBound {
+    let (wl, bl) = merged.layers.last().expect("output layer");
+    let mut phi = vec![0.0; prog.dim()];
+    for k in 0..wl.ncols() {
+        phi[prog.last_hidden() + k] = (0..2).map(|j| d[j] * wl[(j, k)]).sum();
+    }
+    phi[prog.dim() - 1] = (0..2)
+        .map(|j| d[j] * bl[j] + d[j].abs() * merged.err[j])
+        .sum::<f64>()
+        + 1e-9;
+    prog.bound(&phi)
+}
+
 /// Reach-SDP substitutes the neurons its bounds prove stable: over small
 /// boxes most are, and the bounds (with the substitution's rounding added)
 /// still contain every sampled output; over one box the SDP keeps every
@@ -588,22 +609,10 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
         } else {
             kept_some += 1;
         }
-        // the SDP's own bound of d·y for four directions (not intersected
-        // with CROWN's): φ over the last hidden layer, the output layer's
-        // bias and the merge error in the constant, a generous 1e-9 for the
-        // rounding of φ
-        let (wl, bl) = merged.layers.last().expect("output layer");
+        // the SDP's own bound of d·y for four directions
         let samples = probe(&Region::Box(b.clone()), 300, case as u64);
         for d in [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.5], [0.3, -1.0]] {
-            let mut phi = vec![0.0; prog.dim()];
-            for k in 0..wl.ncols() {
-                phi[prog.last_hidden() + k] = (0..2).map(|j| d[j] * wl[(j, k)]).sum();
-            }
-            phi[prog.dim() - 1] = (0..2)
-                .map(|j| d[j] * bl[j] + d[j].abs() * merged.err[j])
-                .sum::<f64>()
-                + 1e-9;
-            let bound = prog.bound(&phi);
+            let bound = sdp_output_bound(&prog, &merged, d);
             assert!(bound.issue.is_none(), "case {case}: {:?}", bound.issue);
             for x in &samples {
                 let y = net.forward(x);
@@ -688,17 +697,8 @@ fn sdp_with_a_pinned_input_contains_every_output() {
         let rows = vec![(vec![1.0, 1.0], 0.5)]; // x0 + x1 ≤ 0.5, so x0 ≤ 0.2
         let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
         let prog = StepSdp::new(&merged, &b, &rows);
-        let (wl, bl) = merged.layers.last().expect("output layer");
         for d in [[1.0, 0.0], [0.0, -1.0], [0.7, 0.7]] {
-            let mut phi = vec![0.0; prog.dim()];
-            for k in 0..wl.ncols() {
-                phi[prog.last_hidden() + k] = (0..2).map(|j| d[j] * wl[(j, k)]).sum();
-            }
-            phi[prog.dim() - 1] = (0..2)
-                .map(|j| d[j] * bl[j] + d[j].abs() * merged.err[j])
-                .sum::<f64>()
-                + 1e-9;
-            let bound = prog.bound(&phi);
+            let bound = sdp_output_bound(&prog, &merged, d);
             assert!(bound.issue.is_none(), "case {case}: {:?}", bound.issue);
             for k in 0..=200 {
                 let x = [-0.5 + 0.7 * k as f64 / 200.0, 0.3];

@@ -94,11 +94,22 @@ impl IBox {
 
     /// The concatenation `self × other`.
     pub fn product(&self, other: &IBox) -> IBox {
-        let mut lo = self.lo.clone();
-        lo.extend_from_slice(&other.lo);
-        let mut hi = self.hi.clone();
-        hi.extend_from_slice(&other.hi);
-        IBox::new(lo, hi)
+        let join = |a: &[f64], b: &[f64]| {
+            let mut v = Vec::with_capacity(a.len() + b.len());
+            v.extend_from_slice(a);
+            v.extend_from_slice(b);
+            v
+        };
+        IBox::new(join(&self.lo, &other.lo), join(&self.hi, &other.hi))
+    }
+
+    /// `self.product(other).abs_max()`, without building the product.
+    pub fn abs_max_with(&self, other: &IBox) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.dim() + other.dim());
+        for b in [self, other] {
+            out.extend(b.lo.iter().zip(&b.hi).map(|(l, h)| num::abs_max(*l, *h)));
+        }
+        out
     }
 
     /// Product of the side lengths (the area in 2-D).

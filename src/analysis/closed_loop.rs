@@ -794,7 +794,7 @@ impl ClosedLoop {
         let d = self.at(t);
         let abs_x = x.abs_max();
         let direct = bound
-            .through_affine(&d.dyn_xw, &d.plant.c, &x.product(w).abs_max())
+            .through_affine(&d.dyn_xw, &d.plant.c, &x.abs_max_with(w))
             .split_concretize(n, w);
         // S = M B in f64; its rounding error times the size of u goes into the offsets
         let spec = bound.coef.mul(&d.plant.b);
@@ -802,7 +802,7 @@ impl ClosedLoop {
         let mb_abs = bound.coef.abs().mul(&d.plant.b.abs());
         let u_abs = analysis.output_box(Mode::Ibp).abs_max();
         let p = self.plant.obs.ncols();
-        let xv_abs = x.product(v).abs_max();
+        let xv_abs = x.abs_max_with(v);
         // with optimised slopes, each row's measure is what this step makes
         // of it: the control part composed with y = Cᵀx + v and added to the
         // direct part, over the box of x (and its maximiser, mapped to y)
@@ -897,7 +897,7 @@ impl ClosedLoop {
                         .through_affine(
                             &self.obs_xv,
                             &DVector::zeros(p),
-                            &boxes[t].product(&self.plant.v).abs_max(),
+                            &boxes[t].abs_max_with(&self.plant.v),
                         )
                         .split_concretize(n, &self.plant.v);
                     let over_x0 = self.back_to_start(over_x, &analyses, &boxes, t);

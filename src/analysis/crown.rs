@@ -252,8 +252,8 @@ pub fn plus_minus_identity(n: usize) -> Rows {
 /// Certified interval image of a box under `z = W x + b`.
 pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
     let rows = w.nrows();
-    let mut lo = vec![Acc::ZERO; rows];
-    let mut hi = vec![Acc::ZERO; rows];
+    let mut both = vec![Acc::ZERO; 2 * rows];
+    let (lo, hi) = both.split_at_mut(rows);
     if rows > 0 {
         // column by column: nalgebra stores columns contiguously
         for (i, col) in w.as_slice().chunks_exact(rows).enumerate() {
@@ -269,8 +269,8 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
         h.add(bj);
     }
     IBox::new(
-        lo.into_iter().map(Acc::lower).collect(),
-        hi.into_iter().map(Acc::upper).collect(),
+        lo.iter().map(|a| a.lower()).collect(),
+        hi.iter().map(|a| a.upper()).collect(),
     )
 }
 
@@ -529,8 +529,19 @@ impl<'a> Analysis<'a> {
         let mut coef = spec;
         let mut offset = vec![Acc::ZERO; coef.nrows()];
         // two buffers in turn: an affine layer writes the other one, an
-        // activation rewrites its rows in place
-        let mut spare = Rows::zeros(0, 0);
+        // activation rewrites its rows in place; both sized once for the
+        // widest layer
+        let widest = self.net.layers[..end]
+            .iter()
+            .map(|l| match l {
+                Layer::Affine { w, .. } => w.ncols().max(w.nrows()),
+                Layer::Act(_) => 0,
+            })
+            .max()
+            .unwrap_or(0);
+        let room = coef.nrows() * widest;
+        coef.reserve_total(room);
+        let mut spare = Rows::with_capacity(room);
         for i in (0..end).rev() {
             match &self.net.layers[i] {
                 Layer::Affine { w, b } => {

@@ -34,6 +34,21 @@ impl Rows {
         }
     }
 
+    /// An empty matrix whose storage can hold `elems` numbers without
+    /// growing (a buffer for [`Rows::mul_into`]).
+    pub fn with_capacity(elems: usize) -> Rows {
+        Rows {
+            rows: 0,
+            cols: 0,
+            data: Vec::with_capacity(elems),
+        }
+    }
+
+    /// Make room for `elems` numbers in all.
+    pub fn reserve_total(&mut self, elems: usize) {
+        self.data.reserve(elems.saturating_sub(self.data.len()));
+    }
+
     /// A matrix from its rows, stored one after another (`data.len()` must be `rows · cols`).
     pub fn from_row_major(rows: usize, cols: usize, data: Vec<f64>) -> Rows {
         assert_eq!(

@@ -225,8 +225,6 @@ pub struct StepSdp {
     rows: Vec<(Vec<f64>, f64)>,
     /// The kept neurons, layer by layer.
     kept: Vec<Kept>,
-    /// Dimension of ξ.
-    d0: usize,
     /// Each coordinate of ξ: its coordinate in v, or its value when ξ's box
     /// pins it to a point (a noise input that is exactly known, say): such
     /// a coordinate is a constant, not a variable.
@@ -399,7 +397,6 @@ impl StepSdp {
         StepSdp {
             rows: all_rows,
             kept,
-            d0,
             xi_at,
             last,
             last_len,
@@ -491,7 +488,7 @@ impl StepSdp {
             }
         }
         let rest = self.dim - self.free();
-        phi[self.free()..].copy_from_slice(&phi_full[self.d0..self.d0 + rest]);
+        phi[self.free()..].copy_from_slice(&phi_full[self.input_dim()..self.input_dim() + rest]);
         let pinned = sum_upper(pinned);
         let phi = &phi[..];
         // Clarabel's PSD cone calls BLAS/LAPACK, loaded on first use
@@ -633,7 +630,7 @@ impl StepSdp {
 
     /// Dimension of ξ.
     pub fn input_dim(&self) -> usize {
-        self.d0
+        self.xi_at.len()
     }
 
     /// Largest magnitude of each neuron of the last hidden layer.
@@ -644,7 +641,7 @@ impl StepSdp {
     /// Where the last hidden layer starts among φ's coordinates (its
     /// neurons are always kept).
     pub fn last_hidden(&self) -> usize {
-        self.last - self.free() + self.d0
+        self.last - self.free() + self.input_dim()
     }
 
     /// The free coordinates of ξ (the ones not pinned to a point).
@@ -661,7 +658,7 @@ impl StepSdp {
     /// Number of φ's coordinates ([`StepSdp::bound`]): ξ, the kept
     /// neurons, the constant.
     pub fn dim(&self) -> usize {
-        self.dim - self.free() + self.d0
+        self.dim - self.free() + self.input_dim()
     }
 }
 

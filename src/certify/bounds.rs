@@ -32,6 +32,22 @@ impl Bx {
         }
     }
 
+    /// The box `center ± radius`, rounded outward (a ball's bounding box).
+    pub fn around(center: &[f64], radius: &[f64]) -> Bx {
+        Bx {
+            lo: center
+                .iter()
+                .zip(radius)
+                .map(|(c, r)| sum_lower([*c, -r]))
+                .collect(),
+            hi: center
+                .iter()
+                .zip(radius)
+                .map(|(c, r)| sum_upper([*c, *r]))
+                .collect(),
+        }
+    }
+
     /// `max |xᵢ|` per coordinate.
     pub fn abs_max(&self) -> Vec<f64> {
         self.lo

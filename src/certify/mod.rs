@@ -216,18 +216,7 @@ impl Initial {
     fn bbox(&self) -> Bx {
         match self {
             Initial::Box(b) | Initial::Polytope { bbox: b, .. } => b.clone(),
-            Initial::Ball { center, radius, .. } => Bx {
-                lo: center
-                    .iter()
-                    .zip(radius)
-                    .map(|(c, r)| sum_lower([*c, -r]))
-                    .collect(),
-                hi: center
-                    .iter()
-                    .zip(radius)
-                    .map(|(c, r)| sum_upper([*c, *r]))
-                    .collect(),
-            },
+            Initial::Ball { center, radius, .. } => Bx::around(center, radius),
         }
     }
 

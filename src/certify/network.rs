@@ -105,18 +105,7 @@ impl Input {
     fn bbox(&self) -> Bx {
         match self {
             Input::Box(b) | Input::Polytope { bbox: b, .. } => b.clone(),
-            Input::Ball { center, radius, .. } => Bx {
-                lo: center
-                    .iter()
-                    .zip(radius)
-                    .map(|(c, r)| sum_lower([*c, -r]))
-                    .collect(),
-                hi: center
-                    .iter()
-                    .zip(radius)
-                    .map(|(c, r)| sum_upper([*c, *r]))
-                    .collect(),
-            },
+            Input::Ball { center, radius, .. } => Bx::around(center, radius),
         }
     }
 

@@ -212,15 +212,13 @@ fn relaxation_in_place(coef: &mut Rows, offset: &mut [Acc], rel: &[Relax], abs_i
         let row = coef.row_mut(r);
         for (c, rl) in row.iter_mut().zip(rel) {
             let l = *c;
-            let (a, b) = if l >= 0.0 {
-                (rl.au, rl.bu)
-            } else {
-                (rl.al, rl.bl)
-            };
+            // selects, not branches: the coefficients' signs are data
+            let up = l >= 0.0;
+            let a = if up { rl.au } else { rl.al };
+            let b = if up { rl.bu } else { rl.bl };
             *c = l * a;
-            if l != 0.0 {
-                acc.add(l * b);
-            }
+            let nonzero = l != 0.0;
+            acc.add_counted(if nonzero { l * b } else { 0.0 }, nonzero);
         }
         acc.add(slack(2.0 * U, row, abs_in));
     }

@@ -95,7 +95,8 @@ impl Acc {
     /// Add `t` as a term when `counted` (then `t` is at most one rounding
     /// from its value); otherwise `t` must be `0.0` and nothing is counted.
     /// Without a branch: callers in hot loops pass the condition they would
-    /// have branched on, so the sum is the same, bit for bit.
+    /// have branched on, so the sum and its bound are those of the branching
+    /// loop (a sum that is exactly zero may change the sign of its zero).
     #[inline]
     pub fn add_counted(&mut self, t: f64, counted: bool) {
         debug_assert!(counted || t == 0.0);
@@ -269,12 +270,14 @@ mod tests {
         }
         assert_eq!(branching.upper(), selecting.upper());
         assert_eq!(branching.lower(), selecting.lower());
-        // zeros are not terms: the bound is not widened by them
+        // the count matters: the same terms with the zeros counted give a
+        // strictly wider bound, so an uncounted zero is really left out
         let mut more = Acc::ZERO;
         for &t in &terms {
             more.add(t);
         }
-        assert!(more.upper() >= selecting.upper());
+        assert!(more.upper() > selecting.upper());
+        assert!(more.lower() < selecting.lower());
     }
 
     #[test]

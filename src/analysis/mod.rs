@@ -7,4 +7,5 @@ pub mod open_loop;
 pub mod partition;
 pub mod relax;
 pub mod sdp;
+pub mod sdp_ipm;
 pub mod shape;

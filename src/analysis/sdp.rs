@@ -1,6 +1,8 @@
 //! Reach-SDP (after Hu et al. 2020): one closed-loop step bounded by a
-//! semidefinite program over quadratic constraints, solved with Clarabel's
-//! PSD cone, and **re-certified** independently of the solver.
+//! semidefinite program over quadratic constraints, solved by ravel's own
+//! Schur-complement interior-point method ([`super::sdp_ipm`]; Clarabel's
+//! PSD cone when that stalls), and **re-certified** independently of the
+//! solver.
 //!
 //! # The program
 //! With `v = (ξ, h₁, …, h_L, 1)`, where `ξ = (x, v_noise)` is the step's
@@ -28,7 +30,9 @@
 //! observation map `y = Cᵀx + v`, multiplied out in `f64`); the difference to
 //! the exact network is bounded layer by layer (ReLU is 1-Lipschitz) and
 //! added to the bound, and so is the rounding of substituting stable
-//! neurons. Statuses other than `Solved`/`AlmostSolved` give no
+//! neurons. The solver is only a proposer: the Schur-complement method's
+//! multipliers are used when it converged; when it stalls Clarabel is
+//! asked, and Clarabel statuses other than `Solved`/`AlmostSolved` give no
 //! SDP bound: the caller keeps its Reach-LP bound and reports the issue.
 
 use clarabel::algebra::CscMatrix;
@@ -36,7 +40,8 @@ use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, Supporte
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
 use super::crown::{Analysis, Mode};
-use crate::issue::{Backend, Issue};
+use super::sdp_ipm::{self, Con, Ipm};
+use crate::issue::{Backend, Issue, Status};
 use crate::nn::{Activation, Layer, Network};
 use crate::num::{gamma, sum_upper, U};
 use crate::sets::IBox;
@@ -173,6 +178,33 @@ fn tri(i: usize, j: usize) -> usize {
     j * (j + 1) / 2 + i
 }
 
+/// Which solver proposes the multipliers [`StepSdp::bound_using`] re-certifies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solver {
+    /// The Schur-complement interior-point method ([`super::sdp_ipm`]),
+    /// and Clarabel when it stalls: what ravel uses.
+    Auto,
+    /// Only the Schur-complement method (a stall is an issue): for tests.
+    Schur,
+    /// Only Clarabel (the reference the fast path is compared with).
+    Clarabel,
+}
+
+/// A neuron of the last hidden layer, as the SDP sees it.
+#[derive(Clone, Debug)]
+enum LastNeuron {
+    /// A coordinate of v (its index).
+    Kept(usize),
+    /// Stable: `h = formᵀv` in the folded network (a zero form when
+    /// inactive), within `err` of the merged network's value, at most `max`
+    /// in magnitude.
+    Affine {
+        form: Vec<(usize, f64)>,
+        err: f64,
+        max: f64,
+    },
+}
+
 /// What one facet bound came to.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SdpBound {
@@ -201,11 +233,16 @@ struct Kept {
 /// step's input box) prove it inactive (`u ≤ 0`) outputs 0 there, and an
 /// active one (`l ≥ 0`) outputs its pre-activation: both are affine in the
 /// layer's input, so they are substituted into the next layer instead of
-/// becoming coordinates of `v` (the last hidden layer is always kept, so
-/// callers can write the output's objective over it). `v = (ξ, kept
-/// neurons, 1)` and every kept neuron's pre-activation is an affine form
-/// over the coordinates before it. On the quadrotor every neuron of a step
-/// can be stable: `v` then has 1 + 12 + 3 coordinates instead of 83.
+/// becoming coordinates of `v`. In the last hidden layer, over which callers
+/// write the objective, a stable neuron is an affine form over `v` that
+/// [`StepSdp::bound`] substitutes into the objective (callers still give
+/// a coefficient for every neuron of that layer). `v = (ξ, kept neurons, 1)`
+/// and every kept neuron's pre-activation is an affine form over the
+/// coordinates before it. On the quadrotor every neuron of a step can be
+/// stable: `v` then has 1 + 12 coordinates instead of 83. Substituting
+/// matters beyond size: a stable neuron kept as a coordinate is pinned by
+/// two opposite inequalities (`h ≥ 0` and `−h ≥ 0`), so no moment matrix
+/// is strictly feasible, and interior-point methods then stall or diverge.
 /// Likewise a coordinate of ξ that its box pins to a point (noise that is
 /// exactly zero) is a constant, not a coordinate of `v`: its rows' terms
 /// move to the right-hand side (rounded up) and `φ`'s coefficient on it to
@@ -229,10 +266,11 @@ pub struct StepSdp {
     /// pins it to a point (a noise input that is exactly known, say): such
     /// a coordinate is a constant, not a variable.
     xi_at: Vec<Result<usize, f64>>,
-    /// Coordinate of the last hidden layer's first neuron in v.
-    last: usize,
-    /// Neurons in the last hidden layer.
-    last_len: usize,
+    /// The last hidden layer's neurons: coordinates of v, or (when their
+    /// bounds prove them stable) affine forms over v.
+    last: Vec<LastNeuron>,
+    /// Kept neurons before the last hidden layer.
+    kept_before_last: usize,
     /// `|vᵢ|` bounds (the folded network's values).
     vmax: Vec<f64>,
     /// `|vᵢ(folded) − vᵢ(merged)|` bounds.
@@ -271,12 +309,16 @@ impl StepSdp {
             })
             .collect();
         let mut kept_slots: Vec<(usize, Vec<f64>, f64, f64, f64)> = Vec::new();
-        let mut last_slot = used;
+        // the last hidden layer: kept slots, or stable forms (dense over
+        // slots, with their error and magnitude)
+        type Stable = (Vec<f64>, f64, f64);
+        let mut last_slots: Vec<Result<usize, Stable>> = Vec::new();
+        let mut kept_before_last = 0;
         for (k, (w, b)) in net.layers[..hidden].iter().enumerate() {
             let z_box = &boxes[2 * k + 1];
             let is_last = k + 1 == hidden;
             if is_last {
-                last_slot = used;
+                kept_before_last = kept_slots.len();
             }
             let gam = gamma(w.ncols() + 2);
             let mut next = Vec::with_capacity(w.nrows());
@@ -304,9 +346,14 @@ impl StepSdp {
                 let round = (gam * size * 1.0625 + 1e-300).next_up();
                 let err_z = sum_upper(prop.into_iter().chain([round]));
                 let (l, u) = (z_box.lo[j], z_box.hi[j]);
-                if !is_last && u <= 0.0 {
+                if is_last && u <= 0.0 {
+                    last_slots.push(Err((vec![0.0; slots], 0.0, 0.0)));
+                } else if is_last && l >= 0.0 {
+                    let max = (u + err_z).next_up();
+                    last_slots.push(Err((f, err_z, max)));
+                } else if u <= 0.0 {
                     next.push((vec![0.0; slots], 0.0));
-                } else if !is_last && l >= 0.0 {
+                } else if l >= 0.0 {
                     next.push((f, err_z));
                 } else {
                     let (lw, uw) = ((l - err_z).next_down(), (u + err_z).next_up());
@@ -314,6 +361,9 @@ impl StepSdp {
                     used += 1;
                     smax[slot] = uw.max(0.0);
                     kept_slots.push((slot, f, lw, uw, err_z));
+                    if is_last {
+                        last_slots.push(Ok(slot));
+                    }
                     let mut unit = vec![0.0; slots];
                     unit[slot] = 1.0;
                     next.push((unit, err_z));
@@ -388,18 +438,26 @@ impl StepSdp {
             }
         }
         // (no hidden layer: an affine network, nothing in the last layer)
-        let last_len = if hidden == 0 {
-            0
-        } else {
-            net.layers[hidden].0.ncols()
-        };
-        let last = index(last_slot);
+        let last = last_slots
+            .into_iter()
+            .map(|s| match s {
+                Ok(slot) => LastNeuron::Kept(index(slot)),
+                Err((f, err, max)) => LastNeuron::Affine {
+                    form: (0..used)
+                        .filter(|&s| f[s] != 0.0)
+                        .map(|s| (index(s), f[s]))
+                        .collect(),
+                    err,
+                    max,
+                },
+            })
+            .collect();
         StepSdp {
             rows: all_rows,
             kept,
             xi_at,
             last,
-            last_len,
+            kept_before_last,
             vmax,
             err,
             dim,
@@ -407,12 +465,20 @@ impl StepSdp {
         }
     }
 
-    /// The constraint forms: `(form, nonnegative multiplier?)`.
-    fn constraints(&self) -> Vec<(Form, bool)> {
+    /// The constraints as rank-two forms `coef·sym(α βᵀ)` over distinct
+    /// sparse vectors (the unit vector of the constant is vector 0), each
+    /// with whether its multiplier is nonnegative (else it is an equality's).
+    fn constraints(&self) -> (Vec<Vec<(usize, f64)>>, Vec<Con>) {
         let one = self.dim - 1;
-        let mut out = Vec::new();
-        // input rows r_i = g_i − G_i ξ as sparse vectors over v
-        let r: Vec<Vec<(usize, f64)>> = self
+        let mut vecs: Vec<Vec<(usize, f64)>> = vec![vec![(one, 1.0)]];
+        let mut cons = Vec::new();
+        let add = |vecs: &mut Vec<Vec<(usize, f64)>>, v: Vec<(usize, f64)>| {
+            vecs.push(v);
+            vecs.len() - 1
+        };
+        let con = |coef: f64, a: usize, b: usize, nonneg: bool| Con { coef, a, b, nonneg };
+        // input rows r_i = g_i − G_i ξ as sparse vectors over v: r_i ≥ 0, r_i r_j ≥ 0
+        let r: Vec<usize> = self
             .rows
             .iter()
             .map(|(a, g)| {
@@ -423,61 +489,56 @@ impl StepSdp {
                     .map(|(i, x)| (i, -x))
                     .collect();
                 v.push((one, *g));
-                v
+                add(&mut vecs, v)
             })
             .collect();
-        let unit = [(one, 1.0)];
-        for (i, ri) in r.iter().enumerate() {
-            let mut f = Form::default();
-            f.outer(1.0, ri, &unit);
-            out.push((f, true));
-            for rj in r.iter().skip(i + 1) {
-                let mut f = Form::default();
-                f.outer(1.0, ri, rj);
-                out.push((f, true));
+        for (i, &ri) in r.iter().enumerate() {
+            cons.push(con(1.0, ri, 0, true));
+            for &rj in r.iter().skip(i + 1) {
+                cons.push(con(1.0, ri, rj, true));
             }
         }
         // kept neurons
         for n in &self.kept {
             let z = &n.z;
-            let h = [(n.h, 1.0)];
+            let h = add(&mut vecs, vec![(n.h, 1.0)]);
             let mut h_minus_z: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, -x)).collect();
             h_minus_z.push((n.h, 1.0));
+            let hz = add(&mut vecs, h_minus_z);
             let (l, u) = (n.l, n.u);
-            let mut f = Form::default();
-            f.outer(1.0, &h, &unit);
-            out.push((f, true));
-            let mut f = Form::default();
-            f.outer(1.0, &h_minus_z, &unit);
-            out.push((f, true));
-            let mut f = Form::default();
-            f.outer(1.0, &h, &h_minus_z);
-            out.push((f, false));
+            cons.push(con(1.0, h, 0, true));
+            cons.push(con(1.0, hz, 0, true));
+            cons.push(con(1.0, h, hz, false));
             if u <= 0.0 {
-                let mut f = Form::default();
-                f.outer(-1.0, &h, &unit);
-                out.push((f, true));
+                cons.push(con(-1.0, h, 0, true));
             } else if l >= 0.0 {
-                let mut f = Form::default();
-                f.outer(-1.0, &h_minus_z, &unit);
-                out.push((f, true));
+                cons.push(con(-1.0, hz, 0, true));
             } else if u.is_finite() && l.is_finite() {
                 // u (z − l) − (u − l) h ≥ 0
                 let mut t: Vec<(usize, f64)> = z.iter().map(|(i, x)| (*i, u * x)).collect();
                 t.push((one, -u * l));
                 t.push((n.h, -(u - l)));
-                let mut f = Form::default();
-                f.outer(1.0, &t, &unit);
-                out.push((f, true));
+                let t = add(&mut vecs, t);
+                cons.push(con(1.0, t, 0, true));
             }
         }
-        out
+        (vecs, cons)
     }
 
     /// A certified upper bound of `φᵀv`, with `φ` over the coordinates of
-    /// [`StepSdp::dim`]: ξ, then the kept neurons ([`StepSdp::last_hidden`]
-    /// is where the last hidden layer starts), the constant last.
+    /// [`StepSdp::dim`]: ξ, then the kept neurons before the last hidden
+    /// layer, every neuron of that layer ([`StepSdp::last_hidden`] is where
+    /// it starts), the constant last. The substitution of the last layer's
+    /// stable neurons into `φ` is paid for: `|φ_k|·err_k` per neuron and the
+    /// rounding of the substituted coefficients times the coordinates'
+    /// magnitudes.
     pub fn bound(&self, phi_full: &[f64]) -> SdpBound {
+        self.bound_using(phi_full, Solver::Auto)
+    }
+
+    /// [`StepSdp::bound`] with the multipliers proposed by `solver` (the
+    /// re-certification is the same for all).
+    pub fn bound_using(&self, phi_full: &[f64], solver: Solver) -> SdpBound {
         // φ on v: pinned coordinates of ξ move into a constant of their own
         let mut phi = vec![0.0; self.dim];
         let mut pinned = Vec::new();
@@ -487,22 +548,50 @@ impl StepSdp {
                 Err(c) => pinned.push(phi_full[i] * c),
             }
         }
-        let rest = self.dim - self.free();
-        phi[self.free()..].copy_from_slice(&phi_full[self.input_dim()..self.input_dim() + rest]);
-        let pinned = sum_upper(pinned);
-        let phi = &phi[..];
-        // Clarabel's PSD cone calls BLAS/LAPACK, loaded on first use
-        if crate::blas::load().is_err() {
-            return none(Issue::NoBlas);
+        let (d0, free, kb) = (self.input_dim(), self.free(), self.kept_before_last);
+        phi[free..free + kb].copy_from_slice(&phi_full[d0..d0 + kb]);
+        let one = self.dim - 1;
+        phi[one] = phi_full[d0 + kb + self.last.len()];
+        // the last hidden layer: a stable neuron's coefficient goes onto its
+        // form's coordinates (|φ|·err for the form's error, and the
+        // rounding of these sums, are added to the bound)
+        let mut phi_abs: Vec<f64> = phi.iter().map(|x| x.abs()).collect();
+        let mut substituted = Vec::new();
+        for (k, neuron) in self.last.iter().enumerate() {
+            let p = phi_full[d0 + kb + k];
+            match neuron {
+                LastNeuron::Kept(i) => {
+                    phi[*i] += p;
+                    phi_abs[*i] += p.abs();
+                }
+                LastNeuron::Affine { form, err, .. } => {
+                    for &(i, x) in form {
+                        phi[i] += p * x;
+                        phi_abs[i] += (p * x).abs();
+                    }
+                    substituted.push(p.abs() * err);
+                }
+            }
         }
+        let g = gamma(self.last.len() + 2);
+        let phi_round = sum_upper(
+            phi_abs
+                .iter()
+                .zip(&self.vmax)
+                .map(|(a, m)| (g * a * m * 1.0625).next_up()),
+        );
+        let pinned = sum_upper(pinned.into_iter().chain(substituted).chain([phi_round]));
+        let phi = &phi[..];
         let n = self.dim;
-        let one = n - 1;
-        let cons = self.constraints();
-        let nvar = 1 + cons.len();
-        let nnon = cons.iter().filter(|c| c.1).count();
-        let tdim = n * (n + 1) / 2;
-        let sq2 = std::f64::consts::SQRT_2;
-        let svec_scale = |i: usize, j: usize| if i == j { 1.0 } else { sq2 };
+        let (vecs, rank2) = self.constraints();
+        let cons: Vec<(Form, bool)> = rank2
+            .iter()
+            .map(|c| {
+                let mut f = Form::default();
+                f.outer(c.coef, &vecs[c.a], &vecs[c.b]);
+                (f, c.nonneg)
+            })
+            .collect();
         // objective form F = sym(φ eᵀ)
         let phi_sparse: Vec<(usize, f64)> = phi
             .iter()
@@ -512,63 +601,21 @@ impl StepSdp {
             .collect();
         let mut fobj = Form::default();
         fobj.outer(1.0, &phi_sparse, &[(one, 1.0)]);
-        // A, b: rows 0..nnon are μ ≥ 0; then the PSD block s = svec(−M)
-        let (mut ri, mut ci, mut vs) = (Vec::new(), Vec::new(), Vec::new());
-        let mut bvec = vec![0.0; nnon + tdim];
-        for (i, j, v) in &fobj.entries {
-            bvec[nnon + tri(*i, *j)] -= v * svec_scale(*i, *j);
-        }
-        // d: s gets +d·svec(e eᵀ) → A column −svec(e eᵀ)
-        ri.push(nnon + tri(one, one));
-        ci.push(0);
-        vs.push(-1.0);
-        let mut k_non = 0;
-        for (c, (form, nonneg)) in cons.iter().enumerate() {
-            let col = 1 + c;
-            if *nonneg {
-                ri.push(k_non);
-                ci.push(col);
-                vs.push(-1.0);
-                k_non += 1;
-            }
-            for (i, j, v) in &form.entries {
-                ri.push(nnon + tri(*i, *j));
-                ci.push(col);
-                vs.push(v * svec_scale(*i, *j));
-            }
-        }
-        let a = CscMatrix::new_from_triplets(nnon + tdim, nvar, ri, ci, vs);
-        let p = CscMatrix::<f64>::zeros((nvar, nvar));
-        let mut q = vec![0.0; nvar];
-        q[0] = 1.0;
-        let cones = [
-            SupportedConeT::NonnegativeConeT(nnon),
-            SupportedConeT::PSDTriangleConeT(n),
-        ];
-        let settings = match DefaultSettingsBuilder::default()
-            .verbose(false)
-            .max_iter(100)
-            // faer's supernodal LDL: about 5× faster than QDLDL on the dense
-            // KKT blocks of larger PSD cones; one thread keeps it deterministic
-            .direct_solve_method("faer".into())
-            .max_threads(1)
-            .build()
-        {
-            Ok(s) => s,
-            Err(_) => return none(Issue::BadSettings(Backend::Sdp)),
+        // the Schur-complement interior-point method first; Clarabel when it stalls
+        let schur = match solver {
+            Solver::Clarabel => None,
+            Solver::Auto | Solver::Schur => propose(n, &fobj, vecs, &rank2),
         };
-        let mut solver = match DefaultSolver::new(&p, &q, &a, &bvec, &cones, settings) {
-            Ok(s) => s,
-            Err(_) => return none(Issue::RejectedData(Backend::Sdp)),
+        let x = match (schur, solver) {
+            (Some(y), _) => y,
+            (None, Solver::Schur) => {
+                return none(Issue::Status(Backend::Sdp, Status::InsufficientProgress))
+            }
+            (None, _) => match clarabel_solve(n, &fobj, &cons) {
+                Ok(x) => x,
+                Err(issue) => return none(issue),
+            },
         };
-        solver.solve();
-        if let Some(issue) = Issue::from_status(Backend::Sdp, solver.solution.status) {
-            return none(issue);
-        }
-        let x = &solver.solution.x;
-        if x.iter().any(|v| !v.is_finite()) {
-            return none(Issue::NonFiniteSolution);
-        }
         // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
         let d = x[0];
         let mut m = DMatrix::<f64>::zeros(n, n);
@@ -635,13 +682,19 @@ impl StepSdp {
 
     /// Largest magnitude of each neuron of the last hidden layer.
     pub fn last_hidden_max(&self) -> Vec<f64> {
-        self.vmax[self.last..self.last + self.last_len].to_vec()
+        self.last
+            .iter()
+            .map(|n| match n {
+                LastNeuron::Kept(i) => self.vmax[*i],
+                LastNeuron::Affine { max, .. } => *max,
+            })
+            .collect()
     }
 
-    /// Where the last hidden layer starts among φ's coordinates (its
-    /// neurons are always kept).
+    /// Where the last hidden layer starts among φ's coordinates (all its
+    /// neurons have one, kept or substituted).
     pub fn last_hidden(&self) -> usize {
-        self.last - self.free() + self.input_dim()
+        self.input_dim() + self.kept_before_last
     }
 
     /// The free coordinates of ξ (the ones not pinned to a point).
@@ -656,10 +709,117 @@ impl StepSdp {
     }
 
     /// Number of φ's coordinates ([`StepSdp::bound`]): ξ, the kept
-    /// neurons, the constant.
+    /// neurons before the last hidden layer, every neuron of the last
+    /// hidden layer, the constant.
     pub fn dim(&self) -> usize {
-        self.dim - self.free() + self.input_dim()
+        self.input_dim() + self.kept_before_last + self.last.len() + 1
     }
+}
+
+/// The Schur-complement method's proposal for the program of
+/// [`StepSdp::bound`], `(d, multipliers)`, when it converged.
+fn propose(n: usize, fobj: &Form, vecs: Vec<Vec<(usize, f64)>>, rank2: &[Con]) -> Option<Vec<f64>> {
+    // Z = C − Σ yₖ Aₖ = −M: C = −F, A₀ = −e eᵀ (the multiplier d), Aₖ = Sₖ
+    let mut c = DMatrix::<f64>::zeros(n, n);
+    for &(i, j, v) in &fobj.entries {
+        c[(i, j)] -= v;
+        if i != j {
+            c[(j, i)] -= v;
+        }
+    }
+    let mut cons = Vec::with_capacity(rank2.len() + 1);
+    cons.push(Con {
+        coef: -1.0,
+        a: 0,
+        b: 0,
+        nonneg: false,
+    });
+    cons.extend_from_slice(rank2);
+    let mut b = vec![0.0; cons.len()];
+    b[0] = -1.0;
+    let problem = sdp_ipm::Problem {
+        n,
+        c,
+        vecs,
+        cons,
+        b,
+    };
+    match sdp_ipm::solve(&problem) {
+        Ipm::Solved { y, .. } => Some(y),
+        Ipm::NotSolved(_) => None,
+    }
+}
+
+/// Clarabel's proposal for the program of [`StepSdp::bound`]: `x = (d, multipliers)`.
+fn clarabel_solve(n: usize, fobj: &Form, cons: &[(Form, bool)]) -> Result<Vec<f64>, Issue> {
+    // Clarabel's PSD cone calls BLAS/LAPACK, loaded on first use
+    if crate::blas::load().is_err() {
+        return Err(Issue::NoBlas);
+    }
+    let one = n - 1;
+    let nvar = 1 + cons.len();
+    let nnon = cons.iter().filter(|c| c.1).count();
+    let tdim = n * (n + 1) / 2;
+    let sq2 = std::f64::consts::SQRT_2;
+    let svec_scale = |i: usize, j: usize| if i == j { 1.0 } else { sq2 };
+    // A, b: rows 0..nnon are μ ≥ 0; then the PSD block s = svec(−M)
+    let (mut ri, mut ci, mut vs) = (Vec::new(), Vec::new(), Vec::new());
+    let mut bvec = vec![0.0; nnon + tdim];
+    for (i, j, v) in &fobj.entries {
+        bvec[nnon + tri(*i, *j)] -= v * svec_scale(*i, *j);
+    }
+    // d: s gets +d·svec(e eᵀ) → A column −svec(e eᵀ)
+    ri.push(nnon + tri(one, one));
+    ci.push(0);
+    vs.push(-1.0);
+    let mut k_non = 0;
+    for (c, (form, nonneg)) in cons.iter().enumerate() {
+        let col = 1 + c;
+        if *nonneg {
+            ri.push(k_non);
+            ci.push(col);
+            vs.push(-1.0);
+            k_non += 1;
+        }
+        for (i, j, v) in &form.entries {
+            ri.push(nnon + tri(*i, *j));
+            ci.push(col);
+            vs.push(v * svec_scale(*i, *j));
+        }
+    }
+    let a = CscMatrix::new_from_triplets(nnon + tdim, nvar, ri, ci, vs);
+    let p = CscMatrix::<f64>::zeros((nvar, nvar));
+    let mut q = vec![0.0; nvar];
+    q[0] = 1.0;
+    let cones = [
+        SupportedConeT::NonnegativeConeT(nnon),
+        SupportedConeT::PSDTriangleConeT(n),
+    ];
+    let settings = match DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(100)
+        // faer's supernodal LDL: about 5× faster than QDLDL on the dense
+        // KKT blocks of larger PSD cones; one thread keeps it deterministic
+        .direct_solve_method("faer".into())
+        .max_threads(1)
+        .build()
+    {
+        Ok(s) => s,
+        Err(_) => return Err(Issue::BadSettings(Backend::Sdp)),
+    };
+    let mut solver = match DefaultSolver::new(&p, &q, &a, &bvec, &cones, settings) {
+        Ok(s) => s,
+        Err(_) => return Err(Issue::RejectedData(Backend::Sdp)),
+    };
+    solver.solve();
+    if let Some(issue) = Issue::from_status(Backend::Sdp, solver.solution.status) {
+        return Err(issue);
+    }
+    let x = solver.solution.x.clone();
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(Issue::NonFiniteSolution);
+    }
+    Ok(x)
 }
 
 fn none(issue: Issue) -> SdpBound {

@@ -691,6 +691,38 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
     );
 }
 
+/// Many input rows on a small program (their pairwise products are
+/// multipliers: 45 rows give over a thousand) are Clarabel's case: the
+/// default solver choice gives Clarabel's bound exactly there, and the bound
+/// contains the samples.
+#[test]
+fn sdp_with_many_input_rows_goes_to_clarabel() {
+    use ravel::analysis::sdp::{merge, Solver, StepSdp};
+    let mut rng = Rng::new(31);
+    let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 5));
+    let b = IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]);
+    // tangent rows of the disc of radius 0.6 (all contain the box)
+    let rows: Vec<(Vec<f64>, f64)> = (0..45)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::TAU / 45.0;
+            (vec![a.cos(), a.sin()], 0.75)
+        })
+        .collect();
+    let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
+    let prog = StepSdp::new(&merged, &b, &rows);
+    let samples = probe(&Region::Box(b.clone()), 200, 5);
+    for d in [[1.0, 0.0], [0.0, -1.0]] {
+        let auto = sdp_output_bound_using(&prog, &merged, d, Solver::Auto);
+        let reference = sdp_output_bound_using(&prog, &merged, d, Solver::Clarabel);
+        assert_eq!(auto, reference);
+        assert!(auto.issue.is_none() && auto.value.is_finite());
+        for x in &samples {
+            let y = net.forward(x);
+            assert!(d[0] * y[0] + d[1] * y[1] <= auto.value);
+        }
+    }
+}
+
 /// A network property only optimised slopes prove: its certificate records
 /// the step count and is VALID through the checker's own slope search, and
 /// INVALID with the search switched off.

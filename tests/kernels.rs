@@ -5,7 +5,9 @@
 //! nalgebra. The analysis's kernels (row-major rows, two buffers, interleaved
 //! sums, the blocked product for wide layers, the exact path for the ±I
 //! layers of control limits, no back-substitution for ReLUs that interval
-//! arithmetic proves inactive) must give the same bounds up to
+//! arithmetic proves inactive, nor for a layer whose rows each read one
+//! neuron of an activation, as a clamp's second half does) must give the
+//! same bounds up to
 //! rounding-error terms, on random ReLU, tanh and sigmoid networks from 2 to
 //! 96 neurons wide (both product paths), and every sampled output must lie
 //! inside both.

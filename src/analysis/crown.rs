@@ -224,6 +224,14 @@ fn relaxation_in_place(coef: &mut Rows, offset: &mut [Acc], rel: &[Relax], abs_i
     }
 }
 
+/// Whether every row of `w` has at most one nonzero entry (a one-column
+/// matrix, or a diagonal one such as a clamp's `±I`).
+fn one_per_row(w: &DMatrix<f64>) -> bool {
+    w.ncols() == 1
+        || w.row_iter()
+            .all(|r| r.iter().filter(|v| **v != 0.0).count() <= 1)
+}
+
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
 pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
     let mut acc = vec![Acc::ZERO; w.nrows()];
@@ -353,19 +361,29 @@ impl<'a> Analysis<'a> {
                     // with the product's rounding slack added: never
                     // tighter, so without a hook (which may bound it
                     // otherwise) the back-substitution is skipped (same
-                    // bounds, bit for bit). Likewise after an activation of
-                    // one neuron (the clamp of a single control): its
-                    // input's bounds are CROWN's already, and CROWN of
-                    // `w·σ(z) + b` substitutes a relaxation line of σ and
-                    // then the very linear bound of `z` (scaled; same
-                    // signs, same relaxations) that gave z's bound, so it
-                    // comes to the line at z's bound, which is never below
-                    // σ's interval image: up to rounding, no tighter than
-                    // interval arithmetic from z's bounds.
-                    let after_one_neuron = i >= 2
-                        && matches!(net.layers[i - 1], Layer::Act(_))
-                        && matches!(net.layers[i - 2], Layer::Affine { .. })
-                        && a.boxes[i].dim() == 1;
+                    // bounds, bit for bit). Likewise when every row of this
+                    // layer reads one neuron of an activation's output
+                    // (a one-neuron activation, as the clamp of a single
+                    // control; or an elementwise clamp's diagonal halves),
+                    // through affine layers that keep one nonzero per row:
+                    // the activation's input bounds are CROWN's already,
+                    // and CROWN of `w·σ(z_k) + b` substitutes a relaxation
+                    // line of σ and then the very linear bound of `z_k`
+                    // (scaled; same signs, same relaxations) that gave
+                    // z_k's bound, so it comes to the line at z_k's bound,
+                    // which is never below σ's interval image: up to
+                    // rounding, no tighter than interval arithmetic from
+                    // z_k's bounds.
+                    let mut j = i + 1;
+                    while j >= 1
+                        && matches!(&net.layers[j - 1],
+                            Layer::Affine { w, .. } if one_per_row(w))
+                    {
+                        j -= 1;
+                    }
+                    let after_one_neuron = j >= 2
+                        && matches!(net.layers[j - 1], Layer::Act(_))
+                        && matches!(net.layers[j - 2], Layer::Affine { .. });
                     let useful = hook.is_some() || (i > 0 && !after_one_neuron);
                     if mode != Mode::Ibp && feeds_activation && useful {
                         // A ReLU that interval arithmetic already proves

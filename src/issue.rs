@@ -31,6 +31,10 @@ pub enum Issue {
     SdpNeedsRelu,
     /// The BLAS/LAPACK library the SDP solver calls could not be loaded.
     NoBlas,
+    /// The SDP has more multipliers than the Schur-complement method takes
+    /// ([`crate::limits::MAX_SCHUR_MULTIPLIERS`]) on a matrix larger than
+    /// Clarabel takes ([`crate::limits::MAX_CLARABEL_SDP_DIM`]).
+    SdpTooLarge,
 }
 
 /// An untrusted solver status.
@@ -88,6 +92,7 @@ impl Issue {
             Issue::NonFiniteEigenvalues => "eigenvalues not finite",
             Issue::SdpNeedsRelu => "SDP needs a ReLU network",
             Issue::NoBlas => "SDP solver's BLAS/LAPACK (libopenblas.so.0) not loadable",
+            Issue::SdpTooLarge => "SDP too large for its solvers",
             Issue::Status(Lp, s) => s.as_str(),
             Issue::Status(Sdp, s) => match s {
                 Status::Unsolved => "SDP unsolved",

@@ -48,10 +48,22 @@ pub const MAX_WIDTH: u64 = 4096;
 pub const MAX_NODES: usize = 4096;
 
 /// Largest dimension of Reach-SDP's semidefinite program (observation and
-/// state inputs, hidden and saturation neurons, plus one): Clarabel's
+/// state inputs, hidden and saturation neurons, plus one). The
+/// Schur-complement method (`analysis::sdp_ipm`) holds a few `d × d`
+/// matrices and one `m × m` (m multipliers, about four per neuron: 1200 at
+/// 300, 12 MB) and factors it in `m³/3` operations an iteration: about 0.2 s
+/// an iteration at 300 on the build machines.
+pub const MAX_SDP_DIM: u64 = 300;
+/// Largest dimension Clarabel (the SDP fallback, and the solver for
+/// programs with many more multipliers than matrix entries) is given: its
 /// factorisation of a PSD cone of dimension `d` holds about `(d²/2)²`
 /// numbers, 1 GB at 150.
-pub const MAX_SDP_DIM: u64 = 150;
+pub const MAX_CLARABEL_SDP_DIM: usize = 150;
+/// Most multipliers the Schur-complement method is given: its `m × m`
+/// matrix and factor hold `2m²` numbers, 256 MB at 4000. (The pairwise
+/// products of many input rows can exceed it on a small matrix: Clarabel's
+/// case.)
+pub const MAX_SCHUR_MULTIPLIERS: usize = 4000;
 /// Largest `horizon × neurons` of unrolled CROWN, which keeps every step's
 /// neuron bounds and relaxations (about 60 bytes per neuron and step).
 pub const MAX_UNROLLED_NEURON_STEPS: u64 = 5_000_000;

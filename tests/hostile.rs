@@ -404,3 +404,71 @@ fn observation_files_stay_in_the_spec_folder() {
         Some(std::path::Path::new("specs"))
     );
 }
+
+/// A ReLU network `2 → w → w → outputs` with small random weights.
+fn wide_net(w: usize, outputs: usize) -> Network {
+    let mut rng = ravel::rng::Rng::new(5);
+    let mut layers = Vec::new();
+    for (k, (i, o)) in [(2, w), (w, w), (w, outputs)].into_iter().enumerate() {
+        let s = 1.0 / (i as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(o, i, |_, _| rng.uniform(-s, s)),
+            b: DVector::from_fn(o, |_, _| rng.uniform(-0.1, 0.1)),
+        });
+        if k < 2 {
+            layers.push(Layer::Act(Activation::Relu));
+        }
+    }
+    Network::new(2, layers)
+}
+
+/// Reach-SDP's programs are bounded in size when the spec is checked (E0216
+/// with the propagator's span), for closed loops and network specs alike: a
+/// 2 → 150 → 150 controller is refused, a 2 → 100 → 100 one (beyond what
+/// Clarabel alone took) is accepted.
+#[test]
+fn sdp_programs_beyond_the_size_limit_are_refused() {
+    let closed_loop = format!("{SPEC}analysis {{\n    propagator reach_sdp\n}}\n");
+    let network = r#"
+network n {
+    input  x[2]
+    output y[2]
+}
+model "models/policy.onnx"
+input X = box(x[0] in [-0.1, 0.1], x[1] in [-0.1, 0.1])
+require r = { y[0] <= 10 }
+analysis {
+    propagator sdp
+}
+"#;
+    for (spec, outputs) in [(closed_loop.as_str(), 1), (network, 2)] {
+        for (width, refused) in [(150, true), (100, false)] {
+            let dir = folder(&format!("sdp_size_{outputs}_{width}"));
+            let mut g = GraphBuilder::new(2, Storage::RawF32);
+            g.network(&wide_net(width, outputs), false);
+            let (bytes, _) = g.finish(outputs);
+            std::fs::write(dir.join("models/policy.onnx"), bytes).expect("write");
+            let res = ravel::front_end_task(spec, &dir, &ravel::cli::read_request, None);
+            let diags = res.err().unwrap_or_default();
+            let got: Vec<Code> = diags.iter().map(|d| d.code).collect();
+            let expected = if refused { vec![Code::Limit] } else { vec![] };
+            assert_eq!(
+                got,
+                expected,
+                "{width}: {:?}",
+                diags.iter().map(|d| &d.message).collect::<Vec<_>>()
+            );
+            if refused {
+                let d = &diags[0];
+                assert!(
+                    d.message.contains("beyond the limit of 300"),
+                    "{}",
+                    d.message
+                );
+                let span = d.span.expect("a span");
+                let at = &spec[span.start..span.end];
+                assert!(at.contains("sdp"), "span {at:?}");
+            }
+        }
+    }
+}

@@ -691,6 +691,49 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
     );
 }
 
+/// Beyond the matrix size Clarabel is given (its PSD block would not fit
+/// in memory), the Schur-complement method alone bounds the program: a
+/// 2 → 90 → 90 → 2 network over a box where most neurons are unstable
+/// keeps more than 150 coordinates; its bound holds on samples, and asking
+/// Clarabel for it is refused as too large (no attempt, no memory).
+#[test]
+fn sdp_beyond_clarabels_size_is_the_schur_methods() {
+    use ravel::analysis::sdp::{merge, Solver, StepSdp};
+    use ravel::issue::Issue;
+    let mut rng = Rng::new(8);
+    let mut layers = Vec::new();
+    for (k, (i, o)) in [(2, 90), (90, 90), (90, 2)].into_iter().enumerate() {
+        let sc = 1.5 / (i as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(o, i, |_, _| rng.uniform(-sc, sc)),
+            b: DVector::from_fn(o, |_, _| rng.uniform(-0.2, 0.2)),
+        });
+        if k < 2 {
+            layers.push(Layer::Act(Activation::Relu));
+        }
+    }
+    let net = Network::new(2, layers);
+    let b = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
+    let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
+    let prog = StepSdp::new(&merged, &b, &[]);
+    assert!(
+        prog.kept_neurons() + 3 > ravel::limits::MAX_CLARABEL_SDP_DIM,
+        "only {} neurons kept",
+        prog.kept_neurons()
+    );
+    let d = [1.0, -0.5];
+    let fast = sdp_output_bound_using(&prog, &merged, d, Solver::Auto);
+    assert_eq!(fast.issue, None);
+    assert!(fast.value.is_finite());
+    for x in &probe(&Region::Box(b.clone()), 300, 8) {
+        let y = net.forward(x);
+        assert!(d[0] * y[0] + d[1] * y[1] <= fast.value);
+    }
+    let refused = sdp_output_bound_using(&prog, &merged, d, Solver::Clarabel);
+    assert_eq!(refused.issue, Some(Issue::SdpTooLarge));
+    assert_eq!(refused.value, f64::INFINITY);
+}
+
 /// Many input rows on a small program (their pairwise products are
 /// multipliers: 45 rows give over a thousand) are Clarabel's case: the
 /// default solver choice gives Clarabel's bound exactly there, and the bound

@@ -42,6 +42,7 @@ use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use super::crown::{Analysis, Mode};
 use super::sdp_ipm::{self, Con, Ipm};
 use crate::issue::{Backend, Issue, Status};
+use crate::limits::{MAX_CLARABEL_SDP_DIM, MAX_SCHUR_MULTIPLIERS};
 use crate::nn::{Activation, Layer, Network};
 use crate::num::{gamma, sum_upper, U};
 use crate::sets::IBox;
@@ -601,22 +602,33 @@ impl StepSdp {
             .collect();
         let mut fobj = Form::default();
         fobj.outer(1.0, &phi_sparse, &[(one, 1.0)]);
-        // the Schur-complement interior-point method first where it is the
-        // cheaper one; Clarabel when it stalls
-        let schur = match solver {
-            Solver::Clarabel => None,
-            Solver::Auto if !schur_pays(rank2.len() + 1, n) => None,
-            Solver::Auto | Solver::Schur => propose(n, &fobj, vecs, &rank2),
+        // the Schur-complement interior-point method where it is the cheaper
+        // one (or the only one: Clarabel's PSD block outgrows memory beyond
+        // MAX_CLARABEL_SDP_DIM); Clarabel otherwise, and when it stalls
+        let m = rank2.len() + 1;
+        let clarabel_fits = n <= MAX_CLARABEL_SDP_DIM;
+        let use_schur = match solver {
+            Solver::Schur => true,
+            Solver::Clarabel => false,
+            Solver::Auto => schur_pays(m, n) || !clarabel_fits,
         };
-        let x = match (schur, solver) {
-            (Some(y), _) => y,
-            (None, Solver::Schur) => {
-                return none(Issue::Status(Backend::Sdp, Status::InsufficientProgress))
-            }
-            (None, _) => match clarabel_solve(n, &fobj, &cons) {
+        let tried_schur = use_schur && m <= MAX_SCHUR_MULTIPLIERS;
+        let schur = if tried_schur {
+            propose(n, &fobj, vecs, &rank2)
+        } else {
+            None
+        };
+        let may_clarabel = clarabel_fits && solver != Solver::Schur;
+        let x = match schur {
+            Some(y) => y,
+            None if may_clarabel => match clarabel_solve(n, &fobj, &cons) {
                 Ok(x) => x,
                 Err(issue) => return none(issue),
             },
+            None if tried_schur => {
+                return none(Issue::Status(Backend::Sdp, Status::InsufficientProgress))
+            }
+            None => return none(Issue::SdpTooLarge),
         };
         // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
         let d = x[0];

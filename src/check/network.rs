@@ -9,7 +9,7 @@ use super::{analysis, controller, sha256_hex, ControllerFile, Ctx};
 use crate::analysis::shape::Shape;
 use crate::diag::{compact, Code, Diagnostic};
 use crate::ir::{NetPropagator, Partitioner};
-use crate::limits::{within, MAX_POLYTOPE_DIM, MAX_STORED_NUMBERS};
+use crate::limits::{within, MAX_POLYTOPE_DIM, MAX_SDP_DIM, MAX_STORED_NUMBERS};
 use crate::onnx::Controller;
 use crate::sets::{Polytope, Region};
 use crate::syntax::ast::*;
@@ -656,6 +656,27 @@ pub(super) fn check_network(
                 )
                 .label("needs a ReLU network")
                 .hint("use `crown` or `fast_lin`, which handle tanh and sigmoid"),
+            );
+        }
+        // the SDP's matrix: the inputs, every hidden neuron, and 1
+        let neurons: u64 = c
+            .net
+            .layers
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| matches!(l, crate::nn::Layer::Act(_)))
+            .map(|(i, _)| c.net.width_at(i) as u64)
+            .sum();
+        let dim = c.net.inputs as u64 + neurons + 1;
+        if dim > MAX_SDP_DIM {
+            cx.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    span,
+                    format!("the SDP relaxation would solve semidefinite programs of dimension {dim}, beyond the limit of {MAX_SDP_DIM}"),
+                )
+                .label("too large for the SDP relaxation")
+                .hint("use `crown`, or a smaller network"),
             );
         }
     }

@@ -144,10 +144,11 @@ fn max_step(s: &DMatrix<f64>, d: &DMatrix<f64>, cap: f64) -> Option<f64> {
     let li_d = l.solve_lower_triangular(d)?;
     let t = l.solve_lower_triangular(&li_d.transpose())?;
     let t = (&t + t.transpose()) * 0.5;
-    let lmin = t.symmetric_eigenvalues().min();
-    if !lmin.is_finite() {
+    let eig = t.symmetric_eigenvalues();
+    if eig.iter().any(|v| !v.is_finite()) {
         return None;
     }
+    let lmin = eig.min();
     Some(if lmin >= 0.0 {
         cap
     } else {
@@ -417,7 +418,13 @@ impl State<'_> {
         for (y, d) in self.y.iter_mut().zip(&dy) {
             *y += ad * d;
         }
-        if self.y.iter().any(|v| !v.is_finite()) || self.x.iter().any(|v| !v.is_finite()) {
+        let finite = |v: &f64| v.is_finite();
+        if !(self.y.iter().all(finite)
+            && self.x.iter().all(finite)
+            && self.z.iter().all(finite)
+            && self.xl.iter().all(finite)
+            && self.zl.iter().all(finite))
+        {
             return Step::Stuck("non-finite iterate");
         }
         Step::Continue

@@ -384,7 +384,12 @@ impl<'a> Analysis<'a> {
                     let after_one_neuron = j >= 2
                         && matches!(net.layers[j - 1], Layer::Act(_))
                         && matches!(net.layers[j - 2], Layer::Affine { .. });
-                    let useful = hook.is_some() || (i > 0 && !after_one_neuron);
+                    // (With a hook, unrolled CROWN's, the same holds: the
+                    // rows reach z_k's own bound expression and the hook
+                    // maps it as it mapped z_k's, whose bound is at least
+                    // z_k's stored one; the first layer is bounded there,
+                    // the hook reaching further back than the box.)
+                    let useful = !after_one_neuron && (hook.is_some() || i > 0);
                     if mode != Mode::Ibp && feeds_activation && useful {
                         // A ReLU that interval arithmetic already proves
                         // inactive (z ≤ 0) outputs exactly 0 whatever its

@@ -128,6 +128,20 @@ impl Network {
         n
     }
 
+    /// The number of activation neurons (the hidden neurons, and those of
+    /// saturation layers): the neurons Reach-SDP's programs may keep.
+    pub fn activation_neurons(&self) -> usize {
+        let mut n = self.inputs;
+        let mut total = 0usize;
+        for layer in &self.layers {
+            match layer {
+                Layer::Affine { w, .. } => n = w.nrows(),
+                Layer::Act(_) => total = total.saturating_add(n),
+            }
+        }
+        total
+    }
+
     /// Output dimension.
     pub fn outputs(&self) -> usize {
         self.width_at(self.layers.len())

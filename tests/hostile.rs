@@ -5,6 +5,8 @@
 //! diagnostic (exit code 2), in bounded time, and no file outside the
 //! controller's folder is ever read.
 
+mod common;
+
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -405,23 +407,6 @@ fn observation_files_stay_in_the_spec_folder() {
     );
 }
 
-/// A ReLU network `2 → w → w → outputs` with small random weights.
-fn wide_net(w: usize, outputs: usize) -> Network {
-    let mut rng = ravel::rng::Rng::new(5);
-    let mut layers = Vec::new();
-    for (k, (i, o)) in [(2, w), (w, w), (w, outputs)].into_iter().enumerate() {
-        let s = 1.0 / (i as f64).sqrt();
-        layers.push(Layer::Affine {
-            w: DMatrix::from_fn(o, i, |_, _| rng.uniform(-s, s)),
-            b: DVector::from_fn(o, |_, _| rng.uniform(-0.1, 0.1)),
-        });
-        if k < 2 {
-            layers.push(Layer::Act(Activation::Relu));
-        }
-    }
-    Network::new(2, layers)
-}
-
 /// Reach-SDP's programs are bounded in size when the spec is checked (E0216
 /// with the propagator's span), for closed loops and network specs alike: a
 /// 2 → 150 → 150 controller is refused, a 2 → 100 → 100 one (beyond what
@@ -445,7 +430,9 @@ analysis {
         for (width, refused) in [(150, true), (100, false)] {
             let dir = folder(&format!("sdp_size_{outputs}_{width}"));
             let mut g = GraphBuilder::new(2, Storage::RawF32);
-            g.network(&wide_net(width, outputs), false);
+            let mut rng = ravel::rng::Rng::new(5);
+            let net = common::relu_network(&mut rng, &[2, width, width, outputs], 1.0, 0.1);
+            g.network(&net, false);
             let (bytes, _) = g.finish(outputs);
             std::fs::write(dir.join("models/policy.onnx"), bytes).expect("write");
             let res = ravel::front_end_task(spec, &dir, &ravel::cli::read_request, None);

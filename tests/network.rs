@@ -700,19 +700,7 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
 fn sdp_beyond_clarabels_size_is_the_schur_methods() {
     use ravel::analysis::sdp::{merge, Solver, StepSdp};
     use ravel::issue::Issue;
-    let mut rng = Rng::new(8);
-    let mut layers = Vec::new();
-    for (k, (i, o)) in [(2, 90), (90, 90), (90, 2)].into_iter().enumerate() {
-        let sc = 1.5 / (i as f64).sqrt();
-        layers.push(Layer::Affine {
-            w: DMatrix::from_fn(o, i, |_, _| rng.uniform(-sc, sc)),
-            b: DVector::from_fn(o, |_, _| rng.uniform(-0.2, 0.2)),
-        });
-        if k < 2 {
-            layers.push(Layer::Act(Activation::Relu));
-        }
-    }
-    let net = Network::new(2, layers);
+    let net = common::relu_network(&mut Rng::new(8), &[2, 90, 90, 2], 1.5, 0.2);
     let b = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
     let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
     let prog = StepSdp::new(&merged, &b, &[]);

@@ -971,14 +971,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         }
     }
     if let Some(c) = &ctrl {
-        let neurons: u64 = c
-            .net
-            .layers
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| matches!(l, crate::nn::Layer::Act(_)))
-            .map(|(i, _)| c.net.width_at(i) as u64)
-            .sum();
+        let neurons = c.net.activation_neurons() as u64;
         let span = propagator_span.unwrap_or(whole);
         if let (Some(Propagator::ReachSdp), Some((_, n)), Some(p)) = (propagator, &state, p_dim) {
             // ξ = (x, v), the hidden neurons, the two saturation layers, and 1

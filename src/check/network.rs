@@ -659,15 +659,7 @@ pub(super) fn check_network(
             );
         }
         // the SDP's matrix: the inputs, every hidden neuron, and 1
-        let neurons: u64 = c
-            .net
-            .layers
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| matches!(l, crate::nn::Layer::Act(_)))
-            .map(|(i, _)| c.net.width_at(i) as u64)
-            .sum();
-        let dim = c.net.inputs as u64 + neurons + 1;
+        let dim = c.net.inputs as u64 + c.net.activation_neurons() as u64 + 1;
         if dim > MAX_SDP_DIM {
             cx.err(
                 Diagnostic::new(

@@ -1,8 +1,26 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests (each test crate uses some).
+#![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
+
+/// A ReLU network with the given widths (input first, output last),
+/// weights uniform in `±scale/√fan-in`, biases in `±bias`.
+pub fn relu_network(rng: &mut Rng, widths: &[usize], scale: f64, bias: f64) -> Network {
+    let mut layers = Vec::new();
+    for (k, pair) in widths.windows(2).enumerate() {
+        let s = scale / (pair[0] as f64).sqrt();
+        layers.push(Layer::Affine {
+            w: DMatrix::from_fn(pair[1], pair[0], |_, _| rng.uniform(-s, s)),
+            b: DVector::from_fn(pair[1], |_, _| rng.uniform(-bias, bias)),
+        });
+        if k + 2 < widths.len() {
+            layers.push(Layer::Act(Activation::Relu));
+        }
+    }
+    Network::new(widths[0], layers)
+}
 
 /// A random network with `1 + below(depths)` hidden layers of
 /// `2 + below(widths)` neurons each, weights scaled by `1.5/√fan-in`.

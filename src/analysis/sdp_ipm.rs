@@ -276,6 +276,8 @@ impl State<'_> {
         let n = p.n;
         let m = p.cons.len();
         let nl = self.xl.len();
+        // set once this iterate's residuals are known
+        self.acceptable = false;
         let Some(zc) = Cholesky::new(self.z.clone()) else {
             return Step::Stuck("Z lost definiteness");
         };

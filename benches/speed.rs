@@ -226,29 +226,9 @@ fn targets(slow: bool) {
             t.elapsed().as_secs_f64(),
             "≤ 60 s",
         );
-        let mut rng = Rng::new(11);
-        let net = common::random_relu(&mut rng, &[2, 32, 32, 3]);
-        let plant = Plant {
-            a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
-            b: DMatrix::from_row_slice(2, 3, &[0.5, 0.1, 0.0, 1.0, 0.0, 0.2]),
-            c: DVector::zeros(2),
-            obs: DMatrix::identity(2, 2),
-            w: IBox::point(&[0.0, 0.0]),
-            v: IBox::point(&[0.0, 0.0]),
-            err: None,
-        };
-        let cl = ClosedLoop::new(plant, net);
-        let x0 = Region::Box(IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]));
-        let t = Instant::now();
-        std::hint::black_box(cl.step(
-            0,
-            &x0,
-            Propagator::ReachSdp,
-            &ravel::analysis::closed_loop::Boundary::Box,
-        ));
         row(
             "2 → 32 → 32 → 3 ReLU, Reach-SDP, one step (one run)",
-            t.elapsed().as_secs_f64(),
+            sdp_step(32),
             "≤ 3 s",
         );
     } else {
@@ -280,6 +260,42 @@ fn targets(slow: bool) {
     let p = plan_of(&quad, Propagator::ReachLp, gsg, 1000);
     let (one, two) = (time(|| run(&p, 1)), time(|| run(&p, 2)));
     println!("| Quadrotor Reach-LP + GSG (32 calls, 1000 samples): jobs 1 / jobs 2 | {} / {} ({:.2}×) | ≥ 1.8× |", show(one), show(two), one / two);
+}
+
+/// One Reach-SDP step (one run, seconds) of a 2-state plant with a random
+/// `2 → w → w → 3` ReLU controller over a box where most neurons are
+/// unstable.
+fn sdp_step(w: usize) -> f64 {
+    let mut rng = Rng::new(11);
+    let net = common::random_relu(&mut rng, &[2, w, w, 3]);
+    let plant = Plant {
+        a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+        b: DMatrix::from_row_slice(2, 3, &[0.5, 0.1, 0.0, 1.0, 0.0, 0.2]),
+        c: DVector::zeros(2),
+        obs: DMatrix::identity(2, 2),
+        w: IBox::point(&[0.0, 0.0]),
+        v: IBox::point(&[0.0, 0.0]),
+        err: None,
+    };
+    let cl = ClosedLoop::new(plant, net);
+    let x0 = Region::Box(IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]));
+    let t = Instant::now();
+    std::hint::black_box(cl.step(
+        0,
+        &x0,
+        Propagator::ReachSdp,
+        &ravel::analysis::closed_loop::Boundary::Box,
+    ));
+    t.elapsed().as_secs_f64()
+}
+
+/// Reach-SDP's time against the controller's width (`--slow` only).
+fn sdp_width() {
+    println!("## Reach-SDP: one step against the controller's width (2 → w → w → 3, one run)");
+    println!("| w | time |\n|---|---|");
+    for w in [16, 32, 48, 64, 96, 128] {
+        println!("| {w} | {} |", show(sdp_step(w)));
+    }
 }
 
 fn cells() {
@@ -475,6 +491,9 @@ fn main() {
     }
     if on("tightness") {
         tightness();
+    }
+    if slow && on("sdp") {
+        sdp_width();
     }
     println!(
         "\npeak memory (VmHWM) of this benchmark process: {}",

@@ -13,8 +13,10 @@
 //! and routines as before, so every SDP result is unchanged.
 //!
 //! # Contract
-//! * [`load`] must succeed before an SDP is solved; `analysis::sdp` calls
-//!   it first and, when it fails, reports the solve as not done (an
+//! * [`load`] must succeed before Clarabel solves an SDP (ravel's own
+//!   Schur-complement method, `analysis::sdp_ipm`, calls no BLAS);
+//!   `analysis::sdp` calls it first and, when it fails, reports the solve as
+//!   not done (an
 //!   [`Issue`](crate::issue::Issue), so the verdict is at most UNSURE).
 //! * Every forwarding function loads the library itself if needed and, if it
 //!   still is not there, aborts the process with a message (a function

@@ -630,6 +630,10 @@ impl StepSdp {
             }
             None => return none(Issue::SdpTooLarge),
         };
+        // whichever solver proposed it, a non-finite multiplier is no proposal
+        if x.iter().any(|v| !v.is_finite()) {
+            return none(Issue::NonFiniteSolution);
+        }
         // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
         let d = x[0];
         let mut m = DMatrix::<f64>::zeros(n, n);
@@ -841,11 +845,7 @@ fn clarabel_solve(n: usize, fobj: &Form, cons: &[(Form, bool)]) -> Result<Vec<f6
     if let Some(issue) = Issue::from_status(Backend::Sdp, solver.solution.status) {
         return Err(issue);
     }
-    let x = solver.solution.x.clone();
-    if x.iter().any(|v| !v.is_finite()) {
-        return Err(Issue::NonFiniteSolution);
-    }
-    Ok(x)
+    Ok(solver.solution.x.clone())
 }
 
 fn none(issue: Issue) -> SdpBound {

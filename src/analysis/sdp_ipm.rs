@@ -552,10 +552,10 @@ mod tests {
     fn non_finite_or_empty_data_is_not_solved() {
         assert!(matches!(solve(&small(f64::NAN)), Ipm::NotSolved(_)));
         assert!(matches!(solve(&small(f64::INFINITY)), Ipm::NotSolved(_)));
-        assert!(matches!(
-            solve(&small(1e308)),
-            Ipm::NotSolved(_) | Ipm::Solved { .. }
-        ));
+        // data near the top of f64: either no proposal or a finite one
+        if let Ipm::Solved { y, .. } = solve(&small(1e308)) {
+            assert!(y.iter().all(|v| v.is_finite()), "{y:?}");
+        }
         let mut p = small(-3.0);
         p.cons.clear();
         p.b.clear();

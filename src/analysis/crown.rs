@@ -12,6 +12,8 @@
 //! `γ(n)·|Λ|·(|W|·|h|max)` (see [`LinearUpper::through_affine`]), so the
 //! returned bounds hold for the exact network.
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, DVector};
 
 pub use super::dense::Rows;
@@ -65,7 +67,12 @@ impl LinearUpper {
     ) -> LinearUpper {
         let mut coef = Rows::zeros(0, 0);
         let mut acc: Vec<Acc> = self.offset.iter().map(|&o| Acc::of(o)).collect();
-        affine_into(&self.coef, &mut acc, w, b, wz, &mut coef);
+        affine_into(
+            &self.coef,
+            &mut acc,
+            &Packed::new(w, b, wz, None, None),
+            &mut coef,
+        );
         LinearUpper {
             coef,
             offset: acc.into_iter().map(Acc::upper).collect(),
@@ -155,15 +162,8 @@ impl LinearUpper {
 /// rounded once, at the end of the back-substitution, with the error bound
 /// of all their terms (each term is one rounding from its value, as
 /// [`Acc`] requires, whichever layer added it).
-fn affine_into(
-    coef: &Rows,
-    offset: &mut [Acc],
-    w: &DMatrix<f64>,
-    b: &DVector<f64>,
-    wz: &[f64],
-    out: &mut Rows,
-) {
-    if let Some(sign) = signed_identity(w) {
+fn affine_into(coef: &Rows, offset: &mut [Acc], w: &Packed, out: &mut Rows) {
+    if let Some(sign) = w.identity {
         // W = ±I (the clamp layers of control limits): the product is
         // exact, so it has no rounding error to account for
         out.clone_from(coef);
@@ -171,29 +171,112 @@ fn affine_into(
             out.negate();
         }
         for (row, acc) in coef.iter_rows().zip(offset.iter_mut()) {
-            acc.add_products(row, b.as_slice());
+            acc.add_products(row, &w.b);
         }
         return;
     }
-    coef.mul_into(w, out);
-    let k = gamma(w.nrows() + 2);
+    coef.mul_cols_into(&w.w, w.rows, w.cols, out);
+    let k = gamma(w.rows + 2);
     for (row, acc) in coef.iter_rows().zip(offset.iter_mut()) {
-        acc.add_products(row, b.as_slice());
-        acc.add(slack(k, row, wz));
+        acc.add_products(row, &w.b);
+        acc.add(slack(k, row, &w.wz));
     }
 }
 
-/// `Some(s)` when `w = s·I` with `s = ±1`.
-fn signed_identity(w: &DMatrix<f64>) -> Option<f64> {
-    let n = w.nrows();
-    if n != w.ncols() || n == 0 {
+/// An affine layer `z = W h + b` as back-substitution reads it: restricted
+/// to the outputs whose coefficients can be nonzero (the inputs of a ReLU
+/// that interval arithmetic or CROWN does not prove inactive; all outputs
+/// otherwise) and to the inputs that can be nonzero (the outputs of such a
+/// ReLU). A ReLU proved inactive outputs exactly 0 and its relaxation is
+/// `0 ≤ h ≤ 0`, so its coefficient is 0 after the relaxation and its
+/// output's column contributes exactly 0 to every product: leaving both
+/// out changes no coefficient, only shortens the sums (the rounding error
+/// is then bounded with the shorter length).
+#[derive(Clone, Debug)]
+struct Packed<'a> {
+    /// Column-major `rows × cols` weights (W itself when nothing is left out).
+    w: Cow<'a, [f64]>,
+    rows: usize,
+    cols: usize,
+    /// The kept outputs' biases.
+    b: Cow<'a, [f64]>,
+    /// `|W|·|h|max` of the kept outputs (see [`weight_scale`]).
+    wz: Vec<f64>,
+    /// `Some(s)` when the packed matrix is `s·I`, `s = ±1`.
+    identity: Option<f64>,
+}
+
+impl<'a> Packed<'a> {
+    /// `W` and `b` restricted to `rows` (outputs) and `cols` (inputs),
+    /// `None` meaning all; `wz` is `|W|·|h|max` of every output.
+    fn new(
+        w: &'a DMatrix<f64>,
+        b: &'a DVector<f64>,
+        wz: &[f64],
+        rows: Option<&[usize]>,
+        cols: Option<&[usize]>,
+    ) -> Packed<'a> {
+        let (nr, nc) = w.shape();
+        let (data, b, wz): (Cow<[f64]>, Cow<[f64]>, Vec<f64>) = match (rows, cols) {
+            (None, None) => (
+                Cow::Borrowed(w.as_slice()),
+                Cow::Borrowed(b.as_slice()),
+                wz.to_vec(),
+            ),
+            (None, Some(cols)) => {
+                let mut data = Vec::with_capacity(nr * cols.len());
+                for &c in cols {
+                    data.extend_from_slice(&w.as_slice()[c * nr..(c + 1) * nr]);
+                }
+                (Cow::Owned(data), Cow::Borrowed(b.as_slice()), wz.to_vec())
+            }
+            (Some(rows), cols) => {
+                let all: Vec<usize>;
+                let cols = match cols {
+                    Some(c) => c,
+                    None => {
+                        all = (0..nc).collect();
+                        &all
+                    }
+                };
+                let mut data = Vec::with_capacity(rows.len() * cols.len());
+                for &c in cols {
+                    let col = &w.as_slice()[c * nr..(c + 1) * nr];
+                    data.extend(rows.iter().map(|&r| col[r]));
+                }
+                (
+                    Cow::Owned(data),
+                    Cow::Owned(rows.iter().map(|&r| b[r]).collect()),
+                    rows.iter().map(|&r| wz[r]).collect(),
+                )
+            }
+        };
+        let (rows, cols) = (
+            rows.map_or(nr, <[usize]>::len),
+            cols.map_or(nc, <[usize]>::len),
+        );
+        let identity = signed_identity(&data, rows, cols);
+        Packed {
+            w: data,
+            rows,
+            cols,
+            b,
+            wz,
+            identity,
+        }
+    }
+}
+
+/// `Some(s)` when the column-major `n × m` matrix `w` is `s·I` with `s = ±1`.
+fn signed_identity(w: &[f64], n: usize, m: usize) -> Option<f64> {
+    if n != m || n == 0 {
         return None;
     }
-    let s = w[(0, 0)];
+    let s = w[0];
     if s != 1.0 && s != -1.0 {
         return None;
     }
-    for (j, col) in w.as_slice().chunks_exact(n).enumerate() {
+    for (j, col) in w.chunks_exact(n).enumerate() {
         for (i, &v) in col.iter().enumerate() {
             if v != if i == j { s } else { 0.0 } {
                 return None;
@@ -224,6 +307,13 @@ fn relaxation_in_place(coef: &mut Rows, offset: &mut [Acc], rel: &[Relax], abs_i
     }
 }
 
+/// Whether a ReLU whose input is at most `hi` is proved inactive (its
+/// output is exactly 0). NaN is not: it is kept, and the analysis that
+/// produced it is rejected as not finite.
+fn inactive(hi: f64) -> bool {
+    hi <= 0.0
+}
+
 /// Whether every row of `w` has at most one nonzero entry (a one-column
 /// matrix, or a diagonal one such as a clamp's `±I`).
 fn one_per_row(w: &DMatrix<f64>) -> bool {
@@ -234,12 +324,24 @@ fn one_per_row(w: &DMatrix<f64>) -> bool {
 
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
 pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
-    let mut acc = vec![Acc::ZERO; w.nrows()];
-    if w.nrows() > 0 {
-        for (col, &mi) in w.as_slice().chunks_exact(w.nrows()).zip(m) {
+    weight_scale_of(w, m, None)
+}
+
+/// [`weight_scale`] over the columns `cols` only (all with `None`): the
+/// others' `m` must be 0 (their terms are exactly 0).
+fn weight_scale_of(w: &DMatrix<f64>, m: &[f64], cols: Option<&[usize]>) -> Vec<f64> {
+    let rows = w.nrows();
+    let mut acc = vec![Acc::ZERO; rows];
+    if rows > 0 {
+        let mut column = |i: usize| {
+            let (col, mi) = (&w.as_slice()[i * rows..(i + 1) * rows], m[i]);
             for (a, &wji) in acc.iter_mut().zip(col) {
                 a.add(mul0(wji.abs(), mi));
             }
+        };
+        match cols {
+            None => (0..w.ncols()).for_each(&mut column),
+            Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
     acc.into_iter().map(Acc::upper).collect()
@@ -257,17 +359,28 @@ pub fn plus_minus_identity(n: usize) -> Rows {
 
 /// Certified interval image of a box under `z = W x + b`.
 pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
+    affine_image_of(w, b, x, None)
+}
+
+/// [`affine_image`] summing over the columns `cols` only (all with
+/// `None`): the others' inputs must be exactly `[0, 0]`.
+fn affine_image_of(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox, cols: Option<&[usize]>) -> IBox {
     let rows = w.nrows();
     let mut both = vec![Acc::ZERO; 2 * rows];
     let (lo, hi) = both.split_at_mut(rows);
     if rows > 0 {
         // column by column: nalgebra stores columns contiguously
-        for (i, col) in w.as_slice().chunks_exact(rows).enumerate() {
+        let mut column = |i: usize| {
+            let col = &w.as_slice()[i * rows..(i + 1) * rows];
             let (xl, xh) = (x.lo[i], x.hi[i]);
             for ((l, h), &a) in lo.iter_mut().zip(hi.iter_mut()).zip(col) {
                 l.add(term_lower(a, xl, xh));
                 h.add(term_upper(a, xl, xh));
             }
+        };
+        match cols {
+            None => (0..w.ncols()).for_each(&mut column),
+            Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
     for ((l, h), &bj) in lo.iter_mut().zip(hi.iter_mut()).zip(b.iter()) {
@@ -308,13 +421,22 @@ pub struct Analysis<'a> {
     net: &'a Network,
     /// `boxes[i]` bounds the value before layer `i` (`boxes[0]` is the input box).
     boxes: Vec<IBox>,
-    /// The relaxation of each activation layer (empty for affine layers).
+    /// For each ReLU layer with neurons proved inactive (input `≤ 0`,
+    /// output exactly 0), the others, in order; `None` for every neuron
+    /// (and for the other layers). Back-substitution carries coefficients
+    /// on these neurons only.
+    keep: Vec<Option<Vec<usize>>>,
+    /// The relaxation of each activation layer's kept neurons (empty for
+    /// affine layers).
     relax: Vec<Vec<Relax>>,
     /// `|W|·|h|max` of each affine layer (empty for activations), for error terms.
     scales: Vec<Vec<f64>>,
-    /// `|h|max` of the value before each activation layer (empty for affine
-    /// layers), for error terms.
+    /// `|h|max` of the kept neurons' inputs of each activation layer (empty
+    /// for affine layers), for error terms.
     abs: Vec<Vec<f64>>,
+    /// Each affine layer as back-substitution reads it (`None` for
+    /// activations, and in interval mode, where it is built when asked).
+    packed: Vec<Option<Packed<'a>>>,
 }
 
 impl<'a> Analysis<'a> {
@@ -334,27 +456,24 @@ impl<'a> Analysis<'a> {
         mode: Mode,
         hook: Option<&BoundHook>,
     ) -> Analysis<'a> {
+        let layers = net.layers.len();
         let mut a = Analysis {
             net,
-            boxes: vec![input.clone()],
-            relax: Vec::with_capacity(net.layers.len()),
-            scales: Vec::with_capacity(net.layers.len()),
-            abs: Vec::with_capacity(net.layers.len()),
+            boxes: Vec::with_capacity(layers + 1),
+            keep: Vec::with_capacity(layers),
+            relax: Vec::with_capacity(layers),
+            scales: Vec::with_capacity(layers),
+            abs: Vec::with_capacity(layers),
+            packed: Vec::with_capacity(layers),
         };
+        a.boxes.push(input.clone());
         for (i, layer) in net.layers.iter().enumerate() {
-            let abs = a.boxes[i].abs_max();
-            a.scales.push(match layer {
-                Layer::Affine { w, .. } => weight_scale(w, &abs),
-                Layer::Act(_) => Vec::new(),
-            });
-            a.abs.push(match layer {
-                Layer::Affine { .. } => Vec::new(),
-                Layer::Act(_) => abs,
-            });
-            let current = &a.boxes[i];
-            let (next, rel) = match layer {
+            match layer {
                 Layer::Affine { w, b } => {
-                    let mut next = affine_image(w, b, current);
+                    let ins = a.ins(i);
+                    let current = &a.boxes[i];
+                    let scale = weight_scale_of(w, &current.abs_max(), ins);
+                    let mut next = affine_image_of(w, b, current, ins);
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     // On the network's first layer (an affine map of the
                     // input box) CROWN's bound is interval arithmetic's
@@ -403,16 +522,11 @@ impl<'a> Analysis<'a> {
                         let relu =
                             matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
                         let rows: Vec<usize> = (0..w.nrows())
-                            .filter(|&j| !(relu && next.hi[j] <= 0.0))
+                            .filter(|&j| !(relu && inactive(next.hi[j])))
                             .collect();
                         let k = rows.len();
                         if k > 0 {
-                            let mut spec = Rows::zeros(2 * k, w.nrows());
-                            for (r, &j) in rows.iter().enumerate() {
-                                spec.row_mut(r)[j] = 1.0;
-                                spec.row_mut(k + r)[j] = -1.0;
-                            }
-                            let bound = a.backward(spec, i + 1);
+                            let bound = a.backward_select(&rows, i);
                             let mut both = bound.concretize(input);
                             if let Some(h) = hook {
                                 for (b, o) in both.iter_mut().zip(h(&bound)) {
@@ -425,13 +539,37 @@ impl<'a> Analysis<'a> {
                             }
                         }
                     }
-                    (next, Vec::new())
+                    a.boxes.push(next);
+                    a.scales.push(scale);
+                    a.keep.push(None);
+                    a.relax.push(Vec::new());
+                    a.abs.push(Vec::new());
+                    // an affine layer before a ReLU is packed once the
+                    // ReLU's inactive neurons are known
+                    let before_relu =
+                        matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
+                    let packed = (mode != Mode::Ibp && !before_relu)
+                        .then(|| Packed::new(w, b, &a.scales[i], None, a.ins(i)));
+                    a.packed.push(packed);
                 }
                 Layer::Act(act) => {
-                    let rel: Vec<Relax> = (0..current.dim())
-                        .map(|j| {
+                    let current = &a.boxes[i];
+                    let n = current.dim();
+                    let relu = *act == Activation::Relu;
+                    let keep: Option<Vec<usize>> = if relu {
+                        let live: Vec<usize> =
+                            (0..n).filter(|&j| !inactive(current.hi[j])).collect();
+                        (live.len() < n).then_some(live)
+                    } else {
+                        None
+                    };
+                    let kept = |j: usize| keep.as_ref().map_or(j, |k| k[j]);
+                    let count = keep.as_ref().map_or(n, Vec::len);
+                    let rel: Vec<Relax> = (0..count)
+                        .map(|c| {
+                            let j = kept(c);
                             let r = relax(*act, current.lo[j], current.hi[j]);
-                            if mode == Mode::FastLin && *act == Activation::Relu {
+                            if mode == Mode::FastLin && relu {
                                 // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
                                 Relax {
                                     al: r.au,
@@ -443,16 +581,46 @@ impl<'a> Analysis<'a> {
                             }
                         })
                         .collect();
-                    let (lo, hi) = (0..current.dim())
+                    let abs = (0..count)
+                        .map(|c| {
+                            let j = kept(c);
+                            crate::num::abs_max(current.lo[j], current.hi[j])
+                        })
+                        .collect();
+                    let (lo, hi) = (0..n)
                         .map(|j| image(*act, current.lo[j], current.hi[j]))
                         .unzip();
-                    (IBox::new(lo, hi), rel)
+                    a.boxes.push(IBox::new(lo, hi));
+                    a.scales.push(Vec::new());
+                    a.keep.push(keep);
+                    a.relax.push(rel);
+                    a.abs.push(abs);
+                    a.packed.push(None);
+                    if relu && mode != Mode::Ibp && i >= 1 {
+                        if let Layer::Affine { w, b } = &net.layers[i - 1] {
+                            a.packed[i - 1] = Some(Packed::new(
+                                w,
+                                b,
+                                &a.scales[i - 1],
+                                a.keep[i].as_deref(),
+                                a.ins(i - 1),
+                            ));
+                        }
+                    }
                 }
-            };
-            a.boxes.push(next);
-            a.relax.push(rel);
+            }
         }
         a
+    }
+
+    /// The kept neurons of layer `i` (an activation's; `None` for all).
+    fn kept(&self, i: usize) -> Option<&[usize]> {
+        self.keep.get(i).and_then(|k| k.as_deref())
+    }
+
+    /// The inputs of affine layer `i` that can be nonzero (`None` for all).
+    fn ins(&self, i: usize) -> Option<&[usize]> {
+        i.checked_sub(1).and_then(|p| self.kept(p))
     }
 
     /// Whether every intermediate bound is finite. An analysis that is not
@@ -536,6 +704,35 @@ impl<'a> Analysis<'a> {
         self.backward_with(spec, end, &self.relax, None)
     }
 
+    /// Bounds of `z_j` and of `−z_j` for the outputs `rows` of affine layer
+    /// `i` (the `2k` rows: upper bounds, then negated lower bounds), down to
+    /// the input. The first layer is a selection of `W`'s rows, exact: no
+    /// product, no rounding error.
+    fn backward_select(&self, rows: &[usize], i: usize) -> LinearUpper {
+        let Layer::Affine { w, b } = &self.net.layers[i] else {
+            unreachable!("bounds are selected from affine layers only");
+        };
+        let ins = self.ins(i);
+        let k = rows.len();
+        let width = ins.map_or(w.ncols(), <[usize]>::len);
+        let mut coef = Rows::zeros(2 * k, width);
+        let mut offset = Vec::with_capacity(2 * k);
+        for (r, &j) in rows.iter().enumerate() {
+            let row = coef.row_mut(r);
+            match ins {
+                None => row.iter_mut().enumerate().for_each(|(c, v)| *v = w[(j, c)]),
+                Some(ins) => row.iter_mut().zip(ins).for_each(|(v, &c)| *v = w[(j, c)]),
+            }
+            offset.push(Acc::of(b[j]));
+        }
+        for r in 0..k {
+            let (upper, lower) = coef.rows_pair_mut(r, k + r);
+            lower.iter_mut().zip(upper).for_each(|(l, u)| *l = -*u);
+            offset.push(Acc::of(-b[rows[r]]));
+        }
+        self.substitute(coef, offset, ins, i, &self.relax, None)
+    }
+
     /// [`Analysis::backward`] with the given relaxations (any sound ones:
     /// the optimised slopes of [`Analysis::upper_optimised`]); with `trace`,
     /// the first row's coefficients on each activation's output are
@@ -545,10 +742,24 @@ impl<'a> Analysis<'a> {
         spec: Rows,
         end: usize,
         relax: &[Vec<Relax>],
+        trace: Option<&mut [Vec<f64>]>,
+    ) -> LinearUpper {
+        let offset = vec![Acc::ZERO; spec.nrows()];
+        self.substitute(spec, offset, None, end, relax, trace)
+    }
+
+    /// Back-substitute `coef · v + offset` from the value `v` at position
+    /// `end` through layers `end − 1, …, 0`: `coef`'s columns are the
+    /// neurons `cols` of that value (`None` for all of them).
+    fn substitute<'s>(
+        &'s self,
+        mut coef: Rows,
+        mut offset: Vec<Acc>,
+        mut cols: Option<&'s [usize]>,
+        end: usize,
+        relax: &[Vec<Relax>],
         mut trace: Option<&mut [Vec<f64>]>,
     ) -> LinearUpper {
-        let mut coef = spec;
-        let mut offset = vec![Acc::ZERO; coef.nrows()];
         // two buffers in turn: an affine layer writes the other one, an
         // activation rewrites its rows in place; both sized once for the
         // widest layer
@@ -566,17 +777,39 @@ impl<'a> Analysis<'a> {
         for i in (0..end).rev() {
             match &self.net.layers[i] {
                 Layer::Affine { w, b } => {
-                    affine_into(&coef, &mut offset, w, b, &self.scales[i], &mut spare);
+                    let ins = self.ins(i);
+                    let built;
+                    let packed = match &self.packed[i] {
+                        Some(p) if cols == self.kept(i + 1) => p,
+                        _ => {
+                            built = Packed::new(w, b, &self.scales[i], cols, ins);
+                            &built
+                        }
+                    };
+                    affine_into(&coef, &mut offset, packed, &mut spare);
                     std::mem::swap(&mut coef, &mut spare);
+                    cols = ins;
                 }
                 Layer::Act(_) => {
+                    let keep = self.kept(i);
+                    if cols != keep {
+                        coef = coef.columns_moved(cols, keep, self.boxes[i + 1].dim());
+                        cols = keep;
+                    }
                     if let Some(t) = trace.as_deref_mut() {
                         t[i].clear();
-                        t[i].extend_from_slice(coef.row(0));
+                        t[i].resize(self.boxes[i].dim(), 0.0);
+                        for (c, &v) in coef.row(0).iter().enumerate() {
+                            t[i][cols.map_or(c, |k| k[c])] = v;
+                        }
                     }
                     relaxation_in_place(&mut coef, &mut offset, &relax[i], &self.abs[i]);
                 }
             }
+        }
+        if cols.is_some() {
+            // a network that starts with a ReLU: back to every input
+            coef = coef.columns_moved(cols, None, self.boxes[0].dim());
         }
         LinearUpper {
             coef,
@@ -696,18 +929,23 @@ impl<'a> Analysis<'a> {
                 }
                 Layer::Act(act) => {
                     let relu = *act == Activation::Relu;
-                    grad[i] = vec![0.0; h.len()];
-                    for (j, z) in h.iter_mut().enumerate() {
-                        let (rl, c) = (relax[i][j], trace[i][j]);
-                        if c >= 0.0 {
-                            *z = rl.au * *z + rl.bu;
+                    let keep = self.kept(i);
+                    // a neuron left out is an inactive ReLU: its output is 0
+                    let mut next = vec![0.0; h.len()];
+                    grad[i] = vec![0.0; relax[i].len()];
+                    for (c, rl) in relax[i].iter().enumerate() {
+                        let j = keep.map_or(c, |k| k[c]);
+                        let (z, coef) = (h[j], trace[i][j]);
+                        next[j] = if coef >= 0.0 {
+                            rl.au * z + rl.bu
                         } else {
                             if relu && rl.au > 0.0 && rl.au < 1.0 {
-                                grad[i][j] = c * *z;
+                                grad[i][c] = coef * z;
                             }
-                            *z = rl.al * *z + rl.bl;
-                        }
+                            rl.al * z + rl.bl
+                        };
                     }
+                    h = next;
                 }
             }
         }

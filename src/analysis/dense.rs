@@ -164,8 +164,15 @@ impl Rows {
 
     /// [`Rows::mul`] into `out`, reusing its storage.
     pub fn mul_into(&self, m: &DMatrix<f64>, out: &mut Rows) {
-        assert_eq!(self.cols, m.nrows(), "product of mismatched sizes");
-        let (k, n, p) = (self.rows, self.cols, m.ncols());
+        self.mul_cols_into(m.as_slice(), m.nrows(), m.ncols(), out);
+    }
+
+    /// [`Rows::mul_into`] for the `n × p` matrix stored column after column
+    /// in `m` (nalgebra's layout).
+    pub fn mul_cols_into(&self, m: &[f64], n: usize, p: usize, out: &mut Rows) {
+        assert_eq!(self.cols, n, "product of mismatched sizes");
+        assert_eq!(m.len(), n * p, "column-major data of the wrong length");
+        let k = self.rows;
         out.rows = k;
         out.cols = p;
         out.data.clear();
@@ -175,18 +182,20 @@ impl Rows {
         }
         if k.saturating_mul(n).saturating_mul(p) >= BLOCKED && n >= 8 {
             // outᵀ = mᵀ · selfᵀ, where selfᵀ is `self`'s storage read
-            // column-major and outᵀ's column-major storage is `out` row-major
+            // column-major and outᵀ's column-major storage is `out`
+            // row-major
             out.data.resize(k * p, 0.0);
             let st = DMatrixView::from_slice(&self.data, n, k);
+            let mt = DMatrixView::from_slice(m, n, p).transpose();
             let mut ot = DMatrixViewMut::from_slice(&mut out.data, p, k);
-            ot.gemm(1.0, &m.transpose(), &st, 0.0);
+            ot.gemm(1.0, &mt, &st, 0.0);
             return;
         }
         // four rows at a time: four independent sums per column keep the
         // floating-point adder busy (each sum still runs over the column
         // in order, so the result is the plain dot product's)
         out.data.resize(k * p, 0.0);
-        let cols: &[f64] = m.as_slice();
+        let cols: &[f64] = m;
         let mut blocks = self.data.chunks_exact(4 * n);
         let mut outs = out.data.chunks_exact_mut(4 * p);
         for (rows, o) in (&mut blocks).zip(&mut outs) {
@@ -222,6 +231,38 @@ impl Rows {
             }
         }
     }
+
+    /// Rows `a` and `b` (`a < b`), both mutable.
+    pub fn rows_pair_mut(&mut self, a: usize, b: usize) -> (&mut [f64], &mut [f64]) {
+        assert!(a < b && b < self.rows, "rows out of order");
+        let (head, tail) = self.data.split_at_mut(b * self.cols);
+        (
+            &mut head[a * self.cols..(a + 1) * self.cols],
+            &mut tail[..self.cols],
+        )
+    }
+
+    /// The same rows with their columns moved: the columns are the entries
+    /// `from` (all `full` of them with `None`) of a longer vector, and come
+    /// out as its entries `to` (all with `None`); an entry not in `from` is 0.
+    pub fn columns_moved(&self, from: Option<&[usize]>, to: Option<&[usize]>, full: usize) -> Rows {
+        let width = to.map_or(full, <[usize]>::len);
+        let mut out = Rows::zeros(self.rows, width);
+        let mut wide = vec![0.0; full];
+        for (r, row) in self.iter_rows().enumerate() {
+            wide.iter_mut().for_each(|v| *v = 0.0);
+            match from {
+                None => wide.copy_from_slice(row),
+                Some(f) => f.iter().zip(row).for_each(|(&j, &v)| wide[j] = v),
+            }
+            let o = out.row_mut(r);
+            match to {
+                None => o.copy_from_slice(&wide),
+                Some(t) => o.iter_mut().zip(t).for_each(|(v, &j)| *v = wide[j]),
+            }
+        }
+        out
+    }
 }
 
 impl From<&DMatrix<f64>> for Rows {
@@ -254,6 +295,10 @@ mod tests {
             (1, 1, 1),
             (40, 30, 20),
             (64, 64, 64),
+            (96, 64, 5),
+            (6, 48, 64),
+            (32, 48, 64),
+            (6, 96, 96),
             (2, 0, 3),
             (0, 4, 2),
         ] {

@@ -762,15 +762,18 @@ impl<'a> Analysis<'a> {
     ) -> LinearUpper {
         // two buffers in turn: an affine layer writes the other one, an
         // activation rewrites its rows in place; both sized once for the
-        // widest layer
+        // widest product (a product's width is at most its layer's inputs:
+        // sizing by the outputs too cost a wide network's interior bounds
+        // tens of megabytes of fresh pages each)
         let widest = self.net.layers[..end]
             .iter()
             .map(|l| match l {
-                Layer::Affine { w, .. } => w.ncols().max(w.nrows()),
+                Layer::Affine { w, .. } => w.ncols(),
                 Layer::Act(_) => 0,
             })
             .max()
-            .unwrap_or(0);
+            .unwrap_or(0)
+            .max(coef.ncols());
         let room = coef.nrows() * widest;
         coef.reserve_total(room);
         let mut spare = Rows::with_capacity(room);

@@ -133,6 +133,15 @@ impl Acc {
         self.n += n;
     }
 
+    /// The running sum of `n` terms whose rounded sum is `s` and whose
+    /// absolute values' rounded sum is `a`, both summed term by term in
+    /// the same order as [`Acc::add`] would: for loops that keep the three
+    /// apart (one count for many sums, the sums in arrays that vectorise).
+    #[inline]
+    pub fn from_parts(s: f64, a: f64, n: usize) -> Acc {
+        Acc { s, a, n }
+    }
+
     /// An upper bound on the exact sum of the terms (see [`sum_upper`]).
     #[inline]
     pub fn upper(self) -> f64 {

@@ -329,22 +329,32 @@ pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
 
 /// [`weight_scale`] over the columns `cols` only (all with `None`): the
 /// others' `m` must be 0 (their terms are exactly 0).
+///
+/// The sums are kept as plain arrays (the terms are non-negative, so each
+/// sum is its own absolute sum, and every row has the same count): the
+/// same additions in the same order as one [`Acc`] per row, which the loop
+/// over a column then vectorises.
 fn weight_scale_of(w: &DMatrix<f64>, m: &[f64], cols: Option<&[usize]>) -> Vec<f64> {
     let rows = w.nrows();
-    let mut acc = vec![Acc::ZERO; rows];
+    let mut sum = vec![0.0; rows];
+    let mut terms = 0;
     if rows > 0 {
         let mut column = |i: usize| {
             let (col, mi) = (&w.as_slice()[i * rows..(i + 1) * rows], m[i]);
-            for (a, &wji) in acc.iter_mut().zip(col) {
-                a.add(mul0(wji.abs(), mi));
+            for (s, &wji) in sum.iter_mut().zip(col) {
+                *s += mul0(wji.abs(), mi);
             }
+            terms += 1;
         };
         match cols {
             None => (0..w.ncols()).for_each(&mut column),
             Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
-    acc.into_iter().map(Acc::upper).collect()
+    for s in &mut sum {
+        *s = Acc::from_parts(*s, *s, terms).upper();
+    }
+    sum
 }
 
 /// The `2n × n` specification `[I; −I]`: upper bounds, then negated lower bounds.
@@ -364,33 +374,51 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
 
 /// [`affine_image`] summing over the columns `cols` only (all with
 /// `None`): the others' inputs must be exactly `[0, 0]`.
+///
+/// Each endpoint's running sum is kept as two plain arrays (the sum and
+/// the absolute sum; every row has the same count): the same additions in
+/// the same order as one [`Acc`] per row and endpoint, laid out so the loop
+/// over a column vectorises.
 fn affine_image_of(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox, cols: Option<&[usize]>) -> IBox {
     let rows = w.nrows();
-    let mut both = vec![Acc::ZERO; 2 * rows];
-    let (lo, hi) = both.split_at_mut(rows);
+    let mut sums = vec![0.0; 4 * rows];
+    let (lo_s, rest) = sums.split_at_mut(rows);
+    let (lo_a, rest) = rest.split_at_mut(rows);
+    let (hi_s, hi_a) = rest.split_at_mut(rows);
+    let mut terms = 0;
     if rows > 0 {
         // column by column: nalgebra stores columns contiguously
         let mut column = |i: usize| {
             let col = &w.as_slice()[i * rows..(i + 1) * rows];
             let (xl, xh) = (x.lo[i], x.hi[i]);
-            for ((l, h), &a) in lo.iter_mut().zip(hi.iter_mut()).zip(col) {
-                l.add(term_lower(a, xl, xh));
-                h.add(term_upper(a, xl, xh));
+            for (((ls, la), (hs, ha)), &a) in lo_s
+                .iter_mut()
+                .zip(lo_a.iter_mut())
+                .zip(hi_s.iter_mut().zip(hi_a.iter_mut()))
+                .zip(col)
+            {
+                let (tl, th) = (term_lower(a, xl, xh), term_upper(a, xl, xh));
+                *ls += tl;
+                *la += tl.abs();
+                *hs += th;
+                *ha += th.abs();
             }
+            terms += 1;
         };
         match cols {
             None => (0..w.ncols()).for_each(&mut column),
             Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
-    for ((l, h), &bj) in lo.iter_mut().zip(hi.iter_mut()).zip(b.iter()) {
-        l.add(bj);
-        h.add(bj);
+    let mut lo = Vec::with_capacity(rows);
+    let mut hi = Vec::with_capacity(rows);
+    for j in 0..rows {
+        let bj = b[j];
+        let n = terms + 1;
+        lo.push(Acc::from_parts(lo_s[j] + bj, lo_a[j] + bj.abs(), n).lower());
+        hi.push(Acc::from_parts(hi_s[j] + bj, hi_a[j] + bj.abs(), n).upper());
     }
-    IBox::new(
-        lo.iter().map(|a| a.lower()).collect(),
-        hi.iter().map(|a| a.upper()).collect(),
-    )
+    IBox::new(lo, hi)
 }
 
 /// What [`Analysis::upper_optimised`] minimises for row `r`, given that

@@ -71,6 +71,7 @@ impl LinearUpper {
             &self.coef,
             &mut acc,
             &Packed::new(w, b, wz, None, None),
+            wz,
             &mut coef,
         );
         LinearUpper {
@@ -162,7 +163,7 @@ impl LinearUpper {
 /// rounded once, at the end of the back-substitution, with the error bound
 /// of all their terms (each term is one rounding from its value, as
 /// [`Acc`] requires, whichever layer added it).
-fn affine_into(coef: &Rows, offset: &mut [Acc], w: &Packed, out: &mut Rows) {
+fn affine_into(coef: &Rows, offset: &mut [Acc], w: &Packed, wz: &[f64], out: &mut Rows) {
     if let Some(sign) = w.identity {
         // W = ±I (the clamp layers of control limits): the product is
         // exact, so it has no rounding error to account for
@@ -179,7 +180,7 @@ fn affine_into(coef: &Rows, offset: &mut [Acc], w: &Packed, out: &mut Rows) {
     let k = gamma(w.rows + 2);
     for (row, acc) in coef.iter_rows().zip(offset.iter_mut()) {
         acc.add_products(row, &w.b);
-        acc.add(slack(k, row, &w.wz));
+        acc.add(slack(k, row, wz));
     }
 }
 
@@ -200,8 +201,9 @@ struct Packed<'a> {
     cols: usize,
     /// The kept outputs' biases.
     b: Cow<'a, [f64]>,
-    /// `|W|·|h|max` of the kept outputs (see [`weight_scale`]).
-    wz: Vec<f64>,
+    /// `|W|·|h|max` of the kept outputs (see [`weight_scale`]), when some
+    /// outputs are left out (otherwise the layer's own, which the caller has).
+    wz: Option<Vec<f64>>,
     /// `Some(s)` when the packed matrix is `s·I`, `s = ±1`.
     identity: Option<f64>,
 }
@@ -217,18 +219,18 @@ impl<'a> Packed<'a> {
         cols: Option<&[usize]>,
     ) -> Packed<'a> {
         let (nr, nc) = w.shape();
-        let (data, b, wz): (Cow<[f64]>, Cow<[f64]>, Vec<f64>) = match (rows, cols) {
+        let (data, b, wz): (Cow<[f64]>, Cow<[f64]>, Option<Vec<f64>>) = match (rows, cols) {
             (None, None) => (
                 Cow::Borrowed(w.as_slice()),
                 Cow::Borrowed(b.as_slice()),
-                wz.to_vec(),
+                None,
             ),
             (None, Some(cols)) => {
                 let mut data = Vec::with_capacity(nr * cols.len());
                 for &c in cols {
                     data.extend_from_slice(&w.as_slice()[c * nr..(c + 1) * nr]);
                 }
-                (Cow::Owned(data), Cow::Borrowed(b.as_slice()), wz.to_vec())
+                (Cow::Owned(data), Cow::Borrowed(b.as_slice()), None)
             }
             (Some(rows), cols) => {
                 let all: Vec<usize>;
@@ -247,7 +249,7 @@ impl<'a> Packed<'a> {
                 (
                     Cow::Owned(data),
                     Cow::Owned(rows.iter().map(|&r| b[r]).collect()),
-                    rows.iter().map(|&r| wz[r]).collect(),
+                    Some(rows.iter().map(|&r| wz[r]).collect()),
                 )
             }
         };
@@ -324,23 +326,24 @@ fn one_per_row(w: &DMatrix<f64>) -> bool {
 
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
 pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
-    weight_scale_of(w, m, None)
+    weight_scale_of(w, |i| m[i], None)
 }
 
-/// [`weight_scale`] over the columns `cols` only (all with `None`): the
-/// others' `m` must be 0 (their terms are exactly 0).
+/// [`weight_scale`] over the columns `cols` only (all with `None`), with
+/// `m(i)` the bound of input `i`: the others' must be 0 (their terms are
+/// exactly 0).
 ///
 /// The sums are kept as plain arrays (the terms are non-negative, so each
 /// sum is its own absolute sum, and every row has the same count): the
 /// same additions in the same order as one [`Acc`] per row, which the loop
 /// over a column then vectorises.
-fn weight_scale_of(w: &DMatrix<f64>, m: &[f64], cols: Option<&[usize]>) -> Vec<f64> {
+fn weight_scale_of(w: &DMatrix<f64>, m: impl Fn(usize) -> f64, cols: Option<&[usize]>) -> Vec<f64> {
     let rows = w.nrows();
     let mut sum = vec![0.0; rows];
     let mut terms = 0;
     if rows > 0 {
         let mut column = |i: usize| {
-            let (col, mi) = (&w.as_slice()[i * rows..(i + 1) * rows], m[i]);
+            let (col, mi) = (&w.as_slice()[i * rows..(i + 1) * rows], m(i));
             for (s, &wji) in sum.iter_mut().zip(col) {
                 *s += mul0(wji.abs(), mi);
             }
@@ -500,7 +503,8 @@ impl<'a> Analysis<'a> {
                 Layer::Affine { w, b } => {
                     let ins = a.ins(i);
                     let current = &a.boxes[i];
-                    let scale = weight_scale_of(w, &current.abs_max(), ins);
+                    let m = |j: usize| crate::num::abs_max(current.lo[j], current.hi[j]);
+                    let scale = weight_scale_of(w, m, ins);
                     let mut next = affine_image_of(w, b, current, ins);
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     // On the network's first layer (an affine map of the
@@ -817,7 +821,8 @@ impl<'a> Analysis<'a> {
                             &built
                         }
                     };
-                    affine_into(&coef, &mut offset, packed, &mut spare);
+                    let wz = packed.wz.as_deref().unwrap_or(&self.scales[i]);
+                    affine_into(&coef, &mut offset, packed, wz, &mut spare);
                     std::mem::swap(&mut coef, &mut spare);
                     cols = ins;
                 }

@@ -219,7 +219,7 @@ impl<'a> Packed<'a> {
         cols: Option<&[usize]>,
     ) -> Packed<'a> {
         let (nr, nc) = w.shape();
-        let (data, b, wz): (Cow<[f64]>, Cow<[f64]>, Option<Vec<f64>>) = match (rows, cols) {
+        let (data, b, wz) = match (rows, cols) {
             (None, None) => (
                 Cow::Borrowed(w.as_slice()),
                 Cow::Borrowed(b.as_slice()),
@@ -249,7 +249,7 @@ impl<'a> Packed<'a> {
                 (
                     Cow::Owned(data),
                     Cow::Owned(rows.iter().map(|&r| b[r]).collect()),
-                    Some(rows.iter().map(|&r| wz[r]).collect()),
+                    Some(rows.iter().map(|&r| wz[r]).collect::<Vec<f64>>()),
                 )
             }
         };

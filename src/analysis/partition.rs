@@ -188,7 +188,7 @@ pub fn refine_parallel<T: Send + Clone>(
         let (jobs, job_rx) = std::sync::mpsc::channel::<(IBox, T)>();
         let (res_tx, results) = std::sync::mpsc::channel::<(T, f64)>();
         scope.spawn(move || {
-            for (cell, parent) in job_rx {
+            while let Some((cell, parent)) = recv_soon(&job_rx) {
                 if res_tx.send(eval(&cell, Some(&parent))).is_err() {
                     break;
                 }
@@ -205,7 +205,7 @@ pub fn refine_parallel<T: Send + Clone>(
                 let vb = eval(b, Some(parent));
                 // a helper that failed (it panicked; the scope re-raises it
                 // when it ends) leaves the child to this thread
-                let va = match sent.then(|| results.recv().ok()).flatten() {
+                let va = match sent.then(|| recv_soon(&results)).flatten() {
                     Some(v) => v,
                     None => eval(a, Some(parent)),
                 };
@@ -216,6 +216,30 @@ pub fn refine_parallel<T: Send + Clone>(
         drop(jobs);
         r
     })
+}
+
+/// How long a thread of [`refine_parallel`] polls for the other's message
+/// before it sleeps on the channel. Waking a sleeping thread took tens of
+/// microseconds on the build machines (a virtual machine), at every split,
+/// twice: a cell's evaluation takes about as long.
+const SPIN: std::time::Duration = std::time::Duration::from_micros(300);
+
+/// The next message, polled for up to [`SPIN`] and then waited for; `None`
+/// once the sender is gone.
+fn recv_soon<T>(rx: &std::sync::mpsc::Receiver<T>) -> Option<T> {
+    let start = std::time::Instant::now();
+    loop {
+        match rx.try_recv() {
+            Ok(v) => return Some(v),
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => return None,
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                if start.elapsed() > SPIN {
+                    return rx.recv().ok();
+                }
+                std::hint::spin_loop();
+            }
+        }
+    }
 }
 
 /// A [`CellEval`] that threads can share.

@@ -553,8 +553,29 @@ impl<'a> Analysis<'a> {
                         // their bounds: every neuron is bounded.
                         let relu =
                             matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
+                        // With a hook (unrolled CROWN, where each bound
+                        // runs back through every earlier step), a ReLU
+                        // that interval arithmetic proves active is not
+                        // bounded either when the layer after it mixes its
+                        // neurons: its relaxation is the identity whatever
+                        // its bounds, so every later CROWN bound is the
+                        // same; its interval box enters only the next
+                        // layer's interval image (intersected with that
+                        // layer's CROWN bound) and error terms. Not where
+                        // one neuron's box is read on (a clamp, whose
+                        // second half is interval arithmetic from it), nor
+                        // without a hook: there interval images win often
+                        // enough for a looser box to show (measured on the
+                        // partitioned specs; unrolled sets are unchanged
+                        // up to rounding).
+                        let mixed_next = hook.is_some()
+                            && matches!(net.layers.get(i + 2),
+                                Some(Layer::Affine { w, .. }) if !one_per_row(w));
                         let rows: Vec<usize> = (0..w.nrows())
-                            .filter(|&j| !(relu && inactive(next.hi[j])))
+                            .filter(|&j| {
+                                !(relu
+                                    && (inactive(next.hi[j]) || (mixed_next && next.lo[j] >= 0.0)))
+                            })
                             .collect();
                         let k = rows.len();
                         if k > 0 {

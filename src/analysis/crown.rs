@@ -5,7 +5,11 @@
 //! every hidden layer are themselves computed by CROWN (and intersected with
 //! IBP's), then each neuron is relaxed by [`relax`](super::relax). A ReLU
 //! whose input IBP already proves non-positive is not back-substituted: it
-//! outputs 0 whatever its bounds, so no bound changes.
+//! outputs 0 whatever its bounds, so no bound changes; and once any bound
+//! proves a ReLU inactive, back-substitution leaves it out of every product
+//! (`Packed`). Skipping a bound only ever keeps interval arithmetic's
+//! (valid) box in its place: every relaxation is still computed from the
+//! box it has, so a skip can cost tightness, never soundness.
 //!
 //! All coefficient arithmetic is done in `f64`; the rounding error of every
 //! matrix product is accounted for by widening the offset with

@@ -221,7 +221,9 @@ pub fn refine_parallel<T: Send + Clone>(
 /// How long a thread of [`refine_parallel`] polls for the other's message
 /// before it sleeps on the channel. Waking a sleeping thread took tens of
 /// microseconds on the build machines (a virtual machine), at every split,
-/// twice: a cell's evaluation takes about as long.
+/// twice: a cell's evaluation takes about as long. Polling yields the
+/// processor each time, so on a machine with fewer cores than threads the
+/// other thread still runs.
 const SPIN: std::time::Duration = std::time::Duration::from_micros(300);
 
 /// The next message, polled for up to [`SPIN`] and then waited for; `None`
@@ -236,7 +238,7 @@ fn recv_soon<T>(rx: &std::sync::mpsc::Receiver<T>) -> Option<T> {
                 if start.elapsed() > SPIN {
                     return rx.recv().ok();
                 }
-                std::hint::spin_loop();
+                std::thread::yield_now();
             }
         }
     }

@@ -113,6 +113,19 @@ impl Acc {
     #[inline]
     pub fn add_products(&mut self, x: &[f64], y: &[f64]) {
         let n = x.len().min(y.len());
+        if n < 4 {
+            // fewer terms than lanes: each lane holds at most one term, and
+            // the lanes combine as below, `(s₀ + s₁) + (s₂ + s₃)` with the
+            // missing ones 0, the same additions without the lane set-up
+            let t = |i: usize| if i < n { mul0(x[i], y[i]) } else { 0.0 };
+            let (t0, t1, t2) = (t(0), t(1), t(2));
+            let (s0, s1, s2) = (0.0 + t0, 0.0 + t1, 0.0 + t2);
+            let (a0, a1, a2) = (0.0 + t0.abs(), 0.0 + t1.abs(), 0.0 + t2.abs());
+            self.s += (s0 + s1) + (s2 + 0.0);
+            self.a += (a0 + a1) + (a2 + 0.0);
+            self.n += n;
+            return;
+        }
         let (mut s, mut a) = ([0.0f64; 4], [0.0f64; 4]);
         let (xc, yc) = (x[..n].chunks_exact(4), y[..n].chunks_exact(4));
         let (xr, yr) = (xc.remainder(), yc.remainder());
@@ -224,6 +237,17 @@ pub fn dot_box_lower(a: &[f64], lo: &[f64], hi: &[f64]) -> f64 {
 #[inline]
 pub fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
     let n = a.len().min(m.len());
+    if n < 4 {
+        // one term per lane at most: the lanes' sum below without the set-up
+        let t = |i: usize| {
+            if i < n {
+                0.0 + mul0(a[i].abs(), m[i])
+            } else {
+                0.0
+            }
+        };
+        return (t(0) + t(1)) + (t(2) + 0.0);
+    }
     let mut s = [0.0f64; 4];
     let (ac, mc) = (a[..n].chunks_exact(4), m[..n].chunks_exact(4));
     let (ar, mr) = (ac.remainder(), mc.remainder());
@@ -372,6 +396,48 @@ mod tests {
             assert!((abs_dot(&x, &m) - plain).abs() <= 1e-12 * (1.0 + plain));
         }
         assert_eq!(abs_dot(&[0.0], &[f64::INFINITY]), 0.0);
+    }
+
+    /// The four-lane sums of `add_products` and `abs_dot` as written for
+    /// long vectors, for any length.
+    fn lanes(x: &[f64], y: &[f64]) -> (f64, f64, f64) {
+        let (mut s, mut a, mut d) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        for (i, (&x, &y)) in x.iter().zip(y).enumerate() {
+            let t = mul0(x, y);
+            s[i % 4] += t;
+            a[i % 4] += t.abs();
+            d[i % 4] += mul0(x.abs(), y);
+        }
+        let sum = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        (sum(s), sum(a), sum(d))
+    }
+
+    #[test]
+    fn short_products_are_the_lane_sums_bit_for_bit() {
+        let mut rng = crate::rng::Rng::new(11);
+        let pick = [0.0, -0.0, 1.0, -3.5, 1e-300, f64::INFINITY, 0.1];
+        for round in 0..400 {
+            let n = round % 4;
+            let gen = |rng: &mut crate::rng::Rng| -> f64 {
+                let k = (rng.uniform(0.0, 1.0) * 10.0) as usize;
+                pick.get(k)
+                    .copied()
+                    .unwrap_or_else(|| rng.uniform(-5.0, 5.0))
+            };
+            let x: Vec<f64> = (0..n).map(|_| gen(&mut rng)).collect();
+            let y: Vec<f64> = (0..n).map(|_| gen(&mut rng).abs()).collect();
+            let (s, a, d) = lanes(&x, &y);
+            let mut acc = Acc::of(0.5);
+            acc.add_products(&x, &y);
+            let mut want = Acc::of(0.5);
+            want.s += s;
+            want.a += a;
+            want.n += n;
+            assert_eq!(acc.s.to_bits(), want.s.to_bits(), "{x:?} {y:?}");
+            assert_eq!(acc.a.to_bits(), want.a.to_bits(), "{x:?} {y:?}");
+            assert_eq!(acc.n, want.n);
+            assert_eq!(abs_dot(&x, &y).to_bits(), d.to_bits(), "{x:?} {y:?}");
+        }
     }
 
     #[test]

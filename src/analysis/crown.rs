@@ -323,9 +323,23 @@ fn inactive(hi: f64) -> bool {
 /// Whether every row of `w` has at most one nonzero entry (a one-column
 /// matrix, or a diagonal one such as a clamp's `±I`).
 fn one_per_row(w: &DMatrix<f64>) -> bool {
-    w.ncols() == 1
-        || w.row_iter()
-            .all(|r| r.iter().filter(|v| **v != 0.0).count() <= 1)
+    if w.ncols() <= 1 {
+        return true;
+    }
+    // column by column (nalgebra's layout): a dense matrix answers within
+    // its first two columns
+    let mut seen = vec![false; w.nrows()];
+    for col in w.as_slice().chunks_exact(w.nrows().max(1)) {
+        for (s, &v) in seen.iter_mut().zip(col) {
+            if v != 0.0 {
+                if *s {
+                    return false;
+                }
+                *s = true;
+            }
+        }
+    }
+    true
 }
 
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
@@ -502,6 +516,13 @@ impl<'a> Analysis<'a> {
             packed: Vec::with_capacity(layers),
         };
         a.boxes.push(input.clone());
+        // which affine layers have at most one nonzero per row (asked for
+        // several layers at each step below)
+        let opr: Vec<bool> = net
+            .layers
+            .iter()
+            .map(|l| matches!(l, Layer::Affine { w, .. } if one_per_row(w)))
+            .collect();
         for (i, layer) in net.layers.iter().enumerate() {
             match layer {
                 Layer::Affine { w, b } => {
@@ -530,10 +551,7 @@ impl<'a> Analysis<'a> {
                     // rounding, no tighter than interval arithmetic from
                     // z_k's bounds.
                     let mut j = i + 1;
-                    while j >= 1
-                        && matches!(&net.layers[j - 1],
-                            Layer::Affine { w, .. } if one_per_row(w))
-                    {
+                    while j >= 1 && opr[j - 1] {
                         j -= 1;
                     }
                     let after_one_neuron = j >= 2
@@ -573,8 +591,8 @@ impl<'a> Analysis<'a> {
                         // partitioned specs; unrolled sets are unchanged
                         // up to rounding).
                         let mixed_next = hook.is_some()
-                            && matches!(net.layers.get(i + 2),
-                                Some(Layer::Affine { w, .. }) if !one_per_row(w));
+                            && matches!(net.layers.get(i + 2), Some(Layer::Affine { .. }))
+                            && !opr[i + 2];
                         let rows: Vec<usize> = (0..w.nrows())
                             .filter(|&j| {
                                 !(relu

@@ -259,6 +259,8 @@ struct Dynamics {
     dyn_xw: DMatrix<f64>,
     /// `[A B I]`: `(x, u, w) ↦ A x + B u + w`.
     dyn_xuw: DMatrix<f64>,
+    /// `|B|`, entry-wise (the scale of the rounding error of `M B`).
+    b_abs: DMatrix<f64>,
 }
 
 /// A closed loop ready for analysis, with the block matrices precomputed.
@@ -272,6 +274,8 @@ pub struct ClosedLoop {
     pub net: Network,
     /// `[Cᵀ I]`: `(x, v) ↦ y`.
     obs_xv: DMatrix<f64>,
+    /// The zero offset of `obs_xv` (a vector of `p` zeros).
+    obs_zero: DVector<f64>,
     /// The dynamics per step (one entry: time-invariant).
     dynamics: Vec<Dynamics>,
     /// Projected-gradient steps on the lower ReLU slopes of each
@@ -308,6 +312,7 @@ impl ClosedLoop {
                 dyn_xuw.view_mut((0, n), (n, m)).copy_from(&pl.b);
                 dyn_xuw.view_mut((0, n + m), (n, n)).fill_with_identity();
                 Dynamics {
+                    b_abs: pl.b.abs(),
                     plant: pl,
                     dyn_xw,
                     dyn_xuw,
@@ -317,6 +322,7 @@ impl ClosedLoop {
         ClosedLoop {
             plant,
             net,
+            obs_zero: DVector::zeros(obs_xv.nrows()),
             obs_xv,
             dynamics,
             slope_steps: 0,
@@ -434,12 +440,7 @@ impl ClosedLoop {
     /// error); `None` when a bound is not finite. Used to confirm that a
     /// simulated counterexample is a real one.
     pub fn enclose_step(&self, t: usize, x: &IBox, w: &[f64], v: &[f64]) -> Option<IBox> {
-        let p = self.plant.obs.ncols();
-        let y = affine_image(
-            &self.obs_xv,
-            &DVector::zeros(p),
-            &x.product(&IBox::point(v)),
-        );
+        let y = affine_image(&self.obs_xv, &self.obs_zero, &x.product(&IBox::point(v)));
         let a = Analysis::new(&self.net, &y, Mode::Ibp);
         if !(y.is_finite() && a.is_finite()) {
             return None;
@@ -462,8 +463,7 @@ impl ClosedLoop {
 
     /// The box of possible observations for states in `x`.
     pub fn observation_box(&self, x: &IBox) -> IBox {
-        let p = self.plant.obs.ncols();
-        affine_image(&self.obs_xv, &DVector::zeros(p), &x.product(&self.plant.v))
+        affine_image(&self.obs_xv, &self.obs_zero, &x.product(&self.plant.v))
     }
 
     /// The facet matrix of a boundary at step `t`: `[I; −I]` (the bounding
@@ -542,19 +542,14 @@ impl ClosedLoop {
                 }
                 // the facets' bound and CL-CROWN's control box, from one
                 // back-substitution through the controller
-                let (bound, u) = self.back_step_with(
-                    t,
-                    &LinearUpper::of_spec(facets.clone()),
-                    &analysis,
-                    &bbox,
-                    true,
-                );
+                let spec = LinearUpper::of_spec(&facets);
+                let (bound, u) = self.back_step_with(t, &spec, &analysis, &bbox, true);
                 let Some(u) = u.filter(IBox::is_finite) else {
                     return Step::overflowed(n, Vec::new());
                 };
                 if !alone {
                     let (separate, more) = self
-                        .push_control_box(t, facets.clone(), &bbox, &u)
+                        .push_control_box(t, &spec, &bbox, &u)
                         .concretize_region(x);
                     extra = Some((separate, more));
                 }
@@ -573,7 +568,7 @@ impl ClosedLoop {
                     _ => self.sg_ibp_control(&y),
                 };
                 match u.filter(IBox::is_finite) {
-                    Some(u) => self.push_control_box(t, facets.clone(), &bbox, &u),
+                    Some(u) => self.push_control_box(t, &LinearUpper::of_spec(&facets), &bbox, &u),
                     None => return Step::overflowed(n, Vec::new()),
                 }
             }
@@ -745,12 +740,12 @@ impl ClosedLoop {
         }
     }
 
-    /// `F (A x + B u + c + w)` bounded linearly in `x`, over `u ∈ U`, `w ∈ W`.
-    fn push_control_box(&self, t: usize, facets: DMatrix<f64>, x: &IBox, u: &IBox) -> LinearUpper {
+    /// `F (A x + B u + c + w)` bounded linearly in `x`, over `u ∈ U`, `w ∈ W`,
+    /// for the facet rows `F` of `spec` (an identity bound, offsets 0).
+    fn push_control_box(&self, t: usize, spec: &LinearUpper, x: &IBox, u: &IBox) -> LinearUpper {
         let n = self.states();
         let xuw = x.product(u).product(&self.plant.w);
         let d = self.at(t);
-        let spec = LinearUpper::of_spec(&facets);
         let mut bound = spec
             .through_affine(&d.dyn_xuw, &d.plant.c, &xuw.abs_max())
             .split_concretize(n, &u.product(&self.plant.w));
@@ -799,15 +794,18 @@ impl ClosedLoop {
         // S = M B in f64; its rounding error times the size of u goes into the offsets
         let spec = bound.coef.mul(&d.plant.b);
         let k = gamma(n + 2);
-        let mb_abs = bound.coef.abs().mul(&d.plant.b.abs());
-        let u_abs = analysis.output_box(Mode::Ibp).abs_max();
-        let p = self.plant.obs.ncols();
+        let mb_abs = bound.coef.abs().mul(&d.b_abs);
+        let u_abs = analysis
+            .boxes()
+            .last()
+            .expect("an analysis has its input box")
+            .abs_max();
         let xv_abs = x.abs_max_with(v);
         // with optimised slopes, each row's measure is what this step makes
         // of it: the control part composed with y = Cᵀx + v and added to the
         // direct part, over the box of x (and its maximiser, mapped to y)
         let objective = |r: usize, cand: &LinearUpper| -> (f64, Vec<f64>) {
-            let over_xv = cand.through_affine(&self.obs_xv, &DVector::zeros(p), &xv_abs);
+            let over_xv = cand.through_affine(&self.obs_xv, &self.obs_zero, &xv_abs);
             let v_star = corner(&over_xv.coef.row(0)[n..], v);
             let direct_r = LinearUpper {
                 coef: Rows::from_row_major(1, n, direct.coef.row(r).to_vec()),
@@ -828,7 +826,7 @@ impl ClosedLoop {
             (over_y, None)
         };
         let mut control = over_y
-            .through_affine(&self.obs_xv, &DVector::zeros(p), &xv_abs)
+            .through_affine(&self.obs_xv, &self.obs_zero, &xv_abs)
             .split_concretize(n, v);
         for (o, row) in control.offset.iter_mut().zip(mb_abs.iter_rows()) {
             *o = sum_upper([*o, slack(k, row, &u_abs)]);
@@ -878,7 +876,6 @@ impl ClosedLoop {
         alone: bool,
     ) -> Vec<Step> {
         let n = self.states();
-        let p = self.plant.obs.ncols();
         let mut steps = vec![Step::new(x0.clone(), Vec::new())];
         let mut boxes = vec![x0.bbox()];
         let mut analyses: Vec<Analysis> = Vec::with_capacity(horizon);
@@ -896,7 +893,7 @@ impl ClosedLoop {
                     let over_x = over_y
                         .through_affine(
                             &self.obs_xv,
-                            &DVector::zeros(p),
+                            &self.obs_zero,
                             &boxes[t].abs_max_with(&self.plant.v),
                         )
                         .split_concretize(n, &self.plant.v);

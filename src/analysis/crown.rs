@@ -742,6 +742,16 @@ impl<'a> Analysis<'a> {
     /// give: bit for bit while products are per-row dot products, up to
     /// rounding where the blocked product of wide layers takes over (its
     /// summation order depends on the number of rows; sound either way).
+    ///
+    /// A row of `spec` with at most one nonzero, `c` at output `i` (every
+    /// row for a one-output network; the facet rows `M B` of a plant whose
+    /// `B` has one nonzero per row), is not back-substituted: CROWN is
+    /// positively homogeneous in its row (scaling a row by `|c| > 0` keeps
+    /// every coefficient's sign, hence every relaxation it selects), so its
+    /// bound is `|c|` times the bound of `±z_i`, which the `[I; −I]` rows
+    /// give. The scaled coefficients are rounded, and their error
+    /// (`≤ 2u·|c·λⱼ|·|yⱼ|`) is added to the offset; the result equals the
+    /// direct pass's up to rounding.
     pub fn upper_and_output_box(
         &self,
         spec: Rows,
@@ -758,15 +768,70 @@ impl<'a> Analysis<'a> {
             let u = self.crown_box(ibp, &self.upper(plus_minus_identity(m)));
             return (self.upper_optimised(spec, steps, objective), u);
         }
-        let all = self.upper(plus_minus_identity(m).stacked(&spec));
-        let (pm_coef, coef) = all.coef.split_rows(2 * m);
-        let mut offset = all.offset;
-        let rest = offset.split_off(2 * m);
+        // rows with at most one (finite) nonzero: (column, coefficient)
+        let single: Vec<Option<(usize, f64)>> = spec
+            .iter_rows()
+            .map(|row| {
+                let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
+                match (nz.next(), nz.next()) {
+                    (None, _) => Some((0, 0.0)),
+                    (Some((i, &c)), None) if c.is_finite() => Some((i, c)),
+                    _ => None,
+                }
+            })
+            .collect();
+        if single.iter().all(Option::is_none) {
+            let all = self.upper(plus_minus_identity(m).stacked(&spec));
+            let (pm_coef, coef) = all.coef.split_rows(2 * m);
+            let mut offset = all.offset;
+            let rest = offset.split_off(2 * m);
+            let pm = LinearUpper {
+                coef: pm_coef,
+                offset,
+            };
+            return (LinearUpper { coef, offset: rest }, self.crown_box(ibp, &pm));
+        }
+        // the other rows go below [I; −I] in one pass
+        let own: Vec<usize> = (0..spec.nrows()).filter(|&r| single[r].is_none()).collect();
+        let mut stacked = plus_minus_identity(m);
+        if !own.is_empty() {
+            let data = own.iter().flat_map(|&r| spec.row(r)).copied().collect();
+            stacked = stacked.stacked(&Rows::from_row_major(own.len(), m, data));
+        }
+        let all = self.upper(stacked);
+        let abs_in = self.boxes[0].abs_max();
+        let width = all.coef.ncols();
+        let mut coef = Rows::zeros(spec.nrows(), width);
+        let mut offset = Vec::with_capacity(spec.nrows());
+        let mut next_own = 2 * m;
+        for (r, s) in single.iter().enumerate() {
+            let out = coef.row_mut(r);
+            match *s {
+                Some((i, c)) => {
+                    // c·zᵢ = |c|·(±zᵢ): the bound of zᵢ's row (c ≥ 0) or of −zᵢ's
+                    let src = if c >= 0.0 { i } else { m + i };
+                    let a = c.abs();
+                    for (o, &l) in out.iter_mut().zip(all.coef.row(src)) {
+                        *o = mul0(a, l);
+                    }
+                    let mut acc = Acc::ZERO;
+                    acc.add(mul0(a, all.offset[src]));
+                    acc.add(slack(2.0 * U, out, &abs_in));
+                    offset.push(acc.upper());
+                }
+                None => {
+                    out.copy_from_slice(all.coef.row(next_own));
+                    offset.push(all.offset[next_own]);
+                    next_own += 1;
+                }
+            }
+        }
+        let (pm_coef, _) = all.coef.split_rows(2 * m);
         let pm = LinearUpper {
             coef: pm_coef,
-            offset,
+            offset: all.offset[..2 * m].to_vec(),
         };
-        (LinearUpper { coef, offset: rest }, self.crown_box(ibp, &pm))
+        (LinearUpper { coef, offset }, self.crown_box(ibp, &pm))
     }
 
     /// CROWN: `S f(y) ≤ Λ y + c` over the input box, for a `k × outputs` matrix `S`.

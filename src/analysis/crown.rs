@@ -486,6 +486,12 @@ pub struct Analysis<'a> {
     /// Each affine layer as back-substitution reads it (`None` for
     /// activations, and in interval mode, where it is built when asked).
     packed: Vec<Option<Packed<'a>>>,
+    /// For an affine layer with one output `z` whose bounds were
+    /// back-substituted, the bounds of `z` and `−z` over the input (CROWN's
+    /// own relaxations); `None` otherwise. A later back-substitution that
+    /// reaches `z` with CROWN's relaxations finishes from them (see
+    /// [`Analysis::substitute`]).
+    single: Vec<Option<LinearUpper>>,
 }
 
 impl<'a> Analysis<'a> {
@@ -514,6 +520,7 @@ impl<'a> Analysis<'a> {
             scales: Vec::with_capacity(layers),
             abs: Vec::with_capacity(layers),
             packed: Vec::with_capacity(layers),
+            single: vec![None; layers],
         };
         a.boxes.push(input.clone());
         // which affine layers have at most one nonzero per row (asked for
@@ -611,6 +618,9 @@ impl<'a> Analysis<'a> {
                             for (r, &j) in rows.iter().enumerate() {
                                 next.hi[j] = next.hi[j].min(both[r]);
                                 next.lo[j] = next.lo[j].max(-both[k + r]);
+                            }
+                            if w.nrows() == 1 {
+                                a.single[i] = Some(bound);
                             }
                         }
                     }
@@ -873,6 +883,37 @@ impl<'a> Analysis<'a> {
         self.substitute(coef, offset, ins, i, &self.relax, None)
     }
 
+    /// Rows `c_r·z + offset_r` on the one output `z` of an affine layer
+    /// whose bounds `pm` (of `z` and `−z`, over the input) are stored,
+    /// bounded over the input: `c·z = |c|·(±z)` is at most `|c|` times the
+    /// bound of `±z` (for `c ≥ 0` and `c < 0`), the scaled coefficients
+    /// rounded and their error `≤ 2u·|c·λⱼ|·|yⱼ|` added. Equal to
+    /// back-substituting the rows on through the network up to rounding:
+    /// CROWN is positively homogeneous in its row (scaling by `|c|` keeps
+    /// every coefficient's sign, hence every relaxation it selects).
+    fn scaled(&self, coef: &Rows, offset: Vec<Acc>, pm: &LinearUpper) -> LinearUpper {
+        let abs_in = self.boxes[0].abs_max();
+        let width = pm.coef.ncols();
+        let mut out = Rows::zeros(coef.nrows(), width);
+        let offset = offset
+            .into_iter()
+            .enumerate()
+            .map(|(r, mut acc)| {
+                let c = coef.get(r, 0);
+                let src = usize::from(c < 0.0);
+                let a = c.abs();
+                let row = out.row_mut(r);
+                for (o, &l) in row.iter_mut().zip(pm.coef.row(src)) {
+                    *o = mul0(a, l);
+                }
+                acc.add(mul0(a, pm.offset[src]));
+                acc.add(slack(2.0 * U, row, &abs_in));
+                acc.upper()
+            })
+            .collect();
+        LinearUpper { coef: out, offset }
+    }
+
     /// [`Analysis::backward`] with the given relaxations (any sound ones:
     /// the optimised slopes of [`Analysis::upper_optimised`]); with `trace`,
     /// the first row's coefficients on each activation's output are
@@ -917,9 +958,17 @@ impl<'a> Analysis<'a> {
         let room = coef.nrows() * widest;
         coef.reserve_total(room);
         let mut spare = Rows::with_capacity(room);
+        // with CROWN's own relaxations, rows that reach a one-output layer
+        // whose bounds are stored finish from them
+        let own_relax = trace.is_none() && std::ptr::eq(relax, self.relax.as_slice());
         for i in (0..end).rev() {
             match &self.net.layers[i] {
                 Layer::Affine { w, b } => {
+                    if own_relax && cols.is_none() && coef.ncols() == 1 {
+                        if let Some(pm) = &self.single[i] {
+                            return self.scaled(&coef, offset, pm);
+                        }
+                    }
                     let ins = self.ins(i);
                     let built;
                     let packed = match &self.packed[i] {

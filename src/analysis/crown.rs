@@ -342,6 +342,30 @@ fn one_per_row(w: &DMatrix<f64>) -> bool {
     true
 }
 
+/// For rows whose columns are the neurons `cols` (`None`: all), when every
+/// row has at most one nonzero, finite, on a neuron among `stored`
+/// (ascending): per row, that neuron's position in `stored` and the
+/// coefficient (`None` for a row of zeros). `None` when some row does not.
+fn single_rows(
+    coef: &Rows,
+    cols: Option<&[usize]>,
+    stored: &[usize],
+) -> Option<Vec<Option<(usize, f64)>>> {
+    coef.iter_rows()
+        .map(|row| {
+            let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
+            match (nz.next(), nz.next()) {
+                (None, _) => Some(None),
+                (Some((c, &v)), None) if v.is_finite() => {
+                    let j = cols.map_or(c, |k| k[c]);
+                    stored.binary_search(&j).ok().map(|p| Some((p, v)))
+                }
+                _ => None,
+            }
+        })
+        .collect()
+}
+
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
 pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
     weight_scale_of(w, |i| m[i], None)
@@ -486,12 +510,14 @@ pub struct Analysis<'a> {
     /// Each affine layer as back-substitution reads it (`None` for
     /// activations, and in interval mode, where it is built when asked).
     packed: Vec<Option<Packed<'a>>>,
-    /// For an affine layer with one output `z` whose bounds were
-    /// back-substituted, the bounds of `z` and `−z` over the input (CROWN's
-    /// own relaxations); `None` otherwise. A later back-substitution that
-    /// reaches `z` with CROWN's relaxations finishes from them (see
-    /// [`Analysis::substitute`]).
-    single: Vec<Option<LinearUpper>>,
+    /// For an affine layer whose outputs' bounds were back-substituted:
+    /// those outputs `z_j` (ascending) and the bounds of `z_j` and `−z_j`
+    /// over the input (CROWN's own relaxations; the `2k` rows of
+    /// [`Analysis::backward_select`]); `None` otherwise. A later
+    /// back-substitution with CROWN's relaxations whose every row has
+    /// reached one of these outputs alone finishes from them (see
+    /// [`Analysis::scaled`]).
+    stored: Vec<Option<(Vec<usize>, LinearUpper)>>,
 }
 
 impl<'a> Analysis<'a> {
@@ -520,7 +546,7 @@ impl<'a> Analysis<'a> {
             scales: Vec::with_capacity(layers),
             abs: Vec::with_capacity(layers),
             packed: Vec::with_capacity(layers),
-            single: vec![None; layers],
+            stored: vec![None; layers],
         };
         a.boxes.push(input.clone());
         // which affine layers have at most one nonzero per row (asked for
@@ -619,9 +645,7 @@ impl<'a> Analysis<'a> {
                                 next.hi[j] = next.hi[j].min(both[r]);
                                 next.lo[j] = next.lo[j].max(-both[k + r]);
                             }
-                            if w.nrows() == 1 {
-                                a.single[i] = Some(bound);
-                            }
+                            a.stored[i] = Some((rows, bound));
                         }
                     }
                     a.boxes.push(next);
@@ -883,31 +907,43 @@ impl<'a> Analysis<'a> {
         self.substitute(coef, offset, ins, i, &self.relax, None)
     }
 
-    /// Rows `c_r·z + offset_r` on the one output `z` of an affine layer
-    /// whose bounds `pm` (of `z` and `−z`, over the input) are stored,
-    /// bounded over the input: `c·z = |c|·(±z)` is at most `|c|` times the
-    /// bound of `±z` (for `c ≥ 0` and `c < 0`), the scaled coefficients
-    /// rounded and their error `≤ 2u·|c·λⱼ|·|yⱼ|` added. Equal to
-    /// back-substituting the rows on through the network up to rounding:
-    /// CROWN is positively homogeneous in its row (scaling by `|c|` keeps
-    /// every coefficient's sign, hence every relaxation it selects).
-    fn scaled(&self, coef: &Rows, offset: Vec<Acc>, pm: &LinearUpper) -> LinearUpper {
+    /// Rows `c_r·z_{j_r} + offset_r`, each on one output of an affine
+    /// layer whose bounds `pm` are stored (`picks[r]`: the stored row of
+    /// `z_{j_r}` and `c_r`; `None` for a row of zeros), bounded over the
+    /// input: `c·z = |c|·(±z)` is at most `|c|` times the bound of `±z`,
+    /// the scaled coefficients rounded and their error `≤ 2u·|c·λⱼ|·|yⱼ|`
+    /// added; a zero row stays zero (the rest of its pass would add only
+    /// zero terms). Equal to back-substituting the rows on through the
+    /// network up to rounding: CROWN is positively homogeneous in its row
+    /// (scaling by `|c|` keeps every coefficient's sign, hence every
+    /// relaxation it selects), and one neuron's row is the row its bound
+    /// was back-substituted from.
+    fn scaled(
+        &self,
+        coef: &Rows,
+        offset: Vec<Acc>,
+        pm: &LinearUpper,
+        picks: &[Option<(usize, f64)>],
+    ) -> LinearUpper {
         let abs_in = self.boxes[0].abs_max();
         let width = pm.coef.ncols();
+        let k = pm.coef.nrows() / 2;
         let mut out = Rows::zeros(coef.nrows(), width);
         let offset = offset
             .into_iter()
+            .zip(picks)
             .enumerate()
-            .map(|(r, mut acc)| {
-                let c = coef.get(r, 0);
-                let src = usize::from(c < 0.0);
-                let a = c.abs();
-                let row = out.row_mut(r);
-                for (o, &l) in row.iter_mut().zip(pm.coef.row(src)) {
-                    *o = mul0(a, l);
+            .map(|(r, (mut acc, pick))| {
+                if let Some((p, c)) = *pick {
+                    let src = if c < 0.0 { k + p } else { p };
+                    let a = c.abs();
+                    let row = out.row_mut(r);
+                    for (o, &l) in row.iter_mut().zip(pm.coef.row(src)) {
+                        *o = mul0(a, l);
+                    }
+                    acc.add(mul0(a, pm.offset[src]));
+                    acc.add(slack(2.0 * U, row, &abs_in));
                 }
-                acc.add(mul0(a, pm.offset[src]));
-                acc.add(slack(2.0 * U, row, &abs_in));
                 acc.upper()
             })
             .collect();
@@ -964,9 +1000,11 @@ impl<'a> Analysis<'a> {
         for i in (0..end).rev() {
             match &self.net.layers[i] {
                 Layer::Affine { w, b } => {
-                    if own_relax && cols.is_none() && coef.ncols() == 1 {
-                        if let Some(pm) = &self.single[i] {
-                            return self.scaled(&coef, offset, pm);
+                    if own_relax {
+                        if let Some((rows, pm)) = &self.stored[i] {
+                            if let Some(picks) = single_rows(&coef, cols, rows) {
+                                return self.scaled(&coef, offset, pm, &picks);
+                            }
                         }
                     }
                     let ins = self.ins(i);

@@ -466,6 +466,27 @@ fn affine_image_of(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox, cols: Option<&[
     IBox::new(lo, hi)
 }
 
+/// [`weight_scale_of`] and [`affine_image_of`] of `z = s·x + b` (`s = ±1`,
+/// all columns), without the sums over zeros: the same numbers bit for bit.
+/// There, row `j`'s sums start at 0 and take `s·x_j`'s term and zeros
+/// (`±0`, which leave a sum unchanged once it holds `0 + t`), with one
+/// count per column.
+fn identity_image(s: f64, b: &DVector<f64>, x: &IBox) -> (Vec<f64>, IBox) {
+    let n = x.dim();
+    let mut scale = Vec::with_capacity(n);
+    let mut lo = Vec::with_capacity(n);
+    let mut hi = Vec::with_capacity(n);
+    for j in 0..n {
+        let (xl, xh, bj) = (x.lo[j], x.hi[j], b[j]);
+        let m = 0.0 + mul0(s.abs(), crate::num::abs_max(xl, xh));
+        scale.push(Acc::from_parts(m, m, n).upper());
+        let (tl, th) = (0.0 + term_lower(s, xl, xh), 0.0 + term_upper(s, xl, xh));
+        lo.push(Acc::from_parts(tl + bj, (0.0 + tl.abs()) + bj.abs(), n + 1).lower());
+        hi.push(Acc::from_parts(th + bj, (0.0 + th.abs()) + bj.abs(), n + 1).upper());
+    }
+    (scale, IBox::new(lo, hi))
+}
+
 /// What [`Analysis::upper_optimised`] minimises for row `r`, given that
 /// row's one-row bound over the network input: its value (the smaller the
 /// better; any measure, every candidate is sound) and the network input at
@@ -556,14 +577,31 @@ impl<'a> Analysis<'a> {
             .iter()
             .map(|l| matches!(l, Layer::Affine { w, .. } if one_per_row(w)))
             .collect();
+        // and which are ±I (the halves of a control clamp)
+        let ident: Vec<Option<f64>> = net
+            .layers
+            .iter()
+            .zip(&opr)
+            .map(|(l, &one)| match l {
+                Layer::Affine { w, .. } if one => {
+                    signed_identity(w.as_slice(), w.nrows(), w.ncols())
+                }
+                _ => None,
+            })
+            .collect();
         for (i, layer) in net.layers.iter().enumerate() {
             match layer {
                 Layer::Affine { w, b } => {
                     let ins = a.ins(i);
                     let current = &a.boxes[i];
                     let m = |j: usize| crate::num::abs_max(current.lo[j], current.hi[j]);
-                    let scale = weight_scale_of(w, m, ins);
-                    let mut next = affine_image_of(w, b, current, ins);
+                    let (scale, mut next) = match (ident[i], ins) {
+                        (Some(sign), None) => identity_image(sign, b, current),
+                        _ => (
+                            weight_scale_of(w, m, ins),
+                            affine_image_of(w, b, current, ins),
+                        ),
+                    };
                     let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
                     // On the network's first layer (an affine map of the
                     // input box) CROWN's bound is interval arithmetic's

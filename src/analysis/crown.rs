@@ -703,40 +703,38 @@ impl<'a> Analysis<'a> {
                     let current = &a.boxes[i];
                     let n = current.dim();
                     let relu = *act == Activation::Relu;
-                    let keep: Option<Vec<usize>> = if relu {
-                        let live: Vec<usize> =
-                            (0..n).filter(|&j| !inactive(current.hi[j])).collect();
-                        (live.len() < n).then_some(live)
-                    } else {
-                        None
-                    };
-                    let kept = |j: usize| keep.as_ref().map_or(j, |k| k[j]);
-                    let count = keep.as_ref().map_or(n, Vec::len);
-                    let rel: Vec<Relax> = (0..count)
-                        .map(|c| {
-                            let j = kept(c);
-                            let r = relax(*act, current.lo[j], current.hi[j]);
-                            if mode == Mode::FastLin && relu {
-                                // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
-                                Relax {
-                                    al: r.au,
-                                    bl: 0.0,
-                                    ..r
-                                }
-                            } else {
-                                r
+                    // one pass over the neurons: the image of each, and
+                    // the relaxation and input size of each neuron kept (a
+                    // ReLU's neurons proved inactive are left out)
+                    let mut live = Vec::with_capacity(if relu { n } else { 0 });
+                    let mut rel = Vec::with_capacity(n);
+                    let mut abs = Vec::with_capacity(n);
+                    let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
+                    for j in 0..n {
+                        let (l, h) = (current.lo[j], current.hi[j]);
+                        let (il, ih) = image(*act, l, h);
+                        lo.push(il);
+                        hi.push(ih);
+                        if relu {
+                            if inactive(h) {
+                                continue;
                             }
-                        })
-                        .collect();
-                    let abs = (0..count)
-                        .map(|c| {
-                            let j = kept(c);
-                            crate::num::abs_max(current.lo[j], current.hi[j])
-                        })
-                        .collect();
-                    let (lo, hi) = (0..n)
-                        .map(|j| image(*act, current.lo[j], current.hi[j]))
-                        .unzip();
+                            live.push(j);
+                        }
+                        let r = relax(*act, l, h);
+                        rel.push(if mode == Mode::FastLin && relu {
+                            // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
+                            Relax {
+                                al: r.au,
+                                bl: 0.0,
+                                ..r
+                            }
+                        } else {
+                            r
+                        });
+                        abs.push(crate::num::abs_max(l, h));
+                    }
+                    let keep = (relu && live.len() < n).then_some(live);
                     a.boxes.push(IBox::new(lo, hi));
                     a.scales.push(Vec::new());
                     a.keep.push(keep);

@@ -442,7 +442,27 @@ fn affine_image_of(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox, cols: Option<&[
                 .zip(hi_s.iter_mut().zip(hi_a.iter_mut()))
                 .zip(col)
             {
-                let (tl, th) = (term_lower(a, xl, xh), term_upper(a, xl, xh));
+                // term_lower and term_upper from the same two products:
+                // min and max of a·xl and a·xh by the sign of a, 0 for
+                // a = 0 (term_lower's −0 there adds the same to a sum that
+                // starts at +0)
+                let (pl, ph) = (a * xl, a * xh);
+                let up = a > 0.0;
+                let zero = a == 0.0;
+                let th = if zero {
+                    0.0
+                } else if up {
+                    ph
+                } else {
+                    pl
+                };
+                let tl = if zero {
+                    0.0
+                } else if up {
+                    pl
+                } else {
+                    ph
+                };
                 *ls += tl;
                 *la += tl.abs();
                 *hs += th;

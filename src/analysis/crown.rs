@@ -898,8 +898,13 @@ impl<'a> Analysis<'a> {
             let out = coef.row_mut(r);
             match *s {
                 Some((i, c)) => {
-                    // c·zᵢ = |c|·(±zᵢ): the bound of zᵢ's row (c ≥ 0) or of −zᵢ's
-                    let src = if c >= 0.0 { i } else { m + i };
+                    if c == 0.0 {
+                        // a row of zeros: 0 ≤ the (rounded-up) empty sum
+                        offset.push(Acc::ZERO.upper());
+                        continue;
+                    }
+                    // c·zᵢ = |c|·(±zᵢ): the bound of zᵢ's row (c > 0) or of −zᵢ's
+                    let src = if c > 0.0 { i } else { m + i };
                     let a = c.abs();
                     for (o, &l) in out.iter_mut().zip(all.coef.row(src)) {
                         *o = mul0(a, l);

@@ -37,7 +37,21 @@ fn random_case(seed: u64) -> Case {
         n,
         |i, j| if i == j { 0.9 } else { 0.0 } + rng.normal() * 0.25,
     );
-    let b = DMatrix::from_fn(n, m, |_, _| rng.normal() * 0.5);
+    let mut b = DMatrix::from_fn(n, m, |_, _| rng.normal() * 0.5);
+    // one nonzero per row of B (as an Euler-discretised plant has): every
+    // facet row of M·B then has one nonzero, the rows CROWN's homogeneity
+    // lets Reach-LP scale from the control box's instead of
+    // back-substituting them (for one control, every case is such)
+    let sparse_b = m > 1 && seed % 3 == 2;
+    if sparse_b {
+        for i in 0..n {
+            for j in 0..m {
+                if j != i % m {
+                    b[(i, j)] = 0.0;
+                }
+            }
+        }
+    }
     let c = DVector::from_fn(n, |_, _| rng.normal() * 0.1);
     let obs = if observed {
         DMatrix::from_fn(n, p, |_, _| rng.normal())
@@ -109,7 +123,7 @@ fn random_case(seed: u64) -> Case {
         vec![plant]
     };
     let label = format!(
-        "seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited} ball={ball} varying={varying} uncertain={uncertain}"
+        "seed {seed}: n={n} m={m} p={p} {act:?} noise={noisy} limits={limited} ball={ball} varying={varying} uncertain={uncertain} sparse_b={sparse_b}"
     );
     Case {
         cl: ClosedLoop::time_varying(plants, net),

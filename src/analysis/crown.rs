@@ -326,20 +326,17 @@ fn one_per_row(w: &DMatrix<f64>) -> bool {
     if w.ncols() <= 1 {
         return true;
     }
-    // column by column (nalgebra's layout): a dense matrix answers within
-    // its first two columns
-    let mut seen = vec![false; w.nrows()];
-    for col in w.as_slice().chunks_exact(w.nrows().max(1)) {
-        for (s, &v) in seen.iter_mut().zip(col) {
-            if v != 0.0 {
-                if *s {
-                    return false;
-                }
-                *s = true;
-            }
-        }
-    }
-    true
+    // row by row, stopping at a row's second nonzero: a dense matrix
+    // answers within its first row
+    let rows = w.nrows();
+    (0..rows).all(|r| {
+        w.as_slice()[r..]
+            .iter()
+            .step_by(rows)
+            .filter(|v| **v != 0.0)
+            .nth(1)
+            .is_none()
+    })
 }
 
 /// For rows whose columns are the neurons `cols` (`None`: all), when every
@@ -726,7 +723,8 @@ impl<'a> Analysis<'a> {
                     // one pass over the neurons: the image of each, and
                     // the relaxation and input size of each neuron kept (a
                     // ReLU's neurons proved inactive are left out)
-                    let mut live = Vec::with_capacity(if relu { n } else { 0 });
+                    // (the kept ReLU neurons, listed once one is left out)
+                    let mut live: Option<Vec<usize>> = None;
                     let mut rel = Vec::with_capacity(n);
                     let mut abs = Vec::with_capacity(n);
                     let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -737,9 +735,12 @@ impl<'a> Analysis<'a> {
                         hi.push(ih);
                         if relu {
                             if inactive(h) {
+                                live.get_or_insert_with(|| (0..j).collect());
                                 continue;
                             }
-                            live.push(j);
+                            if let Some(live) = live.as_mut() {
+                                live.push(j);
+                            }
                         }
                         let r = relax(*act, l, h);
                         rel.push(if mode == Mode::FastLin && relu {
@@ -754,7 +755,7 @@ impl<'a> Analysis<'a> {
                         });
                         abs.push(crate::num::abs_max(l, h));
                     }
-                    let keep = (relu && live.len() < n).then_some(live);
+                    let keep = live;
                     a.boxes.push(IBox::new(lo, hi));
                     a.scales.push(Vec::new());
                     a.keep.push(keep);

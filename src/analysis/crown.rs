@@ -349,18 +349,26 @@ fn single_rows(
     stored: &[usize],
 ) -> Option<Vec<Option<(usize, f64)>>> {
     coef.iter_rows()
-        .map(|row| {
-            let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
-            match (nz.next(), nz.next()) {
-                (None, _) => Some(None),
-                (Some((c, &v)), None) if v.is_finite() => {
-                    let j = cols.map_or(c, |k| k[c]);
-                    stored.binary_search(&j).ok().map(|p| Some((p, v)))
-                }
-                _ => None,
+        .map(|row| match one_nonzero(row)? {
+            None => Some(None),
+            Some((c, v)) => {
+                let j = cols.map_or(c, |k| k[c]);
+                stored.binary_search(&j).ok().map(|p| Some((p, v)))
             }
         })
         .collect()
+}
+
+/// A row's nonzeros when it has at most one, finite: `Some(None)` for a
+/// row of zeros, `Some(Some((column, value)))` for one; `None` otherwise
+/// (two or more, or a non-finite one).
+fn one_nonzero(row: &[f64]) -> Option<Option<(usize, f64)>> {
+    let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
+    match (nz.next(), nz.next()) {
+        (None, _) => Some(None),
+        (Some((c, &v)), None) if v.is_finite() => Some(Some((c, v))),
+        _ => None,
+    }
 }
 
 /// `|W|·m` rounded up, for `|z| ≤ m`: the scale of the rounding error of products with `W`.
@@ -551,7 +559,9 @@ pub struct Analysis<'a> {
     /// For an affine layer whose outputs' bounds were back-substituted:
     /// those outputs `z_j` (ascending) and the bounds of `z_j` and `−z_j`
     /// over the input (CROWN's own relaxations; the `2k` rows of
-    /// [`Analysis::backward_select`]); `None` otherwise. A later
+    /// [`Analysis::backward_select`]) when the next affine layer keeps its
+    /// rows apart (one nonzero per row) or there is none; `None` otherwise
+    /// (a later pass reaches them only through that layer). A later
     /// back-substitution with CROWN's relaxations whose every row has
     /// reached one of these outputs alone finishes from them (see
     /// [`Analysis::scaled`]).
@@ -700,7 +710,19 @@ impl<'a> Analysis<'a> {
                                 next.hi[j] = next.hi[j].min(both[r]);
                                 next.lo[j] = next.lo[j].max(-both[k + r]);
                             }
-                            a.stored[i] = Some((rows, bound));
+                            // kept only where a later pass can arrive with
+                            // one nonzero per row: when the next affine layer
+                            // keeps rows apart (a clamp's halves) or there is
+                            // none; after a mixing layer rows arrive dense,
+                            // and a wide network's bounds need not outlive
+                            // their use
+                            let next_affine = net.layers[i + 1..]
+                                .iter()
+                                .position(|l| matches!(l, Layer::Affine { .. }))
+                                .map(|d| i + 1 + d);
+                            if next_affine.is_none_or(|j| opr[j]) {
+                                a.stored[i] = Some((rows, bound));
+                            }
                         }
                     }
                     a.boxes.push(next);
@@ -859,29 +881,8 @@ impl<'a> Analysis<'a> {
             let u = self.crown_box(ibp, &self.upper(plus_minus_identity(m)));
             return (self.upper_optimised(spec, steps, objective), u);
         }
-        // rows with at most one (finite) nonzero: (column, coefficient)
-        let single: Vec<Option<(usize, f64)>> = spec
-            .iter_rows()
-            .map(|row| {
-                let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
-                match (nz.next(), nz.next()) {
-                    (None, _) => Some((0, 0.0)),
-                    (Some((i, &c)), None) if c.is_finite() => Some((i, c)),
-                    _ => None,
-                }
-            })
-            .collect();
-        if single.iter().all(Option::is_none) {
-            let all = self.upper(plus_minus_identity(m).stacked(&spec));
-            let (pm_coef, coef) = all.coef.split_rows(2 * m);
-            let mut offset = all.offset;
-            let rest = offset.split_off(2 * m);
-            let pm = LinearUpper {
-                coef: pm_coef,
-                offset,
-            };
-            return (LinearUpper { coef, offset: rest }, self.crown_box(ibp, &pm));
-        }
+        // rows with at most one (finite) nonzero: scaled from [I; −I]
+        let single: Vec<Option<Option<(usize, f64)>>> = spec.iter_rows().map(one_nonzero).collect();
         // the other rows go below [I; −I] in one pass
         let own: Vec<usize> = (0..spec.nrows()).filter(|&r| single[r].is_none()).collect();
         let mut stacked = plus_minus_identity(m);
@@ -890,44 +891,20 @@ impl<'a> Analysis<'a> {
             stacked = stacked.stacked(&Rows::from_row_major(own.len(), m, data));
         }
         let all = self.upper(stacked);
-        let abs_in = self.boxes[0].abs_max();
-        let width = all.coef.ncols();
-        let mut coef = Rows::zeros(spec.nrows(), width);
-        let mut offset = Vec::with_capacity(spec.nrows());
-        let mut next_own = 2 * m;
-        for (r, s) in single.iter().enumerate() {
-            let out = coef.row_mut(r);
-            match *s {
-                Some((i, c)) => {
-                    if c == 0.0 {
-                        // a row of zeros: 0 ≤ the (rounded-up) empty sum
-                        offset.push(Acc::ZERO.upper());
-                        continue;
-                    }
-                    // c·zᵢ = |c|·(±zᵢ): the bound of zᵢ's row (c > 0) or of −zᵢ's
-                    let src = if c > 0.0 { i } else { m + i };
-                    let a = c.abs();
-                    for (o, &l) in out.iter_mut().zip(all.coef.row(src)) {
-                        *o = mul0(a, l);
-                    }
-                    let mut acc = Acc::ZERO;
-                    acc.add(mul0(a, all.offset[src]));
-                    acc.add(slack(2.0 * U, out, &abs_in));
-                    offset.push(acc.upper());
-                }
-                None => {
-                    out.copy_from_slice(all.coef.row(next_own));
-                    offset.push(all.offset[next_own]);
-                    next_own += 1;
-                }
-            }
-        }
-        let (pm_coef, _) = all.coef.split_rows(2 * m);
+        let (pm_coef, own_coef) = all.coef.split_rows(2 * m);
+        let mut pm_offset = all.offset;
+        let own_offset = pm_offset.split_off(2 * m);
         let pm = LinearUpper {
             coef: pm_coef,
-            offset: all.offset[..2 * m].to_vec(),
+            offset: pm_offset,
         };
-        (LinearUpper { coef, offset }, self.crown_box(ibp, &pm))
+        let picks: Vec<Option<(usize, f64)>> = single.iter().map(|s| s.flatten()).collect();
+        let mut out = self.scaled(vec![Acc::ZERO; spec.nrows()], &pm, &picks);
+        for (k, &r) in own.iter().enumerate() {
+            out.coef.row_mut(r).copy_from_slice(own_coef.row(k));
+            out.offset[r] = own_offset[k];
+        }
+        (out, self.crown_box(ibp, &pm))
     }
 
     /// CROWN: `S f(y) ≤ Λ y + c` over the input box, for a `k × outputs` matrix `S`.
@@ -982,7 +959,6 @@ impl<'a> Analysis<'a> {
     /// was back-substituted from.
     fn scaled(
         &self,
-        coef: &Rows,
         offset: Vec<Acc>,
         pm: &LinearUpper,
         picks: &[Option<(usize, f64)>],
@@ -990,7 +966,7 @@ impl<'a> Analysis<'a> {
         let abs_in = self.boxes[0].abs_max();
         let width = pm.coef.ncols();
         let k = pm.coef.nrows() / 2;
-        let mut out = Rows::zeros(coef.nrows(), width);
+        let mut out = Rows::zeros(picks.len(), width);
         let offset = offset
             .into_iter()
             .zip(picks)
@@ -1056,8 +1032,8 @@ impl<'a> Analysis<'a> {
         let room = coef.nrows() * widest;
         coef.reserve_total(room);
         let mut spare = Rows::with_capacity(room);
-        // with CROWN's own relaxations, rows that reach a one-output layer
-        // whose bounds are stored finish from them
+        // with CROWN's own relaxations, rows that have each reached one
+        // neuron whose bounds are stored finish from them
         let own_relax = trace.is_none() && std::ptr::eq(relax, self.relax.as_slice());
         for i in (0..end).rev() {
             match &self.net.layers[i] {
@@ -1065,7 +1041,7 @@ impl<'a> Analysis<'a> {
                     if own_relax {
                         if let Some((rows, pm)) = &self.stored[i] {
                             if let Some(picks) = single_rows(&coef, cols, rows) {
-                                return self.scaled(&coef, offset, pm, &picks);
+                                return self.scaled(offset, pm, &picks);
                             }
                         }
                     }

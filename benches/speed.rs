@@ -386,6 +386,67 @@ fn width_and_depth() {
     }
 }
 
+/// CROWN output boxes of 256 cells of one input box through one network,
+/// batched (`analysis::batch`: the cells' back-substitutions as shared
+/// matrix products) against one cell at a time (`Analysis`, measured on 16
+/// cells and scaled to 256).
+fn batched_cells() {
+    let rate = gemm_rate();
+    println!("\n## Batched cells: CROWN output boxes of 256 cells (4 × 4 × 4 × 4 grid of a 6-input box), one thread\n");
+    println!("this machine's 512×512 matrix multiply: {:.2} G multiply-adds/s; \"dense\": the multiply-adds of a dense single-cell CROWN pass (every neuron kept) for 256 cells; \"done\": those of the batched products\n", rate / 1e9);
+    println!("| network | one cell at a time (×256) | batched | speed-up | dense multiply-adds | of matmul rate | done multiply-adds | of matmul rate |");
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut rng = Rng::new(9);
+    for w in [32usize, 128, 512, 1024] {
+        let widths = [6, w, w, 3];
+        let net = common::random_relu(&mut rng, &widths);
+        let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);
+        let cells = input.grid(&[4, 4, 4, 4, 1, 1]);
+        let dirs = DMatrix::from_fn(6, 3, |r, c| {
+            if r % 3 == c {
+                if r < 3 {
+                    1.0
+                } else {
+                    -1.0
+                }
+            } else {
+                0.0
+            }
+        });
+        let single = time(|| {
+            for c in &cells[..16] {
+                std::hint::black_box(ravel::analysis::open_loop::cell_offsets(
+                    &net,
+                    c,
+                    Mode::Crown,
+                    &dirs,
+                ));
+            }
+        }) * 16.0;
+        let batched = time(|| {
+            std::hint::black_box(ravel::analysis::batch::crown_offsets(&net, &cells, &dirs));
+        });
+        let n = cells.len() as f64;
+        let dense = n * crown_madds(&widths, &widths);
+        let (n0, m) = (7.0, 3.0);
+        let wf = w as f64;
+        // interval image of z₁ (W·mid, |W|·[rad | mid]), the right-associated
+        // products (W·S, |W|·D), the output rows through [W₁ | b₁] and [W₀ | b₀]
+        let done = n
+            * (3.0 * wf * wf + 2.0 * wf * wf * n0 + 2.0 * m * (wf + 1.0) * wf + 2.0 * m * n0 * wf);
+        println!(
+            "| 6 → {w} → {w} → 3 | {} | {} | {:.1}× | {:.2e} | {:.0} % | {:.2e} | {:.0} % |",
+            show(single),
+            show(batched),
+            single / batched,
+            dense,
+            100.0 * dense / batched / rate,
+            done,
+            100.0 * done / batched / rate
+        );
+    }
+}
+
 fn horizon() {
     println!("\n## Horizon: one cell of the double integrator\n");
     println!("| horizon | Reach-LP | per step | unrolled CROWN | per step |");
@@ -513,6 +574,9 @@ fn main() {
     }
     if on("width") {
         width_and_depth();
+    }
+    if on("batch") {
+        batched_cells();
     }
     if on("horizon") {
         horizon();

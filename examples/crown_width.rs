@@ -1,5 +1,6 @@
 //! Profiling helper: CROWN output bounds of a random `6 → w → w → 3` ReLU
-//! network over one box, many times (`cargo run --release --example crown_width -- 32`).
+//! network over one box, many times (`cargo run --release --example crown_width -- 32`);
+//! `BATCH=1`: the batched CROWN of 256 cells of that box instead.
 #[path = "../benches/common/mod.rs"]
 mod common;
 
@@ -15,6 +16,27 @@ fn main() {
     let widths = [6, w, w, 3];
     let net = common::random_relu(&mut rng, &widths);
     let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);
+    if std::env::var_os("BATCH").is_some() {
+        let cells = input.grid(&[4, 4, 4, 4, 1, 1]);
+        let dirs = nalgebra::DMatrix::from_fn(6, 3, |r, c| {
+            if r % 3 != c {
+                0.0
+            } else if r < 3 {
+                1.0
+            } else {
+                -1.0
+            }
+        });
+        let t = std::time::Instant::now();
+        for _ in 0..3 {
+            std::hint::black_box(ravel::analysis::batch::crown_offsets(&net, &cells, &dirs));
+        }
+        eprintln!(
+            "{:.2} ms per batch of 256 cells",
+            t.elapsed().as_secs_f64() * 1e3 / 3.0
+        );
+        return;
+    }
     let reps = (2_000_000 / (w * w)).max(3);
     let t = std::time::Instant::now();
     for _ in 0..reps {

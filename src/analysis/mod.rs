@@ -1,5 +1,6 @@
 //! The analysis back-end: network bounds, closed-loop propagators, simulation.
 
+pub mod batch;
 pub mod closed_loop;
 pub mod crown;
 pub mod dense;

@@ -1,0 +1,690 @@
+//! Batched CROWN: the bounds of many cells of a partition through one ReLU
+//! network at once, with the back-substitutions of all cells done as
+//! matrix–matrix products that share the network's weights.
+//!
+//! [`Analysis`](super::crown::Analysis) bounds one cell: its
+//! back-substitutions multiply that cell's coefficient rows by each weight
+//! matrix, row by row, and through a wide network most of its time goes to
+//! per-entry work on those rows. Here the cells of a partition go through
+//! together, and every product is one blocked matrix multiply (nalgebra's,
+//! i.e. `matrixmultiply`):
+//!
+//! * **The second layer's bounds, right-associated.** The bound of
+//!   `±z₁ = ±(W₁ relu(z₀) + b₁)` substitutes, for each neuron `i` of the
+//!   first ReLU, the upper line `aᵤ z₀ᵢ + bᵤ` where `W₁`'s entry is
+//!   positive and the lower line `aₗ z₀ᵢ + bₗ` where it is negative, then
+//!   `z₀ = W₀ x + b₀`. Written per cell with `T⁺ = [diag(aᵤ) W₀ | aᵤ b₀ + bᵤ]`
+//!   and `T⁻ = [diag(aₗ) W₀ | aₗ b₀ + bₗ]`, the upper bound's
+//!   coefficients are `W₁⁺ T⁺ + W₁⁻ T⁻ = W₁ S + |W₁| D` with
+//!   `S = (T⁺ + T⁻)/2`, `D = (T⁺ − T⁻)/2`, and the lower bound's are
+//!   `W₁ S − |W₁| D`: two products of the shared `W₁` and `|W₁|` with all
+//!   cells' thin `S` and `D` side by side (the same choice of lines, hence
+//!   CROWN's bound, as the row-by-row pass). The same holds for the output
+//!   rows of a network with one hidden layer.
+//! * **Deeper passes, stacked.** Other back-substitutions (the output
+//!   rows of deeper networks, the bounds of the third layer on) start from
+//!   rows shared by all cells, take each cell's relaxation entry by entry,
+//!   and multiply all cells' rows, stacked, by the layer's `[W | b]`.
+//! * Interval images of hidden layers are products of `W` and `|W|` with
+//!   all cells' midpoints and radii.
+//!
+//! # Soundness
+//! The relaxations are [`relax`]'s, as in the single-cell analysis, and
+//! every bound is an upper bound of exact arithmetic on the numbers used:
+//! a product of `n`-term sums has error at most `γₙ·|A|·|B|` in any order
+//! of summation, with or without fused multiply-adds (Higham, §3.5), plus
+//! `TINY` for underflow. The error terms are:
+//! * a stacked product `Λ·[W | b]` of rows on a layer's output: `γ` times
+//!   `|Λ|·s`, with `s = |W|·|h|max + |b|` the layer's scale per cell
+//!   (as the single-cell analysis);
+//! * the right-associated products: every rounding in forming `T⁺`, `T⁻`,
+//!   `S`, `D`, the two products and their sum is at most
+//!   `γ_{n+8}·Σᵢ|Wⱼᵢ|·(|T⁺ᵢₖ| + |T⁻ᵢₖ|)` per coefficient, bounded by the
+//!   rank-one `γ_{n+8}·(Σᵢ|Wⱼᵢ|)·maxᵢ(|T⁺ᵢₖ| + |T⁻ᵢₖ|)` (looser by at most
+//!   the width, i.e. ~10⁻¹⁰ relative for 1000 neurons; cheap);
+//! * a ReLU step's products `λ·a`: `2u·|λ'|·|z|max`.
+//!
+//! The bounds equal the single-cell analysis's up to these rounding terms
+//! (the tests compare them bound for bound); a cell whose numbers are not
+//! all finite makes the whole batch decline (`None`), and the caller takes
+//! the single-cell path, as before.
+use nalgebra::{DMatrix, DMatrixView, DVector, Dyn};
+
+use super::crown::{affine_image, weight_scale};
+use super::relax::{image, relax, Relax};
+use super::shape::support_of_box;
+use crate::nn::{Activation, Layer, Network};
+use crate::num::{dot_box_upper, gamma, mul0, slack, Acc, TINY, U};
+use crate::sets::IBox;
+
+/// The most matrix entries one cell chunk's largest work matrix holds
+/// (32 MB of `f64`): cells go through in chunks of at most this size.
+const CHUNK_ENTRIES: usize = 1 << 20;
+
+/// A network as affine maps `z_g = W_g h_{g−1} + b_g` (`h_{−1}` the input)
+/// with a ReLU `h_g = relu(z_g)` between consecutive ones.
+struct Chain<'a> {
+    w: Vec<&'a DMatrix<f64>>,
+    b: Vec<&'a DVector<f64>>,
+    /// `|W_g|`.
+    abs_w: Vec<DMatrix<f64>>,
+}
+
+impl<'a> Chain<'a> {
+    /// The chain of `net`, if it is one (affine, then ReLU and affine
+    /// alternating, at least one ReLU), with finite weights.
+    fn of(net: &'a Network) -> Option<Chain<'a>> {
+        let mut w = Vec::new();
+        let mut b = Vec::new();
+        for (i, layer) in net.layers.iter().enumerate() {
+            match (i % 2, layer) {
+                (0, Layer::Affine { w: wi, b: bi }) => {
+                    if !wi.iter().chain(bi.iter()).all(|v| v.is_finite()) {
+                        return None;
+                    }
+                    w.push(wi);
+                    b.push(bi);
+                }
+                (1, Layer::Act(Activation::Relu)) => {}
+                _ => return None,
+            }
+        }
+        if net.layers.len() % 2 == 0 || w.len() < 2 {
+            return None;
+        }
+        let abs_w = w.iter().map(|m| m.abs()).collect();
+        Some(Chain { w, b, abs_w })
+    }
+
+    /// The number of affine layers.
+    fn len(&self) -> usize {
+        self.w.len()
+    }
+}
+
+/// One cell's bounds, filled layer by layer.
+struct Cell {
+    /// The input box.
+    x: IBox,
+    /// `|x|max` per input.
+    x_abs: Vec<f64>,
+    /// Bounds of each `z_g`.
+    z: Vec<IBox>,
+    /// The relaxation of each ReLU `h_g = relu(z_g)`.
+    relax: Vec<Vec<Relax>>,
+    /// `|z_g|max` per neuron (the ReLU products' error terms).
+    z_abs: Vec<Vec<f64>>,
+    /// `|h_g|max` per neuron, `h_g = relu(z_g)`.
+    h_abs: Vec<Vec<f64>>,
+    /// `|W_g|·|h_{g−1}|max + |b_g|`, rounded up (a product's error terms).
+    scale: Vec<Vec<f64>>,
+}
+
+/// Certified upper bounds of `d·f(x)` over each cell for every row `d` of
+/// `dirs`: the smaller of the support of the interval output box and
+/// CROWN's bound, as [`super::open_loop::cell_offsets`] in CROWN mode gives
+/// for each cell alone (equal up to rounding terms; see the module
+/// documentation). `None` when `net` is not an affine/ReLU chain with at
+/// least two affine layers, or a number on the way is not finite: the
+/// caller bounds the cells one by one.
+pub fn crown_offsets(net: &Network, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<Vec<Vec<f64>>> {
+    let chain = Chain::of(net)?;
+    if dirs.ncols() != net.outputs() || !dirs.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // the entries per cell of the largest work matrix: the
+    // right-associated factors and products, the interval products, the
+    // stacked rows of deeper bounds and of the output
+    let last = chain.len() - 1;
+    let n0 = net.inputs + 1;
+    let (m0, m1) = (chain.w[0].nrows(), chain.w[1].nrows());
+    let mut per_cell = (m0 * n0).max(m1.max(dirs.nrows()) * n0);
+    for g in 1..=last {
+        let (out, inp) = chain.w[g].shape();
+        per_cell = per_cell.max(3 * out.max(inp));
+        if g >= 2 && g < last {
+            per_cell = per_cell.max(2 * out * (inp + 1));
+        }
+    }
+    per_cell = per_cell.max(dirs.nrows() * (chain.w[last].ncols() + 1));
+    let chunk = (CHUNK_ENTRIES / per_cell).max(1);
+    let mut out = Vec::with_capacity(cells.len());
+    for part in cells.chunks(chunk) {
+        out.extend(chunk_offsets(&chain, part, dirs)?);
+    }
+    Some(out)
+}
+
+fn chunk_offsets(chain: &Chain, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<Vec<Vec<f64>>> {
+    let last = chain.len() - 1;
+    let mut cs: Vec<Cell> = Vec::with_capacity(cells.len());
+    for x in cells {
+        if x.dim() != chain.w[0].ncols() || !x.is_finite() {
+            return None;
+        }
+        let x_abs = x.abs_max();
+        let z0 = affine_image(chain.w[0], chain.b[0], x);
+        let s0 = with_bias(weight_scale(chain.w[0], &x_abs), chain.b[0]);
+        cs.push(Cell {
+            x: x.clone(),
+            x_abs,
+            z: vec![z0],
+            relax: Vec::new(),
+            z_abs: Vec::new(),
+            h_abs: Vec::new(),
+            scale: vec![s0],
+        });
+    }
+    for g in 1..=last {
+        relu_step(&mut cs, g - 1)?;
+        interval_step(chain, &mut cs, g)?;
+        if g < last {
+            let m = chain.w[g].nrows();
+            let bounds = if g == 1 {
+                right_associated(
+                    chain,
+                    &cs,
+                    chain.w[1],
+                    &chain.abs_w[1],
+                    chain.b[1],
+                    None,
+                    true,
+                )
+            } else {
+                let mut rows = DMatrix::zeros(chain.w[g].ncols() + 1, 2 * m);
+                for j in 0..m {
+                    for k in 0..chain.w[g].ncols() {
+                        rows[(k, j)] = chain.w[g][(j, k)];
+                        rows[(k, m + j)] = -chain.w[g][(j, k)];
+                    }
+                    rows[(chain.w[g].ncols(), j)] = chain.b[g][j];
+                    rows[(chain.w[g].ncols(), m + j)] = -chain.b[g][j];
+                }
+                stacked(chain, &cs, &rows, None, g - 1)
+            };
+            for (c, up) in cs.iter_mut().zip(bounds) {
+                let z = &mut c.z[g];
+                for j in 0..m {
+                    z.hi[j] = z.hi[j].min(up[j]);
+                    z.lo[j] = z.lo[j].max(-up[m + j]);
+                }
+                if !z.is_finite() {
+                    return None;
+                }
+            }
+        }
+    }
+    // the output rows `dirs · z_last`, as rows on h_{last−1}: `dirs·[W | b]`
+    // with its rounding error bounded entry by entry
+    let (w, b) = (chain.w[last], chain.b[last]);
+    let (k, m) = (dirs.nrows(), w.ncols());
+    let wb = DMatrix::from_fn(
+        w.nrows(),
+        m + 1,
+        |j, i| if i < m { w[(j, i)] } else { b[j] },
+    );
+    let rows = dirs * &wb;
+    let abs_wb = wb.abs();
+    let terms = w.nrows() + 2;
+    let err = (dirs.abs() * abs_wb).map(|v| (gamma(terms) * v * 1.0625 + TINY).next_up());
+    let bounds = if last == 1 {
+        let r = rows.columns(0, m).into_owned();
+        let off: Vec<f64> = (0..k).map(|j| rows[(j, m)]).collect();
+        let off = DVector::from_vec(off);
+        right_associated(chain, &cs, &r, &r.abs(), &off, Some(&err), false)
+    } else {
+        let rows_t = rows.transpose();
+        stacked(chain, &cs, &rows_t, Some(&err), last - 1)
+    };
+    let mut out = Vec::with_capacity(cs.len());
+    for (c, up) in cs.iter().zip(bounds) {
+        let z = &c.z[last];
+        if !z.is_finite() || !up.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let mut s = support_of_box(dirs, &z.lo, &z.hi);
+        for (v, u) in s.iter_mut().zip(up) {
+            *v = v.min(u);
+        }
+        out.push(s);
+    }
+    Some(out)
+}
+
+/// `s + |b|`, rounded up.
+fn with_bias(mut s: Vec<f64>, b: &DVector<f64>) -> Vec<f64> {
+    for (v, bj) in s.iter_mut().zip(b.iter()) {
+        *v = Acc::from_parts(*v + bj.abs(), *v + bj.abs(), 2).upper();
+    }
+    s
+}
+
+/// The ReLU after affine layer `g`: each cell's relaxation and sizes.
+fn relu_step(cs: &mut [Cell], g: usize) -> Option<()> {
+    for c in cs.iter_mut() {
+        let z = &c.z[g];
+        let n = z.dim();
+        let (mut rel, mut za, mut ha) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for j in 0..n {
+            let (l, h) = (z.lo[j], z.hi[j]);
+            rel.push(relax(Activation::Relu, l, h));
+            za.push(l.abs().max(h.abs()));
+            ha.push(image(Activation::Relu, l, h).1);
+        }
+        c.relax.push(rel);
+        c.z_abs.push(za);
+        c.h_abs.push(ha);
+    }
+    Some(())
+}
+
+/// The interval image of `z_g = W_g h_{g−1} + b_g` for every cell (the
+/// `h_{g−1} ≥ 0` are ReLU outputs), and the layer's scale: products of
+/// `W_g` with the midpoints and `|W_g|` with the radii and midpoints.
+fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
+    let (w, b) = (chain.w[g], chain.b[g]);
+    let (m, n) = w.shape();
+    let cells = cs.len();
+    let mut mid = DMatrix::zeros(n, cells);
+    let mut both = DMatrix::zeros(n, 2 * cells);
+    for (c, cell) in cs.iter().enumerate() {
+        let z = &cell.z[g - 1];
+        for i in 0..n {
+            let (l, h) = (z.lo[i].max(0.0), z.hi[i].max(0.0));
+            let md = 0.5 * l + 0.5 * h;
+            // [l, h] ⊆ [md − r, md + r]: each difference rounded, then up
+            let r = (h - md).next_up().max((md - l).next_up()).max(0.0);
+            mid[(i, c)] = md;
+            both[(i, c)] = r;
+            both[(i, cells + c)] = md;
+        }
+    }
+    let p = w * &mid;
+    let q = &chain.abs_w[g] * &both;
+    let k = gamma(n + 2) * 1.0625;
+    for (c, cell) in cs.iter_mut().enumerate() {
+        let mut lo = Vec::with_capacity(m);
+        let mut hi = Vec::with_capacity(m);
+        let mut scale = Vec::with_capacity(m);
+        for j in 0..m {
+            let (pm, qr, qm) = (p[(j, c)], q[(j, c)], q[(j, cells + c)]);
+            // |W·md − P| ≤ γ|W|·md, |W|·r ≤ Q_r + γ|W|·r
+            let err = (k * (qr + qm) + TINY).next_up();
+            let mut up = Acc::of(pm);
+            up.add(qr);
+            up.add(b[j]);
+            up.add(err);
+            hi.push(up.upper());
+            let mut down = Acc::of(pm);
+            down.add(-qr);
+            down.add(b[j]);
+            down.add(-err);
+            lo.push(down.lower());
+            // |W|·|h|max + |b| ≤ |W|·(md + r) + |b|
+            let mut s = Acc::of(qr);
+            s.add(qm);
+            s.add(b[j].abs());
+            s.add(err);
+            scale.push(s.upper());
+        }
+        let z = IBox::new(lo, hi);
+        if !z.is_finite() || !scale.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        cell.z.push(z);
+        cell.scale.push(scale);
+    }
+    Some(())
+}
+
+/// Upper bounds, per cell, of `r·h₀ + o_r` for the rows `r` of `rows` on
+/// the first ReLU's output `h₀` (and, with `both`, of `−r·h₀ − o_r`
+/// after them), right-associated (see the module documentation). `err`
+/// bounds the rounding error of `rows` and `offset` entry by entry (its
+/// last column the offset's).
+fn right_associated(
+    chain: &Chain,
+    cs: &[Cell],
+    rows: &DMatrix<f64>,
+    abs_rows: &DMatrix<f64>,
+    offset: &DVector<f64>,
+    err: Option<&DMatrix<f64>>,
+    both: bool,
+) -> Vec<Vec<f64>> {
+    let (w0, b0) = (chain.w[0], chain.b[0]);
+    let (m0, n) = w0.shape();
+    let width = n + 1;
+    let cells = cs.len();
+    let mut s = DMatrix::zeros(m0, width * cells);
+    let mut d = DMatrix::zeros(m0, width * cells);
+    // per cell: Σₖ maxᵢ(|T⁺ᵢₖ| + |T⁻ᵢₖ|)·|xₖ|max + the offset column's
+    let mut tau = Vec::with_capacity(cells);
+    for (c, cell) in cs.iter().enumerate() {
+        let mut cmax = vec![0.0f64; width];
+        let rel = &cell.relax[0];
+        // column by column (contiguous in S, D and W₀)
+        for (k, cm) in cmax.iter_mut().enumerate() {
+            let at = (c * width + k) * m0;
+            let (sc, dc) = (
+                &mut s.as_mut_slice()[at..at + m0],
+                &mut d.as_mut_slice()[at..at + m0],
+            );
+            if k < n {
+                let wc = &w0.as_slice()[k * m0..(k + 1) * m0];
+                for i in 0..m0 {
+                    let (tu, tl) = (mul0(rel[i].au, wc[i]), mul0(rel[i].al, wc[i]));
+                    sc[i] = 0.5 * (tu + tl);
+                    dc[i] = 0.5 * (tu - tl);
+                    *cm = cm.max(tu.abs() + tl.abs());
+                }
+            } else {
+                for i in 0..m0 {
+                    let r = rel[i];
+                    let (pu, pl) = (mul0(r.au, b0[i]), mul0(r.al, b0[i]));
+                    let (tu, tl) = (pu + r.bu, pl + r.bl);
+                    sc[i] = 0.5 * (tu + tl);
+                    dc[i] = 0.5 * (tu - tl);
+                    *cm = cm.max(pu.abs() + r.bu.abs() + pl.abs() + r.bl.abs());
+                }
+            }
+        }
+        let mut t = Acc::ZERO;
+        t.add_products(&cmax[..n], &cell.x_abs);
+        t.add(cmax[n]);
+        tau.push((t.upper() * 1.0625).next_up());
+    }
+    let p = rows * &s;
+    let q = abs_rows * &d;
+    let k = rows.nrows();
+    let n_h = rows.ncols();
+    let kappa = gamma(m0 + 8) * 1.0625;
+    let row_abs: Vec<f64> = (0..k)
+        .map(|j| {
+            let sum: f64 = abs_rows.row(j).iter().sum();
+            (sum * (1.0 + gamma(m0 + 2))).next_up()
+        })
+        .collect();
+    // the rows' own rounding error, per cell: Σᵢ eᵢ·|h₀ᵢ|max + e_offset
+    let err_rows: Option<Vec<Vec<f64>>> =
+        err.map(|e| (0..k).map(|j| e.row(j).iter().copied().collect()).collect());
+    let mut out = Vec::with_capacity(cells);
+    let mut coef = vec![0.0; n];
+    for (c, cell) in cs.iter().enumerate() {
+        // underflow: at most `TINY` per entry of each product (`m₀·η`) and
+        // `η` per halved entry of S and D, each times `|x|max` (or 1)
+        let x_sum = cell.x_abs.iter().fold(1.0, |a, v| a + v) * 1.0625;
+        let mut up = Vec::with_capacity(if both { 2 * k } else { k });
+        for sign in [1.0, -1.0] {
+            if sign < 0.0 && !both {
+                break;
+            }
+            for j in 0..k {
+                // upper: W S + |W| D; of the negated row: |W| D − W S
+                for (kk, v) in coef.iter_mut().enumerate() {
+                    let (pv, qv) = (p[(j, c * width + kk)], q[(j, c * width + kk)]);
+                    *v = sign * pv + qv;
+                }
+                let off_p = p[(j, c * width + n)];
+                let off_q = q[(j, c * width + n)];
+                let mut acc = Acc::of(dot_box_upper(&coef, &cell.x.lo, &cell.x.hi));
+                acc.add(sign * off_p + off_q);
+                acc.add(sign * offset[j]);
+                acc.add((kappa * row_abs[j] * tau[c] * 1.0625 + TINY).next_up());
+                acc.add((TINY * (2.0 + row_abs[j]) * x_sum * 1.0625).next_up());
+                if let Some(e) = &err_rows {
+                    let mut t = Acc::ZERO;
+                    t.add_products(&e[j][..n_h], &cell.h_abs[0]);
+                    t.add(e[j][n_h]);
+                    acc.add(t.upper());
+                }
+                up.push(acc.upper());
+            }
+        }
+        out.push(up);
+    }
+    out
+}
+
+/// Upper bounds, per cell, of the rows on `h_g` (stored as the columns of
+/// `rows_t`, `(width + 1) × k`, the last entry the offset) back-substituted
+/// through the ReLUs and affine layers `g, …, 0` cell by cell, the cells'
+/// rows stacked in each product. `err` bounds the rounding error of the
+/// rows (`k × (width + 1)`, the last column the offset's).
+fn stacked(
+    chain: &Chain,
+    cs: &[Cell],
+    rows_t: &DMatrix<f64>,
+    err: Option<&DMatrix<f64>>,
+    g: usize,
+) -> Vec<Vec<f64>> {
+    let k = rows_t.ncols();
+    let width = rows_t.nrows() - 1;
+    let cells = cs.len();
+    let total = k * cells;
+    // lam: the coefficients of every cell's rows (column c·k + r)
+    let mut lam = DMatrix::zeros(width, total);
+    let mut acc = vec![Acc::ZERO; total];
+    let err_rows: Option<Vec<Vec<f64>>> =
+        err.map(|e| (0..k).map(|j| e.row(j).iter().copied().collect()).collect());
+    for (c, cell) in cs.iter().enumerate() {
+        for r in 0..k {
+            let col = c * k + r;
+            lam.as_mut_slice()[col * width..(col + 1) * width]
+                .copy_from_slice(&rows_t.as_slice()[r * (width + 1)..r * (width + 1) + width]);
+            acc[col].add(rows_t[(width, r)]);
+            if let Some(e) = &err_rows {
+                let mut t = Acc::ZERO;
+                t.add_products(&e[r][..width], &cell.h_abs[g]);
+                t.add(e[r][width]);
+                acc[col].add(t.upper());
+            }
+        }
+    }
+    let mut layer = g;
+    loop {
+        // the ReLU h_layer = relu(z_layer): coefficients onto z_layer
+        let m = lam.nrows();
+        for (c, cell) in cs.iter().enumerate() {
+            let rel = &cell.relax[layer];
+            let z_abs = &cell.z_abs[layer];
+            for r in 0..k {
+                let col = c * k + r;
+                let column = &mut lam.as_mut_slice()[col * m..(col + 1) * m];
+                let a = &mut acc[col];
+                for i in 0..m {
+                    let l = column[i];
+                    let (slope, icpt) = if l >= 0.0 {
+                        (rel[i].au, rel[i].bu)
+                    } else {
+                        (rel[i].al, rel[i].bl)
+                    };
+                    column[i] = mul0(l, slope);
+                    let t = mul0(l, icpt);
+                    if t != 0.0 {
+                        a.add(t);
+                    }
+                }
+                a.add(slack(2.0 * U, column, z_abs));
+            }
+        }
+        // the affine layer z_layer = W h_{layer−1} + b (x for layer 0):
+        // coefficients `Wᵀλ` for all rows at once (`Wᵀ` a strided view of
+        // `W`, not a copy), offsets `b·λ` row by row
+        let (w, b) = (chain.w[layer], chain.b[layer]);
+        let (out_w, inner) = w.shape();
+        let wt = DMatrixView::from_slice_with_strides_generic(
+            w.as_slice(),
+            Dyn(inner),
+            Dyn(out_w),
+            Dyn(out_w),
+            Dyn(1),
+        );
+        let next = wt * &lam;
+        let terms = m + 2;
+        for (c, cell) in cs.iter().enumerate() {
+            // underflow: at most `m·η ≤ TINY` per entry of the product,
+            // each times its input's `|h|max`
+            let h_abs = if layer == 0 {
+                &cell.x_abs
+            } else {
+                &cell.h_abs[layer - 1]
+            };
+            let under = (TINY * h_abs.iter().fold(1.0, |a, v| a + v) * 1.0625).next_up();
+            for r in 0..k {
+                let col = c * k + r;
+                let a = &mut acc[col];
+                let lam_col = &lam.as_slice()[col * m..(col + 1) * m];
+                a.add_products(b.as_slice(), lam_col);
+                a.add(slack(gamma(terms), lam_col, &cell.scale[layer]));
+                a.add(under);
+            }
+        }
+        if layer == 0 {
+            let mut out = Vec::with_capacity(cells);
+            for (c, cell) in cs.iter().enumerate() {
+                let ups = (0..k)
+                    .map(|r| {
+                        let col = c * k + r;
+                        let coef = &next.as_slice()[col * inner..(col + 1) * inner];
+                        let mut a = acc[col];
+                        a.add(dot_box_upper(coef, &cell.x.lo, &cell.x.hi));
+                        a.upper()
+                    })
+                    .collect();
+                out.push(ups);
+            }
+            return out;
+        }
+        lam = next;
+        layer -= 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::crown::Mode;
+    use crate::analysis::open_loop::cell_offsets;
+    use crate::rng::Rng;
+
+    fn network(rng: &mut Rng, widths: &[usize], act: Activation) -> Network {
+        let mut layers = Vec::new();
+        for (k, pair) in widths.windows(2).enumerate() {
+            let s = 1.5 / (pair[0] as f64).sqrt();
+            layers.push(Layer::Affine {
+                w: DMatrix::from_fn(pair[1], pair[0], |_, _| rng.uniform(-s, s)),
+                b: DVector::from_fn(pair[1], |_, _| rng.uniform(-0.3, 0.3)),
+            });
+            if k + 2 < widths.len() {
+                layers.push(Layer::Act(act));
+            }
+        }
+        Network::new(widths[0], layers)
+    }
+
+    fn directions(rng: &mut Rng, m: usize) -> DMatrix<f64> {
+        // [I; −I] and three random directions
+        DMatrix::from_fn(2 * m + 3, m, |r, c| {
+            if r < m {
+                f64::from(u8::from(r == c))
+            } else if r < 2 * m {
+                -f64::from(u8::from(r - m == c))
+            } else {
+                0.0
+            }
+        })
+        .map_with_location(|r, _, v| {
+            if r >= 2 * m {
+                rng.uniform(-1.0, 1.0)
+            } else {
+                v
+            }
+        })
+    }
+
+    /// Every batched offset is the single-cell analysis's up to rounding
+    /// terms, and above every sampled output of its cell.
+    #[test]
+    fn batched_offsets_match_the_single_cell_analysis_and_contain_samples() {
+        let shapes: [&[usize]; 6] = [
+            &[2, 8, 3],
+            &[3, 16, 16, 2],
+            &[2, 12, 10, 8, 3],
+            &[6, 48, 48, 3],
+            &[1, 5, 1],
+            &[4, 7, 9, 6, 5, 2],
+        ];
+        let mut rng = Rng::new(11);
+        let mut compared = 0;
+        for widths in shapes {
+            for _ in 0..3 {
+                let net = network(&mut rng, widths, Activation::Relu);
+                let n = widths[0];
+                let m = *widths.last().unwrap();
+                let dirs = directions(&mut rng, m);
+                let lo: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 0.0)).collect();
+                let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(0.1, 1.5)).collect();
+                let input = IBox::new(lo, hi);
+                let counts: Vec<usize> = (0..n).map(|i| if i < 3 { 3 } else { 1 }).collect();
+                let cells = input.grid(&counts);
+                let batched = crown_offsets(&net, &cells, &dirs).expect("a ReLU chain");
+                assert_eq!(batched.len(), cells.len());
+                for (cell, got) in cells.iter().zip(&batched) {
+                    let want = cell_offsets(&net, cell, Mode::Crown, &dirs);
+                    for (g, w) in got.iter().zip(&want) {
+                        assert!(
+                            (g - w).abs() <= 1e-9 * (1.0 + w.abs()),
+                            "{widths:?}: batched {g} against {w}"
+                        );
+                        compared += 1;
+                    }
+                    for _ in 0..40 {
+                        let x: Vec<f64> = (0..n)
+                            .map(|i| rng.uniform(cell.lo[i], cell.hi[i]))
+                            .collect();
+                        let y = net.forward(&x);
+                        for (r, g) in got.iter().enumerate() {
+                            let v: f64 = dirs.row(r).iter().zip(&y).map(|(d, y)| d * y).sum();
+                            assert!(v <= *g + 1e-12 * (1.0 + v.abs()), "{v} above {g}");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(compared > 1000, "{compared}");
+    }
+
+    /// Networks that are not affine/ReLU chains, and cells that are not
+    /// finite, are left to the single-cell path.
+    #[test]
+    fn other_networks_and_non_finite_cells_decline() {
+        let mut rng = Rng::new(3);
+        let dirs = directions(&mut rng, 2);
+        let cell = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
+        let tanh = network(&mut rng, &[2, 5, 2], Activation::Tanh);
+        assert!(crown_offsets(&tanh, std::slice::from_ref(&cell), &dirs).is_none());
+        let affine = network(&mut rng, &[2, 2], Activation::Relu);
+        assert!(crown_offsets(&affine, std::slice::from_ref(&cell), &dirs).is_none());
+        let relu = network(&mut rng, &[2, 5, 2], Activation::Relu);
+        assert!(crown_offsets(&relu, std::slice::from_ref(&cell), &dirs).is_some());
+        let nan = IBox::new(vec![f64::NAN, -1.0], vec![1.0, 1.0]);
+        assert!(crown_offsets(&relu, &[cell.clone(), nan], &dirs).is_none());
+        let huge = IBox::new(vec![-1e300, -1.0], vec![1e300, 1.0]);
+        let big = network(&mut rng, &[2, 5, 5, 2], Activation::Relu);
+        let big = Network::new(
+            2,
+            big.layers
+                .into_iter()
+                .map(|l| match l {
+                    Layer::Affine { w, b } => Layer::Affine { w: w * 1e10, b },
+                    a => a,
+                })
+                .collect(),
+        );
+        assert!(crown_offsets(&big, &[cell, huge], &dirs).is_none());
+    }
+}

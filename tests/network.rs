@@ -511,9 +511,9 @@ fn threads_never_change_a_network_result() {
         norm: Norm::LInf,
         observations: (0..23).map(|k| vec![0.1 * k as f64 - 1.0, 0.5]).collect(),
     }];
-    let with = |threads| {
+    let with_plan = |p: &NetPlan, threads| {
         execute_network(
-            &p,
+            p,
             &NetControl {
                 elapsed: &|| 0.0,
                 time_limit: None,
@@ -521,6 +521,7 @@ fn threads_never_change_a_network_result() {
             },
         )
     };
+    let with = |threads| with_plan(&p, threads);
     let one = with(1);
     for threads in [2, 3, 8] {
         let many = with(threads);
@@ -528,6 +529,21 @@ fn threads_never_change_a_network_result() {
         assert_eq!(many.partition, one.partition);
         assert_eq!(many.properties, one.properties);
         assert_eq!(many.selections, one.selections);
+    }
+    // box cells go through the network in groups (analysis::batch)
+    let mut p = p.clone();
+    p.input = Some(Region::Box(IBox::new(vec![-0.3, -0.5], vec![0.5, 0.1])));
+    p.partitioner = Partitioner::Uniform(vec![7, 5]);
+    let with = |threads| with_plan(&p, threads);
+    let one = with(1);
+    for threads in [2, 3, 8] {
+        let many = with(threads);
+        assert_eq!(
+            many.output.offsets, one.output.offsets,
+            "box, {threads} threads"
+        );
+        assert_eq!(many.partition, one.partition);
+        assert_eq!(many.properties, one.properties);
     }
 }
 

@@ -48,7 +48,7 @@
 //! (the tests compare them bound for bound); a cell whose numbers are not
 //! all finite makes the whole batch decline (`None`), and the caller takes
 //! the single-cell path, as before.
-use nalgebra::{DMatrix, DMatrixView, DVector, Dyn};
+use nalgebra::{DMatrix, DVector};
 
 use super::crown::{affine_image, weight_scale};
 use super::relax::{image, relax, Relax};
@@ -68,6 +68,12 @@ struct Chain<'a> {
     b: Vec<&'a DVector<f64>>,
     /// `|W_g|`.
     abs_w: Vec<DMatrix<f64>>,
+    /// `W_gᵀ` for `g` below the last layer (a stacked product's left
+    /// factor: rows are stored as columns). A copy, not a strided view of
+    /// `W_g`: in nalgebra 0.35 the product of such a view (3 × 16, row
+    /// stride 16) with a 16 × 22 matrix corrupted the heap (safe code;
+    /// found while writing this module).
+    wt: Vec<DMatrix<f64>>,
 }
 
 impl<'a> Chain<'a> {
@@ -93,7 +99,8 @@ impl<'a> Chain<'a> {
             return None;
         }
         let abs_w = w.iter().map(|m| m.abs()).collect();
-        Some(Chain { w, b, abs_w })
+        let wt = w[..w.len() - 1].iter().map(|m| m.transpose()).collect();
+        Some(Chain { w, b, abs_w, wt })
     }
 
     /// The number of affine layers.
@@ -121,16 +128,32 @@ struct Cell {
 }
 
 /// Certified upper bounds of `d·f(x)` over each cell for every row `d` of
-/// `dirs`: the smaller of the support of the interval output box and
-/// CROWN's bound, as [`super::open_loop::cell_offsets`] in CROWN mode gives
-/// for each cell alone (equal up to rounding terms; see the module
-/// documentation). `None` when `net` is not an affine/ReLU chain with at
-/// least two affine layers, or a number on the way is not finite: the
-/// caller bounds the cells one by one.
+/// `dirs`: the smaller of the support of the CROWN output box (CROWN's
+/// bounds of `±f`, intersected with interval arithmetic's) and CROWN's
+/// bound of `d·f`, as the single-cell analysis gives them
+/// ([`Analysis::output_box`](super::crown::Analysis::output_box), then
+/// [`Analysis::upper`](super::crown::Analysis::upper) of `dirs`), equal up
+/// to rounding terms (see the module documentation). `None` when `net` is
+/// not an affine/ReLU chain with at least two affine layers, or a number on
+/// the way is not finite: the caller bounds the cells one by one.
 pub fn crown_offsets(net: &Network, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<Vec<Vec<f64>>> {
     let chain = Chain::of(net)?;
     if dirs.ncols() != net.outputs() || !dirs.iter().all(|v| v.is_finite()) {
         return None;
+    }
+    // the rows bounded: [I; −I] (the output box), then those of `dirs`
+    // that are not ±eⱼ (whose bound is the box's side)
+    let out_m = net.outputs();
+    let own: Vec<usize> = (0..dirs.nrows())
+        .filter(|&r| unit_row(dirs, r).is_none())
+        .collect();
+    let mut all = DMatrix::zeros(2 * out_m + own.len(), out_m);
+    for j in 0..out_m {
+        all[(j, j)] = 1.0;
+        all[(out_m + j, j)] = -1.0;
+    }
+    for (k, &r) in own.iter().enumerate() {
+        all.row_mut(2 * out_m + k).copy_from(&dirs.row(r));
     }
     // the entries per cell of the largest work matrix: the
     // right-associated factors and products, the interval products, the
@@ -138,7 +161,7 @@ pub fn crown_offsets(net: &Network, cells: &[IBox], dirs: &DMatrix<f64>) -> Opti
     let last = chain.len() - 1;
     let n0 = net.inputs + 1;
     let (m0, m1) = (chain.w[0].nrows(), chain.w[1].nrows());
-    let mut per_cell = (m0 * n0).max(m1.max(dirs.nrows()) * n0);
+    let mut per_cell = (m0 * n0).max(m1.max(all.nrows()) * n0);
     for g in 1..=last {
         let (out, inp) = chain.w[g].shape();
         per_cell = per_cell.max(3 * out.max(inp));
@@ -146,16 +169,34 @@ pub fn crown_offsets(net: &Network, cells: &[IBox], dirs: &DMatrix<f64>) -> Opti
             per_cell = per_cell.max(2 * out * (inp + 1));
         }
     }
-    per_cell = per_cell.max(dirs.nrows() * (chain.w[last].ncols() + 1));
+    per_cell = per_cell.max(all.nrows() * (chain.w[last].ncols() + 1));
     let chunk = (CHUNK_ENTRIES / per_cell).max(1);
     let mut out = Vec::with_capacity(cells.len());
     for part in cells.chunks(chunk) {
-        out.extend(chunk_offsets(&chain, part, dirs)?);
+        out.extend(chunk_offsets(&chain, part, &all, dirs, &own)?);
     }
     Some(out)
 }
 
-fn chunk_offsets(chain: &Chain, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<Vec<Vec<f64>>> {
+/// The output index and sign of row `r` of `dirs` if it is `±eⱼ`.
+fn unit_row(dirs: &DMatrix<f64>, r: usize) -> Option<(usize, bool)> {
+    let mut nonzero = (0..dirs.ncols()).filter(|&j| dirs[(r, j)] != 0.0);
+    match (nonzero.next(), nonzero.next()) {
+        (Some(j), None) if dirs[(r, j)] == 1.0 => Some((j, true)),
+        (Some(j), None) if dirs[(r, j)] == -1.0 => Some((j, false)),
+        _ => None,
+    }
+}
+
+/// [`crown_offsets`] of one chunk of cells: `dirs` the rows bounded
+/// (`[I; −I]` then the rows `own` of `given`).
+fn chunk_offsets(
+    chain: &Chain,
+    cells: &[IBox],
+    dirs: &DMatrix<f64>,
+    given: &DMatrix<f64>,
+    own: &[usize],
+) -> Option<Vec<Vec<f64>>> {
     let last = chain.len() - 1;
     let mut cs: Vec<Cell> = Vec::with_capacity(cells.len());
     for x in cells {
@@ -236,15 +277,19 @@ fn chunk_offsets(chain: &Chain, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<V
         let rows_t = rows.transpose();
         stacked(chain, &cs, &rows_t, Some(&err), last - 1)
     };
+    // the output box: interval arithmetic's and CROWN's bounds of ±f
+    let out_m = w.nrows();
     let mut out = Vec::with_capacity(cs.len());
     for (c, up) in cs.iter().zip(bounds) {
         let z = &c.z[last];
         if !z.is_finite() || !up.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut s = support_of_box(dirs, &z.lo, &z.hi);
-        for (v, u) in s.iter_mut().zip(up) {
-            *v = v.min(u);
+        let hi: Vec<f64> = (0..out_m).map(|j| z.hi[j].min(up[j])).collect();
+        let lo: Vec<f64> = (0..out_m).map(|j| z.lo[j].max(-up[out_m + j])).collect();
+        let mut s = support_of_box(given, &lo, &hi);
+        for (&r, u) in own.iter().zip(&up[2 * out_m..]) {
+            s[r] = s[r].min(*u);
         }
         out.push(s);
     }
@@ -512,18 +557,10 @@ fn stacked(
             }
         }
         // the affine layer z_layer = W h_{layer−1} + b (x for layer 0):
-        // coefficients `Wᵀλ` for all rows at once (`Wᵀ` a strided view of
-        // `W`, not a copy), offsets `b·λ` row by row
+        // coefficients `Wᵀλ` for all rows at once, offsets `b·λ` row by row
         let (w, b) = (chain.w[layer], chain.b[layer]);
-        let (out_w, inner) = w.shape();
-        let wt = DMatrixView::from_slice_with_strides_generic(
-            w.as_slice(),
-            Dyn(inner),
-            Dyn(out_w),
-            Dyn(out_w),
-            Dyn(1),
-        );
-        let next = wt * &lam;
+        let inner = w.ncols();
+        let next = &chain.wt[layer] * &lam;
         let terms = m + 2;
         for (c, cell) in cs.iter().enumerate() {
             // underflow: at most `m·η ≤ TINY` per entry of the product,
@@ -567,8 +604,20 @@ fn stacked(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::crown::Analysis;
     use crate::analysis::crown::Mode;
-    use crate::analysis::open_loop::cell_offsets;
+
+    /// The single-cell bounds: the support of CROWN's output box, and
+    /// CROWN's bound of each row.
+    fn cell_offsets(net: &Network, cell: &IBox, dirs: &DMatrix<f64>) -> Vec<f64> {
+        let a = Analysis::new(net, cell, Mode::Crown);
+        let out = a.output_box(Mode::Crown);
+        let mut b = support_of_box(dirs, &out.lo, &out.hi);
+        for (v, c) in b.iter_mut().zip(a.upper(dirs.clone()).concretize(cell)) {
+            *v = v.min(c);
+        }
+        b
+    }
     use crate::rng::Rng;
 
     fn network(rng: &mut Rng, widths: &[usize], act: Activation) -> Network {
@@ -634,7 +683,7 @@ mod tests {
                 let batched = crown_offsets(&net, &cells, &dirs).expect("a ReLU chain");
                 assert_eq!(batched.len(), cells.len());
                 for (cell, got) in cells.iter().zip(&batched) {
-                    let want = cell_offsets(&net, cell, Mode::Crown, &dirs);
+                    let want = cell_offsets(&net, cell, &dirs);
                     for (g, w) in got.iter().zip(&want) {
                         assert!(
                             (g - w).abs() <= 1e-9 * (1.0 + w.abs()),

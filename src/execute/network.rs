@@ -22,6 +22,7 @@
 
 use nalgebra::DMatrix;
 
+use crate::analysis::batch;
 use crate::analysis::crown::{Analysis, Mode};
 use crate::analysis::partition::{refine, Stop, Strategy};
 use crate::analysis::sdp;
@@ -340,6 +341,14 @@ pub fn cell_bounds(
     (b, issues)
 }
 
+/// Whether a uniform grid's cells go through [`batch::crown_offsets`]:
+/// CROWN with its own slopes (no optimisation, no SDP) on box cells.
+fn batched(plan: &NetPlan, region: &Region) -> bool {
+    plan.propagator == NetPropagator::Crown
+        && plan.slope_steps == 0
+        && matches!(region, Region::Box(_))
+}
+
 /// SDP bounds of every row over `cell` (see [`crate::analysis::sdp`]): the
 /// output `W_L h_L + b_L` of the merged network, the merge error and the
 /// rounding of the objective added.
@@ -441,14 +450,44 @@ fn bound_all(
                 let n = parts.len() + 1;
                 // past the time limit a cell keeps the whole set's bounds
                 // (valid for any part of it)
-                let done = map_ordered(&parts, ctl.threads, &|c: &Region| {
-                    if ctl.late() {
-                        return None;
-                    }
+                let one = |c: &Region| {
                     let (b, iss) =
                         cell_bounds(&plan.net, c, plan.propagator, plan.slope_steps, dirs);
-                    Some((within(b, Some(&root)), iss))
-                });
+                    (within(b, Some(&root)), iss)
+                };
+                let done: Vec<Option<(Vec<f64>, Vec<Issue>)>> = if batched(plan, region) {
+                    // CROWN's own bounds of box cells: the cells of a group
+                    // go through the network together (`analysis::batch`;
+                    // the same bounds up to rounding terms), the groups on
+                    // the threads; the groups depend on the cell count only,
+                    // so the output does not depend on `--jobs`
+                    let group = parts.len().div_ceil(8).clamp(4, 256);
+                    let groups: Vec<&[Region]> = parts.chunks(group).collect();
+                    map_ordered(&groups, ctl.threads, &|g: &&[Region]| {
+                        if ctl.late() {
+                            return vec![None; g.len()];
+                        }
+                        let boxes: Vec<IBox> = g.iter().map(Region::bbox).collect();
+                        match batch::crown_offsets(&plan.net, &boxes, dirs) {
+                            Some(all) => all
+                                .into_iter()
+                                .map(|b| Some((within(b, Some(&root)), Vec::new())))
+                                .collect(),
+                            // not a ReLU chain, or a number overflowed: one by one
+                            None => g.iter().map(|c| Some(one(c))).collect(),
+                        }
+                    })
+                    .into_iter()
+                    .flatten()
+                    .collect()
+                } else {
+                    map_ordered(&parts, ctl.threads, &|c: &Region| {
+                        if ctl.late() {
+                            return None;
+                        }
+                        Some(one(c))
+                    })
+                };
                 let mut stop = Stop::Grid;
                 let mut cells = Vec::with_capacity(parts.len());
                 for (c, r) in parts.iter().zip(done) {

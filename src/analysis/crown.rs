@@ -429,7 +429,12 @@ pub fn affine_image(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox) -> IBox {
 /// the absolute sum; every row has the same count): the same additions in
 /// the same order as one [`Acc`] per row and endpoint, laid out so the loop
 /// over a column vectorises.
-fn affine_image_of(w: &DMatrix<f64>, b: &DVector<f64>, x: &IBox, cols: Option<&[usize]>) -> IBox {
+pub(crate) fn affine_image_of(
+    w: &DMatrix<f64>,
+    b: &DVector<f64>,
+    x: &IBox,
+    cols: Option<&[usize]>,
+) -> IBox {
     let rows = w.nrows();
     let mut sums = vec![0.0; 4 * rows];
     let (lo_s, rest) = sums.split_at_mut(rows);

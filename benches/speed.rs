@@ -424,7 +424,12 @@ fn batched_cells() {
             }
         }) * 16.0;
         let batched = time(|| {
-            std::hint::black_box(ravel::analysis::batch::crown_offsets(&net, &cells, &dirs));
+            std::hint::black_box(ravel::analysis::batch::crown_offsets(
+                &net,
+                &cells,
+                &dirs,
+                Mode::Crown,
+            ));
         });
         let n = cells.len() as f64;
         let dense = n * crown_madds(&widths, &widths);

@@ -29,7 +29,12 @@ fn main() {
         });
         let t = std::time::Instant::now();
         for _ in 0..3 {
-            std::hint::black_box(ravel::analysis::batch::crown_offsets(&net, &cells, &dirs));
+            std::hint::black_box(ravel::analysis::batch::crown_offsets(
+                &net,
+                &cells,
+                &dirs,
+                Mode::Crown,
+            ));
         }
         eprintln!(
             "{:.2} ms per batch of 256 cells",

@@ -50,7 +50,7 @@
 //! the single-cell path, as before.
 use nalgebra::{DMatrix, DVector};
 
-use super::crown::{affine_image, affine_image_of, weight_scale};
+use super::crown::{affine_image, affine_image_of, weight_scale, Mode};
 use super::relax::{image, relax, Relax};
 use super::shape::support_of_box;
 use crate::nn::{Activation, Layer, Network};
@@ -58,14 +58,18 @@ use crate::num::{dot_box_upper, gamma, mul0, slack, Acc, TINY, U};
 use crate::sets::IBox;
 
 /// The most matrix entries one cell chunk's largest work matrix holds
-/// (32 MB of `f64`): cells go through in chunks of at most this size.
+/// (8 MB of `f64`): cells go through in chunks of at most this size.
 const CHUNK_ENTRIES: usize = 1 << 20;
 
 /// A network as affine maps `z_g = W_g h_{g−1} + b_g` (`h_{−1}` the input)
-/// with a ReLU `h_g = relu(z_g)` between consecutive ones.
+/// with an activation `h_g = σ_g(z_g)` between consecutive ones.
 struct Chain<'a> {
     w: Vec<&'a DMatrix<f64>>,
     b: Vec<&'a DVector<f64>>,
+    /// `σ_g`.
+    act: Vec<Activation>,
+    /// Fast-Lin: a ReLU's lower slope is its upper one.
+    fast_lin: bool,
     /// `|W_g|`.
     abs_w: Vec<DMatrix<f64>>,
     /// `W_gᵀ` for `g` below the last layer (a stacked product's left
@@ -77,11 +81,12 @@ struct Chain<'a> {
 }
 
 impl<'a> Chain<'a> {
-    /// The chain of `net`, if it is one (affine, then ReLU and affine
-    /// alternating, at least one ReLU), with finite weights.
-    fn of(net: &'a Network) -> Option<Chain<'a>> {
+    /// The chain of `net`, if it is one (affine, then activation and
+    /// affine alternating, at least one activation), with finite weights.
+    fn of(net: &'a Network, fast_lin: bool) -> Option<Chain<'a>> {
         let mut w = Vec::new();
         let mut b = Vec::new();
+        let mut act = Vec::new();
         for (i, layer) in net.layers.iter().enumerate() {
             match (i % 2, layer) {
                 (0, Layer::Affine { w: wi, b: bi }) => {
@@ -91,7 +96,7 @@ impl<'a> Chain<'a> {
                     w.push(wi);
                     b.push(bi);
                 }
-                (1, Layer::Act(Activation::Relu)) => {}
+                (1, Layer::Act(a)) => act.push(*a),
                 _ => return None,
             }
         }
@@ -100,7 +105,14 @@ impl<'a> Chain<'a> {
         }
         let abs_w = w.iter().map(|m| m.abs()).collect();
         let wt = w[..w.len() - 1].iter().map(|m| m.transpose()).collect();
-        Some(Chain { w, b, abs_w, wt })
+        Some(Chain {
+            w,
+            b,
+            act,
+            fast_lin,
+            abs_w,
+            wt,
+        })
     }
 
     /// The number of affine layers.
@@ -119,25 +131,37 @@ struct Cell {
     z: Vec<IBox>,
     /// The relaxation of each ReLU `h_g = relu(z_g)`.
     relax: Vec<Vec<Relax>>,
-    /// `|z_g|max` per neuron (the ReLU products' error terms).
+    /// `|z_g|max` per neuron (the relaxation products' error terms).
     z_abs: Vec<Vec<f64>>,
-    /// `|h_g|max` per neuron, `h_g = relu(z_g)`.
+    /// Bounds of each `h_g = σ_g(z_g)`.
+    h: Vec<IBox>,
+    /// `|h_g|max` per neuron.
     h_abs: Vec<Vec<f64>>,
     /// `|W_g|·|h_{g−1}|max + |b_g|`, rounded up (a product's error terms).
     scale: Vec<Vec<f64>>,
 }
 
 /// Certified upper bounds of `d·f(x)` over each cell for every row `d` of
-/// `dirs`: the smaller of the support of the CROWN output box (CROWN's
-/// bounds of `±f`, intersected with interval arithmetic's) and CROWN's
-/// bound of `d·f`, as the single-cell analysis gives them
+/// `dirs`, in CROWN or Fast-Lin `mode` (`None` in interval mode): the
+/// smaller of the support of the output box (the mode's bounds of `±f`,
+/// intersected with interval arithmetic's) and the mode's bound of `d·f`,
+/// as the single-cell analysis gives them
 /// ([`Analysis::output_box`](super::crown::Analysis::output_box), then
 /// [`Analysis::upper`](super::crown::Analysis::upper) of `dirs`), equal up
 /// to rounding terms (see the module documentation). `None` when `net` is
-/// not an affine/ReLU chain with at least two affine layers, or a number on
-/// the way is not finite: the caller bounds the cells one by one.
-pub fn crown_offsets(net: &Network, cells: &[IBox], dirs: &DMatrix<f64>) -> Option<Vec<Vec<f64>>> {
-    let chain = Chain::of(net)?;
+/// not a chain of affine layers and activations (at least two affine
+/// layers), or a number on the way is not finite: the caller bounds the
+/// cells one by one.
+pub fn crown_offsets(
+    net: &Network,
+    cells: &[IBox],
+    dirs: &DMatrix<f64>,
+    mode: Mode,
+) -> Option<Vec<Vec<f64>>> {
+    let chain = Chain::of(net, mode == Mode::FastLin)?;
+    if mode == Mode::Ibp {
+        return None;
+    }
     if dirs.ncols() != net.outputs() || !dirs.iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -212,27 +236,25 @@ fn chunk_offsets(
             z: vec![z0],
             relax: Vec::new(),
             z_abs: Vec::new(),
+            h: Vec::new(),
             h_abs: Vec::new(),
             scale: vec![s0],
         });
     }
     for g in 1..=last {
-        relu_step(&mut cs, g - 1)?;
+        act_step(chain, &mut cs, g - 1);
         if g == last {
             // the output's interval image as the single-cell analysis
-            // computes it (directed rounding, over the neurons not proved
-            // inactive): few rows, and the box every CROWN row is
-            // intersected with
+            // computes it (directed rounding, over the neurons a ReLU does
+            // not prove inactive): few rows, and the box every CROWN row
+            // is intersected with
+            let relu = chain.act[g - 1] == Activation::Relu;
             for c in cs.iter_mut() {
                 let z = &c.z[g - 1];
                 let kept: Vec<usize> = (0..z.dim()).filter(|&i| z.hi[i] > 0.0).collect();
-                let all_kept = kept.len() == z.dim();
-                let h = IBox::new(
-                    z.lo.iter().map(|v| v.max(0.0)).collect(),
-                    z.hi.iter().map(|v| v.max(0.0)).collect(),
-                );
-                let cols = (!all_kept).then_some(kept.as_slice());
-                c.z.push(affine_image_of(chain.w[g], chain.b[g], &h, cols));
+                let cols = (relu && kept.len() < z.dim()).then_some(kept.as_slice());
+                let out = affine_image_of(chain.w[g], chain.b[g], &c.h[g - 1], cols);
+                c.z.push(out);
             }
             break;
         }
@@ -322,32 +344,51 @@ fn with_bias(mut s: Vec<f64>, b: &DVector<f64>) -> Vec<f64> {
     s
 }
 
-/// The ReLU after affine layer `g`: each cell's relaxation and sizes.
-fn relu_step(cs: &mut [Cell], g: usize) -> Option<()> {
+/// The activation after affine layer `g`: each cell's relaxation (as the
+/// single-cell analysis takes it: [`relax`], with Fast-Lin's lower ReLU
+/// slope), output bounds and sizes.
+fn act_step(chain: &Chain, cs: &mut [Cell], g: usize) {
+    let act = chain.act[g];
+    let fast_lin = chain.fast_lin && act == Activation::Relu;
     for c in cs.iter_mut() {
         let z = &c.z[g];
         let n = z.dim();
-        let (mut rel, mut za, mut ha) = (
+        let mut rel = Vec::with_capacity(n);
+        let mut za = Vec::with_capacity(n);
+        let (mut lo, mut hi, mut ha) = (
             Vec::with_capacity(n),
             Vec::with_capacity(n),
             Vec::with_capacity(n),
         );
         for j in 0..n {
             let (l, h) = (z.lo[j], z.hi[j]);
-            rel.push(relax(Activation::Relu, l, h));
+            let r = relax(act, l, h);
+            rel.push(if fast_lin {
+                // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
+                Relax {
+                    al: r.au,
+                    bl: 0.0,
+                    ..r
+                }
+            } else {
+                r
+            });
             za.push(l.abs().max(h.abs()));
-            ha.push(image(Activation::Relu, l, h).1);
+            let (il, ih) = image(act, l, h);
+            lo.push(il);
+            hi.push(ih);
+            ha.push(il.abs().max(ih.abs()));
         }
         c.relax.push(rel);
         c.z_abs.push(za);
+        c.h.push(IBox::new(lo, hi));
         c.h_abs.push(ha);
     }
-    Some(())
 }
 
-/// The interval image of `z_g = W_g h_{g−1} + b_g` for every cell (the
-/// `h_{g−1} ≥ 0` are ReLU outputs), and the layer's scale: products of
-/// `W_g` with the midpoints and `|W_g|` with the radii and midpoints.
+/// The interval image of `z_g = W_g h_{g−1} + b_g` for every cell, and the
+/// layer's scale: products of `W_g` with the midpoints and `|W_g|` with
+/// the radii and the midpoints' sizes.
 fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
     let (w, b) = (chain.w[g], chain.b[g]);
     let (m, n) = w.shape();
@@ -355,15 +396,15 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
     let mut mid = DMatrix::zeros(n, cells);
     let mut both = DMatrix::zeros(n, 2 * cells);
     for (c, cell) in cs.iter().enumerate() {
-        let z = &cell.z[g - 1];
+        let x = &cell.h[g - 1];
         for i in 0..n {
-            let (l, h) = (z.lo[i].max(0.0), z.hi[i].max(0.0));
+            let (l, h) = (x.lo[i], x.hi[i]);
             let md = 0.5 * l + 0.5 * h;
             // [l, h] ⊆ [md − r, md + r]: each difference rounded, then up
             let r = (h - md).next_up().max((md - l).next_up()).max(0.0);
             mid[(i, c)] = md;
             both[(i, c)] = r;
-            both[(i, cells + c)] = md;
+            both[(i, cells + c)] = md.abs();
         }
     }
     let p = w * &mid;
@@ -375,7 +416,7 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
         let mut scale = Vec::with_capacity(m);
         for j in 0..m {
             let (pm, qr, qm) = (p[(j, c)], q[(j, c)], q[(j, cells + c)]);
-            // |W·md − P| ≤ γ|W|·md, |W|·r ≤ Q_r + γ|W|·r
+            // |W·md − P| ≤ γ|W|·|md|, |W|·r ≤ Q_r + γ|W|·r
             let err = (k * (qr + qm) + TINY).next_up();
             let mut up = Acc::of(pm);
             up.add(qr);
@@ -387,7 +428,7 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
             down.add(b[j]);
             down.add(-err);
             lo.push(down.lower());
-            // |W|·|h|max + |b| ≤ |W|·(md + r) + |b|
+            // |W|·|h|max + |b| ≤ |W|·(|md| + r) + |b|
             let mut s = Acc::of(qr);
             s.add(qm);
             s.add(b[j].abs());
@@ -625,11 +666,11 @@ mod tests {
     use crate::analysis::crown::Analysis;
     use crate::analysis::crown::Mode;
 
-    /// The single-cell bounds: the support of CROWN's output box, and
-    /// CROWN's bound of each row.
-    fn cell_offsets(net: &Network, cell: &IBox, dirs: &DMatrix<f64>) -> Vec<f64> {
-        let a = Analysis::new(net, cell, Mode::Crown);
-        let out = a.output_box(Mode::Crown);
+    /// The single-cell bounds: the support of the mode's output box, and
+    /// the mode's bound of each row.
+    fn cell_offsets(net: &Network, cell: &IBox, dirs: &DMatrix<f64>, mode: Mode) -> Vec<f64> {
+        let a = Analysis::new(net, cell, mode);
+        let out = a.output_box(mode);
         let mut b = support_of_box(dirs, &out.lo, &out.hi);
         for (v, c) in b.iter_mut().zip(a.upper(dirs.clone()).concretize(cell)) {
             *v = v.min(c);
@@ -674,7 +715,8 @@ mod tests {
     }
 
     /// Every batched offset is the single-cell analysis's up to rounding
-    /// terms, and above every sampled output of its cell.
+    /// terms, and above every sampled output of its cell: ReLU, tanh and
+    /// sigmoid networks (and mixed), CROWN and Fast-Lin.
     #[test]
     fn batched_offsets_match_the_single_cell_analysis_and_contain_samples() {
         let shapes: [&[usize]; 6] = [
@@ -687,9 +729,21 @@ mod tests {
         ];
         let mut rng = Rng::new(11);
         let mut compared = 0;
+        let acts = [Activation::Relu, Activation::Tanh, Activation::Sigmoid];
         for widths in shapes {
-            for _ in 0..3 {
-                let net = network(&mut rng, widths, Activation::Relu);
+            for t in 0..6 {
+                let mode = if t % 2 == 0 {
+                    Mode::Crown
+                } else {
+                    Mode::FastLin
+                };
+                let mut net = network(&mut rng, widths, acts[(t / 2) % 3]);
+                if t == 5 {
+                    // mixed activations: the first one a ReLU
+                    if let Some(Layer::Act(a)) = net.layers.get_mut(1) {
+                        *a = Activation::Relu;
+                    }
+                }
                 let n = widths[0];
                 let m = *widths.last().unwrap();
                 let dirs = directions(&mut rng, m);
@@ -698,14 +752,14 @@ mod tests {
                 let input = IBox::new(lo, hi);
                 let counts: Vec<usize> = (0..n).map(|i| if i < 3 { 3 } else { 1 }).collect();
                 let cells = input.grid(&counts);
-                let batched = crown_offsets(&net, &cells, &dirs).expect("a ReLU chain");
+                let batched = crown_offsets(&net, &cells, &dirs, mode).expect("a chain");
                 assert_eq!(batched.len(), cells.len());
                 for (cell, got) in cells.iter().zip(&batched) {
-                    let want = cell_offsets(&net, cell, &dirs);
+                    let want = cell_offsets(&net, cell, &dirs, mode);
                     for (g, w) in got.iter().zip(&want) {
                         assert!(
                             (g - w).abs() <= 1e-9 * (1.0 + w.abs()),
-                            "{widths:?}: batched {g} against {w}"
+                            "{widths:?} {mode:?}: batched {g} against {w}"
                         );
                         compared += 1;
                     }
@@ -722,24 +776,28 @@ mod tests {
                 }
             }
         }
-        assert!(compared > 1000, "{compared}");
+        assert!(compared > 4000, "{compared}");
     }
 
-    /// Networks that are not affine/ReLU chains, and cells that are not
-    /// finite, are left to the single-cell path.
+    /// Networks that are not chains, interval mode, and cells that are not
+    /// finite are left to the single-cell path.
     #[test]
     fn other_networks_and_non_finite_cells_decline() {
         let mut rng = Rng::new(3);
         let dirs = directions(&mut rng, 2);
         let cell = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
-        let tanh = network(&mut rng, &[2, 5, 2], Activation::Tanh);
-        assert!(crown_offsets(&tanh, std::slice::from_ref(&cell), &dirs).is_none());
+        let one = std::slice::from_ref(&cell);
+        let crown = Mode::Crown;
         let affine = network(&mut rng, &[2, 2], Activation::Relu);
-        assert!(crown_offsets(&affine, std::slice::from_ref(&cell), &dirs).is_none());
+        assert!(crown_offsets(&affine, one, &dirs, crown).is_none());
         let relu = network(&mut rng, &[2, 5, 2], Activation::Relu);
-        assert!(crown_offsets(&relu, std::slice::from_ref(&cell), &dirs).is_some());
+        assert!(crown_offsets(&relu, one, &dirs, crown).is_some());
+        assert!(crown_offsets(&relu, one, &dirs, Mode::Ibp).is_none());
+        let mut two_acts = relu.clone();
+        two_acts.layers.insert(2, Layer::Act(Activation::Tanh));
+        assert!(crown_offsets(&two_acts, one, &dirs, crown).is_none());
         let nan = IBox::new(vec![f64::NAN, -1.0], vec![1.0, 1.0]);
-        assert!(crown_offsets(&relu, &[cell.clone(), nan], &dirs).is_none());
+        assert!(crown_offsets(&relu, &[cell.clone(), nan], &dirs, crown).is_none());
         let huge = IBox::new(vec![-1e300, -1.0], vec![1e300, 1.0]);
         let big = network(&mut rng, &[2, 5, 5, 2], Activation::Relu);
         let big = Network::new(
@@ -752,7 +810,7 @@ mod tests {
                 })
                 .collect(),
         );
-        assert!(crown_offsets(&big, &[cell, huge], &dirs).is_none());
+        assert!(crown_offsets(&big, &[cell, huge], &dirs, crown).is_none());
     }
 
     /// The propagators' order on every cell of a grid: the batched CROWN
@@ -784,7 +842,7 @@ mod tests {
             let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(0.1, 1.5)).collect();
             let counts: Vec<usize> = (0..n).map(|i| if i < 2 { 3 } else { 1 }).collect();
             let cells = IBox::new(lo, hi).grid(&counts);
-            let got = crown_offsets(&net, &cells, &pm).expect("a ReLU chain");
+            let got = crown_offsets(&net, &cells, &pm, Mode::Crown).expect("a ReLU chain");
             for (cell, g) in cells.iter().zip(&got) {
                 let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
                 for j in 0..m {

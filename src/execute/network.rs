@@ -341,12 +341,16 @@ pub fn cell_bounds(
     (b, issues)
 }
 
-/// Whether a uniform grid's cells go through [`batch::crown_offsets`]:
-/// CROWN with its own slopes (no optimisation, no SDP) on box cells.
-fn batched(plan: &NetPlan, region: &Region) -> bool {
-    plan.propagator == NetPropagator::Crown
-        && plan.slope_steps == 0
-        && matches!(region, Region::Box(_))
+/// The mode in which a uniform grid's cells go through
+/// [`batch::crown_offsets`], if they do: CROWN with its own slopes (no
+/// optimisation, no SDP) or Fast-Lin, on box cells.
+fn batched(plan: &NetPlan, region: &Region) -> Option<Mode> {
+    let mode = match plan.propagator {
+        NetPropagator::Crown if plan.slope_steps == 0 => Mode::Crown,
+        NetPropagator::FastLin => Mode::FastLin,
+        _ => return None,
+    };
+    matches!(region, Region::Box(_)).then_some(mode)
 }
 
 /// SDP bounds of every row over `cell` (see [`crate::analysis::sdp`]): the
@@ -455,39 +459,40 @@ fn bound_all(
                         cell_bounds(&plan.net, c, plan.propagator, plan.slope_steps, dirs);
                     (within(b, Some(&root)), iss)
                 };
-                let done: Vec<Option<(Vec<f64>, Vec<Issue>)>> = if batched(plan, region) {
-                    // CROWN's own bounds of box cells: the cells of a group
-                    // go through the network together (`analysis::batch`;
-                    // the same bounds up to rounding terms), the groups on
-                    // the threads; the groups depend on the cell count only,
-                    // so the output does not depend on `--jobs`
-                    let group = parts.len().div_ceil(8).clamp(4, 256);
-                    let groups: Vec<&[Region]> = parts.chunks(group).collect();
-                    map_ordered(&groups, ctl.threads, &|g: &&[Region]| {
-                        if ctl.late() {
-                            return vec![None; g.len()];
-                        }
-                        let boxes: Vec<IBox> = g.iter().map(Region::bbox).collect();
-                        match batch::crown_offsets(&plan.net, &boxes, dirs) {
-                            Some(all) => all
-                                .into_iter()
-                                .map(|b| Some((within(b, Some(&root)), Vec::new())))
-                                .collect(),
-                            // not a ReLU chain, or a number overflowed: one by one
-                            None => g.iter().map(|c| Some(one(c))).collect(),
-                        }
-                    })
-                    .into_iter()
-                    .flatten()
-                    .collect()
-                } else {
-                    map_ordered(&parts, ctl.threads, &|c: &Region| {
-                        if ctl.late() {
-                            return None;
-                        }
-                        Some(one(c))
-                    })
-                };
+                let done: Vec<Option<(Vec<f64>, Vec<Issue>)>> =
+                    if let Some(mode) = batched(plan, region) {
+                        // CROWN's own bounds of box cells: the cells of a group
+                        // go through the network together (`analysis::batch`;
+                        // the same bounds up to rounding terms), the groups on
+                        // the threads; the groups depend on the cell count only,
+                        // so the output does not depend on `--jobs`
+                        let group = parts.len().div_ceil(8).clamp(4, 256);
+                        let groups: Vec<&[Region]> = parts.chunks(group).collect();
+                        map_ordered(&groups, ctl.threads, &|g: &&[Region]| {
+                            if ctl.late() {
+                                return vec![None; g.len()];
+                            }
+                            let boxes: Vec<IBox> = g.iter().map(Region::bbox).collect();
+                            match batch::crown_offsets(&plan.net, &boxes, dirs, mode) {
+                                Some(all) => all
+                                    .into_iter()
+                                    .map(|b| Some((within(b, Some(&root)), Vec::new())))
+                                    .collect(),
+                                // not a ReLU chain, or a number overflowed: one by one
+                                None => g.iter().map(|c| Some(one(c))).collect(),
+                            }
+                        })
+                        .into_iter()
+                        .flatten()
+                        .collect()
+                    } else {
+                        map_ordered(&parts, ctl.threads, &|c: &Region| {
+                            if ctl.late() {
+                                return None;
+                            }
+                            Some(one(c))
+                        })
+                    };
                 let mut stop = Stop::Grid;
                 let mut cells = Vec::with_capacity(parts.len());
                 for (c, r) in parts.iter().zip(done) {

@@ -397,7 +397,7 @@ fn batched_cells() {
     println!("| network | one cell at a time (×256) | batched | speed-up | dense multiply-adds | of matmul rate | done multiply-adds | of matmul rate |");
     println!("|---|---|---|---|---|---|---|---|");
     let mut rng = Rng::new(9);
-    for w in [32usize, 128, 512, 1024] {
+    for w in [8usize, 32, 128, 512, 1024] {
         let widths = [6, w, w, 3];
         let net = common::random_relu(&mut rng, &widths);
         let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);

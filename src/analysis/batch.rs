@@ -50,7 +50,7 @@
 //! the single-cell path, as before.
 use nalgebra::{DMatrix, DVector};
 
-use super::crown::{affine_image, affine_image_of, weight_scale, Mode};
+use super::crown::{affine_image, affine_image_of, affine_image_row, weight_scale, Mode};
 use super::relax::{image, relax, Relax};
 use super::shape::support_of_box;
 use crate::nn::{Activation, Layer, Network};
@@ -139,6 +139,9 @@ struct Cell {
     h_abs: Vec<Vec<f64>>,
     /// `|W_g|·|h_{g−1}|max + |b_g|`, rounded up (a product's error terms).
     scale: Vec<Vec<f64>>,
+    /// Per neuron of the last interval image: how far the exact image's
+    /// bounds can lie inside the computed ones (see [`interval_step`]).
+    gap: Vec<f64>,
 }
 
 /// Certified upper bounds of `d·f(x)` over each cell for every row `d` of
@@ -239,6 +242,7 @@ fn chunk_offsets(
             h: Vec::new(),
             h_abs: Vec::new(),
             scale: vec![s0],
+            gap: Vec::new(),
         });
     }
     for g in 1..=last {
@@ -283,13 +287,34 @@ fn chunk_offsets(
                 }
                 stacked(chain, &cs, &rows, None, g - 1)
             };
+            let relu = chain.act[g - 1] == Activation::Relu;
             for (c, up) in cs.iter_mut().zip(bounds) {
-                let z = &mut c.z[g];
+                // Where CROWN's bound does not certainly beat the exact
+                // interval image (the computed one from midpoints and
+                // radii can exceed it by `gap`), the interval bound is
+                // computed as the single-cell analysis does (directed
+                // rounding): so no bound is looser than interval
+                // arithmetic's from the same boxes.
+                let mut kept: Option<Vec<usize>> = None;
                 for j in 0..m {
-                    z.hi[j] = z.hi[j].min(up[j]);
-                    z.lo[j] = z.lo[j].max(-up[m + j]);
+                    let (hi, lo, gap) = (c.z[g].hi[j], c.z[g].lo[j], c.gap[j]);
+                    let (u, l) = (up[j], -up[m + j]);
+                    let (mut new_hi, mut new_lo) = (hi.min(u), lo.max(l));
+                    if u > hi - gap || l < lo + gap {
+                        let z = &c.z[g - 1];
+                        let cols = kept.get_or_insert_with(|| {
+                            (0..z.dim()).filter(|&i| !relu || z.hi[i] > 0.0).collect()
+                        });
+                        let cols = (cols.len() < z.dim()).then_some(cols.as_slice());
+                        let (dl, dh) =
+                            affine_image_row(chain.w[g], chain.b[g], &c.h[g - 1], cols, j);
+                        new_hi = new_hi.min(dh);
+                        new_lo = new_lo.max(dl);
+                    }
+                    c.z[g].hi[j] = new_hi;
+                    c.z[g].lo[j] = new_lo;
                 }
-                if !z.is_finite() {
+                if !c.z[g].is_finite() {
                     return None;
                 }
             }
@@ -414,6 +439,7 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
         let mut lo = Vec::with_capacity(m);
         let mut hi = Vec::with_capacity(m);
         let mut scale = Vec::with_capacity(m);
+        let mut gap = Vec::with_capacity(m);
         for j in 0..m {
             let (pm, qr, qm) = (p[(j, c)], q[(j, c)], q[(j, cells + c)]);
             // |W·md − P| ≤ γ|W|·|md|, |W|·r ≤ Q_r + γ|W|·r
@@ -423,6 +449,10 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
             up.add(b[j]);
             up.add(err);
             hi.push(up.upper());
+            // the exact image's bounds lie inside the computed ones by at
+            // most the error terms twice over, the radius's rounding and
+            // the sums' rounding: generously
+            gap.push((4.0 * err + 16.0 * U * (pm.abs() + qr + qm + b[j].abs()) + TINY).next_up());
             let mut down = Acc::of(pm);
             down.add(-qr);
             down.add(b[j]);
@@ -441,6 +471,7 @@ fn interval_step(chain: &Chain, cs: &mut [Cell], g: usize) -> Option<()> {
         }
         cell.z.push(z);
         cell.scale.push(scale);
+        cell.gap = gap;
     }
     Some(())
 }

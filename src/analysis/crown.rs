@@ -496,6 +496,46 @@ pub(crate) fn affine_image_of(
     IBox::new(lo, hi)
 }
 
+/// Row `j` of [`affine_image_of`] alone: its lower and upper bound, the
+/// same numbers bit for bit (the same terms added in the same column
+/// order, with the same count).
+pub(crate) fn affine_image_row(
+    w: &DMatrix<f64>,
+    b: &DVector<f64>,
+    x: &IBox,
+    cols: Option<&[usize]>,
+    j: usize,
+) -> (f64, f64) {
+    let rows = w.nrows();
+    let (mut ls, mut la, mut hs, mut ha) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let mut terms = 0;
+    let mut column = |i: usize| {
+        let a = w.as_slice()[i * rows + j];
+        let (pl, ph) = (a * x.lo[i], a * x.hi[i]);
+        let (th, tl) = if a == 0.0 {
+            (0.0, 0.0)
+        } else if a > 0.0 {
+            (ph, pl)
+        } else {
+            (pl, ph)
+        };
+        ls += tl;
+        la += tl.abs();
+        hs += th;
+        ha += th.abs();
+        terms += 1;
+    };
+    match cols {
+        None => (0..w.ncols()).for_each(&mut column),
+        Some(cols) => cols.iter().for_each(|&i| column(i)),
+    }
+    let (bj, n) = (b[j], terms + 1);
+    (
+        Acc::from_parts(ls + bj, la + bj.abs(), n).lower(),
+        Acc::from_parts(hs + bj, ha + bj.abs(), n).upper(),
+    )
+}
+
 /// [`weight_scale_of`] and [`affine_image_of`] of `z = s·x + b` (`s = ±1`,
 /// all columns), without the sums over zeros: the same numbers bit for bit.
 /// There, row `j`'s sums start at 0 and take `s·x_j`'s term and zeros
@@ -1231,6 +1271,35 @@ impl<'a> Analysis<'a> {
 mod tests {
     use super::*;
     use crate::nn::Activation;
+
+    /// One row of the interval image alone is the whole image's row, bit
+    /// for bit, over all columns and over a subset.
+    #[test]
+    fn one_row_of_the_interval_image_is_its_row_bit_for_bit() {
+        let mut rng = crate::rng::Rng::new(4);
+        for (rows, cols) in [(1, 1), (3, 7), (9, 4), (16, 33)] {
+            let w = DMatrix::from_fn(rows, cols, |_, _| {
+                if rng.uniform(0.0, 1.0) < 0.2 {
+                    0.0
+                } else {
+                    rng.uniform(-2.0, 2.0)
+                }
+            });
+            let b = DVector::from_fn(rows, |_, _| rng.uniform(-1.0, 1.0));
+            let lo: Vec<f64> = (0..cols).map(|_| rng.uniform(-1.0, 0.5)).collect();
+            let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(0.0, 1.0)).collect();
+            let x = IBox::new(lo, hi);
+            let some: Vec<usize> = (0..cols).filter(|i| i % 3 != 1).collect();
+            for sel in [None, Some(some.as_slice())] {
+                let whole = affine_image_of(&w, &b, &x, sel);
+                for j in 0..rows {
+                    let (l, h) = affine_image_row(&w, &b, &x, sel, j);
+                    assert_eq!(l.to_bits(), whole.lo[j].to_bits());
+                    assert_eq!(h.to_bits(), whole.hi[j].to_bits());
+                }
+            }
+        }
+    }
 
     fn net() -> Network {
         Network::new(

@@ -305,23 +305,20 @@ pub fn cell_bounds(
         NetPropagator::FastLin => Mode::FastLin,
         NetPropagator::Crown | NetPropagator::Sdp => Mode::Crown,
     };
-    // a box under CROWN's own slopes or Fast-Lin: the batched pass, which
-    // is as fast on one cell of a narrow network and faster on a wide one
-    // (its products are blocked matrix multiplies); the same bounds up to
-    // rounding terms
+    // A box cell: the batched pass (`analysis::batch`), as fast as the
+    // single-cell analysis on one cell of a narrow network and faster on a
+    // wide one (its products are blocked matrix multiplies); the same
+    // bounds up to rounding terms. It is the answer under CROWN's own
+    // slopes and Fast-Lin; optimised slopes and the SDP are intersected
+    // with it, so they are never looser than what CROWN reports.
+    let batched = (mode != Mode::Ibp && matches!(cell, Region::Box(_)))
+        .then(|| batch::crown_offsets(net, std::slice::from_ref(&bbox), dirs, mode))
+        .flatten()
+        .and_then(|mut all| all.pop());
     let own_slopes =
         prop == NetPropagator::FastLin || (prop == NetPropagator::Crown && slope_steps == 0);
-    if own_slopes && matches!(cell, Region::Box(_)) {
-        if let Some(mut b) = batch::crown_offsets(net, std::slice::from_ref(&bbox), dirs, mode)
-            .and_then(|mut all| all.pop())
-        {
-            for v in &mut b {
-                if v.is_nan() {
-                    *v = f64::INFINITY;
-                }
-            }
-            return (b, Vec::new());
-        }
+    if let (true, Some(b)) = (own_slopes, &batched) {
+        return (b.clone(), Vec::new());
     }
     let a = Analysis::new(net, &bbox, mode);
     if !a.is_finite() {
@@ -349,6 +346,9 @@ pub fn cell_bounds(
                 *v = v.min(c);
             }
         }
+    }
+    for (v, c) in b.iter_mut().zip(batched.iter().flatten()) {
+        *v = v.min(*c);
     }
     // a NaN is no bound
     for v in &mut b {

@@ -167,19 +167,26 @@ fn output_bounds_contain_every_sampled_output() {
     assert!(checked >= 150, "only {checked} cases ran");
 }
 
-/// Propagators are ordered: CROWN is never looser than IBP on one cell,
-/// CROWN with optimised slopes never looser than CROWN, and SDP (intersected
-/// with CROWN) never looser than CROWN.
+/// Propagators are ordered: CROWN is never looser than IBP, CROWN with
+/// optimised slopes never looser than CROWN, and SDP (intersected with
+/// CROWN) never looser than CROWN; on one cell and on a uniform grid
+/// (whose CROWN cells go through the batched pass).
 #[test]
 fn propagators_are_ordered() {
     let mut rng = Rng::new(11);
-    for case in 0..12 {
+    for case in 0..16 {
         let net = random_network(&mut rng, 2, 2, Activation::Relu, (2, 6));
         let input = Region::Box(IBox::new(vec![-0.5, -0.3], vec![0.4, 0.6]));
+        let grid = if case % 2 == 0 {
+            vec![1, 1]
+        } else {
+            vec![3, 2]
+        };
         let bound = |prop, slope_steps| {
             let mut p = plan(net.clone(), input.clone(), Vec::new());
             p.propagator = prop;
             p.slope_steps = slope_steps;
+            p.partitioner = Partitioner::Uniform(grid.clone());
             run(&p).output.offsets
         };
         let (ibp, crown, alpha, sdp) = (

@@ -884,4 +884,39 @@ mod tests {
         }
         assert!(sides > 2000, "{sides}");
     }
+
+    /// Degenerate widths (a hidden layer of one neuron or of none, one
+    /// output, one input) neither panic nor differ from the single-cell
+    /// analysis.
+    #[test]
+    fn degenerate_widths_match_the_single_cell_analysis() {
+        let mut rng = Rng::new(8);
+        let shapes: [&[usize]; 5] = [
+            &[2, 0, 3],
+            &[2, 1, 1],
+            &[1, 1, 1, 1],
+            &[3, 0, 0, 2],
+            &[1, 6, 1, 6, 1],
+        ];
+        for widths in shapes {
+            let net = network(&mut rng, widths, Activation::Relu);
+            let m = widths[widths.len() - 1];
+            let dirs = directions(&mut rng, m);
+            let n = widths[0];
+            let input = IBox::new(vec![-0.5; n], vec![0.7; n]);
+            let cells = input.grid(&vec![2; n]);
+            for mode in [Mode::Crown, Mode::FastLin] {
+                let got = crown_offsets(&net, &cells, &dirs, mode).expect("a chain");
+                for (cell, g) in cells.iter().zip(&got) {
+                    let want = cell_offsets(&net, cell, &dirs, mode);
+                    for (g, w) in g.iter().zip(&want) {
+                        assert!(
+                            (g - w).abs() <= 1e-9 * (1.0 + w.abs()),
+                            "{widths:?}: {g} against {w}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

@@ -919,4 +919,82 @@ mod tests {
             }
         }
     }
+
+    /// An opt-in campaign (`cargo test --release -- --ignored
+    /// batched_bounds_campaign`, `RAVEL_BATCH_CASES` networks, 2000 by
+    /// default): random depths, widths, activations (mixed), modes and
+    /// grids; every batched bound equal to the single-cell analysis's up
+    /// to rounding terms, above every sampled output, and the output box
+    /// never looser than interval arithmetic's.
+    #[test]
+    #[ignore]
+    fn batched_bounds_campaign() {
+        let cases: usize = std::env::var("RAVEL_BATCH_CASES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(2000);
+        let mut rng = Rng::new(0xBA7C);
+        let acts = [Activation::Relu, Activation::Tanh, Activation::Sigmoid];
+        let (mut bounds, mut samples) = (0usize, 0usize);
+        let mut worst = 0.0f64;
+        for case in 0..cases {
+            let depth = 1 + rng.below(4);
+            let n = 1 + rng.below(6);
+            let m = 1 + rng.below(4);
+            let mut widths = vec![n];
+            widths.extend((0..depth).map(|_| 1 + rng.below(48)));
+            widths.push(m);
+            let mut net = network(&mut rng, &widths, Activation::Relu);
+            for l in net.layers.iter_mut() {
+                if let Layer::Act(a) = l {
+                    *a = acts[rng.below(3)];
+                }
+            }
+            let mode = if case % 3 == 2 {
+                Mode::FastLin
+            } else {
+                Mode::Crown
+            };
+            let dirs = directions(&mut rng, m);
+            let lo: Vec<f64> = (0..n).map(|_| rng.uniform(-2.0, 1.0)).collect();
+            let hi: Vec<f64> = lo.iter().map(|l| l + rng.uniform(1e-6, 2.0)).collect();
+            let counts: Vec<usize> = (0..n).map(|_| 1 + rng.below(3)).collect();
+            let cells = IBox::new(lo, hi).grid(&counts);
+            let got = crown_offsets(&net, &cells, &dirs, mode).expect("a chain");
+            for (cell, g) in cells.iter().zip(&got) {
+                let want = cell_offsets(&net, cell, &dirs, mode);
+                for (g, w) in g.iter().zip(&want) {
+                    let rel = (g - w).abs() / (1.0 + w.abs());
+                    worst = worst.max(rel);
+                    assert!(
+                        rel <= 1e-9,
+                        "case {case} {widths:?} {mode:?}: {g} against {w}"
+                    );
+                    bounds += 1;
+                }
+                let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
+                for j in 0..m {
+                    assert!(
+                        g[j] <= ibp.hi[j] && -g[m + j] >= ibp.lo[j],
+                        "case {case}: IBP"
+                    );
+                }
+                for _ in 0..50 {
+                    let x: Vec<f64> = (0..n)
+                        .map(|i| rng.uniform(cell.lo[i], cell.hi[i]))
+                        .collect();
+                    let y = net.forward(&x);
+                    for (r, b) in g.iter().enumerate() {
+                        let v: f64 = dirs.row(r).iter().zip(&y).map(|(d, y)| d * y).sum();
+                        assert!(
+                            v <= *b + 1e-12 * (1.0 + v.abs()),
+                            "case {case}: {v} above {b}"
+                        );
+                        samples += 1;
+                    }
+                }
+            }
+        }
+        eprintln!("{cases} networks: {bounds} bounds, {samples} sampled checks, largest relative difference {worst:.2e}");
+    }
 }

@@ -54,7 +54,7 @@ use super::crown::{affine_image, affine_image_of, affine_image_row, weight_scale
 use super::relax::{image, relax, Relax};
 use super::shape::support_of_box;
 use crate::nn::{Activation, Layer, Network};
-use crate::num::{dot_box_upper, gamma, mul0, slack, Acc, TINY, U};
+use crate::num::{dot_box_upper, gamma, mul0, Acc, TINY, U};
 use crate::sets::IBox;
 
 /// The most matrix entries one cell chunk's largest work matrix holds
@@ -70,14 +70,9 @@ struct Chain<'a> {
     act: Vec<Activation>,
     /// Fast-Lin: a ReLU's lower slope is its upper one.
     fast_lin: bool,
-    /// `|W_g|`.
+    /// `|W_g|` for `g ≥ 1` (empty for `g = 0`, whose interval image is
+    /// the single-cell analysis's).
     abs_w: Vec<DMatrix<f64>>,
-    /// `W_gᵀ` for `g` below the last layer (a stacked product's left
-    /// factor: rows are stored as columns). A copy, not a strided view of
-    /// `W_g`: in nalgebra 0.35 the product of such a view (3 × 16, row
-    /// stride 16) with a 16 × 22 matrix corrupted the heap (safe code;
-    /// found while writing this module).
-    wt: Vec<DMatrix<f64>>,
 }
 
 impl<'a> Chain<'a> {
@@ -103,15 +98,23 @@ impl<'a> Chain<'a> {
         if net.layers.len() % 2 == 0 || w.len() < 2 {
             return None;
         }
-        let abs_w = w.iter().map(|m| m.abs()).collect();
-        let wt = w[..w.len() - 1].iter().map(|m| m.transpose()).collect();
+        let abs_w = w
+            .iter()
+            .enumerate()
+            .map(|(g, m)| {
+                if g == 0 {
+                    DMatrix::zeros(0, 0)
+                } else {
+                    m.abs()
+                }
+            })
+            .collect();
         Some(Chain {
             w,
             b,
             act,
             fast_lin,
             abs_w,
-            wt,
         })
     }
 
@@ -276,15 +279,16 @@ fn chunk_offsets(
                     true,
                 )
             } else {
-                let mut rows = DMatrix::zeros(chain.w[g].ncols() + 1, 2 * m);
-                for j in 0..m {
-                    for k in 0..chain.w[g].ncols() {
-                        rows[(k, j)] = chain.w[g][(j, k)];
-                        rows[(k, m + j)] = -chain.w[g][(j, k)];
+                // the rows [W | b; −W | −b] on h_{g−1}
+                let inp = chain.w[g].ncols();
+                let rows = DMatrix::from_fn(2 * m, inp + 1, |r, i| {
+                    let (j, sign) = if r < m { (r, 1.0) } else { (r - m, -1.0) };
+                    sign * if i < inp {
+                        chain.w[g][(j, i)]
+                    } else {
+                        chain.b[g][j]
                     }
-                    rows[(chain.w[g].ncols(), j)] = chain.b[g][j];
-                    rows[(chain.w[g].ncols(), m + j)] = -chain.b[g][j];
-                }
+                });
                 stacked(chain, &cs, &rows, None, g - 1)
             };
             let relu = chain.act[g - 1] == Activation::Relu;
@@ -339,8 +343,7 @@ fn chunk_offsets(
         let off = DVector::from_vec(off);
         right_associated(chain, &cs, &r, &r.abs(), &off, Some(&err), false)
     } else {
-        let rows_t = rows.transpose();
-        stacked(chain, &cs, &rows_t, Some(&err), last - 1)
+        stacked(chain, &cs, &rows, Some(&err), last - 1)
     };
     // the output box: interval arithmetic's and CROWN's bounds of ±f
     let out_m = w.nrows();
@@ -584,73 +587,102 @@ fn right_associated(
     out
 }
 
-/// Upper bounds, per cell, of the rows on `h_g` (stored as the columns of
-/// `rows_t`, `(width + 1) × k`, the last entry the offset) back-substituted
-/// through the ReLUs and affine layers `g, …, 0` cell by cell, the cells'
-/// rows stacked in each product. `err` bounds the rounding error of the
-/// rows (`k × (width + 1)`, the last column the offset's).
+/// Upper bounds, per cell, of the rows on `h_g` (`rows`, `k × (width + 1)`,
+/// the last column the offset) back-substituted through the activations
+/// and affine layers `g, …, 0` cell by cell, all cells' rows stacked in
+/// one matrix (row `c·k + r`: cell `c`'s row `r`) multiplied by each
+/// layer's `W` as it is stored. `err` bounds the rounding error of `rows`
+/// entry by entry (same shape).
 fn stacked(
     chain: &Chain,
     cs: &[Cell],
-    rows_t: &DMatrix<f64>,
+    rows: &DMatrix<f64>,
     err: Option<&DMatrix<f64>>,
     g: usize,
 ) -> Vec<Vec<f64>> {
-    let k = rows_t.ncols();
-    let width = rows_t.nrows() - 1;
+    let k = rows.nrows();
+    let width = rows.ncols() - 1;
     let cells = cs.len();
     let total = k * cells;
-    // lam: the coefficients of every cell's rows (column c·k + r)
-    let mut lam = DMatrix::zeros(width, total);
+    // lam: the coefficients of every cell's rows, one row each
+    let mut lam = DMatrix::zeros(total, width);
+    for i in 0..width {
+        let src = &rows.as_slice()[i * k..(i + 1) * k];
+        let dst = &mut lam.as_mut_slice()[i * total..(i + 1) * total];
+        for c in 0..cells {
+            dst[c * k..(c + 1) * k].copy_from_slice(src);
+        }
+    }
     let mut acc = vec![Acc::ZERO; total];
-    let err_rows: Option<Vec<Vec<f64>>> =
-        err.map(|e| (0..k).map(|j| e.row(j).iter().copied().collect()).collect());
     for (c, cell) in cs.iter().enumerate() {
         for r in 0..k {
-            let col = c * k + r;
-            lam.as_mut_slice()[col * width..(col + 1) * width]
-                .copy_from_slice(&rows_t.as_slice()[r * (width + 1)..r * (width + 1) + width]);
-            acc[col].add(rows_t[(width, r)]);
-            if let Some(e) = &err_rows {
+            let a = &mut acc[c * k + r];
+            a.add(rows[(r, width)]);
+            if let Some(e) = err {
+                // Σᵢ eᵢ·|hᵢ|max + e_offset
                 let mut t = Acc::ZERO;
-                t.add_products(&e[r][..width], &cell.h_abs[g]);
-                t.add(e[r][width]);
-                acc[col].add(t.upper());
+                for i in 0..width {
+                    t.add(mul0(e[(r, i)], cell.h_abs[g][i]));
+                }
+                t.add(e[(r, width)]);
+                a.add(t.upper());
             }
         }
     }
+    // per row: Σᵢ |λᵢ|·mᵢ for the current error term
+    let mut abs_sum = vec![0.0f64; total];
     let mut layer = g;
     loop {
-        // the ReLU h_layer = relu(z_layer): coefficients onto z_layer
-        let m = lam.nrows();
-        for (c, cell) in cs.iter().enumerate() {
-            let rel = &cell.relax[layer];
-            let z_abs = &cell.z_abs[layer];
-            for r in 0..k {
-                let col = c * k + r;
-                let column = &mut lam.as_mut_slice()[col * m..(col + 1) * m];
-                let a = &mut acc[col];
-                for i in 0..m {
-                    let l = column[i];
-                    let (slope, icpt) = if l >= 0.0 {
-                        (rel[i].au, rel[i].bu)
+        // the activation h_layer = σ(z_layer): coefficients onto z_layer,
+        // the intercepts into the offsets, column by column
+        let m = lam.ncols();
+        abs_sum.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..m {
+            let column = &mut lam.as_mut_slice()[i * total..(i + 1) * total];
+            for (c, cell) in cs.iter().enumerate() {
+                let r = cell.relax[layer][i];
+                let za = cell.z_abs[layer][i];
+                for (j, l) in column[c * k..(c + 1) * k].iter_mut().enumerate() {
+                    let idx = c * k + j;
+                    let (slope, icpt) = if *l >= 0.0 {
+                        (r.au, r.bu)
                     } else {
-                        (rel[i].al, rel[i].bl)
+                        (r.al, r.bl)
                     };
-                    column[i] = mul0(l, slope);
-                    let t = mul0(l, icpt);
+                    let t = mul0(*l, icpt);
+                    *l = mul0(*l, slope);
                     if t != 0.0 {
-                        a.add(t);
+                        acc[idx].add(t);
                     }
+                    abs_sum[idx] += mul0(l.abs(), za);
                 }
-                a.add(slack(2.0 * U, column, z_abs));
             }
         }
+        // the products λ·a: at most 2u·Σ|λ'ᵢ|·|zᵢ|max (as `slack`)
+        for (a, v) in acc.iter_mut().zip(&abs_sum) {
+            a.add((2.0 * U * v * 1.0625 + TINY).next_up());
+        }
         // the affine layer z_layer = W h_{layer−1} + b (x for layer 0):
-        // coefficients `Wᵀλ` for all rows at once, offsets `b·λ` row by row
+        // coefficients `λ W` for all rows at once, offsets `λ·b`; error
+        // at most γ·Σ|λᵢ|·scaleᵢ (scale = |W|·|h|max + |b|)
         let (w, b) = (chain.w[layer], chain.b[layer]);
-        let inner = w.ncols();
-        let next = &chain.wt[layer] * &lam;
+        abs_sum.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..m {
+            let column = &lam.as_slice()[i * total..(i + 1) * total];
+            let bi = b[i];
+            for (c, cell) in cs.iter().enumerate() {
+                let si = cell.scale[layer][i];
+                for (j, &l) in column[c * k..(c + 1) * k].iter().enumerate() {
+                    let idx = c * k + j;
+                    let t = mul0(l, bi);
+                    if t != 0.0 {
+                        acc[idx].add(t);
+                    }
+                    abs_sum[idx] += mul0(l.abs(), si);
+                }
+            }
+        }
+        let next = &lam * w;
         let terms = m + 2;
         for (c, cell) in cs.iter().enumerate() {
             // underflow: at most `m·η ≤ TINY` per entry of the product,
@@ -662,23 +694,25 @@ fn stacked(
             };
             let under = (TINY * h_abs.iter().fold(1.0, |a, v| a + v) * 1.0625).next_up();
             for r in 0..k {
-                let col = c * k + r;
-                let a = &mut acc[col];
-                let lam_col = &lam.as_slice()[col * m..(col + 1) * m];
-                a.add_products(b.as_slice(), lam_col);
-                a.add(slack(gamma(terms), lam_col, &cell.scale[layer]));
+                let idx = c * k + r;
+                let a = &mut acc[idx];
+                a.add((gamma(terms) * abs_sum[idx] * 1.0625 + TINY).next_up());
                 a.add(under);
             }
         }
         if layer == 0 {
+            let inner = next.ncols();
+            let mut coef = vec![0.0; inner];
             let mut out = Vec::with_capacity(cells);
             for (c, cell) in cs.iter().enumerate() {
                 let ups = (0..k)
                     .map(|r| {
-                        let col = c * k + r;
-                        let coef = &next.as_slice()[col * inner..(col + 1) * inner];
-                        let mut a = acc[col];
-                        a.add(dot_box_upper(coef, &cell.x.lo, &cell.x.hi));
+                        let idx = c * k + r;
+                        for (q, v) in coef.iter_mut().enumerate() {
+                            *v = next[(idx, q)];
+                        }
+                        let mut a = acc[idx];
+                        a.add(dot_box_upper(&coef, &cell.x.lo, &cell.x.hi));
                         a.upper()
                     })
                     .collect();

@@ -1,6 +1,8 @@
-//! Batched CROWN: the bounds of many cells of a partition through one ReLU
-//! network at once, with the back-substitutions of all cells done as
-//! matrix–matrix products that share the network's weights.
+//! Batched CROWN (and Fast-Lin): the bounds of many cells of a partition
+//! through one network (affine layers with ReLU, tanh or sigmoid between
+//! them) at once, with the back-substitutions of all cells done as
+//! matrix–matrix products that share the network's weights. One cell goes
+//! the same way: the products stay blocked matrix multiplies.
 //!
 //! [`Analysis`](super::crown::Analysis) bounds one cell: its
 //! back-substitutions multiply that cell's coefficient rows by each weight
@@ -10,8 +12,8 @@
 //! i.e. `matrixmultiply`):
 //!
 //! * **The second layer's bounds, right-associated.** The bound of
-//!   `±z₁ = ±(W₁ relu(z₀) + b₁)` substitutes, for each neuron `i` of the
-//!   first ReLU, the upper line `aᵤ z₀ᵢ + bᵤ` where `W₁`'s entry is
+//!   `±z₁ = ±(W₁ σ(z₀) + b₁)` substitutes, for each neuron `i` of the
+//!   first activation, the upper line `aᵤ z₀ᵢ + bᵤ` where `W₁`'s entry is
 //!   positive and the lower line `aₗ z₀ᵢ + bₗ` where it is negative, then
 //!   `z₀ = W₀ x + b₀`. Written per cell with `T⁺ = [diag(aᵤ) W₀ | aᵤ b₀ + bᵤ]`
 //!   and `T⁻ = [diag(aₗ) W₀ | aₗ b₀ + bₗ]`, the upper bound's
@@ -24,9 +26,13 @@
 //! * **Deeper passes, stacked.** Other back-substitutions (the output
 //!   rows of deeper networks, the bounds of the third layer on) start from
 //!   rows shared by all cells, take each cell's relaxation entry by entry,
-//!   and multiply all cells' rows, stacked, by the layer's `[W | b]`.
+//!   and multiply all cells' rows, stacked (kept as rows), by the layer's
+//!   `W` as it is stored; the offsets `λ·b` are summed row by row.
 //! * Interval images of hidden layers are products of `W` and `|W|` with
-//!   all cells' midpoints and radii.
+//!   all cells' midpoints and radii; where CROWN's bound does not certainly
+//!   beat them, a neuron's interval bound is the single-cell analysis's
+//!   directed one (so no box is looser than interval arithmetic's), and
+//!   the output's interval image is the single-cell analysis's.
 //!
 //! # Soundness
 //! The relaxations are [`relax`]'s, as in the single-cell analysis, and
@@ -34,15 +40,17 @@
 //! a product of `n`-term sums has error at most `γₙ·|A|·|B|` in any order
 //! of summation, with or without fused multiply-adds (Higham, §3.5), plus
 //! `TINY` for underflow. The error terms are:
-//! * a stacked product `Λ·[W | b]` of rows on a layer's output: `γ` times
-//!   `|Λ|·s`, with `s = |W|·|h|max + |b|` the layer's scale per cell
-//!   (as the single-cell analysis);
+//! * a stacked product `Λ·W` of rows on a layer's output, with the offsets
+//!   `Λ·b`: `γ` times `|Λ|·s`, with `s = |W|·|h|max + |b|` the layer's
+//!   scale per cell (as the single-cell analysis);
 //! * the right-associated products: every rounding in forming `T⁺`, `T⁻`,
 //!   `S`, `D`, the two products and their sum is at most
 //!   `γ_{n+8}·Σᵢ|Wⱼᵢ|·(|T⁺ᵢₖ| + |T⁻ᵢₖ|)` per coefficient, bounded by the
 //!   rank-one `γ_{n+8}·(Σᵢ|Wⱼᵢ|)·maxᵢ(|T⁺ᵢₖ| + |T⁻ᵢₖ|)` (looser by at most
 //!   the width, i.e. ~10⁻¹⁰ relative for 1000 neurons; cheap);
-//! * a ReLU step's products `λ·a`: `2u·|λ'|·|z|max`.
+//! * an activation step's products `λ·a`: `2u·|λ'|·|z|max`;
+//! * a hidden interval image from midpoints `m` and radii `r`:
+//!   `γ·|W|·(|m| + r)`, the radii rounded up.
 //!
 //! The bounds equal the single-cell analysis's up to these rounding terms
 //! (the tests compare them bound for bound); a cell whose numbers are not

@@ -367,6 +367,13 @@ fn chunk_offsets(
         for (&r, u) in own.iter().zip(&up[2 * out_m..]) {
             s[r] = s[r].min(*u);
         }
+        // every value is finite here (a unit row's is a finite side of the
+        // box, another's is at most its finite CROWN bound); kept as the
+        // guard of this function's promise, never to return a non-finite
+        // number
+        if !s.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         out.push(s);
     }
     Some(out)
@@ -787,6 +794,32 @@ mod tests {
         })
     }
 
+    /// Asserts that `count` uniform points of `cell` have every `dᵣ·f(x)`
+    /// at most `bounds[r]`; returns the number of checks.
+    fn above_samples(
+        net: &Network,
+        cell: &IBox,
+        dirs: &DMatrix<f64>,
+        bounds: &[f64],
+        rng: &mut Rng,
+        count: usize,
+    ) -> usize {
+        for _ in 0..count {
+            let x: Vec<f64> = (0..cell.dim())
+                .map(|i| rng.uniform(cell.lo[i], cell.hi[i]))
+                .collect();
+            let y = net.forward(&x);
+            for (r, b) in bounds.iter().enumerate() {
+                let v: f64 = dirs.row(r).iter().zip(&y).map(|(d, y)| d * y).sum();
+                assert!(
+                    v <= *b + 1e-12 * (1.0 + v.abs()),
+                    "{v} above {b} on {cell:?}"
+                );
+            }
+        }
+        count * bounds.len()
+    }
+
     /// Every batched offset is the single-cell analysis's up to rounding
     /// terms, and above every sampled output of its cell: ReLU, tanh and
     /// sigmoid networks (and mixed), CROWN and Fast-Lin.
@@ -836,16 +869,7 @@ mod tests {
                         );
                         compared += 1;
                     }
-                    for _ in 0..40 {
-                        let x: Vec<f64> = (0..n)
-                            .map(|i| rng.uniform(cell.lo[i], cell.hi[i]))
-                            .collect();
-                        let y = net.forward(&x);
-                        for (r, g) in got.iter().enumerate() {
-                            let v: f64 = dirs.row(r).iter().zip(&y).map(|(d, y)| d * y).sum();
-                            assert!(v <= *g + 1e-12 * (1.0 + v.abs()), "{v} above {g}");
-                        }
-                    }
+                    above_samples(&net, cell, &dirs, got, &mut rng, 40);
                 }
             }
         }
@@ -869,6 +893,17 @@ mod tests {
         let mut two_acts = relu.clone();
         two_acts.layers.insert(2, Layer::Act(Activation::Tanh));
         assert!(crown_offsets(&two_acts, one, &dirs, crown).is_none());
+        // a direction near the top of f64: finite, and above the samples
+        let huge = DMatrix::from_row_slice(1, 2, &[1e308, 1e308]);
+        let near = crown_offsets(&relu, one, &huge, crown).expect("finite");
+        above_samples(&relu, &cell, &huge, &near[0], &mut rng, 2000);
+        // ... and past it, on outputs a hundred times larger: declined
+        let mut loud = relu.clone();
+        if let Some(Layer::Affine { w, b }) = loud.layers.last_mut() {
+            *w *= 100.0;
+            *b *= 100.0;
+        }
+        assert!(crown_offsets(&loud, one, &huge, crown).is_none());
         let nan = IBox::new(vec![f64::NAN, -1.0], vec![1.0, 1.0]);
         assert!(crown_offsets(&relu, &[cell.clone(), nan], &dirs, crown).is_none());
         let huge = IBox::new(vec![-1e300, -1.0], vec![1e300, 1.0]);
@@ -1021,20 +1056,7 @@ mod tests {
                         "case {case}: IBP"
                     );
                 }
-                for _ in 0..50 {
-                    let x: Vec<f64> = (0..n)
-                        .map(|i| rng.uniform(cell.lo[i], cell.hi[i]))
-                        .collect();
-                    let y = net.forward(&x);
-                    for (r, b) in g.iter().enumerate() {
-                        let v: f64 = dirs.row(r).iter().zip(&y).map(|(d, y)| d * y).sum();
-                        assert!(
-                            v <= *b + 1e-12 * (1.0 + v.abs()),
-                            "case {case}: {v} above {b}"
-                        );
-                        samples += 1;
-                    }
-                }
+                samples += above_samples(&net, cell, &dirs, g, &mut rng, 50);
             }
         }
         eprintln!("{cases} networks: {bounds} bounds, {samples} sampled checks, largest relative difference {worst:.2e}");

@@ -315,9 +315,7 @@ pub fn cell_bounds(
         .then(|| batch::crown_offsets(net, std::slice::from_ref(&bbox), dirs, mode))
         .flatten()
         .and_then(|mut all| all.pop());
-    let own_slopes =
-        prop == NetPropagator::FastLin || (prop == NetPropagator::Crown && slope_steps == 0);
-    if let (true, Some(b)) = (own_slopes, &batched) {
+    if let (Some(_), Some(b)) = (own_slopes(prop, slope_steps), &batched) {
         return (b.clone(), Vec::new());
     }
     let a = Analysis::new(net, &bbox, mode);
@@ -359,16 +357,15 @@ pub fn cell_bounds(
     (b, issues)
 }
 
-/// The mode in which a uniform grid's cells go through
-/// [`batch::crown_offsets`], if they do: CROWN with its own slopes (no
-/// optimisation, no SDP) or Fast-Lin, on box cells.
-fn batched(plan: &NetPlan, region: &Region) -> Option<Mode> {
-    let mode = match plan.propagator {
-        NetPropagator::Crown if plan.slope_steps == 0 => Mode::Crown,
-        NetPropagator::FastLin => Mode::FastLin,
-        _ => return None,
-    };
-    matches!(region, Region::Box(_)).then_some(mode)
+/// The mode whose bounds [`batch::crown_offsets`] gives as they are, if
+/// the propagator's are those: CROWN with its own slopes (no optimisation,
+/// no SDP) or Fast-Lin.
+fn own_slopes(prop: NetPropagator, slope_steps: usize) -> Option<Mode> {
+    match prop {
+        NetPropagator::Crown if slope_steps == 0 => Some(Mode::Crown),
+        NetPropagator::FastLin => Some(Mode::FastLin),
+        _ => None,
+    }
 }
 
 /// SDP bounds of every row over `cell` (see [`crate::analysis::sdp`]): the
@@ -478,7 +475,9 @@ fn bound_all(
                     (within(b, Some(&root)), iss)
                 };
                 let done: Vec<Option<(Vec<f64>, Vec<Issue>)>> =
-                    if let Some(mode) = batched(plan, region) {
+                    if let (Some(mode), Region::Box(_)) =
+                        (own_slopes(plan.propagator, plan.slope_steps), region)
+                    {
                         // CROWN's own bounds of box cells: the cells of a group
                         // go through the network together (`analysis::batch`;
                         // the same bounds up to rounding terms), the groups on
@@ -496,7 +495,9 @@ fn bound_all(
                                     .into_iter()
                                     .map(|b| Some((within(b, Some(&root)), Vec::new())))
                                     .collect(),
-                                // not a ReLU chain, or a number overflowed: one by one
+                                // not a chain of affine layers and
+                                // activations, or a number overflowed:
+                                // one by one
                                 None => g.iter().map(|c| Some(one(c))).collect(),
                             }
                         })

@@ -356,3 +356,192 @@ fn stacked_rows_give_the_separate_passes() {
     }
     assert!(scaled > 40, "only {scaled} scaled rows");
 }
+
+mod common;
+
+/// The closed-loop kernel (a box of states under CROWN's own slopes: no
+/// allocation per step) against the general path of `ClosedLoop::step`,
+/// bound for bound, on random loops: 1–3 states, 1–2 controls, ReLU, tanh
+/// and sigmoid controllers with and without control limits, observed or
+/// full-state, with and without noise, model error and time variation,
+/// box and polytope boundaries; Reach-LP with and without CL-CROWN's
+/// intersection, and CL-CROWN. Every true next state of sampled states and
+/// noise lies in the kernel's set.
+#[test]
+fn closed_loop_kernel_matches_the_general_path() {
+    use ravel::analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
+    use ravel::sets::Region;
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()));
+    let mut compared = 0usize;
+    for seed in 0..150u64 {
+        let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9) ^ 0xC105);
+        let n = 1 + rng.below(3);
+        let m = 1 + rng.below(2);
+        let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
+        let observed = seed % 4 == 1;
+        let p = if observed { 1 + rng.below(n + 1) } else { n };
+        let a = DMatrix::from_fn(n, n, |i, j| {
+            if i == j {
+                0.9
+            } else {
+                0.0
+            }
+        } + rng.normal() * 0.25);
+        let mut b = DMatrix::from_fn(n, m, |_, _| rng.normal() * 0.5);
+        if seed % 5 == 3 {
+            // dense control rows of the facets: back-substituted, not scaled
+            b = b.map(|v| v + 0.3);
+        }
+        let c = DVector::from_fn(n, |_, _| rng.normal() * 0.1);
+        let obs = if observed {
+            DMatrix::from_fn(n, p, |_, _| rng.normal())
+        } else {
+            DMatrix::identity(n, n)
+        };
+        let noisy = seed % 2 == 1;
+        let mut noise = |k: usize| {
+            let r = if noisy { 0.05 } else { 0.0 };
+            let lo: Vec<f64> = (0..k).map(|_| -rng.uniform(0.0, r)).collect();
+            let hi: Vec<f64> = (0..k).map(|_| rng.uniform(0.0, r)).collect();
+            IBox::new(lo, hi)
+        };
+        let (w, v) = (noise(n), noise(p));
+        let err = (seed % 6 == 1).then(|| ModelError {
+            a: a.map(|x| x.abs() * 0.05 + 0.01),
+            b: b.map(|x| x.abs() * 0.05 + 0.01),
+            c: c.map(|x| x.abs() * 0.05 + 0.01),
+        });
+        let plant = Plant {
+            a,
+            b,
+            c,
+            obs,
+            w,
+            v,
+            err,
+        };
+        let plants = if seed % 7 == 2 {
+            (0..3)
+                .map(|_| {
+                    let mut q = plant.clone();
+                    q.a = q.a.map(|x| x + rng.normal() * 0.1);
+                    q.b = q.b.map(|x| x + rng.normal() * 0.1);
+                    q
+                })
+                .collect()
+        } else {
+            vec![plant]
+        };
+        let mut net = common::random_network(&mut rng, p, m, act, (3, 9));
+        if (seed / 2) % 2 == 1 {
+            let lo: Vec<f64> = (0..m).map(|_| -rng.uniform(0.2, 1.0)).collect();
+            let hi: Vec<f64> = (0..m).map(|_| rng.uniform(0.2, 1.0)).collect();
+            net = net.with_saturation(&lo, &hi);
+        }
+        let fast = ClosedLoop::time_varying(plants, net);
+        let general = fast.clone().with_kernel(false);
+        let centre: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let radius: Vec<f64> = (0..n).map(|_| rng.uniform(0.01, 0.5)).collect();
+        let x = IBox::new(
+            centre.iter().zip(&radius).map(|(c, r)| c - r).collect(),
+            centre.iter().zip(&radius).map(|(c, r)| c + r).collect(),
+        );
+        let region = Region::Box(x.clone());
+        let mut boundaries = vec![Boundary::Box];
+        if n == 2 {
+            boundaries.push(Boundary::spread(5));
+        }
+        for t in 0..3 {
+            for boundary in &boundaries {
+                for prop in [Propagator::ReachLp, Propagator::CrownSeparate] {
+                    for alone in [false, true] {
+                        let step = |cl: &ClosedLoop| {
+                            if alone {
+                                cl.step_alone(t, &region, prop, boundary)
+                            } else {
+                                cl.step(t, &region, prop, boundary)
+                            }
+                        };
+                        let (k, g) = (step(&fast), step(&general));
+                        assert_eq!(k.cut, g.cut, "seed {seed} t {t} {prop:?}");
+                        let (kb, gb) = (k.set.bbox(), g.set.bbox());
+                        for i in 0..n {
+                            assert!(
+                                close(kb.lo[i], gb.lo[i]) && close(kb.hi[i], gb.hi[i]),
+                                "seed {seed} t {t} {prop:?} alone {alone}: x[{i}] kernel {kb:?} general {gb:?}"
+                            );
+                        }
+                        if let (
+                            Region::Polytope { rows: kr, .. },
+                            Region::Polytope { rows: gr, .. },
+                        ) = (&k.set, &g.set)
+                        {
+                            for (a, b) in kr.iter().zip(gr) {
+                                assert!(close(a.1, b.1), "seed {seed} t {t}: facet {a:?} vs {b:?}");
+                            }
+                        }
+                        compared += 1;
+                        if prop == Propagator::ReachLp && !alone {
+                            for _ in 0..50 {
+                                let xs: Vec<f64> =
+                                    (0..n).map(|i| rng.uniform(x.lo[i], x.hi[i])).collect();
+                                let pl = fast.plant_at(t);
+                                let ws: Vec<f64> = (0..n)
+                                    .map(|i| rng.uniform(pl.w.lo[i], pl.w.hi[i]))
+                                    .collect();
+                                let vs: Vec<f64> = (0..p)
+                                    .map(|j| rng.uniform(pl.v.lo[j], pl.v.hi[j]))
+                                    .collect();
+                                let (_, next) = fast.simulate(t, &xs, &ws, &vs);
+                                assert!(
+                                    k.set.contains_point(&next),
+                                    "seed {seed} t {t}: {next:?} outside {:?}",
+                                    k.set
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared} steps compared");
+}
+
+/// Hostile boxes take the kernel's overflow path as the general path's:
+/// a state near the top of `f64` or a NaN gives the whole space, flagged.
+#[test]
+fn closed_loop_kernel_overflows_as_the_general_path_does() {
+    use ravel::analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
+    use ravel::sets::Region;
+    let mut rng = Rng::new(7);
+    let net = common::random_network(&mut rng, 2, 1, Activation::Relu, (2, 5));
+    let plant = Plant {
+        a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+        b: DMatrix::from_row_slice(2, 1, &[0.5, 1.0]),
+        c: DVector::zeros(2),
+        obs: DMatrix::identity(2, 2),
+        w: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+        v: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+        err: None,
+    };
+    let fast = ClosedLoop::new(plant, net);
+    let general = fast.clone().with_kernel(false);
+    for (lo, hi) in [
+        (vec![1e307, 0.0], vec![1.7e308, 1.0]),
+        (vec![-1.7e308, -1.7e308], vec![1.7e308, 1.7e308]),
+        (vec![f64::NAN, 0.0], vec![1.0, 1.0]),
+        (vec![0.0, 0.0], vec![f64::INFINITY, 1.0]),
+    ] {
+        let x = Region::Box(IBox::new(lo, hi));
+        for prop in [Propagator::ReachLp, Propagator::CrownSeparate] {
+            let (k, g) = (
+                fast.step(0, &x, prop, &Boundary::Box),
+                general.step(0, &x, prop, &Boundary::Box),
+            );
+            assert!(k.cut.is_some(), "{x:?} {prop:?}: {k:?}");
+            assert_eq!(k.cut, g.cut);
+            assert_eq!(k.set, g.set);
+        }
+    }
+}

@@ -24,6 +24,8 @@ use crate::nn::{mat_batch_into, Network};
 use crate::num::{gamma, mul0, slack, sum_upper};
 use crate::sets::{IBox, Region};
 
+mod kernel;
+
 /// A linear plant with bounded noise.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plant {
@@ -282,6 +284,9 @@ pub struct ClosedLoop {
     /// back-substitution through the controller (0: CROWN's own slopes;
     /// see [`Analysis::upper_optimised`]).
     pub slope_steps: usize,
+    /// Whether box states under CROWN's own slopes take the allocation-free
+    /// kernel (`kernel`); off only to compare it with the general path.
+    kernel: bool,
 }
 
 impl ClosedLoop {
@@ -326,6 +331,7 @@ impl ClosedLoop {
             obs_xv,
             dynamics,
             slope_steps: 0,
+            kernel: true,
         }
     }
 
@@ -333,6 +339,20 @@ impl ClosedLoop {
     pub fn with_slope_steps(mut self, steps: usize) -> ClosedLoop {
         self.slope_steps = steps;
         self
+    }
+
+    /// The same loop with the allocation-free kernel for box states on
+    /// (the default) or off (every step by the general path: for tests and
+    /// benchmarks that compare the two).
+    pub fn with_kernel(mut self, on: bool) -> ClosedLoop {
+        self.kernel = on;
+        self
+    }
+
+    /// Whether a box of states takes the kernel: CROWN's own slopes, and a
+    /// controller the kernel takes.
+    fn kernel_applies(&self) -> bool {
+        self.kernel && self.slope_steps == 0 && kernel::applies(self)
     }
 
     /// The dynamics of step `t`.
@@ -521,70 +541,31 @@ impl ClosedLoop {
         alone: bool,
     ) -> Step {
         let n = self.states();
-        let bbox = x.bbox();
-        let y = self.observation_box(&bbox);
         // Every intermediate result is checked for finiteness before it is
         // used: a NaN that met `min`/`max` could otherwise turn into a finite,
         // wrong bound. Any non-finite value makes the whole step an overflow.
-        if !(x.is_finite() && y.is_finite()) {
+        if !x.is_finite() {
             return Step::overflowed(n, Vec::new());
         }
         let facets = self.facets(boundary, t + 1);
-        let mut extra = None;
-        let bound = match prop {
-            Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp => {
-                // Reach-LP, intersected with CL-CROWN from the same analysis:
-                // never looser than CL-CROWN (CL-CROWN's control box is also
-                // intersected with IBP, which Reach-LP's per-facet bound is not)
-                let analysis = Analysis::new(&self.net, &y, Mode::Crown);
-                if !analysis.is_finite() {
-                    return Step::overflowed(n, Vec::new());
-                }
-                // the facets' bound and CL-CROWN's control box, from one
-                // back-substitution through the controller
-                let spec = LinearUpper::of_spec(&facets);
-                let (bound, u) = self.back_step_with(t, &spec, &analysis, &bbox, true);
-                let Some(u) = u.filter(IBox::is_finite) else {
-                    return Step::overflowed(n, Vec::new());
-                };
-                if !alone {
-                    let (separate, more) = self
-                        .push_control_box(t, &spec, &bbox, &u)
-                        .concretize_region(x);
-                    extra = Some((separate, more));
-                }
-                bound
-            }
-            Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
-                let u = match prop {
-                    Propagator::IbpSeparate => {
-                        let a = Analysis::new(&self.net, &y, Mode::Ibp);
-                        a.is_finite().then(|| a.output_box(Mode::Ibp))
-                    }
-                    Propagator::CrownSeparate => {
-                        let a = Analysis::new(&self.net, &y, Mode::Crown);
-                        a.is_finite().then(|| a.output_box(Mode::Crown))
-                    }
-                    _ => self.sg_ibp_control(&y),
-                };
-                match u.filter(IBox::is_finite) {
-                    Some(u) => self.push_control_box(t, &LinearUpper::of_spec(&facets), &bbox, &u),
-                    None => return Step::overflowed(n, Vec::new()),
+        let (mut ub, mut issues) = match (prop, x) {
+            // a box of states under CROWN's own slopes takes the kernel
+            // (the same bounds up to rounding terms, no allocation per step)
+            (Propagator::ReachLp | Propagator::ReachSdp, Region::Box(b))
+                if self.kernel_applies() =>
+            {
+                match kernel::reach_lp(self, t, b, &facets, alone) {
+                    Some(kernel::Answer::Bounds { ub, .. }) => (ub, Vec::new()),
+                    _ => return Step::overflowed(n, Vec::new()),
                 }
             }
+            _ => match self.general_bounds(t, x, &facets, prop, alone) {
+                Ok(both) => both,
+                Err(issues) => return Step::overflowed(n, issues),
+            },
         };
-        let (mut ub, mut issues) = bound.concretize_region(x);
         if !all_finite(&ub) {
             return Step::overflowed(n, issues);
-        }
-        if let Some((other, more)) = extra {
-            issues.extend(more);
-            if !all_finite(&other) {
-                return Step::overflowed(n, issues);
-            }
-            for (u, o) in ub.iter_mut().zip(other) {
-                *u = u.min(o);
-            }
         }
         if prop == Propagator::ReachSdp {
             let (sdp, more) = self.reach_sdp(t, x, &facets);
@@ -602,6 +583,87 @@ impl ClosedLoop {
             }
         }
         Step::new(self.region_of(boundary, t + 1, &ub), issues)
+    }
+
+    /// The facet bounds of one step by the general path (any region, any
+    /// slopes; the SDP's own part is added by the caller) and the issues
+    /// met, or (`Err`) the issues met before a bound overflowed. A box of
+    /// states under CROWN's own slopes takes CL-CROWN's control box from
+    /// the kernel, as Reach-LP does there: one control box for both, so
+    /// Reach-LP is never looser than CL-CROWN, exactly.
+    fn general_bounds(
+        &self,
+        t: usize,
+        x: &Region,
+        facets: &DMatrix<f64>,
+        prop: Propagator,
+        alone: bool,
+    ) -> Result<(Vec<f64>, Vec<Issue>), Vec<Issue>> {
+        let bbox = x.bbox();
+        let y = &self.observation_box(&bbox);
+        if !y.is_finite() {
+            return Err(Vec::new());
+        }
+        let mut extra = None;
+        let bound = match prop {
+            Propagator::ReachLp | Propagator::CrownUnrolled | Propagator::ReachSdp => {
+                // Reach-LP, intersected with CL-CROWN from the same analysis:
+                // never looser than CL-CROWN (CL-CROWN's control box is also
+                // intersected with IBP, which Reach-LP's per-facet bound is not)
+                let analysis = Analysis::new(&self.net, y, Mode::Crown);
+                if !analysis.is_finite() {
+                    return Err(Vec::new());
+                }
+                // the facets' bound and CL-CROWN's control box, from one
+                // back-substitution through the controller
+                let spec = LinearUpper::of_spec(facets);
+                let (bound, u) = self.back_step_with(t, &spec, &analysis, &bbox, true);
+                let Some(u) = u.filter(IBox::is_finite) else {
+                    return Err(Vec::new());
+                };
+                if !alone {
+                    let (separate, more) = self
+                        .push_control_box(t, &spec, &bbox, &u)
+                        .concretize_region(x);
+                    extra = Some((separate, more));
+                }
+                bound
+            }
+            Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
+                let u = match (prop, x) {
+                    (Propagator::IbpSeparate, _) => {
+                        let a = Analysis::new(&self.net, y, Mode::Ibp);
+                        a.is_finite().then(|| a.output_box(Mode::Ibp))
+                    }
+                    (Propagator::CrownSeparate, Region::Box(b)) if self.kernel_applies() => {
+                        kernel::control_box(self, b).flatten()
+                    }
+                    (Propagator::CrownSeparate, _) => {
+                        let a = Analysis::new(&self.net, y, Mode::Crown);
+                        a.is_finite().then(|| a.output_box(Mode::Crown))
+                    }
+                    _ => self.sg_ibp_control(y),
+                };
+                match u.filter(IBox::is_finite) {
+                    Some(u) => self.push_control_box(t, &LinearUpper::of_spec(facets), &bbox, &u),
+                    None => return Err(Vec::new()),
+                }
+            }
+        };
+        let (mut ub, mut issues) = bound.concretize_region(x);
+        if !all_finite(&ub) {
+            return Err(issues);
+        }
+        if let Some((other, more)) = extra {
+            issues.extend(more);
+            if !all_finite(&other) {
+                return Err(issues);
+            }
+            for (u, o) in ub.iter_mut().zip(other) {
+                *u = u.min(o);
+            }
+        }
+        Ok((ub, issues))
     }
 
     /// Reach-SDP bounds of every facet for states in `x` at step `t` (see

@@ -274,7 +274,7 @@ impl<'a> Packed<'a> {
 }
 
 /// `Some(s)` when the column-major `n × m` matrix `w` is `s·I` with `s = ±1`.
-fn signed_identity(w: &[f64], n: usize, m: usize) -> Option<f64> {
+pub(crate) fn signed_identity(w: &[f64], n: usize, m: usize) -> Option<f64> {
     if n != m || n == 0 {
         return None;
     }
@@ -322,7 +322,7 @@ fn inactive(hi: f64) -> bool {
 
 /// Whether every row of `w` has at most one nonzero entry (a one-column
 /// matrix, or a diagonal one such as a clamp's `±I`).
-fn one_per_row(w: &DMatrix<f64>) -> bool {
+pub(crate) fn one_per_row(w: &DMatrix<f64>) -> bool {
     if w.ncols() <= 1 {
         return true;
     }
@@ -362,7 +362,7 @@ fn single_rows(
 /// A row's nonzeros when it has at most one, finite: `Some(None)` for a
 /// row of zeros, `Some(Some((column, value)))` for one; `None` otherwise
 /// (two or more, or a non-finite one).
-fn one_nonzero(row: &[f64]) -> Option<Option<(usize, f64)>> {
+pub(crate) fn one_nonzero(row: &[f64]) -> Option<Option<(usize, f64)>> {
     let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
     match (nz.next(), nz.next()) {
         (None, _) => Some(None),

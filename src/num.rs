@@ -146,6 +146,16 @@ impl Acc {
         self.n += n;
     }
 
+    /// Add the terms of another running sum: the same terms summed in
+    /// another order, which the error bound covers (it holds for any
+    /// order of summation).
+    #[inline]
+    pub fn merge(&mut self, other: Acc) {
+        self.s += other.s;
+        self.a += other.a;
+        self.n += other.n;
+    }
+
     /// The running sum of `n` terms whose rounded sum is `s` and whose
     /// absolute values' rounded sum is `a`, both summed term by term in
     /// the same order as [`Acc::add`] would: for loops that keep the three
@@ -266,8 +276,14 @@ pub fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
 /// where `k` is a relative error factor and `m` bounds `|x|`.
 #[inline]
 pub fn slack(k: f64, a: &[f64], m: &[f64]) -> f64 {
+    slack_of_sum(k, abs_dot(a, m))
+}
+
+/// [`slack`] from `Σ|aᵢ|·mᵢ` summed in `f64` by the caller (any order).
+#[inline]
+pub fn slack_of_sum(k: f64, abs_dot: f64) -> f64 {
     // the factor 1.0625 also covers the rounding of the sum itself
-    (k * abs_dot(a, m) * 1.0625 + TINY).next_up()
+    (k * abs_dot * 1.0625 + TINY).next_up()
 }
 
 /// The largest absolute value in `[lo, hi]`.

@@ -44,7 +44,7 @@ use super::ClosedLoop;
 use crate::analysis::crown::{one_nonzero, one_per_row, signed_identity};
 use crate::analysis::relax::{image, relax, Relax};
 use crate::nn::{Activation, Layer};
-use crate::num::{abs_max, gamma, mul0, slack, term_upper, Acc, U};
+use crate::num::{abs_max, gamma, mul0, slack, slack_of_sum, term_lower, term_upper, Acc, U};
 use crate::sets::IBox;
 
 /// The widest layer the kernel takes (neurons). Row-by-row products win
@@ -81,6 +81,8 @@ struct Workspace {
     st_coef: Vec<f64>,
     st_off: Vec<f64>,
     stored: Vec<bool>,
+    /// Per layer: whether any of its rows' bounds are stored.
+    layer_stored: Vec<bool>,
     /// Per layer: whether it is affine with at most one nonzero per row.
     opr: Vec<bool>,
     /// Per layer: `Some(±1)` for an affine layer that is `±I`.
@@ -281,6 +283,8 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
     ws.wz.resize(total, 0.0);
     ws.stored.clear();
     ws.stored.resize(total, false);
+    ws.layer_stored.clear();
+    ws.layer_stored.resize(layers.len(), false);
     ws.st_off.clear();
     ws.st_off.resize(2 * total, 0.0);
     ws.st_coef.clear();
@@ -340,8 +344,26 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
                 let rows = w.nrows();
                 let (before, after) = ws.lo.split_at_mut(z);
                 let (hbefore, hafter) = ws.hi.split_at_mut(z);
-                // |W|·|h|max, for the error terms of products with W
-                {
+                if let Some(sign) = ws.ident[i] {
+                    // z = ±h + b: the sums of the general case without
+                    // its zero terms (`±0`, which leave a sum unchanged
+                    // once it holds `0 + t`), so the same numbers
+                    let n = rows;
+                    for j in 0..n {
+                        let (xl, xh, bj) = (before[a + j], hbefore[a + j], b[j]);
+                        let m = 0.0 + abs_max(xl, xh);
+                        ws.wz[z + j] = Acc::from_parts(m, m, n).upper();
+                        let (tl, th) = (
+                            0.0 + term_lower(sign, xl, xh),
+                            0.0 + term_upper(sign, xl, xh),
+                        );
+                        after[j] =
+                            Acc::from_parts(tl + bj, (0.0 + tl.abs()) + bj.abs(), n + 1).lower();
+                        hafter[j] =
+                            Acc::from_parts(th + bj, (0.0 + th.abs()) + bj.abs(), n + 1).upper();
+                    }
+                } else {
+                    // |W|·|h|max, for the error terms of products with W
                     let out = &mut ws.wz[z..z + rows];
                     out.fill(0.0);
                     for k in 0..w.ncols() {
@@ -354,16 +376,16 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
                     for s in out.iter_mut() {
                         *s = Acc::from_parts(*s, *s, w.ncols()).upper();
                     }
+                    image_into(
+                        w,
+                        Some(b.as_slice()),
+                        &before[a..z],
+                        &hbefore[a..z],
+                        &mut after[..rows],
+                        &mut hafter[..rows],
+                        &mut sums,
+                    );
                 }
-                image_into(
-                    w,
-                    Some(b.as_slice()),
-                    &before[a..z],
-                    &hbefore[a..z],
-                    &mut after[..rows],
-                    &mut hafter[..rows],
-                    &mut sums,
-                );
                 let next_act = match layers.get(i + 1) {
                     Some(Layer::Act(act)) => Some(*act),
                     _ => None,
@@ -399,6 +421,7 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
                             both[side] = concretize(&cur, &ws.lo[..p], &ws.hi[..p], Acc::of(off));
                         }
                         ws.stored[z + j] = true;
+                        ws.layer_stored[i] = true;
                         ws.hi[z + j] = ws.hi[z + j].min(both[0]);
                         ws.lo[z + j] = ws.lo[z + j].max(-both[1]);
                     }
@@ -450,45 +473,67 @@ fn back(
             Layer::Affine { w, b } => {
                 let rows = w.nrows();
                 let z = ws.pos[i + 1];
-                if let Some(Some((j, c))) = one_nonzero(cur) {
-                    if ws.stored[z + j] {
-                        finish_stored(ws, z + j, c, cur, acc);
-                        return;
+                if ws.layer_stored[i] {
+                    if let Some(Some((j, c))) = one_nonzero(cur) {
+                        if ws.stored[z + j] {
+                            finish_stored(ws, z + j, c, cur, acc);
+                            return;
+                        }
                     }
                 }
-                acc.add_products(cur, b.as_slice());
+                // the offset's terms `cur·b` and the product's error scale
+                // `|cur|·(|W|·|h|max)` in one pass
+                let (mut s, mut a, mut e) = (0.0, 0.0, 0.0);
+                for ((&l, &bj), &m) in cur.iter().zip(b.as_slice()).zip(&ws.wz[z..z + rows]) {
+                    let t = mul0(l, bj);
+                    s += t;
+                    a += t.abs();
+                    e += mul0(l.abs(), m);
+                }
+                acc.merge(Acc::from_parts(s, a, rows));
                 if let Some(s) = ws.ident[i] {
                     if s < 0.0 {
                         cur.iter_mut().for_each(|c| *c = -*c);
                     }
                     continue;
                 }
-                acc.add(slack(gamma(rows + 2), cur, &ws.wz[z..z + rows]));
+                acc.add(slack_of_sum(gamma(rows + 2), e));
+                let cols = w.ncols();
                 spare.clear();
-                spare.extend(
-                    w.as_slice()
-                        .chunks_exact(rows.max(1))
-                        .take(w.ncols())
-                        .map(|col| dot(cur, col)),
-                );
-                if rows == 0 {
-                    spare.clear();
-                    spare.resize(w.ncols(), 0.0);
+                spare.resize(cols, 0.0);
+                if rows > 0 {
+                    for (o, col) in spare.iter_mut().zip(w.as_slice().chunks_exact(rows)) {
+                        *o = dot(cur, col);
+                    }
                 }
                 std::mem::swap(cur, spare);
             }
             Layer::Act(_) => {
-                let a = ws.pos[i];
-                let rel = &ws.rel[a..a + cur.len()];
-                for (c, r) in cur.iter_mut().zip(rel) {
+                // each coefficient times the line its sign selects, the
+                // intercepts' terms, and the scaled coefficients' error
+                // scale `|cur|·|z|max`, in one pass
+                let a0 = ws.pos[i];
+                let k = cur.len();
+                let (mut s, mut a, mut e, mut count) = (0.0, 0.0, 0.0, 0usize);
+                for ((c, r), &m) in cur
+                    .iter_mut()
+                    .zip(&ws.rel[a0..a0 + k])
+                    .zip(&ws.absm[a0..a0 + k])
+                {
                     let l = *c;
                     let up = l >= 0.0;
                     let (slope, intercept) = if up { (r.au, r.bu) } else { (r.al, r.bl) };
-                    *c = l * slope;
+                    let scaled = l * slope;
+                    *c = scaled;
                     let nonzero = l != 0.0;
-                    acc.add_counted(if nonzero { l * intercept } else { 0.0 }, nonzero);
+                    let t = if nonzero { l * intercept } else { 0.0 };
+                    s += t;
+                    a += t.abs();
+                    count += usize::from(nonzero);
+                    e += mul0(scaled.abs(), m);
                 }
-                acc.add(slack(2.0 * U, cur, &ws.absm[a..a + cur.len()]));
+                acc.merge(Acc::from_parts(s, a, count));
+                acc.add(slack_of_sum(2.0 * U, e));
             }
         }
     }

@@ -76,6 +76,17 @@ impl IBox {
         )
     }
 
+    /// Grow this box to its hull with `other`, in place ([`IBox::hull`]'s
+    /// numbers, without new vectors).
+    pub fn hull_with(&mut self, other: &IBox) {
+        for (a, b) in self.lo.iter_mut().zip(&other.lo) {
+            *a = a.min(*b);
+        }
+        for (a, b) in self.hi.iter_mut().zip(&other.hi) {
+            *a = a.max(*b);
+        }
+    }
+
     /// The intersection of two boxes (may be empty if they do not overlap).
     pub fn intersect(&self, other: &IBox) -> IBox {
         IBox::new(
@@ -266,10 +277,17 @@ pub enum Region {
 impl Region {
     /// A box containing the set (exact for boxes and balls, rounded outward).
     pub fn bbox(&self) -> IBox {
+        self.bbox_ref().into_owned()
+    }
+
+    /// [`Region::bbox`], borrowed where the region stores it (boxes and
+    /// polytopes; a ball's is computed).
+    pub fn bbox_ref(&self) -> std::borrow::Cow<'_, IBox> {
+        use std::borrow::Cow;
         match self {
-            Region::Box(b) => b.clone(),
-            Region::Polytope { bbox, .. } => bbox.clone(),
-            Region::Ball { center, radius, .. } => IBox::new(
+            Region::Box(b) => Cow::Borrowed(b),
+            Region::Polytope { bbox, .. } => Cow::Borrowed(bbox),
+            Region::Ball { center, radius, .. } => Cow::Owned(IBox::new(
                 center
                     .iter()
                     .zip(radius)
@@ -280,7 +298,7 @@ impl Region {
                     .zip(radius)
                     .map(|(c, r)| num::sum_upper([*c, *r]))
                     .collect(),
-            ),
+            )),
         }
     }
 

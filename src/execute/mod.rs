@@ -222,7 +222,7 @@ fn certainly_empty(cell: &Region) -> bool {
 /// refers to and whether an LP solver issue weakened it. A set that
 /// overflowed gives the margin `−∞` at its step (never a proof); so does a
 /// margin computation that produced NaN.
-fn cell_margin(prop: &Property, sets: &[Step]) -> (f64, usize, bool) {
+fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
     match &prop.kind {
         PropertyKind::Goal(g) => {
             let t = sets.len() - 1;
@@ -449,18 +449,23 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
         return sample_range(plan, ctl, 0..plan.samples, &special, &counter);
     }
     let chunk = plan.samples.div_ceil(threads);
+    let range = |i: usize| (i * chunk).min(plan.samples)..((i + 1) * chunk).min(plan.samples);
+    // the calling thread samples the first range (one thread fewer to start)
     let parts: Vec<MonteCarlo> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..threads)
+        let workers: Vec<_> = (1..threads)
             .map(|i| {
-                let range = (i * chunk).min(plan.samples)..((i + 1) * chunk).min(plan.samples);
                 let (special, counter) = (&special, &counter);
+                let range = range(i);
                 scope.spawn(move || sample_range(plan, ctl, range, special, counter))
             })
             .collect();
-        workers
-            .into_iter()
-            .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
+        let mut parts = vec![sample_range(plan, ctl, range(0), &special, &counter)];
+        parts.extend(
+            workers
+                .into_iter()
+                .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+        );
+        parts
     });
     let mut parts = parts.into_iter();
     let mut all = parts.next().expect("at least one part");
@@ -792,6 +797,24 @@ struct Partitioned {
     stop: Stop,
     /// Cells propagated (a refinement's parents and a grid's root included).
     calls: usize,
+    /// `margins[c][p]`: [`cell_margin`] of property `p` on cell `c`'s sets
+    /// (computed where the cell was, by the thread that propagated it).
+    margins: Vec<Vec<Margin>>,
+}
+
+/// A property's margin on one cell, the step it refers to, and whether an
+/// LP solver issue weakened it (see [`cell_margin`]).
+type Margin = (f64, usize, bool);
+
+/// One cell's sets and its [`cell_margins`].
+type CellResult = (Vec<Step>, Vec<Margin>);
+
+/// [`cell_margin`] of every property on one cell's sets.
+fn cell_margins(plan: &Plan, sets: &[Step]) -> Vec<Margin> {
+    plan.properties
+        .iter()
+        .map(|p| cell_margin(p, sets))
+        .collect()
 }
 
 /// A hull boundary takes its directions from the samples of each step;
@@ -868,46 +891,52 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
             done: i,
             total: Some(regions.len()),
         });
-        propagate_cell_until(plan, &regions[i], root.as_deref(), &stop)
+        let sets = propagate_cell_until(plan, &regions[i], root.as_deref(), &stop);
+        let margins = cell_margins(plan, &sets);
+        (sets, margins)
     };
     let threads = ctl.threads.clamp(1, regions.len().max(1));
-    let sets = if threads == 1 {
+    let done: Vec<CellResult> = if threads == 1 {
         (0..regions.len()).map(one).collect()
     } else {
         // cells are independent: threads take the next index, and the
         // sets are put back in cell order
         let next = std::sync::atomic::AtomicUsize::new(0);
-        let mut slots: Vec<Option<Vec<Step>>> = vec![None; regions.len()];
-        let done: Vec<Vec<(usize, Vec<Step>)>> = std::thread::scope(|scope| {
-            let workers: Vec<_> = (0..threads)
-                .map(|_| {
-                    scope.spawn(|| {
-                        let mut mine = Vec::new();
-                        loop {
-                            let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            if i >= regions.len() {
-                                break mine;
-                            }
-                            mine.push((i, one(i)));
-                        }
-                    })
-                })
-                .collect();
-            workers
-                .into_iter()
-                .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .collect()
+        let mut slots: Vec<Option<CellResult>> = vec![None; regions.len()];
+        let work = || {
+            let mut mine = Vec::new();
+            loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if i >= regions.len() {
+                    break mine;
+                }
+                mine.push((i, one(i)));
+            }
+        };
+        // the calling thread is one of the workers: one thread fewer to
+        // start, and its warm caches and heap take a share of the cells
+        let done: Vec<Vec<(usize, CellResult)>> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (1..threads).map(|_| scope.spawn(work)).collect();
+            let mut done = vec![work()];
+            done.extend(
+                workers
+                    .into_iter()
+                    .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+            );
+            done
         });
         for (i, steps) in done.into_iter().flatten() {
             slots[i] = Some(steps);
         }
         slots.into_iter().flatten().collect()
     };
+    let (sets, margins) = done.into_iter().unzip();
     Partitioned {
         cells: regions.iter().map(Region::bbox).collect(),
         sets,
         stop: Stop::Grid,
         calls,
+        margins,
     }
 }
 
@@ -1002,23 +1031,31 @@ fn partition_guided(
             .unwrap_or(std::cmp::Ordering::Equal)
     });
     let part = leaves.iter().map(|l| l.cell.clone()).collect();
-    let sets = leaves.into_iter().filter_map(|l| l.value).collect();
+    let sets: Vec<Vec<Step>> = leaves.into_iter().filter_map(|l| l.value).collect();
+    let margins = sets.iter().map(|c| cell_margins(plan, c)).collect();
     Partitioned {
         cells: part,
         sets,
         stop: r.stop,
         calls: r.calls,
+        margins,
     }
 }
 
 /// The verdict of every property: FALSIFIED by a sampled counterexample,
 /// VERIFIED by certified margins on every cell (no solver issue, no cut
 /// step), UNSURE otherwise.
-fn verdicts(plan: &Plan, cells: &[Vec<Step>], mc: &MonteCarlo) -> Vec<PropertyResult> {
+fn verdicts(
+    plan: &Plan,
+    cells: &[Vec<Step>],
+    margins: &[Vec<Margin>],
+    mc: &MonteCarlo,
+) -> Vec<PropertyResult> {
     plan.properties
         .iter()
         .zip(&mc.worst)
-        .map(|(prop, worst)| {
+        .enumerate()
+        .map(|(k, (prop, worst))| {
             let kind = match prop.kind {
                 PropertyKind::Goal(_) => Kind::Goal,
                 PropertyKind::Avoid { .. } => Kind::Avoid,
@@ -1030,8 +1067,8 @@ fn verdicts(plan: &Plan, cells: &[Vec<Step>], mc: &MonteCarlo) -> Vec<PropertyRe
             };
             let mut issue = false;
             let mut cut: Option<(usize, Cut)> = None;
-            for c in cells {
-                let (m, t, i) = cell_margin(prop, c);
+            for (c, cm) in cells.iter().zip(margins) {
+                let (m, t, i) = cm[k];
                 issue |= i;
                 if m < margin || m.is_nan() {
                     margin = sane(m);
@@ -1095,10 +1132,11 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
     let cells = part.sets;
     let reach: Vec<IBox> = (0..=plan.horizon)
         .map(|t| {
-            cells
-                .iter()
-                .skip(1)
-                .fold(cells[0][t].set.bbox(), |h, c| h.hull(&c[t].set.bbox()))
+            let mut h = cells[0][t].set.bbox();
+            for c in &cells[1..] {
+                h.hull_with(&c[t].set.bbox_ref());
+            }
+            h
         })
         .collect();
     let mut solver_issues: Vec<(usize, Issue)> = cells
@@ -1111,7 +1149,7 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         .collect();
     solver_issues.sort();
     solver_issues.dedup();
-    let properties = verdicts(plan, &cells, &mc);
+    let properties = verdicts(plan, &cells, &part.margins, &mc);
     let cut = cells
         .iter()
         .filter_map(|c| first_cut(c))

@@ -164,6 +164,12 @@ pub(super) fn control_box(cl: &ClosedLoop, x: &IBox) -> Option<Option<IBox>> {
     }))
 }
 
+/// `v` as `n` copies of `value`, in its own memory once it has grown.
+fn refill<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
+    v.clear();
+    v.resize(n, value);
+}
+
 /// `out[j] = |W_j|·m` rounded up (the sums of `weight_scale`, in its order).
 fn scale_into(w: &DMatrix<f64>, m: &[f64], out: &mut Vec<f64>) {
     let rows = w.nrows();
@@ -271,24 +277,14 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
         au: 0.0,
         bu: 0.0,
     };
-    ws.lo.clear();
-    ws.lo.resize(total, 0.0);
-    ws.hi.clear();
-    ws.hi.resize(total, 0.0);
-    ws.rel.clear();
-    ws.rel.resize(total, zero);
-    ws.absm.clear();
-    ws.absm.resize(total, 0.0);
-    ws.wz.clear();
-    ws.wz.resize(total, 0.0);
-    ws.stored.clear();
-    ws.stored.resize(total, false);
-    ws.layer_stored.clear();
-    ws.layer_stored.resize(layers.len(), false);
-    ws.st_off.clear();
-    ws.st_off.resize(2 * total, 0.0);
-    ws.st_coef.clear();
-    ws.st_coef.resize(2 * p * total, 0.0);
+    for v in [&mut ws.lo, &mut ws.hi, &mut ws.absm, &mut ws.wz] {
+        refill(v, total, 0.0);
+    }
+    refill(&mut ws.rel, total, zero);
+    refill(&mut ws.stored, total, false);
+    refill(&mut ws.layer_stored, layers.len(), false);
+    refill(&mut ws.st_off, 2 * total, 0.0);
+    refill(&mut ws.st_coef, 2 * p * total, 0.0);
     ws.opr.clear();
     ws.opr.extend(
         layers

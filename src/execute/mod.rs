@@ -932,7 +932,14 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
     };
     let (sets, margins) = done.into_iter().unzip();
     Partitioned {
-        cells: regions.iter().map(Region::bbox).collect(),
+        // the cells' own boxes, moved (a grid's cells are boxes)
+        cells: regions
+            .into_iter()
+            .map(|r| match r {
+                Region::Box(b) => b,
+                other => other.bbox(),
+            })
+            .collect(),
         sets,
         stop: Stop::Grid,
         calls,

@@ -283,6 +283,35 @@ fn targets(slow: bool) {
     let p = plan_of(&quad, Propagator::ReachLp, gsg, 1000);
     let (one, two) = (time(|| run(&p, 1)), time(|| run(&p, 2)));
     println!("| Quadrotor Reach-LP + GSG (32 calls, 1000 samples): jobs 1 / jobs 2 | {} / {} ({:.2}×) | ≥ 1.8× |", show(one), show(two), one / two);
+    // a batch: one spec, 256 controllers (copies of the double integrator's)
+    let dir = std::env::temp_dir().join(format!("ravel-bench-batch-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temporary directory");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/double_integrator.onnx");
+    for i in 0..256 {
+        std::fs::copy(&model, dir.join(format!("c{i:03}.onnx"))).expect("copy a controller");
+    }
+    let batch = |jobs: usize| {
+        time(|| {
+            let out = Command::new(exe)
+                .arg("verify")
+                .arg(&spec)
+                .arg("--controller")
+                .arg(&dir)
+                .arg("--jobs")
+                .arg(jobs.to_string())
+                .output()
+                .expect("ravel runs");
+            assert_eq!(out.status.code(), Some(0));
+        })
+    };
+    let (one, two) = (batch(1), batch(2));
+    println!(
+        "| Batch `ravel verify` of 256 controllers (2000 samples each), whole process: jobs 1 / jobs 2 | {} / {} ({:.2}×) | ≥ 1.8× |",
+        show(one),
+        show(two),
+        one / two
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// One Reach-SDP step (one run, seconds) of a 2-state plant with a random

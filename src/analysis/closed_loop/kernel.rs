@@ -1,7 +1,8 @@
 //! The fast path of a Reach-LP step from a box of states: the same bounds
 //! as [`ClosedLoop::step`]'s general path, computed row by row in buffers
 //! that are reused from step to step (one workspace per thread), with no
-//! allocation per step but the answer.
+//! allocation per step but the answer (the facets' bounds and the control
+//! box) and, for a plant with model error, its error vectors.
 //!
 //! The general path composes [`Analysis`](super::Analysis) and
 //! [`LinearUpper`](super::LinearUpper) values, each a few vectors: on a
@@ -103,6 +104,7 @@ struct Workspace {
     tot: Vec<f64>,
     /// `|·|max` vectors and the scales of the plant's block matrices.
     abs_y: Vec<f64>,
+    abs_u: Vec<f64>,
     abs_xv: Vec<f64>,
     abs_xw: Vec<f64>,
     abs_xuw: Vec<f64>,
@@ -618,9 +620,9 @@ fn facets_bound(
     let am = |b: &IBox, out: &mut Vec<f64>| {
         out.extend(b.lo.iter().zip(&b.hi).map(|(l, h)| abs_max(*l, *h)));
     };
-    let u_abs: Vec<f64> = (0..m)
-        .map(|j| abs_max(ws.lo[o + j], ws.hi[o + j]))
-        .collect();
+    let mut u_abs = std::mem::take(&mut ws.abs_u);
+    u_abs.clear();
+    u_abs.extend((0..m).map(|j| abs_max(ws.lo[o + j], ws.hi[o + j])));
     ws.abs_xv.clear();
     am(x, &mut ws.abs_xv);
     am(v, &mut ws.abs_xv);
@@ -741,6 +743,7 @@ fn facets_bound(
     }
     ws.cur = cur;
     ws.spare = spare;
+    ws.abs_u = u_abs;
     if ub.iter().all(|b| b.is_finite()) {
         Answer::Bounds { ub, control: u }
     } else {

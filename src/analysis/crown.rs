@@ -385,13 +385,25 @@ pub fn weight_scale(w: &DMatrix<f64>, m: &[f64]) -> Vec<f64> {
 /// same additions in the same order as one [`Acc`] per row, which the loop
 /// over a column then vectorises.
 fn weight_scale_of(w: &DMatrix<f64>, m: impl Fn(usize) -> f64, cols: Option<&[usize]>) -> Vec<f64> {
+    let mut sum = vec![0.0; w.nrows()];
+    weight_scale_into(w, m, cols, &mut sum);
+    sum
+}
+
+/// [`weight_scale_of`] into `out` (`W`'s row count long).
+pub(crate) fn weight_scale_into(
+    w: &DMatrix<f64>,
+    m: impl Fn(usize) -> f64,
+    cols: Option<&[usize]>,
+    out: &mut [f64],
+) {
     let rows = w.nrows();
-    let mut sum = vec![0.0; rows];
+    out.fill(0.0);
     let mut terms = 0;
     if rows > 0 {
         let mut column = |i: usize| {
             let (col, mi) = (&w.as_slice()[i * rows..(i + 1) * rows], m(i));
-            for (s, &wji) in sum.iter_mut().zip(col) {
+            for (s, &wji) in out.iter_mut().zip(col) {
                 *s += mul0(wji.abs(), mi);
             }
             terms += 1;
@@ -401,10 +413,9 @@ fn weight_scale_of(w: &DMatrix<f64>, m: impl Fn(usize) -> f64, cols: Option<&[us
             Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
-    for s in &mut sum {
+    for s in out.iter_mut() {
         *s = Acc::from_parts(*s, *s, terms).upper();
     }
-    sum
 }
 
 /// The `2n × n` specification `[I; −I]`: upper bounds, then negated lower bounds.
@@ -437,15 +448,41 @@ pub(crate) fn affine_image_of(
 ) -> IBox {
     let rows = w.nrows();
     let mut sums = vec![0.0; 4 * rows];
-    let (lo_s, rest) = sums.split_at_mut(rows);
+    let (mut lo, mut hi) = (vec![0.0; rows], vec![0.0; rows]);
+    affine_image_into(
+        w,
+        b.as_slice(),
+        (&x.lo, &x.hi),
+        cols,
+        (&mut lo, &mut hi),
+        &mut sums,
+    );
+    IBox::new(lo, hi)
+}
+
+/// [`affine_image_of`] of the box `[xl, xh]` into `lo`, `hi` (`W`'s row
+/// count long), with `sums` (at least four times that) for the running sums.
+pub(crate) fn affine_image_into(
+    w: &DMatrix<f64>,
+    b: &[f64],
+    (xl, xh): (&[f64], &[f64]),
+    cols: Option<&[usize]>,
+    (lo, hi): (&mut [f64], &mut [f64]),
+    sums: &mut [f64],
+) {
+    let rows = w.nrows();
+    let (lo_s, rest) = sums[..4 * rows].split_at_mut(rows);
     let (lo_a, rest) = rest.split_at_mut(rows);
     let (hi_s, hi_a) = rest.split_at_mut(rows);
+    for v in [&mut *lo_s, &mut *lo_a, &mut *hi_s, &mut *hi_a] {
+        v.fill(0.0);
+    }
     let mut terms = 0;
     if rows > 0 {
         // column by column: nalgebra stores columns contiguously
         let mut column = |i: usize| {
             let col = &w.as_slice()[i * rows..(i + 1) * rows];
-            let (xl, xh) = (x.lo[i], x.hi[i]);
+            let (xl, xh) = (xl[i], xh[i]);
             for (((ls, la), (hs, ha)), &a) in lo_s
                 .iter_mut()
                 .zip(lo_a.iter_mut())
@@ -485,15 +522,12 @@ pub(crate) fn affine_image_of(
             Some(cols) => cols.iter().for_each(|&i| column(i)),
         }
     }
-    let mut lo = Vec::with_capacity(rows);
-    let mut hi = Vec::with_capacity(rows);
     for j in 0..rows {
         let bj = b[j];
         let n = terms + 1;
-        lo.push(Acc::from_parts(lo_s[j] + bj, lo_a[j] + bj.abs(), n).lower());
-        hi.push(Acc::from_parts(hi_s[j] + bj, hi_a[j] + bj.abs(), n).upper());
+        lo[j] = Acc::from_parts(lo_s[j] + bj, lo_a[j] + bj.abs(), n).lower();
+        hi[j] = Acc::from_parts(hi_s[j] + bj, hi_a[j] + bj.abs(), n).upper();
     }
-    IBox::new(lo, hi)
 }
 
 /// Row `j` of [`affine_image_of`] alone: its lower and upper bound, the
@@ -543,18 +577,34 @@ pub(crate) fn affine_image_row(
 /// count per column.
 fn identity_image(s: f64, b: &DVector<f64>, x: &IBox) -> (Vec<f64>, IBox) {
     let n = x.dim();
-    let mut scale = Vec::with_capacity(n);
-    let mut lo = Vec::with_capacity(n);
-    let mut hi = Vec::with_capacity(n);
-    for j in 0..n {
-        let (xl, xh, bj) = (x.lo[j], x.hi[j], b[j]);
-        let m = 0.0 + mul0(s.abs(), crate::num::abs_max(xl, xh));
-        scale.push(Acc::from_parts(m, m, n).upper());
-        let (tl, th) = (0.0 + term_lower(s, xl, xh), 0.0 + term_upper(s, xl, xh));
-        lo.push(Acc::from_parts(tl + bj, (0.0 + tl.abs()) + bj.abs(), n + 1).lower());
-        hi.push(Acc::from_parts(th + bj, (0.0 + th.abs()) + bj.abs(), n + 1).upper());
-    }
+    let (mut scale, mut lo, mut hi) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    identity_image_into(
+        s,
+        b.as_slice(),
+        (&x.lo, &x.hi),
+        &mut scale,
+        (&mut lo, &mut hi),
+    );
     (scale, IBox::new(lo, hi))
+}
+
+/// [`identity_image`] of the box `[xl, xh]` into `scale`, `lo`, `hi`.
+pub(crate) fn identity_image_into(
+    s: f64,
+    b: &[f64],
+    (xl, xh): (&[f64], &[f64]),
+    scale: &mut [f64],
+    (lo, hi): (&mut [f64], &mut [f64]),
+) {
+    let n = xl.len();
+    for j in 0..n {
+        let (xl, xh, bj) = (xl[j], xh[j], b[j]);
+        let m = 0.0 + mul0(s.abs(), crate::num::abs_max(xl, xh));
+        scale[j] = Acc::from_parts(m, m, n).upper();
+        let (tl, th) = (0.0 + term_lower(s, xl, xh), 0.0 + term_upper(s, xl, xh));
+        lo[j] = Acc::from_parts(tl + bj, (0.0 + tl.abs()) + bj.abs(), n + 1).lower();
+        hi[j] = Acc::from_parts(th + bj, (0.0 + th.abs()) + bj.abs(), n + 1).upper();
+    }
 }
 
 /// What [`Analysis::upper_optimised`] minimises for row `r`, given that

@@ -42,10 +42,13 @@ use std::cell::RefCell;
 use nalgebra::DMatrix;
 
 use super::ClosedLoop;
-use crate::analysis::crown::{one_nonzero, one_per_row, signed_identity};
+use crate::analysis::crown::{
+    affine_image_into, identity_image_into, one_nonzero, one_per_row, signed_identity,
+    weight_scale_into,
+};
 use crate::analysis::relax::{image, relax, Relax};
 use crate::nn::{Activation, Layer};
-use crate::num::{abs_max, gamma, mul0, slack, slack_of_sum, term_lower, term_upper, Acc, U};
+use crate::num::{abs_max, gamma, mul0, slack, slack_of_sum, term_upper, Acc, U};
 use crate::sets::IBox;
 
 /// The widest layer the kernel takes (neurons). Row-by-row products win
@@ -172,68 +175,10 @@ fn refill<T: Clone>(v: &mut Vec<T>, n: usize, value: T) {
     v.resize(n, value);
 }
 
-/// `out[j] = |W_j|·m` rounded up (the sums of `weight_scale`, in its order).
+/// `out` as `|W|·m` rounded up ([`weight_scale_into`] of all columns).
 fn scale_into(w: &DMatrix<f64>, m: &[f64], out: &mut Vec<f64>) {
-    let rows = w.nrows();
-    out.clear();
-    out.resize(rows, 0.0);
-    for (i, &mi) in m.iter().enumerate().take(w.ncols()) {
-        let col = &w.as_slice()[i * rows..(i + 1) * rows];
-        for (s, &wji) in out.iter_mut().zip(col) {
-            *s += mul0(wji.abs(), mi);
-        }
-    }
-    let terms = w.ncols();
-    for s in out.iter_mut() {
-        *s = Acc::from_parts(*s, *s, terms).upper();
-    }
-}
-
-/// The certified interval image of the box `[xl, xh]` under `W x + b`
-/// (`b = None`: zero) into `lo`, `hi`: the sums of `affine_image`, in its
-/// order (column by column, then the bias), so the same numbers.
-fn image_into(
-    w: &DMatrix<f64>,
-    b: Option<&[f64]>,
-    xl: &[f64],
-    xh: &[f64],
-    lo: &mut [f64],
-    hi: &mut [f64],
-    sums: &mut [f64],
-) {
-    let rows = w.nrows();
-    let (ls, rest) = sums[..4 * rows].split_at_mut(rows);
-    let (la, rest) = rest.split_at_mut(rows);
-    let (hs, ha) = rest.split_at_mut(rows);
-    ls.fill(0.0);
-    la.fill(0.0);
-    hs.fill(0.0);
-    ha.fill(0.0);
-    for i in 0..w.ncols() {
-        let col = &w.as_slice()[i * rows..(i + 1) * rows];
-        let (l, h) = (xl[i], xh[i]);
-        for j in 0..rows {
-            let a = col[j];
-            let (pl, ph) = (a * l, a * h);
-            let (th, tl) = if a == 0.0 {
-                (0.0, 0.0)
-            } else if a > 0.0 {
-                (ph, pl)
-            } else {
-                (pl, ph)
-            };
-            ls[j] += tl;
-            la[j] += tl.abs();
-            hs[j] += th;
-            ha[j] += th.abs();
-        }
-    }
-    let n = w.ncols() + 1;
-    for j in 0..rows {
-        let bj = b.map_or(0.0, |b| b[j]);
-        lo[j] = Acc::from_parts(ls[j] + bj, la[j] + bj.abs(), n).lower();
-        hi[j] = Acc::from_parts(hs[j] + bj, ha[j] + bj.abs(), n).upper();
-    }
+    refill(out, w.nrows(), 0.0);
+    weight_scale_into(w, |i| m[i], None, out);
 }
 
 /// `Σ aᵢ bᵢ` in four interleaved partial sums (any order: every caller
@@ -318,13 +263,12 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
         .max(p);
     sums.clear();
     sums.resize(4 * widest, 0.0);
-    image_into(
+    affine_image_into(
         &cl.obs_xv,
+        cl.obs_zero.as_slice(),
+        (&ws.xv_lo, &ws.xv_hi),
         None,
-        &ws.xv_lo,
-        &ws.xv_hi,
-        &mut ws.lo[..p],
-        &mut ws.hi[..p],
+        (&mut ws.lo[..p], &mut ws.hi[..p]),
         &mut sums,
     );
     if !(x.is_finite() && ws.lo[..p].iter().chain(&ws.hi[..p]).all(|v| v.is_finite())) {
@@ -343,44 +287,28 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
                 let (before, after) = ws.lo.split_at_mut(z);
                 let (hbefore, hafter) = ws.hi.split_at_mut(z);
                 if let Some(sign) = ws.ident[i] {
-                    // z = ±h + b: the sums of the general case without
-                    // its zero terms (`±0`, which leave a sum unchanged
-                    // once it holds `0 + t`), so the same numbers
-                    let n = rows;
-                    for j in 0..n {
-                        let (xl, xh, bj) = (before[a + j], hbefore[a + j], b[j]);
-                        let m = 0.0 + abs_max(xl, xh);
-                        ws.wz[z + j] = Acc::from_parts(m, m, n).upper();
-                        let (tl, th) = (
-                            0.0 + term_lower(sign, xl, xh),
-                            0.0 + term_upper(sign, xl, xh),
-                        );
-                        after[j] =
-                            Acc::from_parts(tl + bj, (0.0 + tl.abs()) + bj.abs(), n + 1).lower();
-                        hafter[j] =
-                            Acc::from_parts(th + bj, (0.0 + th.abs()) + bj.abs(), n + 1).upper();
-                    }
+                    // z = ±h + b: the general path's numbers, without sums over zeros
+                    identity_image_into(
+                        sign,
+                        b.as_slice(),
+                        (&before[a..z], &hbefore[a..z]),
+                        &mut ws.wz[z..z + rows],
+                        (&mut after[..rows], &mut hafter[..rows]),
+                    );
                 } else {
                     // |W|·|h|max, for the error terms of products with W
-                    let out = &mut ws.wz[z..z + rows];
-                    out.fill(0.0);
-                    for k in 0..w.ncols() {
-                        let m = abs_max(before[a + k], hbefore[a + k]);
-                        let col = &w.as_slice()[k * rows..(k + 1) * rows];
-                        for (s, &wjk) in out.iter_mut().zip(col) {
-                            *s += mul0(wjk.abs(), m);
-                        }
-                    }
-                    for s in out.iter_mut() {
-                        *s = Acc::from_parts(*s, *s, w.ncols()).upper();
-                    }
-                    image_into(
+                    weight_scale_into(
                         w,
-                        Some(b.as_slice()),
-                        &before[a..z],
-                        &hbefore[a..z],
-                        &mut after[..rows],
-                        &mut hafter[..rows],
+                        |k| abs_max(before[a + k], hbefore[a + k]),
+                        None,
+                        &mut ws.wz[z..z + rows],
+                    );
+                    affine_image_into(
+                        w,
+                        b.as_slice(),
+                        (&before[a..z], &hbefore[a..z]),
+                        None,
+                        (&mut after[..rows], &mut hafter[..rows]),
                         &mut sums,
                     );
                 }

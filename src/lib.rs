@@ -28,6 +28,7 @@ pub mod nn;
 pub mod num;
 pub mod onnx;
 pub mod plot;
+pub mod pool;
 pub mod report;
 pub mod rng;
 pub mod sets;

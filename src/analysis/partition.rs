@@ -181,19 +181,19 @@ pub fn refine_parallel<T: Send + Clone>(
     elapsed: &dyn Fn() -> f64,
     threads: usize,
 ) -> Refined<T> {
-    if threads < 2 {
+    let Some(helper) = crate::pool::Helper::new(threads) else {
         return refine(root, strategy, budget, &mut |c, p| eval(c, p), elapsed);
-    }
-    std::thread::scope(|scope| {
-        let (jobs, job_rx) = std::sync::mpsc::channel::<(IBox, T)>();
-        let (res_tx, results) = std::sync::mpsc::channel::<(T, f64)>();
-        scope.spawn(move || {
-            while let Some((cell, parent)) = recv_soon(&job_rx) {
-                if res_tx.send(eval(&cell, Some(&parent))).is_err() {
-                    break;
-                }
+    };
+    let (jobs, job_rx) = std::sync::mpsc::channel::<(IBox, T)>();
+    let (res_tx, results) = std::sync::mpsc::channel::<(T, f64)>();
+    let evaluate = move || {
+        while let Some((cell, parent)) = recv_soon(&job_rx) {
+            if res_tx.send(eval(&cell, Some(&parent))).is_err() {
+                break;
             }
-        });
+        }
+    };
+    helper.beside(evaluate, || {
         let first = eval(root, None);
         let r = refine_from(
             root,

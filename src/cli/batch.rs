@@ -671,6 +671,11 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         }
     }
     let jobs = opts.jobs.min(mine.len()).max(1);
+    if jobs == 1 {
+        // one pair at a time, each on `opts.jobs` threads: the workers start
+        // while the first spec is read and checked
+        crate::pool::warm(opts.jobs);
+    }
     let mut counts: Counts = [0; 4];
     let mut results = Vec::new();
     let mut suites = String::new();

@@ -443,29 +443,16 @@ fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
     let threads = if keep {
         1
     } else {
-        ctl.threads.clamp(1, (plan.samples / 256).max(1))
+        crate::pool::available(ctl.threads).clamp(1, (plan.samples / 256).max(1))
     };
     if threads == 1 {
         return sample_range(plan, ctl, 0..plan.samples, &special, &counter);
     }
     let chunk = plan.samples.div_ceil(threads);
     let range = |i: usize| (i * chunk).min(plan.samples)..((i + 1) * chunk).min(plan.samples);
-    // the calling thread samples the first range (one thread fewer to start)
-    let parts: Vec<MonteCarlo> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (1..threads)
-            .map(|i| {
-                let (special, counter) = (&special, &counter);
-                let range = range(i);
-                scope.spawn(move || sample_range(plan, ctl, range, special, counter))
-            })
-            .collect();
-        let mut parts = vec![sample_range(plan, ctl, range(0), &special, &counter)];
-        parts.extend(
-            workers
-                .into_iter()
-                .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-        );
-        parts
+    // the calling thread samples the first range
+    let parts = crate::pool::on_threads(threads, &|i| {
+        sample_range(plan, ctl, range(i), &special, &counter)
     });
     let mut parts = parts.into_iter();
     let mut all = parts.next().expect("at least one part");
@@ -895,7 +882,7 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
         let margins = cell_margins(plan, &sets);
         (sets, margins)
     };
-    let threads = ctl.threads.clamp(1, regions.len().max(1));
+    let threads = crate::pool::available(ctl.threads).clamp(1, regions.len().max(1));
     let done: Vec<CellResult> = if threads == 1 {
         (0..regions.len()).map(one).collect()
     } else {
@@ -913,18 +900,9 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
                 mine.push((i, one(i)));
             }
         };
-        // the calling thread is one of the workers: one thread fewer to
-        // start, and its warm caches and heap take a share of the cells
-        let done: Vec<Vec<(usize, CellResult)>> = std::thread::scope(|scope| {
-            let workers: Vec<_> = (1..threads).map(|_| scope.spawn(work)).collect();
-            let mut done = vec![work()];
-            done.extend(
-                workers
-                    .into_iter()
-                    .map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-            );
-            done
-        });
+        // the calling thread is one of the workers: its warm caches and
+        // heap take a share of the cells
+        let done: Vec<Vec<(usize, CellResult)>> = crate::pool::on_threads(threads, &|_| work());
         for (i, steps) in done.into_iter().flatten() {
             slots[i] = Some(steps);
         }

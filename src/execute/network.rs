@@ -213,24 +213,17 @@ fn map_ordered<T: Sync, U: Send>(
     threads: usize,
     f: &(dyn Fn(&T) -> U + Sync),
 ) -> Vec<U> {
-    let threads = threads.clamp(1, items.len().max(1));
+    let threads = crate::pool::available(threads).clamp(1, items.len().max(1));
     if threads == 1 {
         return items.iter().map(f).collect();
     }
     let chunk = items.len().div_ceil(threads);
-    // the calling thread maps the first chunk (one thread fewer to start)
-    std::thread::scope(|scope| {
-        let mut parts = items.chunks(chunk);
-        let first = parts.next().unwrap_or(&[]);
-        let handles: Vec<_> = parts
-            .map(|part| scope.spawn(move || part.iter().map(f).collect::<Vec<U>>()))
-            .collect();
-        let mut out: Vec<U> = first.iter().map(f).collect();
-        for h in handles {
-            out.extend(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
-        }
-        out
-    })
+    let parts: Vec<&[T]> = items.chunks(chunk).collect();
+    // the calling thread maps the first chunk
+    crate::pool::on_threads(parts.len(), &|i| parts[i].iter().map(f).collect::<Vec<U>>())
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// The rows bounded for one analysis: the shape's, then each property's.

@@ -396,8 +396,7 @@ fn cells() {
     let di = checked("specs/double_integrator.ravel");
     for k in [1usize, 2, 4, 8, 16, 32, 64] {
         let p = plan_of(&di, Propagator::ReachLp, grid(k, 2), 0);
-        let one = time(|| run(&p, 1));
-        let two = time(|| run(&p, 2));
+        let (one, two) = time_pair(|| run(&p, 1), || run(&p, 2));
         let n = k * k;
         println!(
             "| {n} | {} | {} | {} | {:.2}× |",

@@ -28,9 +28,14 @@ static POOLS: OnceLock<Mutex<Vec<Arc<rayon::ThreadPool>>>> = OnceLock::new();
 /// The most threads a pool starts: twice the machine's cores, at least 8,
 /// at most 1024. A larger `--jobs` runs on this many (the results never
 /// depend on the count), instead of starting a million threads on request.
+/// Read once: the standard library reads the cgroup's files on every call
+/// (about 50 µs here, the time of four double-integrator cells).
 fn cap() -> usize {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    (2 * cores).clamp(8, 1024)
+    static CAP: OnceLock<usize> = OnceLock::new();
+    *CAP.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        (2 * cores).clamp(8, 1024)
+    })
 }
 
 /// How many threads a caller asking for `threads` gets: at most the cap, and

@@ -77,13 +77,33 @@ impl IBox {
     }
 
     /// Grow this box to its hull with `other`, in place ([`IBox::hull`]'s
-    /// numbers, without new vectors).
+    /// numbers, without new vectors). The result does not depend on the
+    /// order boxes are added in, to the bit: `−0` counts as below `+0`
+    /// (`f64::min` may return either when both are zero), and a NaN bound is
+    /// passed over as by `f64::min`/`max`. Threads grow parts of one hull
+    /// and merge them ([`crate::execute`]'s reach sets).
     pub fn hull_with(&mut self, other: &IBox) {
         for (a, b) in self.lo.iter_mut().zip(&other.lo) {
-            *a = a.min(*b);
+            *a = if *a == 0.0 && *b == 0.0 {
+                if b.is_sign_negative() {
+                    *b
+                } else {
+                    *a
+                }
+            } else {
+                a.min(*b)
+            };
         }
         for (a, b) in self.hi.iter_mut().zip(&other.hi) {
-            *a = a.max(*b);
+            *a = if *a == 0.0 && *b == 0.0 {
+                if b.is_sign_positive() {
+                    *b
+                } else {
+                    *a
+                }
+            } else {
+                a.max(*b)
+            };
         }
     }
 
@@ -533,6 +553,38 @@ impl Region {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_hull_grown_in_place_does_not_depend_on_the_order() {
+        let boxes = [
+            IBox::new(vec![0.0, f64::NAN, 1.0], vec![-0.0, 2.0, 3.0]),
+            IBox::new(vec![-0.0, -1.0, 1.0], vec![0.0, f64::NAN, 3.0]),
+            IBox::new(vec![0.0, -1.0, -0.5], vec![-0.0, 2.5, 3.0]),
+        ];
+        let bits = |b: &IBox| {
+            let f = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            (f(&b.lo), f(&b.hi))
+        };
+        let mut seen = Vec::new();
+        for order in [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ] {
+            let mut h = boxes[order[0]].clone();
+            // as two threads would: one part grown, then another merged in
+            let mut tail = boxes[order[2]].clone();
+            tail.hull_with(&boxes[order[1]]);
+            h.hull_with(&tail);
+            seen.push(bits(&h));
+        }
+        assert!(seen.iter().all(|b| *b == seen[0]), "{seen:?}");
+        let want = IBox::new(vec![-0.0, -1.0, -0.5], vec![0.0, 2.5, 3.0]);
+        assert_eq!(seen[0], bits(&want));
+    }
 
     #[test]
     fn grid_covers_box_exactly() {

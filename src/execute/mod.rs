@@ -784,24 +784,157 @@ struct Partitioned {
     stop: Stop,
     /// Cells propagated (a refinement's parents and a grid's root included).
     calls: usize,
-    /// `margins[c][p]`: [`cell_margin`] of property `p` on cell `c`'s sets
-    /// (computed where the cell was, by the thread that propagated it).
-    margins: Vec<Vec<Margin>>,
+    /// What the outcome needs of every cell (gathered where the cell was,
+    /// by the thread that propagated it).
+    gathered: Gathered,
 }
 
 /// A property's margin on one cell, the step it refers to, and whether an
 /// LP solver issue weakened it (see [`cell_margin`]).
 type Margin = (f64, usize, bool);
 
-/// One cell's sets and its [`cell_margins`].
-type CellResult = (Vec<Step>, Vec<Margin>);
+/// What the outcome needs of the cells: the reach hull, the solver issues,
+/// the first cut and each property's least margin. Cells are added in any
+/// order, by any thread, and parts merged in any order: the result is the
+/// one of adding every cell in cell order (ties go to the lower cell index;
+/// the hull is order-free, see [`IBox::hull_with`]). A thread gathers its own
+/// cells while their sets are in its cache; summing them up afterwards on
+/// one thread, from the other core's caches, took 1.7 ms of a 25 ms run of
+/// 4096 cells on two threads.
+#[derive(Clone, Debug)]
+struct Gathered {
+    /// Cells added.
+    cells: usize,
+    /// `reach[t]`: the hull of every cell's box at step `t` (empty before the
+    /// first cell).
+    reach: Vec<IBox>,
+    /// Every `(step, issue)` of every cell (sorted and deduplicated by
+    /// [`Gathered::finish`]).
+    issues: Vec<(usize, Issue)>,
+    /// The earliest cut step over the cells: `(step, cell, cut)`.
+    cut: Option<(usize, usize, Cut)>,
+    /// Per property.
+    least: Vec<Least>,
+}
 
-/// [`cell_margin`] of every property on one cell's sets.
-fn cell_margins(plan: &Plan, sets: &[Step]) -> Vec<Margin> {
-    plan.properties
-        .iter()
-        .map(|p| cell_margin(p, sets))
-        .collect()
+/// One property's margins over the cells (see [`Gathered`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Least {
+    /// The least margin below `+∞` that is not NaN, its cell and step (the
+    /// lowest cell among equal margins).
+    min: Option<(f64, usize, usize)>,
+    /// The highest cell whose margin is NaN, and its step.
+    nan: Option<(usize, usize)>,
+    /// A solver issue on some cell's path to the margin.
+    issue: bool,
+    /// The earliest cut step on the property's steps: `(step, cell, cut)`.
+    cut: Option<(usize, usize, Cut)>,
+}
+
+/// The earlier of two cuts, `(step, cell, cut)`: lower step, then lower cell.
+fn earlier(
+    a: Option<(usize, usize, Cut)>,
+    b: Option<(usize, usize, Cut)>,
+) -> Option<(usize, usize, Cut)> {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(if (y.0, y.1) < (x.0, x.1) { y } else { x }),
+        (x, y) => x.or(y),
+    }
+}
+
+impl Least {
+    fn merge(self, other: Least) -> Least {
+        Least {
+            min: match (self.min, other.min) {
+                (Some(a), Some(b)) => Some(if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }),
+                (a, b) => a.or(b),
+            },
+            nan: self.nan.max(other.nan),
+            issue: self.issue || other.issue,
+            cut: earlier(self.cut, other.cut),
+        }
+    }
+
+    /// The margin and its step, as a scan of the cells in order gives them:
+    /// the first least margin; `−∞` at the last NaN's step when a margin is
+    /// NaN (NaN proves nothing); `+∞` at `step` when no cell has a margin
+    /// below `+∞`.
+    fn margin(&self, step: usize) -> (f64, usize) {
+        match (self.nan, self.min) {
+            (Some((_, t)), _) => (f64::NEG_INFINITY, t),
+            (None, Some((m, _, t))) => (m, t),
+            (None, None) => (f64::INFINITY, step),
+        }
+    }
+}
+
+impl Gathered {
+    /// No cell yet.
+    fn new(plan: &Plan) -> Gathered {
+        Gathered {
+            cells: 0,
+            reach: Vec::new(),
+            issues: Vec::new(),
+            cut: None,
+            least: vec![Least::default(); plan.properties.len()],
+        }
+    }
+
+    /// Adds cell `cell`'s sets.
+    fn add(&mut self, plan: &Plan, cell: usize, sets: &[Step]) {
+        self.cells += 1;
+        if self.reach.is_empty() {
+            self.reach = sets.iter().map(|s| s.set.bbox()).collect();
+        } else {
+            for (h, s) in self.reach.iter_mut().zip(sets) {
+                h.hull_with(&s.set.bbox_ref());
+            }
+        }
+        for (t, s) in sets.iter().enumerate() {
+            self.issues.extend(s.issues.iter().map(|i| (t, *i)));
+        }
+        let cut = first_cut(sets).map(|(t, c)| (t, cell, c));
+        self.cut = earlier(self.cut, cut);
+        for (l, prop) in self.least.iter_mut().zip(&plan.properties) {
+            let (m, t, issue) = cell_margin(prop, sets);
+            let mine = Least {
+                min: (m < f64::INFINITY).then_some((m, cell, t)),
+                nan: m.is_nan().then_some((cell, t)),
+                issue,
+                cut: cut.filter(|c| c.0 <= prop.last_step()),
+            };
+            *l = l.merge(mine);
+        }
+    }
+
+    /// The cells of both.
+    fn merge(mut self, other: Gathered) -> Gathered {
+        self.cells += other.cells;
+        if self.reach.is_empty() {
+            self.reach = other.reach;
+        } else {
+            for (h, o) in self.reach.iter_mut().zip(&other.reach) {
+                h.hull_with(o);
+            }
+        }
+        self.issues.extend(other.issues);
+        self.cut = earlier(self.cut, other.cut);
+        for (l, o) in self.least.iter_mut().zip(other.least) {
+            *l = l.merge(o);
+        }
+        self
+    }
+
+    /// The issues sorted and deduplicated.
+    fn finish(mut self) -> Gathered {
+        self.issues.sort_unstable();
+        self.issues.dedup();
+        self
+    }
 }
 
 /// A hull boundary takes its directions from the samples of each step;
@@ -878,37 +1011,48 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
             done: i,
             total: Some(regions.len()),
         });
-        let sets = propagate_cell_until(plan, &regions[i], root.as_deref(), &stop);
-        let margins = cell_margins(plan, &sets);
-        (sets, margins)
+        propagate_cell_until(plan, &regions[i], root.as_deref(), &stop)
     };
     let threads = crate::pool::available(ctl.threads).clamp(1, regions.len().max(1));
-    let done: Vec<CellResult> = if threads == 1 {
-        (0..regions.len()).map(one).collect()
+    let (sets, gathered) = if threads == 1 {
+        let mut gathered = Gathered::new(plan);
+        let sets: Vec<Vec<Step>> = (0..regions.len())
+            .map(|i| {
+                let sets = one(i);
+                gathered.add(plan, i, &sets);
+                sets
+            })
+            .collect();
+        (sets, gathered)
     } else {
         // cells are independent: threads take the next index, and the
         // sets are put back in cell order
         let next = std::sync::atomic::AtomicUsize::new(0);
-        let mut slots: Vec<Option<CellResult>> = vec![None; regions.len()];
+        let mut slots: Vec<Option<Vec<Step>>> = vec![None; regions.len()];
         let work = || {
             let mut mine = Vec::new();
+            let mut gathered = Gathered::new(plan);
             loop {
                 let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 if i >= regions.len() {
-                    break mine;
+                    break (mine, gathered);
                 }
-                mine.push((i, one(i)));
+                let sets = one(i);
+                gathered.add(plan, i, &sets);
+                mine.push((i, sets));
             }
         };
         // the calling thread is one of the workers: its warm caches and
         // heap take a share of the cells
-        let done: Vec<Vec<(usize, CellResult)>> = crate::pool::on_threads(threads, &|_| work());
-        for (i, steps) in done.into_iter().flatten() {
-            slots[i] = Some(steps);
+        let mut gathered = Gathered::new(plan);
+        for (mine, g) in crate::pool::on_threads(threads, &|_| work()) {
+            gathered = gathered.merge(g);
+            for (i, sets) in mine {
+                slots[i] = Some(sets);
+            }
         }
-        slots.into_iter().flatten().collect()
+        (slots.into_iter().flatten().collect(), gathered)
     };
-    let (sets, margins) = done.into_iter().unzip();
     Partitioned {
         // the cells' own boxes, moved (a grid's cells are boxes)
         cells: regions
@@ -921,7 +1065,7 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
         sets,
         stop: Stop::Grid,
         calls,
-        margins,
+        gathered: gathered.finish(),
     }
 }
 
@@ -1017,55 +1161,39 @@ fn partition_guided(
     });
     let part = leaves.iter().map(|l| l.cell.clone()).collect();
     let sets: Vec<Vec<Step>> = leaves.into_iter().filter_map(|l| l.value).collect();
-    let margins = sets.iter().map(|c| cell_margins(plan, c)).collect();
+    let mut gathered = Gathered::new(plan);
+    for (i, c) in sets.iter().enumerate() {
+        gathered.add(plan, i, c);
+    }
     Partitioned {
         cells: part,
         sets,
         stop: r.stop,
         calls: r.calls,
-        margins,
+        gathered: gathered.finish(),
     }
 }
 
 /// The verdict of every property: FALSIFIED by a sampled counterexample,
 /// VERIFIED by certified margins on every cell (no solver issue, no cut
 /// step), UNSURE otherwise.
-fn verdicts(
-    plan: &Plan,
-    cells: &[Vec<Step>],
-    margins: &[Vec<Margin>],
-    mc: &MonteCarlo,
-) -> Vec<PropertyResult> {
+fn verdicts(plan: &Plan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyResult> {
     plan.properties
         .iter()
         .zip(&mc.worst)
-        .enumerate()
-        .map(|(k, (prop, worst))| {
+        .zip(&gathered.least)
+        .map(|((prop, worst), l)| {
             let kind = match prop.kind {
                 PropertyKind::Goal(_) => Kind::Goal,
                 PropertyKind::Avoid { .. } => Kind::Avoid,
             };
-            let mut margin = f64::INFINITY;
-            let mut step = match &prop.kind {
+            let (margin, step) = l.margin(match &prop.kind {
                 PropertyKind::Goal(_) => plan.horizon,
                 PropertyKind::Avoid { steps, .. } => steps.0,
-            };
-            let mut issue = false;
-            let mut cut: Option<(usize, Cut)> = None;
-            for (c, cm) in cells.iter().zip(margins) {
-                let (m, t, i) = cm[k];
-                issue |= i;
-                if m < margin || m.is_nan() {
-                    margin = sane(m);
-                    step = t;
-                }
-                if let Some(o) = first_cut(c).filter(|o| o.0 <= prop.last_step()) {
-                    if cut.is_none_or(|p| o.0 < p.0) {
-                        cut = Some(o);
-                    }
-                }
-            }
-            let proven = proves(prop, margin) && !issue && cut.is_none();
+            });
+            let (issue, cut) = (l.issue, l.cut.map(|(t, _, c)| (t, c)));
+            // no cell proves nothing
+            let proven = gathered.cells > 0 && proves(prop, margin) && !issue && cut.is_none();
             // `confirm` kept only violations the rigorous replay confirms
             let confirmed = worst.and_then(|(depth, k, t)| Some((depth, simulate(plan, k)?, t)));
             match confirmed {
@@ -1115,30 +1243,14 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         }
     };
     let cells = part.sets;
-    let reach: Vec<IBox> = (0..=plan.horizon)
-        .map(|t| {
-            let mut h = cells[0][t].set.bbox();
-            for c in &cells[1..] {
-                h.hull_with(&c[t].set.bbox_ref());
-            }
-            h
-        })
-        .collect();
-    let mut solver_issues: Vec<(usize, Issue)> = cells
-        .iter()
-        .flat_map(|c| {
-            c.iter()
-                .enumerate()
-                .flat_map(|(t, s)| s.issues.iter().map(move |i| (t, *i)))
-        })
-        .collect();
-    solver_issues.sort();
-    solver_issues.dedup();
-    let properties = verdicts(plan, &cells, &part.margins, &mc);
-    let cut = cells
-        .iter()
-        .filter_map(|c| first_cut(c))
-        .min_by_key(|(t, _)| *t);
+    let properties = verdicts(plan, &part.gathered, &mc);
+    let Gathered {
+        reach,
+        issues: solver_issues,
+        cut,
+        ..
+    } = part.gathered;
+    let cut = cut.map(|(t, _, c)| (t, c));
     let verdict = properties
         .iter()
         .map(|p| p.status)
@@ -1159,5 +1271,87 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         propagator_calls: part.calls * plan.horizon,
         cut,
         samples_drawn: mc.drawn,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    /// One cell as the scan sees it: margin, step, issue, first cut.
+    type Cell = (f64, usize, bool, Option<(usize, Cut)>);
+
+    /// The scan over the cells in order that [`Least`] stands for: what the
+    /// verdicts computed before threads gathered their own cells.
+    fn scan(cells: &[Cell], step: usize) -> Cell {
+        let (mut margin, mut at, mut issue, mut cut) = (f64::INFINITY, step, false, None);
+        for &(m, t, i, c) in cells {
+            issue |= i;
+            if m < margin || m.is_nan() {
+                margin = sane(m);
+                at = t;
+            }
+            if let Some(o) = c {
+                if cut.is_none_or(|p: (usize, Cut)| o.0 < p.0) {
+                    cut = Some(o);
+                }
+            }
+        }
+        (margin, at, issue, cut)
+    }
+
+    #[test]
+    fn least_margins_gathered_in_any_order_are_the_in_order_scan() {
+        let mut rng = Rng::new(11);
+        let values = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let cuts = [Cut::Overflow, Cut::TimeLimit];
+        for _ in 0..3000 {
+            let n = 1 + rng.below(7);
+            let cells: Vec<_> = (0..n)
+                .map(|_| {
+                    let c = (rng.below(4) == 0).then(|| (rng.below(3), cuts[rng.below(2)]));
+                    (
+                        values[rng.below(values.len())],
+                        rng.below(4),
+                        rng.below(5) == 0,
+                        c,
+                    )
+                })
+                .collect();
+            let want = scan(&cells, 9);
+            // cells added in a shuffled order, split among up to three parts
+            let mut order: Vec<usize> = (0..n).collect();
+            for i in (1..n).rev() {
+                order.swap(i, rng.below(i + 1));
+            }
+            let mut parts = vec![Least::default(); 1 + rng.below(3)];
+            for &c in &order {
+                let (m, t, issue, cut) = cells[c];
+                let k = rng.below(parts.len());
+                parts[k] = parts[k].merge(Least {
+                    min: (m < f64::INFINITY).then_some((m, c, t)),
+                    nan: m.is_nan().then_some((c, t)),
+                    issue,
+                    cut: cut.map(|(t, x)| (t, c, x)),
+                });
+            }
+            let got = parts.into_iter().fold(Least::default(), Least::merge);
+            let (m, t) = got.margin(9);
+            assert_eq!(
+                (m.to_bits(), t, got.issue, got.cut.map(|(t, _, c)| (t, c))),
+                (want.0.to_bits(), want.1, want.2, want.3),
+                "{cells:?} in order {order:?}"
+            );
+        }
     }
 }

@@ -38,44 +38,38 @@ use ravel::sets::{IBox, Region};
 
 /// The fastest of repeated runs of `f`, in seconds.
 fn time(mut f: impl FnMut()) -> f64 {
-    f(); // warm-up
+    best_times(&mut [&mut f])[0]
+}
+
+/// The best times of `one` and `two`, run in turn: a speed-up measured under
+/// the same conditions for both, when the machine's load drifts.
+fn time_pair(mut one: impl FnMut(), mut two: impl FnMut()) -> (f64, f64) {
+    let t = best_times(&mut [&mut one, &mut two]);
+    (t[0], t[1])
+}
+
+/// The fastest run of each of `fs`, in seconds: after a warm-up of each,
+/// they run in turn for at least a second and five runs each (at most
+/// 20 000 runs or 20 s each).
+fn best_times(fs: &mut [&mut dyn FnMut()]) -> Vec<f64> {
+    for f in fs.iter_mut() {
+        f(); // warm-up
+    }
     let start = Instant::now();
-    let mut best = f64::INFINITY;
+    let mut best = vec![f64::INFINITY; fs.len()];
     let mut runs = 0;
     while runs < 5 || (start.elapsed().as_secs_f64() < 1.0 && runs < 20_000) {
-        let t = Instant::now();
-        f();
-        best = best.min(t.elapsed().as_secs_f64());
+        for (f, b) in fs.iter_mut().zip(&mut best) {
+            let t = Instant::now();
+            f();
+            *b = b.min(t.elapsed().as_secs_f64());
+        }
         runs += 1;
-        if start.elapsed().as_secs_f64() > 20.0 {
+        if start.elapsed().as_secs_f64() > 20.0 * fs.len() as f64 {
             break;
         }
     }
     best
-}
-
-/// The best times of `one` and `two`, run in turn (after a warm-up of each)
-/// for at least a second and five runs each: a speed-up measured under the
-/// same conditions for both, when the machine's load drifts.
-fn time_pair(mut one: impl FnMut(), mut two: impl FnMut()) -> (f64, f64) {
-    one();
-    two();
-    let start = Instant::now();
-    let (mut a, mut b) = (f64::INFINITY, f64::INFINITY);
-    let mut runs = 0;
-    while runs < 5 || (start.elapsed().as_secs_f64() < 1.0 && runs < 20_000) {
-        let t = Instant::now();
-        one();
-        a = a.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        two();
-        b = b.min(t.elapsed().as_secs_f64());
-        runs += 1;
-        if start.elapsed().as_secs_f64() > 40.0 {
-            break;
-        }
-    }
-    (a, b)
 }
 
 fn show(s: f64) -> String {

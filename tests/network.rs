@@ -491,8 +491,8 @@ fn time_limit_keeps_every_bound_sound() {
     assert!(c.lower.iter().all(|v| *v == f64::NEG_INFINITY) && !c.robust_optimal);
 }
 
-/// Grid cells and CARRL observations on several threads: the same outcome,
-/// number for number, as on one.
+/// Grid cells, CARRL observations and guided refinement on several threads:
+/// the same outcome, number for number, as on one.
 #[test]
 fn threads_never_change_a_network_result() {
     use ravel::check::SelectSpec;
@@ -551,6 +551,29 @@ fn threads_never_change_a_network_result() {
         );
         assert_eq!(many.partition, one.partition);
         assert_eq!(many.properties, one.properties);
+    }
+    // guided refinement: each split's two children on two threads
+    for guide in [Guide::Gsg, Guide::Sg] {
+        p.partitioner = Partitioner::Guided {
+            guide,
+            budget: Budget {
+                calls: 25,
+                min_size: 1.0 / 64.0,
+                seconds: None,
+            },
+        };
+        let with = |threads| with_plan(&p, threads);
+        let one = with(1);
+        assert!(one.partition.len() > 1, "{guide:?} refines");
+        for threads in [2, 3] {
+            let many = with(threads);
+            assert_eq!(
+                many.output.offsets, one.output.offsets,
+                "{guide:?}, {threads} threads"
+            );
+            assert_eq!(many.partition, one.partition);
+            assert_eq!(many.properties, one.properties);
+        }
     }
 }
 

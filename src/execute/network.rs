@@ -24,7 +24,7 @@ use nalgebra::DMatrix;
 
 use crate::analysis::batch;
 use crate::analysis::crown::{Analysis, Mode};
-use crate::analysis::partition::{refine, Stop, Strategy};
+use crate::analysis::partition::{refine_parallel, Stop, Strategy};
 use crate::analysis::sdp;
 use crate::analysis::shape::{excess, extent_of_points, support_of_box, support_of_points};
 use crate::check::{NetPropertyKind, RadiusSpec};
@@ -195,8 +195,9 @@ pub struct NetControl<'a> {
     /// Stop refining (and searching) after this many seconds; what is
     /// unfinished stays unproven.
     pub time_limit: Option<f64>,
-    /// Threads for uniform-grid cells and CARRL observations (results are
-    /// put back in index order: the same for every count).
+    /// Threads for uniform-grid cells, CARRL observations and the two
+    /// children of each guided split (results are put back in index order:
+    /// the same for every count).
     pub threads: usize,
 }
 
@@ -536,11 +537,14 @@ fn bound_all(
                 budget.seconds = Some(budget.seconds.map_or(left, |s| s.min(left)));
             }
             let root = region.bbox();
-            let r = refine(
+            // the two children of every split on two threads (the same
+            // cells and values as one thread); the issues are sorted below
+            let found = std::sync::Mutex::new(Vec::new());
+            let r = refine_parallel(
                 &root,
                 strategy,
                 &budget,
-                &mut |c: &IBox, parent: Option<&Vec<f64>>| {
+                &|c: &IBox, parent: Option<&Vec<f64>>| {
                     let cell = match region {
                         Region::Polytope { rows, .. } => Region::Polytope {
                             bbox: c.clone(),
@@ -553,13 +557,17 @@ fn bound_all(
                     };
                     let (b, iss) =
                         cell_bounds(&plan.net, &cell, plan.propagator, plan.slope_steps, dirs);
-                    issues.extend(iss);
+                    if !iss.is_empty() {
+                        found.lock().unwrap_or_else(|e| e.into_inner()).extend(iss);
+                    }
                     let b = within(b, parent);
                     let s = excess(&b, sampled, extent);
                     (b, s)
                 },
                 ctl.elapsed,
+                ctl.threads,
             );
+            issues.extend(found.into_inner().unwrap_or_else(|e| e.into_inner()));
             let cells = r.leaves.into_iter().map(|l| (l.cell, l.value)).collect();
             (cells, r.calls, r.stop)
         }

@@ -27,9 +27,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use ravel::analysis::closed_loop::{Boundary, Propagator};
-use ravel::analysis::partition::Budget;
 use ravel::execute::execute;
-use ravel::lower::{lower, Guide, Partitioner};
+use ravel::lower::{lower, Partitioner};
 
 /// One row of the table: a name, a propagator, a partitioner and the samples
 /// the method itself needs (0 unless simulation-guided).
@@ -77,14 +76,7 @@ fn methods(dims: usize, grid: &[usize], sdp: bool, sdp_cells: bool) -> Vec<Metho
         m(
             "Reach-LP-GSG (32 calls)",
             Propagator::ReachLp,
-            Partitioner::Guided {
-                guide: Guide::Gsg,
-                budget: Budget {
-                    calls: 32,
-                    min_size: 1.0 / 64.0,
-                    seconds: None,
-                },
-            },
+            common::gsg32(),
             1000,
         ),
         m(

@@ -29,10 +29,9 @@ use std::time::Instant;
 use nalgebra::{DMatrix, DVector};
 use ravel::analysis::closed_loop::{ClosedLoop, Plant, Propagator};
 use ravel::analysis::crown::{Analysis, Mode};
-use ravel::analysis::partition::Budget;
 use ravel::check::Checked;
 use ravel::execute::{execute_with, propagate_cell, Control};
-use ravel::lower::{lower, Guide, Partitioner, Plan};
+use ravel::lower::{lower, Partitioner, Plan};
 use ravel::rng::Rng;
 use ravel::sets::{IBox, Region};
 
@@ -203,14 +202,7 @@ fn targets(slow: bool) {
     );
     let p = plan_of(&di, Propagator::ReachLp, grid(4, 2), 0);
     row("DI Reach-LP, 16 cells", time(|| run(&p, 1)), "≤ 200 µs");
-    let gsg = Partitioner::Guided {
-        guide: Guide::Gsg,
-        budget: Budget {
-            calls: 32,
-            min_size: 1.0 / 64.0,
-            seconds: None,
-        },
-    };
+    let gsg = common::gsg32();
     let p = plan_of(&di, Propagator::ReachLp, gsg.clone(), 1000);
     row(
         "DI Reach-LP + GSG (32 calls, 1000 samples included)",
@@ -297,14 +289,7 @@ fn targets(slow: bool) {
 fn jobs_rows() {
     let di = checked("specs/double_integrator.ravel");
     let quad = checked("specs/quadrotor.ravel");
-    let gsg = Partitioner::Guided {
-        guide: Guide::Gsg,
-        budget: Budget {
-            calls: 32,
-            min_size: 1.0 / 64.0,
-            seconds: None,
-        },
-    };
+    let gsg = common::gsg32();
     let exe = env!("CARGO_BIN_EXE_ravel");
     let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator.ravel");
     let p = plan_of(&di, Propagator::ReachLp, grid(16, 2), 0);

@@ -43,3 +43,15 @@ pub fn args() -> (Option<String>, bool) {
         .filter(|a| !a.is_empty());
     (filter, std::env::args().any(|a| a == "--slow"))
 }
+
+/// Greedy simulation-guided refinement with 32 calls (the GSG rows).
+pub fn gsg32() -> ravel::ir::Partitioner {
+    ravel::ir::Partitioner::Guided {
+        guide: ravel::ir::Guide::Gsg,
+        budget: ravel::analysis::partition::Budget {
+            calls: 32,
+            min_size: 1.0 / 64.0,
+            seconds: None,
+        },
+    }
+}

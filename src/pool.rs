@@ -1,6 +1,6 @@
-//! The worker threads of `--jobs`: one pool per thread count, started once
-//! per process and kept (rayon's), so a run's parallel parts wake threads
-//! instead of starting them. Starting a thread per run cost more than the
+//! The worker threads of `--jobs`: rayon pools started once per process and
+//! kept (normally one, sized by the CLI's `--jobs`), so a run's parallel
+//! parts wake threads instead of starting them. Starting a thread per run cost more than the
 //! start itself: with a fresh thread for every 2.7 ms run of 256 cells, the
 //! two threads together took about 20 % more processor time than one thread
 //! alone (see README, Speed).

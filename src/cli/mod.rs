@@ -61,8 +61,10 @@ enum Cmd {
         /// `<spec>[--<controller>].cert.json` per (spec, controller) pair.
         #[arg(long, value_name = "PATH")]
         certificate: Option<PathBuf>,
-        /// Run this many (spec, controller) pairs at once (default: the
-        /// number of cores); the output is the same for every number.
+        /// Run this many (spec, controller) pairs at once, or a single
+        /// pair's cells, guided splits and samples on this many threads
+        /// (default: the number of cores); the output is the same for every
+        /// number.
         #[arg(long, value_name = "N", value_parser = batch::parse_jobs)]
         jobs: Option<usize>,
         /// Run only shard K of N: the pairs whose index is K − 1 modulo N

@@ -541,17 +541,22 @@ fn threads_never_change_a_network_result() {
     let mut p = p.clone();
     p.input = Some(Region::Box(IBox::new(vec![-0.3, -0.5], vec![0.5, 0.1])));
     p.partitioner = Partitioner::Uniform(vec![7, 5]);
-    let with = |threads| with_plan(&p, threads);
-    let one = with(1);
-    for threads in [2, 3, 8] {
-        let many = with(threads);
-        assert_eq!(
-            many.output.offsets, one.output.offsets,
-            "box, {threads} threads"
-        );
-        assert_eq!(many.partition, one.partition);
-        assert_eq!(many.properties, one.properties);
-    }
+    // the output, partition and properties of `p` on these thread counts
+    // against one thread's; the outcome on one thread
+    let same = |p: &NetPlan, counts: &[usize], what: &str| {
+        let one = with_plan(p, 1);
+        for &threads in counts {
+            let many = with_plan(p, threads);
+            assert_eq!(
+                many.output.offsets, one.output.offsets,
+                "{what}, {threads} threads"
+            );
+            assert_eq!(many.partition, one.partition, "{what}");
+            assert_eq!(many.properties, one.properties, "{what}");
+        }
+        one
+    };
+    same(&p, &[2, 3, 8], "box");
     // guided refinement: each split's two children on two threads
     for guide in [Guide::Gsg, Guide::Sg] {
         p.partitioner = Partitioner::Guided {
@@ -562,18 +567,8 @@ fn threads_never_change_a_network_result() {
                 seconds: None,
             },
         };
-        let with = |threads| with_plan(&p, threads);
-        let one = with(1);
+        let one = same(&p, &[2, 3], &format!("{guide:?}"));
         assert!(one.partition.len() > 1, "{guide:?} refines");
-        for threads in [2, 3] {
-            let many = with(threads);
-            assert_eq!(
-                many.output.offsets, one.output.offsets,
-                "{guide:?}, {threads} threads"
-            );
-            assert_eq!(many.partition, one.partition);
-            assert_eq!(many.properties, one.properties);
-        }
     }
 }
 

@@ -44,7 +44,16 @@ pub fn error_bound(count: usize, abs_sum: f64) -> f64 {
 /// An upper bound on the exact sum of the exact values whose rounded values
 /// are `terms` (each term is itself at most one rounding away from its exact value).
 ///
-/// Infinite terms give an infinite result; NaN propagates.
+/// # Saturation
+///
+/// The answer is finite or `+∞`, never `−∞` nor NaN: whenever the rounded
+/// sum or the sum of magnitudes is not finite (an infinite or NaN term, or a
+/// running sum that overflowed, in either direction), the only bound the
+/// terms give is `+∞`. A running sum that overflows to `−∞` says nothing
+/// about the exact sum: `−1.7e308 − 1.7e308 + 1.7e308 + 1.7e308 + 1.7e308`
+/// overflows to `−∞` at its second term while the exact sum is `+1.7e308`.
+/// Taking `−∞` (or NaN, which `min` and `max` silently drop) as an upper
+/// bound would prove anything. [`sum_lower`] saturates to `−∞` the same way.
 pub fn sum_upper<I: IntoIterator<Item = f64>>(terms: I) -> f64 {
     let (mut s, mut a, mut n) = (0.0f64, 0.0f64, 0usize);
     for t in terms {
@@ -52,10 +61,7 @@ pub fn sum_upper<I: IntoIterator<Item = f64>>(terms: I) -> f64 {
         a += t.abs();
         n += 1;
     }
-    if !s.is_finite() || !a.is_finite() {
-        return s;
-    }
-    (s + error_bound(n, a)).next_up()
+    Acc { s, a, n }.upper()
 }
 
 /// A running sum for [`sum_upper`]/[`sum_lower`] built term by term in a
@@ -165,26 +171,32 @@ impl Acc {
         Acc { s, a, n }
     }
 
-    /// An upper bound on the exact sum of the terms (see [`sum_upper`]).
+    /// An upper bound on the exact sum of the terms: finite or `+∞`, never
+    /// `−∞` nor NaN (see [`sum_upper`]).
     #[inline]
     pub fn upper(self) -> f64 {
-        if !self.s.is_finite() || !self.a.is_finite() {
-            return self.s;
+        // `a` is a sum of magnitudes: finite `a` means every term and every
+        // partial sum is finite, so `s` is too; the final addition can only
+        // overflow upward, to `+∞`
+        if !(self.a.is_finite() && self.s.is_finite()) {
+            return f64::INFINITY;
         }
         (self.s + error_bound(self.n, self.a)).next_up()
     }
 
-    /// A lower bound on the exact sum of the terms (see [`sum_lower`]).
+    /// A lower bound on the exact sum of the terms: finite or `−∞`, never
+    /// `+∞` nor NaN (see [`sum_lower`]).
     #[inline]
     pub fn lower(self) -> f64 {
-        if !self.s.is_finite() || !self.a.is_finite() {
-            return self.s;
+        if !(self.a.is_finite() && self.s.is_finite()) {
+            return f64::NEG_INFINITY;
         }
         (self.s - error_bound(self.n, self.a)).next_down()
     }
 }
 
-/// A lower bound on the exact sum; see [`sum_upper`].
+/// A lower bound on the exact sum: finite or `−∞`, never `+∞` nor NaN; see
+/// [`sum_upper`].
 pub fn sum_lower<I: IntoIterator<Item = f64>>(terms: I) -> f64 {
     -sum_upper(terms.into_iter().map(|t| -t))
 }
@@ -280,10 +292,36 @@ pub fn slack(k: f64, a: &[f64], m: &[f64]) -> f64 {
 }
 
 /// [`slack`] from `Σ|aᵢ|·mᵢ` summed in `f64` by the caller (any order).
+/// An error bound: finite or `+∞`, never NaN.
 #[inline]
 pub fn slack_of_sum(k: f64, abs_dot: f64) -> f64 {
     // the factor 1.0625 also covers the rounding of the sum itself
-    (k * abs_dot * 1.0625 + TINY).next_up()
+    sat_upper((k * abs_dot * 1.0625 + TINY).next_up())
+}
+
+/// `v` as an upper bound that saturates soundly: `v` itself when it is
+/// finite or `+∞`; `+∞` when it is NaN or `−∞`. A computed upper bound is
+/// `−∞` only when some step overflowed in the wrong direction (the exact
+/// quantity is a real number), and NaN only when an infinity met its
+/// opposite; in both cases the computation bounds nothing.
+#[inline]
+pub fn sat_upper(v: f64) -> f64 {
+    if v > f64::NEG_INFINITY {
+        v
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// `v` as a lower bound that saturates soundly: `v` when it is finite or
+/// `−∞`; `−∞` when it is NaN or `+∞` (see [`sat_upper`]).
+#[inline]
+pub fn sat_lower(v: f64) -> f64 {
+    if v < f64::INFINITY {
+        v
+    } else {
+        f64::NEG_INFINITY
+    }
 }
 
 /// The largest absolute value in `[lo, hi]`.
@@ -291,21 +329,105 @@ pub fn abs_max(lo: f64, hi: f64) -> f64 {
     lo.abs().max(hi.abs())
 }
 
-/// Upper bound of `f − a·z` where `f` approximates an exact value with absolute error at most `f_err`.
+/// Upper bound of `f − a·z` where `f` approximates an exact value with
+/// absolute error at most `f_err`: finite or `+∞`, never `−∞` nor NaN.
 pub fn gap_upper(f: f64, f_err: f64, a: f64, z: f64) -> f64 {
     let p = mul0(a, z);
     let t = f - p;
-    (t + f_err + 3.0 * U * (f.abs() + p.abs()) + TINY).next_up()
+    let e = f_err + 3.0 * U * (f.abs() + p.abs()) + TINY;
+    if !(t.is_finite() && e.is_finite()) {
+        // an infinite operand, or `f − a·z` overflowed (possibly downward,
+        // where the exact value is a real number): no finite bound
+        return f64::INFINITY;
+    }
+    (t + e).next_up()
 }
 
-/// Lower bound of `f − a·z`; see [`gap_upper`].
+/// Lower bound of `f − a·z`: finite or `−∞`; see [`gap_upper`].
 pub fn gap_lower(f: f64, f_err: f64, a: f64, z: f64) -> f64 {
     -gap_upper(-f, f_err, -a, z)
 }
 
+/// Exact sums for the property tests (shared with the integration tests).
+#[cfg(test)]
+#[path = "../tests/common/exact.rs"]
+mod exact;
+
 #[cfg(test)]
 mod tests {
+    use super::exact::{is_lower, is_upper, Extreme, Fixed};
     use super::*;
+
+    /// Sums near `f64::MAX`, of subnormals and of mixed signs: every upper
+    /// bound is `+∞` or a finite number at least the exact sum (never `−∞`
+    /// nor NaN), every lower bound likewise; through `sum_upper`,
+    /// `sum_lower`, `Acc` (one by one, merged, products with powers of
+    /// two) and the box dot products.
+    #[test]
+    fn directed_sums_saturate_soundly_at_every_magnitude() {
+        let mut g = Extreme::new(26);
+        let mut finite_seen = 0;
+        for round in 0..20_000 {
+            let n = 1 + g.below(if round % 2 == 0 { 6 } else { 40 });
+            let terms: Vec<f64> = (0..n).map(|_| g.value()).collect();
+            let exact = Fixed::sum(terms.iter().copied());
+            let (up, lo) = (
+                sum_upper(terms.iter().copied()),
+                sum_lower(terms.iter().copied()),
+            );
+            assert!(is_upper(up, exact), "upper {up:e} of {terms:?}");
+            assert!(is_lower(lo, exact), "lower {lo:e} of {terms:?}");
+            finite_seen += usize::from(up.is_finite());
+            // a running sum in two parts, merged
+            let cut = g.below(n + 1);
+            let (mut a, mut b) = (Acc::ZERO, Acc::ZERO);
+            terms[..cut].iter().for_each(|&t| a.add(t));
+            terms[cut..].iter().for_each(|&t| b.add(t));
+            a.merge(b);
+            assert!(is_upper(a.upper(), exact) && is_lower(a.lower(), exact));
+            // products with powers of two: each term one rounding (or an
+            // overflow) away from its exact value
+            let k: Vec<u32> = (0..n).map(|_| g.below(3) as u32).collect();
+            let scale: Vec<f64> = k.iter().map(|&k| f64::from(1u32 << k)).collect();
+            let exact_products = terms
+                .iter()
+                .zip(&k)
+                .fold(Fixed::ZERO, |s, (&t, &k)| s.add(Fixed::of_scaled(t, k)));
+            let mut p = Acc::ZERO;
+            p.add_products(&scale, &terms);
+            assert!(is_upper(p.upper(), exact_products), "{terms:?} × {scale:?}");
+            assert!(is_lower(p.lower(), exact_products), "{terms:?} × {scale:?}");
+            // Σ aᵢ xᵢ over a box whose sides are single points
+            let up_box = dot_box_upper(&scale, &terms, &terms);
+            let lo_box = dot_box_lower(&scale, &terms, &terms);
+            assert!(is_upper(up_box, exact_products) && is_lower(lo_box, exact_products));
+        }
+        // the test also reaches finite answers, not only saturated ones
+        assert!(finite_seen > 5_000, "{finite_seen}");
+    }
+
+    /// The forgery of issue 26: a running sum that overflows to `−∞` while
+    /// the exact sum is `+1.7e308` is not an upper bound of anything.
+    #[test]
+    fn a_sum_overflowing_downward_is_no_upper_bound() {
+        let terms = [-1.7e308, -1.7e308, 1.7e308, 1.7e308, 1.7e308];
+        assert_eq!(sum_upper(terms), f64::INFINITY);
+        assert_eq!(sum_lower(terms.map(|t| -t)), f64::NEG_INFINITY);
+        // a dual term of 3.5e307 on a row of the goal, as in the forged
+        // certificate: the support overflows; its bound is +∞
+        let mut acc = Acc::of(-3.5e307 * 6.0);
+        acc.add(-3.5e307 * 6.0);
+        acc.add(1.0);
+        assert!(acc.upper().is_finite() || acc.upper() == f64::INFINITY);
+        assert!(acc.upper() > f64::NEG_INFINITY);
+        assert_eq!(gap_upper(-1.7e308, 0.0, 1.0, 1.7e308), f64::INFINITY);
+        assert_eq!(gap_lower(1.7e308, 0.0, 1.0, -1.7e308), f64::NEG_INFINITY);
+        assert_eq!(gap_upper(f64::NAN, 0.0, 1.0, 1.0), f64::INFINITY);
+        assert_eq!(slack_of_sum(1.0, f64::NAN), f64::INFINITY);
+        assert_eq!(sat_upper(f64::NEG_INFINITY), f64::INFINITY);
+        assert_eq!(sat_lower(f64::NAN), f64::NEG_INFINITY);
+        assert_eq!(sat_upper(-2.0), -2.0);
+    }
 
     #[test]
     fn counted_terms_sum_as_the_branching_loop_does() {
@@ -387,7 +509,8 @@ mod tests {
         let mut nan = Acc::ZERO;
         nan.add(f64::INFINITY);
         nan.add(f64::NEG_INFINITY);
-        assert!(nan.upper().is_nan() && nan.lower().is_nan());
+        assert_eq!(nan.upper(), f64::INFINITY);
+        assert_eq!(nan.lower(), f64::NEG_INFINITY);
     }
 
     #[test]

@@ -718,7 +718,8 @@ fn evidence(
             let proven = match stepped {
                 Ok(st) => {
                     for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
-                        if b < o {
+                        // a claim holds only against a number (NaN proves nothing)
+                        if b.is_nan() || o.is_nan() || b < o {
                             return Ok(Err(format!(
                                 "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
                                 crate::diag::compact(o - b)
@@ -744,7 +745,7 @@ fn evidence(
                 }
             };
             for i in 0..n {
-                if set.hi[i] < proven.hi[i] {
+                if proven.hi[i].is_nan() || set.hi[i] < proven.hi[i] {
                     return Ok(Err(format!(
                         "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
                         facet(i, true),
@@ -753,7 +754,7 @@ fn evidence(
                         crate::diag::compact(proven.hi[i] - set.hi[i])
                     )));
                 }
-                if set.lo[i] > proven.lo[i] {
+                if proven.lo[i].is_nan() || set.lo[i] > proven.lo[i] {
                     return Ok(Err(format!(
                         "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
                         facet(i, false),

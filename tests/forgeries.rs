@@ -1,0 +1,318 @@
+//! No overflow proves anything (issue 26): the forgeries that once passed
+//! the certificate checker, and the analysis at magnitudes near `f64::MAX`.
+//!
+//! * A certificate of a FALSIFIED goal, flipped to VERIFIED, with one true
+//!   claimed inequality at the last step and goal duals of 3.5e307 on it:
+//!   the dual support's sum overflowed to `−∞` and was taken as an upper
+//!   bound. It is INVALID.
+//! * A loop whose states reach ±1.7e308 (finite) at the horizon: a goal
+//!   every trajectory violates and an avoid set every trajectory enters were
+//!   VERIFIED (margins `+∞` from a sum overflowing downward). They are not,
+//!   and their certificates, forced to VERIFIED, are not VALID.
+//! * A forged counterexample for a goal that holds, at those magnitudes:
+//!   the replay's lower bound overflowed to `+∞`. It is INVALID.
+
+use std::path::Path;
+
+use ravel::certify::{check, Answer};
+use ravel::execute::Status;
+use serde_json::{json, Value};
+
+/// Plan and outcome of spec text whose files resolve against `dir`.
+fn analyse(source: &str, dir: &Path) -> (ravel::lower::Plan, ravel::execute::Outcome) {
+    let checked =
+        ravel::front_end(source, dir, &ravel::cli::read_request).expect("the spec checks");
+    let plan = ravel::lower::lower(&checked);
+    let outcome = ravel::execute::execute(&plan, &|| 0.0);
+    (plan, outcome)
+}
+
+fn certificate(plan: &ravel::lower::Plan, outcome: &ravel::execute::Outcome) -> Value {
+    let id = ravel::certificate::Identity {
+        spec_path: String::new(),
+        spec_sha256: String::new(),
+    };
+    ravel::certificate::build(plan, outcome, &id)
+}
+
+fn answer(cert: &Value, plan: &ravel::lower::Plan) -> Answer {
+    check(cert, &plan.closed_loop.net).answer
+}
+
+/// Set property `name`'s verdict in the certificate (and drop its trajectory).
+fn set_status(cert: &mut Value, name: &str, status: &str) {
+    for v in cert["verdicts"].as_array_mut().expect("verdicts") {
+        if v["property"] == name {
+            v["status"] = json!(status);
+            if let Some(o) = v.as_object_mut() {
+                o.remove("step");
+                o.remove("trajectory");
+            }
+        }
+    }
+}
+
+/// The quadrotor with its goal narrowed to `x[0] ∈ [3.0, 3.4]`: every
+/// trajectory ends near x[0] ≈ 3.5–3.65, so the goal is FALSIFIED.
+fn narrowed_quadrotor() -> (ravel::lower::Plan, ravel::execute::Outcome) {
+    let source = std::fs::read_to_string("specs/quadrotor.ravel").expect("spec");
+    let narrowed = source.replace("x[0] in [3.0, 4.5]", "x[0] in [3.0, 3.4]");
+    assert_ne!(narrowed, source, "the goal line moved");
+    analyse(&narrowed, Path::new("specs"))
+}
+
+#[test]
+fn a_huge_goal_dual_cannot_certify_a_false_goal() {
+    let (plan, outcome) = narrowed_quadrotor();
+    let goal = outcome
+        .properties
+        .iter()
+        .find(|p| p.name == "G")
+        .expect("G");
+    assert_eq!(goal.status, Status::Falsified);
+    let mut cert = certificate(&plan, &outcome);
+    assert_eq!(
+        answer(&cert, &plan),
+        Answer::Valid,
+        "the honest certificate"
+    );
+    set_status(&mut cert, "G", "VERIFIED");
+    // one claimed inequality at the last step, true: x₀ + … + x₅ is at most
+    // its bound over the last claimed box (the checker's own facet bound
+    // in that direction is tighter)
+    let cells = cert["evidence"]["cells"]
+        .as_array_mut()
+        .expect("the avoid property's evidence");
+    assert!(!cells.is_empty());
+    for cell in cells.iter_mut() {
+        let steps = cell["steps"].as_array_mut().expect("steps");
+        let last = steps.last_mut().expect("a last step");
+        let lo: Vec<f64> = serde_json::from_value(last["set"]["lo"].clone()).expect("lo");
+        let hi: Vec<f64> = serde_json::from_value(last["set"]["hi"].clone()).expect("hi");
+        let ones = vec![1.0; lo.len()];
+        let b = ravel::num::dot_box_upper(&ones, &lo, &hi);
+        let b = b + 1e-9 * (1.0 + b.abs());
+        last["rows"] = json!([{ "a": ones, "b": b }]);
+        // a dual of 3.5e307 on that row for each of the goal's six rows
+        cell["goal_duals"] = json!(vec![vec![3.5e307]; 6]);
+    }
+    match answer(&cert, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("goal `G`"), "{m}"),
+        other => panic!("a false goal was certified: {other:?}"),
+    }
+    // the same forgery with an absurd goal, far from every trajectory
+    let mut far = cert.clone();
+    for p in far["problem"]["properties"].as_array_mut().expect("props") {
+        if p["name"] == "G" {
+            for row in p["rows"].as_array_mut().expect("rows") {
+                let a: Vec<f64> = serde_json::from_value(row["a"].clone()).expect("a");
+                if a[0] == 1.0 {
+                    row["b"] = json!(101.0);
+                } else if a[0] == -1.0 {
+                    row["b"] = json!(-100.0);
+                }
+            }
+        }
+    }
+    assert!(
+        matches!(answer(&far, &plan), Answer::Invalid(_)),
+        "x[0] in [100, 101] certified"
+    );
+}
+
+/// Seven states: x₀, x₁ stay small (the controller sees them), x₂ … x₆ grow
+/// by 10¹⁵ a step from ∓1.7e8 to ∓1.7e308 at step 20, all finite. x₂ and x₃
+/// are negative, x₄ … x₆ positive: `x₂ + … + x₆` is about +1.7e308 for every
+/// trajectory, though a running sum in this order overflows to `−∞`.
+fn huge(goal: &str, avoid: &str) -> String {
+    format!(
+        r#"
+system huge {{
+    state   x[7]
+    control u[1]
+    A = [[0, 0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 0, 0],
+         [0, 0, 1e15, 0, 0, 0, 0], [0, 0, 0, 1e15, 0, 0, 0], [0, 0, 0, 0, 1e15, 0, 0],
+         [0, 0, 0, 0, 0, 1e15, 0], [0, 0, 0, 0, 0, 0, 1e15]]
+    B = [[0.5], [1], [0], [0], [0], [0], [0]]
+    C = [[1, 0], [0, 1], [0, 0], [0, 0], [0, 0], [0, 0], [0, 0]]
+    u in box([-1, 1])
+}}
+controller "models/double_integrator.onnx"
+initial X0 = box(x[0] in [2.5, 3], x[1] in [-0.25, 0.25],
+                 x[2] in [-1.70e8, -1.69e8], x[3] in [-1.70e8, -1.69e8],
+                 x[4] in [1.69e8, 1.70e8], x[5] in [1.69e8, 1.70e8], x[6] in [1.69e8, 1.70e8])
+goal G = {{ {goal} }}
+avoid crossed = {{ {avoid} }} at steps [20, 20]
+horizon 20
+analysis {{
+    propagator reach_lp
+    samples 200
+}}
+"#
+    )
+}
+
+const SUM: &str = "x[2] + x[3] + x[4] + x[5] + x[6]";
+
+#[test]
+fn states_near_the_top_of_f64_never_verify_a_false_claim() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // every trajectory violates the goal and enters the avoid set
+    let src = huge(
+        &format!("{SUM} <= 0"),
+        "-x[2] - x[3] - x[4] - x[5] - x[6] <= 0",
+    );
+    let (plan, outcome) = analyse(&src, dir);
+    // the states themselves are representable: no step overflowed
+    assert_eq!(outcome.cut, None, "{:?}", outcome.cut);
+    let last = outcome.reach.last().expect("sets");
+    assert!(last.hi[4] > 1.6e308 && last.hi[4].is_finite());
+    for p in &outcome.properties {
+        assert_ne!(p.status, Status::Verified, "{} verified", p.name);
+        assert!(!p.margin.is_nan(), "{}", p.name);
+    }
+    // certificates forced to VERIFIED are never VALID
+    let mut cert = certificate(&plan, &outcome);
+    for name in ["G", "crossed"] {
+        set_status(&mut cert, name, "VERIFIED");
+    }
+    let mut forced = outcome.clone();
+    for p in &mut forced.properties {
+        p.status = Status::Verified;
+        p.counterexample = None;
+    }
+    let written = certificate(&plan, &forced);
+    for c in [&cert, &written] {
+        let a = answer(c, &plan);
+        assert!(
+            !matches!(a, Answer::Valid),
+            "a false claim at 1.7e308 certified: {a:?}"
+        );
+    }
+    // the sets are sound there: each coordinate's box holds the samples'
+    // range, and a true goal at this magnitude is not refused for overflow
+    // of its sum: it is at worst UNSURE
+    let (_, fine) = analyse(&huge(&format!("{SUM} <= 1e15"), "x[0] <= -100"), dir);
+    assert_ne!(fine.properties[1].status, Status::Falsified);
+}
+
+#[test]
+fn a_forged_counterexample_at_the_top_of_f64_is_replayed_not_trusted() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // the goal holds: x₂ + … + x₆ is about +1.7e308 > −1 for every trajectory
+    let src = huge("-x[2] - x[3] - x[4] - x[5] - x[6] <= 1", "x[0] <= -100");
+    let (plan, outcome) = analyse(&src, dir);
+    assert_ne!(outcome.properties[0].status, Status::Falsified);
+    // a counterexample: a trajectory from X0's corner with no noise; the
+    // checker replays it and must not find the goal violated
+    let mut cert = certificate(&plan, &outcome);
+    let x0 = [2.75, 0.0, -1.7e8, -1.7e8, 1.7e8, 1.7e8, 1.7e8];
+    let trajectory = json!({
+        "initial": x0,
+        "process_noise": vec![vec![0.0; 7]; 20],
+        "sensor_noise": vec![vec![0.0; 2]; 20],
+    });
+    for v in cert["verdicts"].as_array_mut().expect("verdicts") {
+        if v["property"] == "G" {
+            v["status"] = json!("FALSIFIED");
+            v["step"] = json!(20);
+            v["trajectory"] = trajectory.clone();
+        }
+    }
+    let a = answer(&cert, &plan);
+    assert!(
+        !matches!(a, Answer::Valid),
+        "a counterexample to a true goal was accepted: {a:?}"
+    );
+}
+
+/// A network of 20 linear layers, each `10¹⁵·I`, on five inputs near
+/// ∓1.7e8: its outputs are about ∓1.7e308 (finite). `require` that
+/// `y₀ + … + y₄ ≤ 0` is false (the sum is about +1.7e308), though a running
+/// sum in this order overflows to `−∞`. Neither the analysis nor a forged
+/// certificate may call it proven.
+#[test]
+fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
+    use ravel::analysis::shape::Shape;
+    use ravel::check::{NetProperty, NetPropertyKind};
+    use ravel::execute::network::{execute_network, NetControl};
+    use ravel::ir::{NetPropagator, Partitioner};
+    use ravel::nn::{Layer, Network};
+    use ravel::sets::{IBox, Polytope, Region};
+    let n = 5;
+    let layers = (0..20)
+        .map(|_| Layer::Affine {
+            w: nalgebra::DMatrix::from_diagonal_element(n, n, 1e15),
+            b: nalgebra::DVector::zeros(n),
+        })
+        .collect();
+    let net = Network::new(n, layers);
+    let y = net.forward(&[-1.7e8, -1.7e8, 1.7e8, 1.7e8, 1.7e8]);
+    assert!(
+        y.iter().all(|v| v.is_finite() && v.abs() > 1.6e308),
+        "{y:?}"
+    );
+    let (lo, hi) = (1.69e8, 1.70e8);
+    let input = IBox::new(vec![-hi, -hi, lo, lo, lo], vec![-lo, -lo, hi, hi, hi]);
+    for propagator in [NetPropagator::Crown, NetPropagator::Ibp] {
+        let plan = ravel::lower::NetPlan {
+            name: "deep".into(),
+            input_name: "x".into(),
+            output_name: "y".into(),
+            model_path: String::new(),
+            model_sha256: String::new(),
+            model_resolved: String::new(),
+            network_summary: String::new(),
+            net: net.clone(),
+            input: Some(Region::Box(input.clone())),
+            input_set_name: "X".into(),
+            selects: Vec::new(),
+            properties: vec![NetProperty {
+                name: "sum".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![1.0; n], 0.0)],
+                }),
+            }],
+            radii: Vec::new(),
+            propagator,
+            partitioner: Partitioner::Uniform(vec![1; n]),
+            shape: Shape::Box,
+            samples: 50,
+            seed: 3,
+            slope_steps: 0,
+        };
+        let mut out = execute_network(
+            &plan,
+            &NetControl {
+                elapsed: &|| 0.0,
+                time_limit: None,
+                threads: 1,
+            },
+        );
+        assert_ne!(
+            out.properties[0].status,
+            Status::Verified,
+            "{propagator:?}: a false requirement verified"
+        );
+        let id = ravel::certificate::Identity {
+            spec_path: String::new(),
+            spec_sha256: String::new(),
+        };
+        out.properties[0].status = Status::Verified;
+        out.properties[0].counterexample = None;
+        let mut forced = ravel::certificate::build_network(&plan, &out, &id);
+        assert!(!matches!(
+            ravel::certify::network::check(&forced, &net).answer,
+            Answer::Valid
+        ));
+        forced["evidence"] = json!({
+            "status": "checkable",
+            "cells": [{ "lo": input.lo, "hi": input.hi }],
+        });
+        let a = ravel::certify::network::check(&forced, &net).answer;
+        assert!(
+            !matches!(a, Answer::Valid),
+            "{propagator:?}: a false requirement certified: {a:?}"
+        );
+    }
+}

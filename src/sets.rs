@@ -550,9 +550,96 @@ impl Region {
     }
 }
 
+/// Exact sums for the property tests (shared with the integration tests).
+#[cfg(test)]
+#[path = "../tests/common/exact.rs"]
+mod exact;
+
 #[cfg(test)]
 mod tests {
+    use super::exact::{is_lower, is_upper, Extreme, Fixed};
     use super::*;
+
+    /// The exact `max_{x ∈ B} a·x` for coefficients `±2^k`: `Σ max(aᵢlᵢ, aᵢhᵢ)`.
+    fn exact_max(a: &[(f64, u32)], b: &IBox) -> Fixed {
+        a.iter()
+            .enumerate()
+            .fold(Fixed::ZERO, |s, (i, &(sign, k))| {
+                let end = if sign > 0.0 { b.hi[i] } else { b.lo[i] };
+                let t = Fixed::of_scaled(end, k);
+                s.add(if sign > 0.0 { t } else { t.neg() })
+            })
+    }
+
+    /// The margins that decide goal and avoid verdicts, and box supports, at
+    /// magnitudes near `f64::MAX`, subnormals and mixed signs: each is a
+    /// sound bound of its exact value (compared in exact fixed point), or
+    /// saturates to the infinity that proves nothing.
+    #[test]
+    fn margins_and_supports_are_sound_near_the_top_of_f64() {
+        let mut g = Extreme::new(4);
+        let mut decided = 0;
+        for _ in 0..4_000 {
+            let n = 1 + g.below(7);
+            let (mut lo, mut hi) = (Vec::new(), Vec::new());
+            for _ in 0..n {
+                let (p, q) = (g.value(), g.value());
+                lo.push(p.min(q));
+                hi.push(p.max(q));
+            }
+            let b = IBox::new(lo, hi);
+            let rows: Vec<(Vec<(f64, u32)>, f64)> = (0..1 + g.below(3))
+                .map(|_| {
+                    let a = (0..n)
+                        .map(|_| {
+                            let sign = if g.below(2) == 0 { 1.0 } else { -1.0 };
+                            (sign, g.below(3) as u32)
+                        })
+                        .collect();
+                    (a, g.value())
+                })
+                .collect();
+            let coef = |a: &[(f64, u32)]| -> Vec<f64> {
+                a.iter().map(|&(s, k)| s * f64::from(1u32 << k)).collect()
+            };
+            let p = Polytope {
+                rows: rows.iter().map(|(a, h)| (coef(a), *h)).collect(),
+            };
+            // containment: min_r (h_r − max a_r·x), exactly
+            let mut least: Option<Fixed> = None;
+            // separation: max_r (min a_r·x − h_r) = max_r (−max (−a_r)·x − h_r)
+            let mut most: Option<Fixed> = None;
+            for (a, h) in &rows {
+                let c = Fixed::of(*h).add(exact_max(a, &b).neg());
+                least = Some(match least {
+                    Some(l) if l.le(c) => l,
+                    _ => c,
+                });
+                let neg: Vec<(f64, u32)> = a.iter().map(|&(s, k)| (-s, k)).collect();
+                let m = exact_max(&neg, &b).neg().add(Fixed::of(*h).neg());
+                most = Some(match most {
+                    Some(l) if m.le(l) => l,
+                    _ => m,
+                });
+                let up = Region::Box(b.clone()).support(&coef(a)).value;
+                assert!(
+                    is_upper(up, exact_max(a, &b)),
+                    "support {up:e} of {a:?} over {b:?}"
+                );
+            }
+            let (least, most) = (least.expect("rows"), most.expect("rows"));
+            let cm = p.containment_margin(&b);
+            let sm = p.separation_margin(&b);
+            assert!(
+                is_lower(cm, least),
+                "containment {cm:e} over {b:?} {rows:?}"
+            );
+            assert!(is_lower(sm, most), "separation {sm:e} over {b:?} {rows:?}");
+            decided += usize::from(cm >= 0.0) + usize::from(sm > 0.0);
+        }
+        // the test reaches margins that decide verdicts, not only saturated ones
+        assert!(decided > 500, "{decided}");
+    }
 
     #[test]
     fn a_hull_grown_in_place_does_not_depend_on_the_order() {

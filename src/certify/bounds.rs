@@ -1448,10 +1448,98 @@ impl<'a> Chain<'a> {
     }
 }
 
+/// Exact sums for the property tests (shared with the integration tests).
+#[cfg(test)]
+#[path = "../../tests/common/exact.rs"]
+mod exact;
+
 #[cfg(test)]
 mod tests {
+    use super::exact::{is_upper, Extreme, Fixed};
     use super::*;
     use nalgebra::{DMatrix, DVector};
+
+    /// The exact `a·v` for coefficients `±2^k`.
+    fn exact_dot(a: &[(f64, u32)], v: &[f64]) -> Fixed {
+        a.iter().zip(v).fold(Fixed::ZERO, |s, (&(sign, k), &x)| {
+            let t = Fixed::of_scaled(x, k);
+            s.add(if sign > 0.0 { t } else { t.neg() })
+        })
+    }
+
+    /// The checker's supports over a box and a polytope with given duals
+    /// (the goal check of a closed-loop certificate, and a polytope start),
+    /// with duals of any size (3.5e307 among them) and boxes near
+    /// `f64::MAX`: never below `c·v` at a box vertex `v` that satisfies the
+    /// rows (exactly), so no dual makes a false containment pass.
+    #[test]
+    fn dual_supports_bound_every_feasible_vertex_at_any_magnitude() {
+        let mut g = Extreme::new(77);
+        let mut feasible = 0;
+        for _ in 0..3_000 {
+            let n = 1 + g.below(3);
+            let (mut lo, mut hi) = (Vec::new(), Vec::new());
+            for _ in 0..n {
+                let (p, q) = (g.value(), g.value());
+                lo.push(p.min(q));
+                hi.push(p.max(q));
+            }
+            let x = Bx { lo, hi };
+            let signed = |g: &mut Extreme| -> Vec<(f64, u32)> {
+                (0..n)
+                    .map(|_| {
+                        let sign = if g.below(2) == 0 { 1.0 } else { -1.0 };
+                        (sign, g.below(3) as u32)
+                    })
+                    .collect()
+            };
+            let coef = |a: &[(f64, u32)]| -> Vec<f64> {
+                a.iter().map(|&(s, k)| s * f64::from(1u32 << k)).collect()
+            };
+            let c = signed(&mut g);
+            let raw: Vec<Vec<(f64, u32)>> = (0..1 + g.below(2)).map(|_| signed(&mut g)).collect();
+            let rows: Vec<(Vec<f64>, f64)> = raw.iter().map(|a| (coef(a), g.value())).collect();
+            let mu: Vec<f64> = rows
+                .iter()
+                .map(|_| match g.below(4) {
+                    0 => 3.5e307,
+                    1 => g.value().abs(),
+                    2 => g.unit() * 4.0,
+                    _ => 1e300,
+                })
+                .collect();
+            let given = [mu];
+            let duals = Duals::given(&given);
+            let start = Start::Polytope {
+                rows: &rows,
+                duals: &duals,
+            };
+            let bound = start.support(&coef(&c), &x);
+            for corner in 0..1usize << n {
+                let v: Vec<f64> = (0..n)
+                    .map(|j| {
+                        if corner >> j & 1 == 1 {
+                            x.hi[j]
+                        } else {
+                            x.lo[j]
+                        }
+                    })
+                    .collect();
+                let inside = raw
+                    .iter()
+                    .zip(&rows)
+                    .all(|(a, (_, h))| exact_dot(a, &v).le(Fixed::of(*h)));
+                if inside {
+                    feasible += 1;
+                    assert!(
+                        is_upper(bound, exact_dot(&c, &v)),
+                        "support {bound:e} below c·v at {v:?} (c {c:?}, rows {rows:?}, duals {given:?})"
+                    );
+                }
+            }
+        }
+        assert!(feasible > 1_000, "{feasible}");
+    }
 
     #[test]
     fn relu_lines_bound_relu_on_their_interval() {

@@ -35,6 +35,12 @@ pub mod sets;
 pub mod syntax;
 pub mod vnnlib;
 
+/// Exact sums of `f64` values for the property tests of directed rounding
+/// (the same file serves the integration tests).
+#[cfg(test)]
+#[path = "../tests/common/exact.rs"]
+mod exact;
+
 use std::path::{Path, PathBuf};
 
 use check::{Checked, ControllerFile, Task};

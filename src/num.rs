@@ -348,15 +348,10 @@ pub fn gap_lower(f: f64, f_err: f64, a: f64, z: f64) -> f64 {
     -gap_upper(-f, f_err, -a, z)
 }
 
-/// Exact sums for the property tests (shared with the integration tests).
-#[cfg(test)]
-#[path = "../tests/common/exact.rs"]
-mod exact;
-
 #[cfg(test)]
 mod tests {
-    use super::exact::{is_lower, is_upper, Extreme, Fixed};
     use super::*;
+    use crate::exact::{is_lower, is_upper, Extreme, Fixed};
 
     /// Sums near `f64::MAX`, of subnormals and of mixed signs: every upper
     /// bound is `+∞` or a finite number at least the exact sum (never `−∞`

@@ -550,15 +550,10 @@ impl Region {
     }
 }
 
-/// Exact sums for the property tests (shared with the integration tests).
-#[cfg(test)]
-#[path = "../tests/common/exact.rs"]
-mod exact;
-
 #[cfg(test)]
 mod tests {
-    use super::exact::{is_lower, is_upper, Extreme, Fixed};
     use super::*;
+    use crate::exact::{is_lower, is_upper, Extreme, Fixed};
 
     /// The exact `max_{x ∈ B} a·x` for coefficients `±2^k`: `Σ max(aᵢlᵢ, aᵢhᵢ)`.
     fn exact_max(a: &[(f64, u32)], b: &IBox) -> Fixed {

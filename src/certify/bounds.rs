@@ -1448,15 +1448,10 @@ impl<'a> Chain<'a> {
     }
 }
 
-/// Exact sums for the property tests (shared with the integration tests).
-#[cfg(test)]
-#[path = "../../tests/common/exact.rs"]
-mod exact;
-
 #[cfg(test)]
 mod tests {
-    use super::exact::{is_upper, Extreme, Fixed};
     use super::*;
+    use crate::exact::{is_upper, Extreme, Fixed};
     use nalgebra::{DMatrix, DVector};
 
     /// The exact `a·v` for coefficients `±2^k`.

@@ -14,6 +14,10 @@
 
 use std::path::Path;
 
+#[allow(dead_code)] // each test crate uses some of it
+#[path = "common/exact.rs"]
+mod exact;
+
 use ravel::certify::{check, Answer};
 use ravel::execute::Status;
 use serde_json::{json, Value};
@@ -315,4 +319,199 @@ fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
             "{propagator:?}: a false requirement certified: {a:?}"
         );
     }
+}
+
+/// Random loops whose four large states grow by `±2^k` a step (`k` up to
+/// 49) to between 2¹⁰²² and 1.91·2¹⁰²³ at the horizon, with goal and avoid rows
+/// of coefficients `±1` and small offsets: the true final states are
+/// `a^T·x(0)` exactly, so every claim is decided exactly (in fixed point)
+/// at X0's corners. A VERIFIED goal holds at every corner; a VERIFIED avoid
+/// set is missed at every corner; a FALSIFIED one is violated at the
+/// corner nearest the counterexample's start, or the run is refuted.
+#[test]
+fn random_loops_near_the_top_of_f64_decide_only_true_verdicts() {
+    use exact::{Extreme, Fixed};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut g = Extreme::new(1_700);
+    let (mut verified, mut checked) = (0, 0);
+    for round in 0..60 {
+        let horizon = 21 + g.below(4) as u32;
+        let big = 4usize;
+        // per large state: growth ±2^k and an initial interval around ±2^m
+        let mut growth = Vec::new();
+        let mut init = Vec::new();
+        for _ in 0..big {
+            // k·T between 975 and 1012, k ≤ 49 (spec numbers lie within
+            // ±1e15), the final states between 2¹⁰²² and 1.91·2¹⁰²³: a
+            // state is representable, a sum of two often overflows
+            let k = 975u32.div_ceil(horizon) + g.below(2) as u32;
+            let sign = if g.below(2) == 0 { 1.0 } else { -1.0 };
+            // (odd rounds: between 2¹⁰¹² and 2¹⁰²⁰, where sums of a few
+            // terms stay finite and true claims are proven)
+            let top = if round % 2 == 0 {
+                1022
+            } else {
+                1012 + g.below(7) as i32
+            };
+            let m = top + g.below(2) as i32 - (k * horizon) as i32;
+            let centre =
+                2f64.powi(m) * (1.0 + 0.9 * g.unit()) * if g.below(2) == 0 { 1.0 } else { -1.0 };
+            let half = centre.abs() * 0.005 * g.unit();
+            growth.push((sign, k));
+            init.push((centre - half, centre + half));
+        }
+        let n = 2 + big;
+        let a_rows: Vec<String> = (0..n)
+            .map(|i| {
+                let row: Vec<String> = (0..n)
+                    .map(|j| {
+                        if i == j && i >= 2 {
+                            let (s, k) = growth[i - 2];
+                            format!("{:e}", s * 2f64.powi(k as i32))
+                        } else {
+                            "0".into()
+                        }
+                    })
+                    .collect();
+                format!("[{}]", row.join(", "))
+            })
+            .collect();
+        // a row Σ ±2^j x[i] ≤ h over the large states, h small
+        let row = |g: &mut Extreme| -> (Vec<(f64, u32)>, f64) {
+            let coef = (0..big)
+                .map(|_| {
+                    let s = match g.below(3) {
+                        0 => 0.0,
+                        1 => 1.0,
+                        _ => -1.0,
+                    };
+                    (s, 0)
+                })
+                .collect();
+            (coef, (g.unit() - 0.5) * 2e15)
+        };
+        let text = |(coef, h): &(Vec<(f64, u32)>, f64)| -> String {
+            let mut t: Vec<String> = coef
+                .iter()
+                .enumerate()
+                .filter(|(_, (s, _))| *s != 0.0)
+                .map(|(i, (s, k))| format!("{:+} x[{}]", s * f64::from(1u32 << k), i + 2))
+                .collect();
+            if t.is_empty() {
+                t.push("0 x[2]".into());
+            }
+            format!("{} <= {h:e}", t.join(" "))
+        };
+        let (mut goal, mut avoid) = (row(&mut g), row(&mut g));
+        if round % 2 == 0 {
+            // the rows where a running sum overflows the wrong way: the
+            // goal's terms (over X0's far corners) −, −, +, + and the avoid
+            // set's +, +, −, −; whether the exact sum is positive is left to
+            // the draw
+            let sign_of = |i: usize| {
+                let flips = growth[i].0 < 0.0 && horizon % 2 == 1;
+                init[i].0.signum() * if flips { -1.0 } else { 1.0 }
+            };
+            for (i, c) in goal.0.iter_mut().enumerate() {
+                *c = (if i < 2 { -sign_of(i) } else { sign_of(i) }, 0);
+            }
+            for (i, c) in avoid.0.iter_mut().enumerate() {
+                *c = (if i < 2 { sign_of(i) } else { -sign_of(i) }, 0);
+            }
+        }
+        let x0: Vec<String> = init
+            .iter()
+            .enumerate()
+            .map(|(i, (l, h))| format!("x[{}] in [{l:e}, {h:e}]", i + 2))
+            .collect();
+        let src = format!(
+            r#"
+system top {{
+    state   x[{n}]
+    control u[1]
+    A = [{a}]
+    B = [[0.5], [1]{zeros}]
+    C = [[1, 0], [0, 1]{czeros}]
+    u in box([-1, 1])
+}}
+controller "models/double_integrator.onnx"
+initial X0 = box(x[0] in [2.5, 3], x[1] in [-0.25, 0.25], {x0})
+goal G = {{ {goal} }}
+avoid A = {{ {avoid} }} at steps [{horizon}, {horizon}]
+horizon {horizon}
+analysis {{
+    propagator {prop}
+    samples 64
+    seed {round}
+}}
+"#,
+            a = a_rows.join(", "),
+            zeros = ", [0]".repeat(big),
+            czeros = ", [0, 0]".repeat(big),
+            x0 = x0.join(", "),
+            goal = text(&goal),
+            avoid = text(&avoid),
+            prop = [
+                "reach_lp",
+                "crown_unrolled",
+                "ibp_separate",
+                "sg_ibp_separate"
+            ][round % 4],
+        );
+        let (_, outcome) = analyse(&src, dir);
+        // exact a·x(T) at every corner of the large states' box
+        let values = |(coef, _): &(Vec<(f64, u32)>, f64)| -> Vec<Fixed> {
+            (0..1usize << big)
+                .map(|corner| {
+                    (0..big).fold(Fixed::ZERO, |acc, i| {
+                        let (s, j) = coef[i];
+                        if s == 0.0 {
+                            return acc;
+                        }
+                        let (l, h) = init[i];
+                        let x = if corner >> i & 1 == 1 { h } else { l };
+                        let (gs, k) = growth[i];
+                        // x(T) = (gs·2^k)^T · x(0)
+                        let negative = (s < 0.0) ^ (gs < 0.0 && horizon % 2 == 1);
+                        let t = Fixed::of_scaled(x, k * horizon + j);
+                        acc.add(if negative { t.neg() } else { t })
+                    })
+                })
+                .collect()
+        };
+        let holds = |r: &(Vec<(f64, u32)>, f64)| {
+            let h = Fixed::of(r.1);
+            values(r).iter().all(|v| v.le(h))
+        };
+        let crosses = |r: &(Vec<(f64, u32)>, f64)| {
+            let h = Fixed::of(r.1);
+            values(r).iter().any(|v| v.le(h))
+        };
+        let what = format!("round {round}:\n{src}");
+        for p in &outcome.properties {
+            checked += 1;
+            match (p.name.as_str(), p.status) {
+                ("G", Status::Verified) => {
+                    verified += 1;
+                    assert!(holds(&goal), "a false goal verified, {what}");
+                }
+                ("A", Status::Verified) => {
+                    verified += 1;
+                    // every corner strictly outside the half-space; linear
+                    // in each state, so the whole box is outside
+                    assert!(!crosses(&avoid), "an entered avoid set verified, {what}");
+                }
+                ("G", Status::Falsified) => {
+                    assert!(!holds(&goal), "a true goal falsified, {what}")
+                }
+                ("A", Status::Falsified) => {
+                    assert!(crosses(&avoid), "a missed avoid set falsified, {what}")
+                }
+                _ => {}
+            }
+        }
+    }
+    assert_eq!(checked, 120);
+    // the test reaches verdicts, not only UNSURE
+    assert!(verified > 10, "{verified}");
 }

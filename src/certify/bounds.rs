@@ -680,10 +680,31 @@ impl<'a> NetBounds<'a> {
     /// slope search, measured over the input box), intersected with the
     /// output box's support.
     pub fn rows_upper(&self, spec: &DMatrix<f64>, slopes: usize) -> Vec<f64> {
+        self.rows_upper_in(spec, slopes, &Start::Box)
+    }
+
+    /// [`NetBounds::rows_upper`] with the back-substituted rows concretised
+    /// over the input box intersected with what `start` knows of the inputs
+    /// (an ℓp ball: its dual norm; a polytope: the dual vectors `start`
+    /// gives, one per row in order), each the smaller of the box's and the
+    /// other's support ([`Start::support`]). The slope search measures its
+    /// candidates over the box (any slopes give a sound line).
+    pub fn rows_upper_in(&self, spec: &DMatrix<f64>, slopes: usize, start: &Start) -> Vec<f64> {
         let out = self.boxes.last().unwrap_or(&self.boxes[0]);
         let input = &self.boxes[0];
+        let concretise = |lin: Linear| -> Vec<f64> {
+            match start {
+                Start::Box => lin.over(input),
+                _ => (0..lin.coef.nrows())
+                    .map(|r| {
+                        let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                        sum_upper([start.support(&row, input), lin.off[r]])
+                    })
+                    .collect(),
+            }
+        };
         let back = if slopes == 0 {
-            self.linear(spec.clone()).over(input)
+            concretise(self.linear(spec.clone()))
         } else {
             let measure = |_: usize, cand: &Linear| -> (f64, Vec<f64>) {
                 let corner = (0..input.lo.len())
@@ -697,8 +718,7 @@ impl<'a> NetBounds<'a> {
                     .collect();
                 (cand.over(input)[0], corner)
             };
-            self.linear_optimised(spec.clone(), slopes, &measure)
-                .over(input)
+            concretise(self.linear_optimised(spec.clone(), slopes, &measure))
         };
         (0..spec.nrows())
             .map(|r| {

@@ -3,8 +3,9 @@
 //! Every finite `f64` is an integer multiple of 2⁻¹⁰⁷⁴, so it is an
 //! integer in fixed point scaled by 2¹⁰⁷⁴: at most 2¹⁰²⁴·2¹⁰⁷⁴ = 2²⁰⁹⁸.
 //! [`Fixed`] holds such integers in two's complement over 2 560 bits, room
-//! for sums of millions of values near `f64::MAX` and for products with
-//! powers of two up to 2⁴⁰⁰. Addition is exact, so a test can compare a
+//! for sums of millions of values near `f64::MAX`, for products with
+//! powers of two up to 2⁴⁰⁰, and for values below 2⁴⁴ times powers of two
+//! up to 2¹⁴⁰⁰ (`of_scaled` checks that the value fits). Addition is exact, so a test can compare a
 //! computed bound with the exact sum of the exact values it bounds.
 
 /// Limbs of 64 bits: 2 560 bits in all.
@@ -18,10 +19,10 @@ impl Fixed {
     /// Zero.
     pub const ZERO: Fixed = Fixed([0; LIMBS]);
 
-    /// The exact value of a finite `x` times 2^`k` (`0 ≤ k ≤ 400`).
+    /// The exact value of a finite `x` times 2^`k` (`0 ≤ k ≤ 1400`).
     pub fn of_scaled(x: f64, k: u32) -> Fixed {
         assert!(x.is_finite(), "only finite values are exact numbers");
-        assert!(k <= 400);
+        assert!(k <= 1400);
         let bits = x.to_bits();
         let exp = ((bits >> 52) & 0x7ff) as u32;
         let frac = bits & ((1u64 << 52) - 1);
@@ -32,6 +33,11 @@ impl Fixed {
             (frac | (1u64 << 52), exp - 1)
         };
         let shift = shift + k;
+        // the top bit of the mantissa, and one more for the sign and for sums
+        assert!(
+            (shift + 53) as usize + 48 < LIMBS * 64,
+            "{x:e}·2^{k} does not fit"
+        );
         let mut out = [0u64; LIMBS];
         let (limb, bit) = ((shift / 64) as usize, shift % 64);
         out[limb] |= m << bit;

@@ -7,12 +7,15 @@
 //! one-step bound ([`crate::certify::bounds::Loop::step`]) and records the
 //! pre-activation bounds it used as the witness, so a correct certificate
 //! checks exactly (no rounding differences between two implementations).
-//! The writer then runs the checker on the certificate; when the checker's
-//! sets do not prove a VERIFIED property (the analysis's method was tighter:
-//! Reach-SDP, unrolled CROWN, polytope sets, a parent cell's intersection)
-//! or the evidence is of a kind the checker does not handle yet, the
-//! evidence is marked `unsupported` with the reason, and `ravel certify`
-//! answers UNSUPPORTED, never VALID. See `docs/certificates.md`.
+//! Where the checker's chain on a cell does not prove a VERIFIED property
+//! (the analysis's method was tighter: Reach-SDP, unrolled CROWN, polytope
+//! sets, a parent cell's intersection), the writer bisects the cell and
+//! derives the halves instead, until every cell's chain proves it: the
+//! finer partition is the witness, and the checker re-checks it as any
+//! other (coverage included). When that fails within the refinement's
+//! budget, or the evidence is of a kind the checker does not handle yet,
+//! the evidence is marked `unsupported` with the reason, and `ravel
+//! certify` answers UNSUPPORTED, never VALID. See `docs/certificates.md`.
 
 use serde_json::{json, Value};
 
@@ -178,138 +181,227 @@ pub fn loop_data(cl: &ClosedLoop) -> (Vec<PlantRows>, Bx, Bx) {
     (plants, boxed(&cl.plant.w), boxed(&cl.plant.v))
 }
 
-/// The VERIFIED evidence: per cell, the chain of boxes with the witness of
-/// every step, up to `steps`.
-fn derive(plan: &Plan, outcome: &Outcome, steps: usize) -> Result<Value, String> {
-    let cl = &plan.closed_loop;
-    let (plants, w, v) = loop_data(cl);
+/// The VERIFIED evidence's settings, without cells: `steps`, `mode`,
+/// `slope_steps`.
+fn evidence_header(plan: &Plan, steps: usize) -> Value {
     // the unrolled chain costs quadratic time in the horizon: only when the
     // analysis itself unrolled
     let unrolled = plan.propagator == Propagator::CrownUnrolled;
-    let mut cells = Vec::with_capacity(outcome.cells.len());
+    let mode = if unrolled { "unrolled" } else { "one_step" };
+    json!({
+        "status": "checkable",
+        "mode": mode,
+        "slope_steps": plan.closed_loop.slope_steps,
+        "steps": steps,
+        "cells": [],
+    })
+}
+
+/// The most cells the writer's refinement may make: sixteen times the
+/// analysis's partition, at least 256, within the checker's cell limit.
+fn refinement_cap(cells: usize) -> usize {
+    (cells.saturating_mul(16))
+        .max(256)
+        .min(crate::limits::MAX_CELLS as usize)
+}
+
+/// Cells of the VERIFIED evidence, each with the chain of boxes and the
+/// witness of every step up to `steps`, derived with the checker's own
+/// step. A cell whose chain does not prove every VERIFIED property
+/// ([`certify::CellCheck`]) is bisected along its widest side (relative to
+/// X0's box) and its halves derived in its place, depth first, until every
+/// cell proves them or the cells would exceed [`refinement_cap`]: the
+/// analysis may have proved the verdict with tighter sets than the
+/// checker's boxes (Reach-SDP, hull or polytope boundaries, unrolled
+/// CROWN, a parent cell's intersection), and smaller cells tighten the
+/// checker's boxes. The error says why the evidence is not checkable.
+fn derive(plan: &Plan, outcome: &Outcome, header: &Value, cert: &Value) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let (plants, w, v) = loop_data(cl);
+    let steps = header["steps"].as_u64().unwrap_or(0) as usize;
+    let unrolled = header["mode"] == "unrolled";
+    let checker = certify::CellCheck::new(cert, &cl.net).map_err(|e| format!("internal: {e}"))?;
+    let x0 = plan.initial.bbox();
+    let cap = refinement_cap(outcome.cells.len());
+    // (the cell's box, the analysis's sets for it when it is its cell)
+    let mut todo: Vec<(IBox, Option<&[Region]>)> = Vec::with_capacity(outcome.cells.len());
     for (c, sets) in outcome.cells.iter().enumerate() {
         let start = sets
             .first()
             .map(Region::bbox)
             .ok_or_else(|| format!("cell {c} has no sets"))?;
-        let mut set = Bx {
-            lo: start.lo.clone(),
-            hi: start.hi.clone(),
-        };
-        let mut claims = Vec::with_capacity(steps);
-        let first = match &plan.initial {
-            Region::Ball {
-                center,
-                radius,
-                norm,
-            } => Start::Ball {
-                center,
-                radius,
-                norm: norm.name(),
-            },
-            Region::Box(_) | Region::Polytope { .. } => Start::Box,
-        };
-        let mut chain = Chain::new(first, unrolled);
-        // the previous set's inequalities (step 0: a polytope X0's)
-        let mut prev_rows: Vec<(Vec<f64>, f64)> = match &plan.initial {
-            Region::Polytope { rows, .. } => rows.clone(),
-            Region::Box(_) | Region::Ball { .. } => Vec::new(),
-        };
-        for t in 0..steps {
-            let lp = Loop {
-                plant: &plants[t.min(plants.len() - 1)],
-                obs: &cl.plant.obs,
-                w: &w,
-                v: &v,
-                net: &cl.net,
-                slopes: cl.slope_steps,
-            };
-            let fail =
-                |e: Trouble| format!("the checker's bound of cell {c} at step {}: {e}", t + 1);
-            // the analysis's directions for the next set, if it is a polytope
-            let directions = match sets.get(t + 1) {
-                Some(Region::Polytope { rows, .. }) if !rows.is_empty() => {
-                    let n = set.lo.len();
-                    Some(DMatrix::from_fn(rows.len(), n, |r, j| rows[r].0[j]))
-                }
-                _ => None,
-            };
-            let (lo, hi) = (set.lo.clone(), set.hi.clone());
-            let solve = |g: &[f64]| lp::maximize_dual(g, &prev_rows, &lo, &hi);
-            let duals = Duals::solved(&solve);
-            let start = if !prev_rows.is_empty() {
-                Start::Polytope {
-                    rows: &prev_rows,
-                    duals: &duals,
-                }
-            } else if t == 0 {
-                first
-            } else {
-                Start::Box
-            };
-            // claims are widened by a hair, so that a checker on another
-            // machine (whose libm may round tanh, exp, … differently) proves
-            // them too; the next step starts from the widened claims
-            let witness = chain.witness(&lp, &set).map_err(fail)?;
-            let stepped = chain
-                .step(lp, &set, start, directions.as_ref(), Some(&witness))
-                .map_err(fail)?;
-            let next = widen(&stepped.next);
-            let rows_next: Vec<(Vec<f64>, f64)> = match &directions {
-                Some(d) => (0..d.nrows())
-                    .map(|r| {
-                        let o = stepped.offsets[r];
-                        let o = widen(&Bx {
-                            lo: vec![o],
-                            hi: vec![o],
-                        })
-                        .hi[0];
-                        (d.row(r).iter().copied().collect(), o)
-                    })
-                    .collect(),
-                None => Vec::new(),
-            };
-            let mut claim = json!({
-                "set": bx_json(&next),
-                "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
-            });
-            if !rows_next.is_empty() {
-                claim["rows"] = ineq_json(&rows_next);
-            }
-            if !prev_rows.is_empty() {
-                claim["duals"] = json!(duals.used());
-            }
-            claims.push(claim);
-            set = next;
-            prev_rows = rows_next;
-        }
-        let mut cell = json!({ "box": box_json(&start), "steps": claims });
-        if !prev_rows.is_empty() {
-            // duals of the goal rows over the last set
-            let goal_duals: Vec<Vec<f64>> = plan
-                .properties
-                .iter()
-                .filter_map(|p| match &p.kind {
-                    PropertyKind::Goal(g) => Some(g),
-                    PropertyKind::Avoid { .. } => None,
-                })
-                .flat_map(|g| g.rows.iter())
-                .map(|(a, _)| {
-                    lp::maximize_dual(a, &prev_rows, &set.lo, &set.hi).unwrap_or_default()
-                })
-                .collect();
-            cell["goal_duals"] = json!(goal_duals);
-        }
-        cells.push(cell);
+        todo.push((start, Some(sets.as_slice())));
     }
-    let mode = if unrolled { "unrolled" } else { "one_step" };
-    Ok(json!({
-        "status": "checkable",
-        "mode": mode,
-        "slope_steps": cl.slope_steps,
-        "steps": steps,
-        "cells": cells,
-    }))
+    todo.reverse();
+    let mut cells = Vec::with_capacity(todo.len());
+    while let Some((start, sets)) = todo.pop() {
+        let failure = match derive_cell(plan, &plants, (&w, &v), &start, sets, steps, unrolled) {
+            Ok(cell) => match checker.check(&cell) {
+                Ok(()) => {
+                    cells.push(cell);
+                    continue;
+                }
+                Err(e) => e,
+            },
+            Err(e) => e,
+        };
+        // split in place: the halves come next, so the order is fixed
+        if cells.len() + todo.len() + 2 > cap {
+            return Err(format!(
+                "the checker's own bounds do not prove the verdict ({failure}), not on the analysis's cells nor on up to {cap} cells bisected from them: either the analysis ({}) used bounds tighter than the checker re-derives, or its verdict is wrong",
+                plan.propagator.name()
+            ));
+        }
+        let (a, b) = bisect(&start, &x0);
+        todo.push((b, None));
+        todo.push((a, None));
+    }
+    let mut ev = header.clone();
+    ev["cells"] = json!(cells);
+    Ok(ev)
+}
+
+/// Halves of `b` across its widest side relative to `whole`'s (the
+/// midpoint rounded to a double; the halves share it, so they cover `b`).
+fn bisect(b: &IBox, whole: &IBox) -> (IBox, IBox) {
+    let rel = |i: usize| {
+        let w = whole.hi[i] - whole.lo[i];
+        let d = b.hi[i] - b.lo[i];
+        if w > 0.0 {
+            d / w
+        } else {
+            d
+        }
+    };
+    let k = (0..b.dim())
+        .max_by(|&i, &j| rel(i).total_cmp(&rel(j)))
+        .unwrap_or(0);
+    let mid = b.lo[k] + (b.hi[k] - b.lo[k]) / 2.0;
+    let (mut lo, mut hi) = (b.clone(), b.clone());
+    lo.hi[k] = mid;
+    hi.lo[k] = mid;
+    (lo, hi)
+}
+
+/// One cell of the evidence: the chain of boxes from `start` with the
+/// witness of every step. With the analysis's `sets` for the cell, a step
+/// whose set is a polytope claims its directions too.
+fn derive_cell(
+    plan: &Plan,
+    plants: &[PlantRows],
+    (w, v): (&Bx, &Bx),
+    start: &IBox,
+    sets: Option<&[Region]>,
+    steps: usize,
+    unrolled: bool,
+) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let mut set = Bx {
+        lo: start.lo.clone(),
+        hi: start.hi.clone(),
+    };
+    let mut claims = Vec::with_capacity(steps);
+    let first = match &plan.initial {
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => Start::Ball {
+            center,
+            radius,
+            norm: norm.name(),
+        },
+        Region::Box(_) | Region::Polytope { .. } => Start::Box,
+    };
+    let mut chain = Chain::new(first, unrolled);
+    // the previous set's inequalities (step 0: a polytope X0's)
+    let mut prev_rows: Vec<(Vec<f64>, f64)> = match &plan.initial {
+        Region::Polytope { rows, .. } => rows.clone(),
+        Region::Box(_) | Region::Ball { .. } => Vec::new(),
+    };
+    for t in 0..steps {
+        let lp = Loop {
+            plant: &plants[t.min(plants.len() - 1)],
+            obs: &cl.plant.obs,
+            w,
+            v,
+            net: &cl.net,
+            slopes: cl.slope_steps,
+        };
+        let fail = |e: Trouble| format!("the checker's bound of a cell at step {}: {e}", t + 1);
+        // the analysis's directions for the next set, if it is a polytope
+        let directions = match sets.and_then(|s| s.get(t + 1)) {
+            Some(Region::Polytope { rows, .. }) if !rows.is_empty() => {
+                let n = set.lo.len();
+                Some(DMatrix::from_fn(rows.len(), n, |r, j| rows[r].0[j]))
+            }
+            _ => None,
+        };
+        let (lo, hi) = (set.lo.clone(), set.hi.clone());
+        let solve = |g: &[f64]| lp::maximize_dual(g, &prev_rows, &lo, &hi);
+        let duals = Duals::solved(&solve);
+        let start = if !prev_rows.is_empty() {
+            Start::Polytope {
+                rows: &prev_rows,
+                duals: &duals,
+            }
+        } else if t == 0 {
+            first
+        } else {
+            Start::Box
+        };
+        // claims are widened by a hair, so that a checker on another
+        // machine (whose libm may round tanh, exp, … differently) proves
+        // them too; the next step starts from the widened claims
+        let witness = chain.witness(&lp, &set).map_err(fail)?;
+        let stepped = chain
+            .step(lp, &set, start, directions.as_ref(), Some(&witness))
+            .map_err(fail)?;
+        let next = widen(&stepped.next);
+        let rows_next: Vec<(Vec<f64>, f64)> = match &directions {
+            Some(d) => (0..d.nrows())
+                .map(|r| {
+                    let o = stepped.offsets[r];
+                    let o = widen(&Bx {
+                        lo: vec![o],
+                        hi: vec![o],
+                    })
+                    .hi[0];
+                    (d.row(r).iter().copied().collect(), o)
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut claim = json!({
+            "set": bx_json(&next),
+            "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
+        });
+        if !rows_next.is_empty() {
+            claim["rows"] = ineq_json(&rows_next);
+        }
+        if !prev_rows.is_empty() {
+            claim["duals"] = json!(duals.used());
+        }
+        claims.push(claim);
+        set = next;
+        prev_rows = rows_next;
+    }
+    let mut cell = json!({ "box": box_json(start), "steps": claims });
+    if !prev_rows.is_empty() {
+        // duals of the goal rows over the last set
+        let goal_duals: Vec<Vec<f64>> = plan
+            .properties
+            .iter()
+            .filter_map(|p| match &p.kind {
+                PropertyKind::Goal(g) => Some(g),
+                PropertyKind::Avoid { .. } => None,
+            })
+            .flat_map(|g| g.rows.iter())
+            .map(|(a, _)| lp::maximize_dual(a, &prev_rows, &set.lo, &set.hi).unwrap_or_default())
+            .collect();
+        cell["goal_duals"] = json!(goal_duals);
+    }
+    Ok(cell)
 }
 
 /// The certificate of one (spec, controller) result.
@@ -358,7 +450,9 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
     let Some(steps) = needed else {
         return cert;
     };
-    let evidence = match derive(plan, outcome, steps) {
+    let header = evidence_header(plan, steps);
+    cert["evidence"] = header.clone();
+    let evidence = match derive(plan, outcome, &header, &cert) {
         Ok(ev) => ev,
         Err(why) => json!({ "status": "unsupported", "reason": why }),
     };

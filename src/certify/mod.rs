@@ -607,17 +607,27 @@ fn slope_steps(ev: &Value) -> R<usize> {
     Ok(slopes)
 }
 
-/// Check the VERIFIED evidence; the outer error is an unreadable
-/// certificate, the inner one the first false claim.
-fn evidence(
-    problem: &Problem,
-    net: &Network,
-    ev: &Value,
-    needed: usize,
-    verified: &[usize],
-    report: &mut Report,
-) -> R<Result<(), String>> {
-    let n = problem.n;
+/// One cell's checked chain: its box, the claimed sets from step 0 (the
+/// box) to the last step, the last set's inequalities and the goal rows'
+/// duals over them.
+struct CellChain {
+    start: Bx,
+    sets: Vec<Bx>,
+    last_rows: Rows,
+    goal_duals: Vec<Vec<f64>>,
+}
+
+/// The evidence's settings every cell is checked with.
+#[derive(Clone, Copy)]
+struct Mode {
+    steps: usize,
+    unrolled: bool,
+    slopes: usize,
+}
+
+/// Read the evidence's settings; the inner error is evidence that cannot
+/// serve the verified properties.
+fn mode(problem: &Problem, ev: &Value, needed: usize) -> R<Result<Mode, String>> {
     let steps = uint(get(ev, "steps")?, "evidence.steps")?;
     if steps < needed || steps > problem.horizon {
         return Ok(Err(format!(
@@ -629,7 +639,27 @@ fn evidence(
         Some("one_step") => false,
         _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
     };
-    let slopes = slope_steps(ev)?;
+    Ok(Ok(Mode {
+        steps,
+        unrolled,
+        slopes: slope_steps(ev)?,
+    }))
+}
+
+/// Check the VERIFIED evidence; the outer error is an unreadable
+/// certificate, the inner one the first false claim.
+fn evidence(
+    problem: &Problem,
+    net: &Network,
+    ev: &Value,
+    needed: usize,
+    verified: &[usize],
+    report: &mut Report,
+) -> R<Result<(), String>> {
+    let mode = match mode(problem, ev, needed)? {
+        Ok(m) => m,
+        Err(e) => return Ok(Err(e)),
+    };
     let cells_json = get(ev, "cells")?
         .as_array()
         .ok_or("`evidence.cells` must be an array")?;
@@ -641,148 +671,14 @@ fn evidence(
             crate::limits::MAX_CELLS
         ));
     }
-    let mut cells = Vec::with_capacity(cells_json.len());
-    let mut sets: Vec<Vec<Bx>> = Vec::with_capacity(cells_json.len());
-    // per cell: the last claimed set's inequalities and the goal rows' duals over it
-    let mut finals: Vec<(Rows, Vec<Vec<f64>>)> = Vec::with_capacity(cells_json.len());
+    let mut chains = Vec::with_capacity(cells_json.len());
     for (c, cell) in cells_json.iter().enumerate() {
-        let start = claimed_box(get(cell, "box")?, n, "cell box")?;
-        if !start.is_proper() {
-            return Ok(Err(format!("cell {c}'s box is empty")));
+        match cell_chain(problem, net, cell, mode, c)? {
+            Ok(chain) => chains.push(chain),
+            Err(e) => return Ok(Err(e)),
         }
-        let claims = get(cell, "steps")?
-            .as_array()
-            .ok_or("`steps` must be an array")?;
-        if claims.len() != steps {
-            return Err(format!(
-                "cell {c} has {} steps, expected {steps}",
-                claims.len()
-            ));
-        }
-        let mut chain = vec![start.clone()];
-        let mut links = Chain::new(problem.initial.start(), unrolled);
-        // the inequalities of the previous claimed set (step 0: a polytope X0's)
-        let mut prev_rows: Vec<(Vec<f64>, f64)> = match &problem.initial {
-            Initial::Polytope { rows, .. } => rows.clone(),
-            Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
-        };
-        for (k, claim) in claims.iter().enumerate() {
-            let t = k + 1;
-            let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
-            let rows_now = match claim.get("rows") {
-                None => Vec::new(),
-                Some(r) => rows(r, n, "claimed rows")?,
-            };
-            let given: Vec<Vec<f64>> = match claim.get("duals") {
-                None => Vec::new(),
-                Some(d) => d
-                    .as_array()
-                    .ok_or("`duals` must be an array")?
-                    .iter()
-                    .map(|v| {
-                        let len = v.as_array().map_or(0, Vec::len);
-                        vector(v, len, "duals")
-                    })
-                    .collect::<R<Vec<_>>>()?,
-            };
-            let duals = Duals::given(&given);
-            let start_k = if !prev_rows.is_empty() {
-                Start::Polytope {
-                    rows: &prev_rows,
-                    duals: &duals,
-                }
-            } else if k == 0 {
-                problem.initial.start()
-            } else {
-                Start::Box
-            };
-            let directions = (!rows_now.is_empty())
-                .then(|| nalgebra::DMatrix::from_fn(rows_now.len(), n, |r, j| rows_now[r].0[j]));
-            let witness = get(claim, "preactivations")?
-                .as_array()
-                .ok_or("`preactivations` must be an array")?
-                .iter()
-                .map(|b| {
-                    let len = b.get("lo").and_then(Value::as_array).map_or(0, Vec::len);
-                    claimed_box(b, len, "pre-activation bounds")
-                })
-                .collect::<R<Vec<_>>>()?;
-            let prev = &chain[k];
-            let stepped = links.step(
-                problem.at(k, net, slopes),
-                prev,
-                start_k,
-                directions.as_ref(),
-                Some(&witness),
-            );
-            let proven = match stepped {
-                Ok(st) => {
-                    for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
-                        // a claim holds only against a number (NaN proves nothing)
-                        if b.is_nan() || o.is_nan() || b < o {
-                            return Ok(Err(format!(
-                                "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
-                                crate::diag::compact(o - b)
-                            )));
-                        }
-                    }
-                    st.next
-                }
-                Err(Trouble::Neuron {
-                    layer,
-                    neuron,
-                    claimed,
-                    proven,
-                }) => {
-                    return Ok(Err(format!(
-                        "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
-                        claimed.0, claimed.1, proven.0, proven.1
-                    )))
-                }
-                Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
-                Err(Trouble::Overflow) => {
-                    return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
-                }
-            };
-            for i in 0..n {
-                if proven.hi[i].is_nan() || set.hi[i] < proven.hi[i] {
-                    return Ok(Err(format!(
-                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
-                        facet(i, true),
-                        set.hi[i],
-                        proven.hi[i],
-                        crate::diag::compact(proven.hi[i] - set.hi[i])
-                    )));
-                }
-                if proven.lo[i].is_nan() || set.lo[i] > proven.lo[i] {
-                    return Ok(Err(format!(
-                        "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
-                        facet(i, false),
-                        set.lo[i],
-                        proven.lo[i],
-                        crate::diag::compact(set.lo[i] - proven.lo[i])
-                    )));
-                }
-            }
-            chain.push(set);
-            prev_rows = rows_now;
-        }
-        let goal_duals: Vec<Vec<f64>> = match cell.get("goal_duals") {
-            None => Vec::new(),
-            Some(d) => d
-                .as_array()
-                .ok_or("`goal_duals` must be an array")?
-                .iter()
-                .map(|v| {
-                    let len = v.as_array().map_or(0, Vec::len);
-                    vector(v, len, "goal_duals")
-                })
-                .collect::<R<Vec<_>>>()?,
-        };
-        cells.push(start);
-        sets.push(chain);
-        finals.push((prev_rows, goal_duals));
     }
+    let cells: Vec<Bx> = chains.iter().map(|ch| ch.start.clone()).collect();
     let x0 = &problem.initial;
     match cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
         Ok(()) => {}
@@ -800,59 +696,272 @@ fn evidence(
         }
     }
     for &i in verified {
-        let (name, prop) = &problem.props[i];
-        let shown = crate::diag::sanitize(name);
-        for (c, chain) in sets.iter().enumerate() {
-            match prop {
-                Prop::Goal(g) => {
-                    let last = &chain[problem.horizon];
-                    let (last_rows, goal_duals) = &finals[c];
-                    let duals = Duals::given(goal_duals);
-                    let support = Start::Polytope {
-                        rows: last_rows,
-                        duals: &duals,
-                    };
-                    for (r, (a, b)) in g.iter().enumerate() {
-                        let top = if last_rows.is_empty() {
-                            dot_box_upper(a, &last.lo, &last.hi)
-                        } else {
-                            support.support(a, last)
-                        };
-                        let worst = sum_upper([top, -b]);
-                        if worst.is_nan() || worst > 0.0 {
-                            return Ok(Err(format!(
-                                "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",
-                                problem.horizon,
-                                crate::diag::compact(worst)
-                            )));
-                        }
+        for (c, chain) in chains.iter().enumerate() {
+            if let Err(e) = cell_proves(problem, i, chain, c) {
+                return Ok(Err(e));
+            }
+        }
+    }
+    report.cells = cells.len();
+    report.steps = mode.steps;
+    Ok(Ok(()))
+}
+
+/// Check one cell's chain of claimed sets (`c` names it in messages); the
+/// outer error is an unreadable cell, the inner one the first false claim.
+fn cell_chain(
+    problem: &Problem,
+    net: &Network,
+    cell: &Value,
+    mode: Mode,
+    c: usize,
+) -> R<Result<CellChain, String>> {
+    let Mode {
+        steps,
+        unrolled,
+        slopes,
+    } = mode;
+    let n = problem.n;
+    let start = claimed_box(get(cell, "box")?, n, "cell box")?;
+    if !start.is_proper() {
+        return Ok(Err(format!("cell {c}'s box is empty")));
+    }
+    let claims = get(cell, "steps")?
+        .as_array()
+        .ok_or("`steps` must be an array")?;
+    if claims.len() != steps {
+        return Err(format!(
+            "cell {c} has {} steps, expected {steps}",
+            claims.len()
+        ));
+    }
+    let mut chain = vec![start.clone()];
+    let mut links = Chain::new(problem.initial.start(), unrolled);
+    // the inequalities of the previous claimed set (step 0: a polytope X0's)
+    let mut prev_rows: Vec<(Vec<f64>, f64)> = match &problem.initial {
+        Initial::Polytope { rows, .. } => rows.clone(),
+        Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
+    };
+    for (k, claim) in claims.iter().enumerate() {
+        let t = k + 1;
+        let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
+        let rows_now = match claim.get("rows") {
+            None => Vec::new(),
+            Some(r) => rows(r, n, "claimed rows")?,
+        };
+        let given = vectors(claim.get("duals"), "duals")?;
+        let duals = Duals::given(&given);
+        let start_k = if !prev_rows.is_empty() {
+            Start::Polytope {
+                rows: &prev_rows,
+                duals: &duals,
+            }
+        } else if k == 0 {
+            problem.initial.start()
+        } else {
+            Start::Box
+        };
+        let directions = (!rows_now.is_empty())
+            .then(|| nalgebra::DMatrix::from_fn(rows_now.len(), n, |r, j| rows_now[r].0[j]));
+        let witness = get(claim, "preactivations")?
+            .as_array()
+            .ok_or("`preactivations` must be an array")?
+            .iter()
+            .map(|b| {
+                let len = b.get("lo").and_then(Value::as_array).map_or(0, Vec::len);
+                claimed_box(b, len, "pre-activation bounds")
+            })
+            .collect::<R<Vec<_>>>()?;
+        let prev = &chain[k];
+        let stepped = links.step(
+            problem.at(k, net, slopes),
+            prev,
+            start_k,
+            directions.as_ref(),
+            Some(&witness),
+        );
+        let proven = match stepped {
+            Ok(st) => {
+                for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
+                    // a claim holds only against a number (NaN proves nothing)
+                    if b.is_nan() || o.is_nan() || b < o {
+                        return Ok(Err(format!(
+                            "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
+                            crate::diag::compact(o - b)
+                        )));
                     }
                 }
-                Prop::Avoid { members, steps: s } => {
-                    for (t, set) in chain
+                st.next
+            }
+            Err(Trouble::Neuron {
+                layer,
+                neuron,
+                claimed,
+                proven,
+            }) => {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+                    claimed.0, claimed.1, proven.0, proven.1
+                )))
+            }
+            Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
+            Err(Trouble::Overflow) => {
+                return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
+            }
+        };
+        for i in 0..n {
+            if proven.hi[i].is_nan() || set.hi[i] < proven.hi[i] {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                    facet(i, true),
+                    set.hi[i],
+                    proven.hi[i],
+                    crate::diag::compact(proven.hi[i] - set.hi[i])
+                )));
+            }
+            if proven.lo[i].is_nan() || set.lo[i] > proven.lo[i] {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                    facet(i, false),
+                    set.lo[i],
+                    proven.lo[i],
+                    crate::diag::compact(set.lo[i] - proven.lo[i])
+                )));
+            }
+        }
+        chain.push(set);
+        prev_rows = rows_now;
+    }
+    let goal_duals = vectors(cell.get("goal_duals"), "goal_duals")?;
+    Ok(Ok(CellChain {
+        start,
+        sets: chain,
+        last_rows: prev_rows,
+        goal_duals,
+    }))
+}
+
+/// A list of number vectors of any lengths (absent: none).
+fn vectors(v: Option<&Value>, what: &str) -> R<Vec<Vec<f64>>> {
+    match v {
+        None => Ok(Vec::new()),
+        Some(d) => d
+            .as_array()
+            .ok_or_else(|| format!("`{what}` must be an array"))?
+            .iter()
+            .map(|v| {
+                let len = v.as_array().map_or(0, Vec::len);
+                vector(v, len, what)
+            })
+            .collect(),
+    }
+}
+
+/// Whether one cell's checked chain proves VERIFIED property `i`.
+fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Result<(), String> {
+    let (name, prop) = &problem.props[i];
+    let shown = crate::diag::sanitize(name);
+    let sets = &chain.sets;
+    match prop {
+        Prop::Goal(g) => {
+            let last = &sets[problem.horizon];
+            let duals = Duals::given(&chain.goal_duals);
+            let support = Start::Polytope {
+                rows: &chain.last_rows,
+                duals: &duals,
+            };
+            for (r, (a, b)) in g.iter().enumerate() {
+                let top = if chain.last_rows.is_empty() {
+                    dot_box_upper(a, &last.lo, &last.hi)
+                } else {
+                    support.support(a, last)
+                };
+                let worst = sum_upper([top, -b]);
+                if worst.is_nan() || worst > 0.0 {
+                    return Err(format!(
+                        "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",
+                        problem.horizon,
+                        crate::diag::compact(worst)
+                    ));
+                }
+            }
+        }
+        Prop::Avoid { members, steps: s } => {
+            for (t, set) in sets
+                .iter()
+                .enumerate()
+                .take(problem.last_step(prop) + 1)
+                .skip(s.0)
+            {
+                for (k, mb) in members.iter().enumerate() {
+                    let separated = mb
                         .iter()
-                        .enumerate()
-                        .take(problem.last_step(prop) + 1)
-                        .skip(s.0)
-                    {
-                        for (k, mb) in members.iter().enumerate() {
-                            let separated = mb.iter().any(|(a, b)| {
-                                sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0
-                            });
-                            if !separated {
-                                return Ok(Err(format!(
-                                    "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
-                                )));
-                            }
-                        }
+                        .any(|(a, b)| sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0);
+                    if !separated {
+                        return Err(format!(
+                            "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
+                        ));
                     }
                 }
             }
         }
     }
-    report.cells = cells.len();
-    report.steps = steps;
-    Ok(Ok(()))
+    Ok(())
+}
+
+/// The certificate writer's view of the checker: one cell at a time.
+///
+/// The writer may refine the analysis's partition until every cell's
+/// chain proves the VERIFIED properties (a witness the checker re-checks as
+/// a whole: coverage included). `CellCheck` reads the problem, the
+/// verdicts and the evidence's settings once and checks single cells with
+/// the same code as [`check`].
+pub struct CellCheck<'a> {
+    problem: Problem,
+    net: &'a Network,
+    verified: Vec<usize>,
+    mode: Mode,
+}
+
+impl<'a> CellCheck<'a> {
+    /// From a certificate whose evidence has its settings (`steps`, `mode`,
+    /// `slope_steps`; the cells are not read).
+    pub fn new(cert: &Value, net: &'a Network) -> Result<CellCheck<'a>, String> {
+        let problem =
+            Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
+        let verdicts = get(cert, "verdicts")?
+            .as_array()
+            .ok_or("`verdicts` must be an array")?;
+        let verified: Vec<usize> = verdicts
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.get("status").and_then(Value::as_str) == Some("VERIFIED"))
+            .map(|(i, _)| i)
+            .filter(|&i| i < problem.props.len())
+            .collect();
+        let needed = verified
+            .iter()
+            .map(|&i| problem.last_step(&problem.props[i].1))
+            .max()
+            .unwrap_or(0);
+        let mode = mode(&problem, get(cert, "evidence")?, needed)??;
+        Ok(CellCheck {
+            problem,
+            net,
+            verified,
+            mode,
+        })
+    }
+
+    /// Whether `cell` (a certificate cell: its box, its claimed steps)
+    /// proves every VERIFIED property on its own; the first failure.
+    pub fn check(&self, cell: &Value) -> Result<(), String> {
+        let chain = cell_chain(&self.problem, self.net, cell, self.mode, 0)??;
+        for &i in &self.verified {
+            cell_proves(&self.problem, i, &chain, 0)?;
+        }
+        Ok(())
+    }
 }
 
 /// Replay a counterexample rigorously; the outer error is an unreadable

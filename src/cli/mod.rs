@@ -1146,3 +1146,125 @@ pub fn main() -> ExitCode {
         } => import_vnnlib(&property, &network, output.as_deref(), color),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(s: &str, c: Option<&str>) -> (PathBuf, Option<PathBuf>) {
+        (PathBuf::from(s), c.map(PathBuf::from))
+    }
+
+    #[test]
+    fn names_are_stems_unless_they_collide() {
+        // unique stems keep today's names
+        let names = output_names(&[pair("specs/di.ravel", None), pair("specs/quad.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["di", "quad"]);
+        // a shared stem takes folders, nearest first, only where needed
+        let names = output_names(&[
+            pair("x/a/di.ravel", Some("c.onnx")),
+            pair("x/b/di.ravel", Some("c.onnx")),
+            pair("di.ravel", Some("c.onnx")),
+            pair("x/quad.ravel", Some("c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["a~di--c", "b~di--c", "di--c", "quad--c"]);
+        // names that differ only in case collide (case-insensitive file systems)
+        let names =
+            output_names(&[pair("A/Di.ravel", None), pair("b/di.ravel", None)]).expect("distinct");
+        assert_eq!(names, ["A~Di", "b~di"]);
+        // one spec, controllers of one name in two folders
+        let names = output_names(&[
+            pair("s.ravel", Some("x/c.onnx")),
+            pair("s.ravel", Some("y/c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["s--x~c", "s--y~c"]);
+        // folders that differ only far up
+        let names = output_names(&[pair("p/m/n/di.ravel", None), pair("q/m/n/di.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["p~m~n~di", "q~m~n~di"]);
+    }
+
+    #[test]
+    fn a_pair_given_twice_cannot_be_named() {
+        let e = output_names(&[pair("a/di.ravel", None), pair("./a/di.ravel", None)])
+            .expect_err("the same pair");
+        assert!(e.contains("given twice"), "{e}");
+        let e = output_names(&[
+            pair("s.ravel", Some("c.onnx")),
+            pair("s.ravel", Some("c.onnx")),
+        ])
+        .expect_err("the same pair");
+        assert!(e.contains("`s.ravel` with `c.onnx`"), "{e}");
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ravel-atomic-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("dir");
+        d
+    }
+
+    #[test]
+    fn atomic_writes_replace_whole_files_and_leave_nothing_behind() {
+        let d = scratch("ok");
+        let f = d.join("x.cert.json");
+        write_atomically(&f, b"first").expect("written");
+        write_atomically(&f, b"second").expect("replaced");
+        assert_eq!(std::fs::read(&f).expect("read"), b"second");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+            write_atomically(&f, b"third").expect("replaced");
+            let mode = std::fs::metadata(&f).expect("meta").permissions().mode();
+            assert_eq!(mode & 0o777, 0o600, "permissions kept");
+        }
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["x.cert.json"]);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_failed_atomic_write_leaves_the_target_and_no_temporary_file() {
+        let d = scratch("fail");
+        // the target is a non-empty folder: the rename fails
+        let target = d.join("taken");
+        std::fs::create_dir_all(target.join("inside")).expect("dir");
+        assert!(write_atomically(&target, b"data").is_err());
+        assert!(target.join("inside").is_dir());
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["taken"], "no temporary file left");
+        // a folder that does not exist: an error, nothing created
+        assert!(write_atomically(&d.join("no/such/file"), b"data").is_err());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn relative_paths_part_where_the_folders_do() {
+        let d = scratch("rel");
+        std::fs::create_dir_all(d.join("certs")).expect("dir");
+        std::fs::create_dir_all(d.join("specs/x")).expect("dir");
+        std::fs::write(d.join("specs/x/s.ravel"), "").expect("file");
+        assert_eq!(
+            relative_to(&d.join("certs"), &d.join("specs/x/s.ravel")),
+            Path::new("../specs/x/s.ravel")
+        );
+        assert_eq!(
+            relative_to(&d.join("specs/x"), &d.join("specs/x/s.ravel")),
+            Path::new("s.ravel")
+        );
+        // an unresolvable folder: the path made absolute, never relative to the cwd
+        let r = relative_to(&d.join("certs"), Path::new("no/such/s.ravel"));
+        assert!(r.is_absolute(), "{}", r.display());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

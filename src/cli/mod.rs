@@ -59,7 +59,9 @@ enum Cmd {
         time_limit: Option<f64>,
         /// Write a `ravel-certificate/1` for each result: to this file for a
         /// single result, else into this folder (created if missing), one
-        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair.
+        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair
+        /// (with folders, `a~<spec>`, where names would collide); written
+        /// atomically.
         #[arg(long, value_name = "PATH")]
         certificate: Option<PathBuf>,
         /// Run this many (spec, controller) pairs at once, or a single
@@ -81,7 +83,8 @@ enum Cmd {
         quiet: bool,
         /// Write one SVG per result into this folder (created if missing):
         /// the reachable sets per step, simulated trajectories, X0, goal,
-        /// avoid sets and any counterexample, projected on two states.
+        /// avoid sets and any counterexample, projected on two states (named
+        /// as the certificates, with `.svg`).
         #[arg(long, value_name = "DIR")]
         plot: Option<PathBuf>,
         /// The two state coordinates a plot shows (default 0,1).
@@ -130,10 +133,12 @@ enum Cmd {
         /// Certificate files.
         #[arg(required = true)]
         certificates: Vec<PathBuf>,
-        /// The spec (default: the path recorded in the certificate).
+        /// The spec (default: the path recorded in the certificate, relative
+        /// to the certificate's folder).
         #[arg(long, value_name = "PATH")]
         spec: Option<PathBuf>,
-        /// The controller (default: the path recorded in the certificate).
+        /// The controller (default: the path recorded in the certificate,
+        /// relative to the certificate's folder).
         #[arg(long, value_name = "PATH")]
         controller: Option<PathBuf>,
     },

@@ -642,30 +642,31 @@ fn short_hash(h: &str) -> String {
 fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (u8, String) {
     use crate::certify::Answer;
     let name = crate::diag::sanitize(&file.display().to_string());
-    // lines after the answer: the files checked, notes
-    let mut lines: Vec<String> = Vec::new();
-    let with = |head: String, lines: &[String]| {
+    // after the answer's line: the files checked, then notes
+    let mut files: Vec<String> = Vec::new();
+    let mut notes: Vec<String> = Vec::new();
+    let with = |head: String, files: &[String], notes: &[String]| {
         let mut text = head;
-        for l in lines {
+        for l in files.iter().chain(notes) {
             text += &format!("\n  {l}");
         }
         text
     };
-    let unreadable = |why: String, lines: &[String]| {
+    let unreadable = |why: String, files: &[String], notes: &[String]| {
         (
             exit::INPUT_ERROR,
-            with(format!("UNREADABLE  {name}: {why}"), lines),
+            with(format!("UNREADABLE  {name}: {why}"), files, notes),
         )
     };
-    let invalid = |why: String, lines: &[String]| {
+    let invalid = |why: String, files: &[String], notes: &[String]| {
         (
             exit::FALSIFIED,
-            with(format!("INVALID     {name}: {why}"), lines),
+            with(format!("INVALID     {name}: {why}"), files, notes),
         )
     };
     let cert = match read_json(file) {
         Ok(v) => v,
-        Err(e) => return unreadable(e, &lines),
+        Err(e) => return unreadable(e, &[], &[]),
     };
     // empty for a certificate in the working folder: paths stay as recorded
     let cert_dir = file.parent().unwrap_or(Path::new(""));
@@ -676,7 +677,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
                 .and_then(|v| v.get("path"))
                 .and_then(Value::as_str)?,
         );
-        lines.extend(note);
+        notes.extend(note);
         Some(path)
     };
     // an explicit --spec / --controller is relative to the working folder
@@ -689,12 +690,13 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         None => recorded("controller"),
     };
     let Some(spec_path) = spec_path else {
-        return unreadable("no spec path recorded; pass --spec".into(), &lines);
+        return unreadable("no spec path recorded; pass --spec".into(), &[], &notes);
     };
     let Some(ctrl_path) = ctrl_path else {
         return unreadable(
             "no controller path recorded; pass --controller".into(),
-            &lines,
+            &[],
+            &notes,
         );
     };
     let spec_name = crate::diag::sanitize(&spec_path.display().to_string());
@@ -706,7 +708,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         whole: true,
     }) {
         Ok(b) => b,
-        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}"), &lines),
+        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}"), &[], &notes),
     };
     let hash = |key: &str, field: &str| {
         cert.get(key)
@@ -716,28 +718,30 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             .to_string()
     };
     let spec_sha = crate::check::sha256_hex(&source);
-    // the files checked come first, before any note
-    let mut files = vec![format!(
+    files.push(format!(
         "spec        {spec_name} (SHA-256 {})",
         short_hash(&spec_sha)
-    )];
+    ));
     // the text may differ (comments, layout): the problem decides
     let text_differs = spec_sha != hash("spec", "sha256");
     let Ok(source) = String::from_utf8(source) else {
-        files.append(&mut lines);
-        return unreadable(format!("spec `{spec_name}` is not UTF-8 text"), &files);
+        return unreadable(
+            format!("spec `{spec_name}` is not UTF-8 text"),
+            &files,
+            &notes,
+        );
     };
     let dir = spec_path.parent().unwrap_or(Path::new("."));
     let task = match crate::front_end_task(&source, dir, &read_request, Some(&ctrl_path)) {
         Ok(t) => t,
         Err(d) => {
-            files.append(&mut lines);
             return unreadable(
                 format!(
                     "spec `{spec_name}` with controller `{ctrl_name}` does not check ({} error(s); run `ravel check`)",
                     d.len()
                 ),
                 &files,
+                &notes,
             );
         }
     };
@@ -758,18 +762,18 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         "controller  {ctrl_name} (SHA-256 {})",
         short_hash(&sha)
     ));
-    files.append(&mut lines);
-    let mut lines = files;
     if sha != hash("controller", "sha256") {
         return invalid(
             "the controller file is not the one certified (SHA-256 differs)".into(),
-            &lines,
+            &files,
+            &notes,
         );
     }
     if crate::certificate::network_sha256(&net) != hash("controller", "network_sha256") {
         return invalid(
             "the controller's network (external data included) is not the one certified".into(),
-            &lines,
+            &files,
+            &notes,
         );
     }
     let text_note = format!(
@@ -783,18 +787,19 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         "problem",
     ) {
         if text_differs {
-            lines.push(text_note);
+            notes.push(text_note);
         }
         return invalid(
             format!(
                 "the recorded problem is not the spec's: `{}` differs",
                 crate::diag::sanitize(&d)
             ),
-            &lines,
+            &files,
+            &notes,
         );
     }
     if text_differs {
-        lines.push(format!("{text_note}; its problem is identical"));
+        notes.push(format!("{text_note}; its problem is identical"));
     }
     let report = crate::certify::check(&cert, &net);
     let (code, head) = match &report.answer {
@@ -816,8 +821,8 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             text += &format!("\n  {}", crate::diag::sanitize_to(m, 600));
         }
     }
-    lines.extend(report.properties.iter().cloned());
-    (code, with(text, &lines))
+    notes.extend(report.properties.iter().cloned());
+    (code, with(text, &files, &notes))
 }
 
 /// A line diff of `a` and `b` (longest common subsequence), `-`/`+` lines

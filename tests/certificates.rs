@@ -849,5 +849,12 @@ fn older_certificates_read_paths_from_the_working_folder() {
     let (code, out) = ravel_in(&root, &["certify", "p/certs/di.cert.json"]);
     assert_eq!(code, 2, "{out}");
     assert!(out.starts_with("UNREADABLE"), "{out}");
+    // a recorded path with control characters is shown escaped
+    cert["spec"]["path"] = serde_json::json!("specs/\u{1b}[2Jdi.ravel");
+    std::fs::write(&file, cert.to_string()).expect("write");
+    let (code, out) = ravel_in(&p, &["certify", "certs/di.cert.json"]);
+    assert_eq!(code, 2, "{out}");
+    assert!(!out.contains('\u{1b}'), "{out:?}");
+    assert!(out.contains("\\u{1b}[2Jdi.ravel"), "{out}");
     let _ = std::fs::remove_dir_all(&root);
 }

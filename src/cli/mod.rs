@@ -534,7 +534,7 @@ fn output_names(pairs: &[(PathBuf, Option<PathBuf>)]) -> Result<Vec<String>, Str
 }
 
 /// Write `bytes` to `file` atomically: into a new temporary file beside it
-/// (`.NAME.tmp-PID-N`, created exclusively), flushed to disk, then renamed
+/// (`.NAME.tmp-PID-N`, `NAME` cut to 64 characters, created exclusively), flushed to disk, then renamed
 /// over `file`, so a reader sees the old file or the whole new one, never
 /// half of one; an existing file's permissions are kept. On failure the
 /// temporary file is removed and `file` is left as it was.
@@ -552,11 +552,10 @@ fn write_atomically(file: &Path, bytes: &[u8]) -> std::io::Result<()> {
         _ => Path::new("."),
     };
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}-{n}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    // the name's start only: a long name must not make the temporary one
+    // longer than the file system allows
+    let start: String = name.to_string_lossy().chars().take(64).collect();
+    let tmp = dir.join(format!(".{start}.tmp-{}-{n}", std::process::id()));
     let mut f = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -1237,6 +1236,11 @@ mod tests {
             .map(|e| e.expect("entry").file_name())
             .collect();
         assert_eq!(names, ["x.cert.json"]);
+        // a name as long as file systems allow (255 bytes) still has room
+        // for its temporary file
+        let long = d.join("n".repeat(255));
+        write_atomically(&long, b"long").expect("written");
+        assert_eq!(std::fs::read(&long).expect("read"), b"long");
         let _ = std::fs::remove_dir_all(&d);
     }
 

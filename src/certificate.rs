@@ -33,7 +33,8 @@ use crate::sets::{IBox, Region};
 /// Who made the certificate and from which files.
 #[derive(Clone, Debug)]
 pub struct Identity {
-    /// The spec's path as given on the command line.
+    /// The spec's path as recorded (the CLI records it relative to the
+    /// certificate's folder, where `certify` reads it).
     pub spec_path: String,
     /// SHA-256 of the spec's bytes.
     pub spec_sha256: String,

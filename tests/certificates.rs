@@ -333,7 +333,8 @@ fn command_line_writes_and_checks_certificates() {
     assert_eq!(ok.status.code(), Some(0), "{text}");
     assert!(text.starts_with("VALID"), "{text}");
 
-    // a copy of the spec with one plant entry changed: the hash catches it
+    // a copy of the spec with one plant entry changed: the re-derived
+    // problem differs, and the message names the first number that does
     let spec = std::fs::read_to_string("specs/double_integrator.ravel").expect("spec");
     let changed = spec.replacen("[0, 1]", "[0, 1.001]", 1);
     assert_ne!(changed, spec);
@@ -348,7 +349,14 @@ fn command_line_writes_and_checks_certificates() {
         .expect("runs");
     let _ = std::fs::remove_file(&copy);
     assert_eq!(bad.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&bad.stdout).contains("SHA-256 differs"));
+    let text = String::from_utf8_lossy(&bad.stdout);
+    assert!(text.starts_with("INVALID"), "{text}");
+    assert!(
+        text.contains("`problem.plants[0].A[1][1]` differs"),
+        "{text}"
+    );
+    assert!(text.contains("the spec's text differs"), "{text}");
+    assert!(!text.contains("its problem is identical"), "{text}");
 
     // a different controller
     let other = ravel()
@@ -614,4 +622,239 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
             "{spec}: an absurd step count is unreadable"
         );
     }
+}
+
+/// `ravel` run in the folder `dir`: exit code and standard output.
+fn ravel_in(dir: &Path, args: &[&str]) -> (i32, String) {
+    let o = ravel().current_dir(dir).args(args).output().expect("runs");
+    assert!(o.status.code().is_some(), "ended by a signal");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+    )
+}
+
+/// The first 12 hex digits of a file's SHA-256, as `certify` prints them.
+fn sha_prefix(file: &Path) -> String {
+    let bytes = std::fs::read(file).expect("readable");
+    ravel::check::sha256_hex(&bytes)[..12].to_string()
+}
+
+/// A project folder `p` holding `specs/di.ravel` (the double integrator,
+/// with a non-canonical layout that `ravel fmt` changes) and
+/// `models/double_integrator.onnx`, certified into `p/certs/di.cert.json` by
+/// `verify` run in `p` with relative paths. Returns (`p`, the spec's text).
+fn certified_project(root: &Path) -> (std::path::PathBuf, String) {
+    let p = root.join("p");
+    std::fs::create_dir_all(p.join("specs")).expect("dir");
+    std::fs::create_dir_all(p.join("models")).expect("dir");
+    std::fs::create_dir_all(p.join("certs")).expect("dir");
+    std::fs::copy(
+        "models/double_integrator.onnx",
+        p.join("models/double_integrator.onnx"),
+    )
+    .expect("copy model");
+    let spec = std::fs::read_to_string("specs/double_integrator.ravel")
+        .expect("spec")
+        .replace("horizon 5", "horizon      5");
+    std::fs::write(p.join("specs/di.ravel"), &spec).expect("write spec");
+    let (code, out) = ravel_in(
+        &p,
+        &[
+            "verify",
+            "specs/di.ravel",
+            "--quiet",
+            "--no-timing",
+            "--certificate",
+            "certs/di.cert.json",
+        ],
+    );
+    assert_eq!(code, 0, "{out}");
+    (p, spec)
+}
+
+/// A certificate records its files relative to its own folder: `certify`
+/// works from any working folder, and after the spec, the model and the
+/// certificate are moved together; it names the spec and the controller it
+/// checked, with their hashes.
+#[test]
+fn certificates_travel_with_their_files() {
+    let root = tmp("travel");
+    let (p, _) = certified_project(&root);
+    let cert: Value = serde_json::from_str(
+        &std::fs::read_to_string(p.join("certs/di.cert.json")).expect("certificate"),
+    )
+    .expect("json");
+    assert_eq!(cert["spec"]["path"], "../specs/di.ravel");
+    assert_eq!(
+        cert["controller"]["path"],
+        "../models/double_integrator.onnx"
+    );
+    // from another working folder, the certificate named by its full path
+    let elsewhere = root.join("elsewhere");
+    std::fs::create_dir_all(&elsewhere).expect("dir");
+    let file = p.join("certs/di.cert.json");
+    let (code, out) = ravel_in(&elsewhere, &["certify", file.to_str().expect("utf-8")]);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.starts_with("VALID"), "{out}");
+    // the files checked: paths and SHA-256 prefixes
+    let model_sha = sha_prefix(&p.join("models/double_integrator.onnx"));
+    let spec_sha = sha_prefix(&p.join("specs/di.ravel"));
+    assert!(
+        out.lines().any(|l| l.trim_start().starts_with("controller")
+            && l.contains("models/double_integrator.onnx")
+            && l.contains(&format!("SHA-256 {model_sha})"))),
+        "{out}"
+    );
+    assert!(
+        out.lines().any(|l| l.trim_start().starts_with("spec")
+            && l.contains("specs/di.ravel")
+            && l.contains(&format!("SHA-256 {spec_sha})"))),
+        "{out}"
+    );
+    assert!(!out.contains("note:"), "{out}");
+    // the whole folder moved; certified from its new place and from the
+    // certificate's own folder
+    let q = root.join("moved").join("q");
+    std::fs::create_dir_all(q.parent().expect("parent")).expect("dir");
+    std::fs::rename(&p, &q).expect("move");
+    let (code, out) = ravel_in(&root, &["certify", "moved/q/certs/di.cert.json"]);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.starts_with("VALID"), "{out}");
+    let (code, out) = ravel_in(&q.join("certs"), &["certify", "di.cert.json"]);
+    assert_eq!(code, 0, "{out}");
+    // an explicit --spec stays relative to the working folder
+    let (code, out) = ravel_in(
+        &q,
+        &["certify", "certs/di.cert.json", "--spec", "specs/di.ravel"],
+    );
+    assert_eq!(code, 0, "{out}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// VALID depends on the problem, not on the spec's text: a comment or `ravel
+/// fmt` leaves it VALID with a note; a changed number makes it INVALID,
+/// naming the number.
+#[test]
+fn a_changed_text_with_the_same_problem_stays_valid() {
+    let root = tmp("text");
+    let (p, spec) = certified_project(&root);
+    let spec_file = p.join("specs/di.ravel");
+    let certify = || ravel_in(&root, &["certify", "p/certs/di.cert.json"]);
+    // a comment
+    std::fs::write(&spec_file, format!("// reviewed\n{spec}")).expect("write");
+    let (code, out) = certify();
+    assert_eq!(code, 0, "{out}");
+    assert!(out.starts_with("VALID"), "{out}");
+    let note = out
+        .lines()
+        .find(|l| l.contains("note:"))
+        .unwrap_or_else(|| panic!("no note: {out}"));
+    assert!(note.contains("text differs"), "{out}");
+    assert!(note.contains("its problem is identical"), "{out}");
+    assert!(
+        note.contains(&sha_prefix(&spec_file)),
+        "the note names the hash read: {out}"
+    );
+    // `ravel fmt` rewrites the layout
+    let before = std::fs::read_to_string(&spec_file).expect("spec");
+    let (code, out) = ravel_in(&p, &["fmt", "specs/di.ravel"]);
+    assert_eq!(code, 0, "{out}");
+    let after = std::fs::read_to_string(&spec_file).expect("spec");
+    assert_ne!(
+        before, after,
+        "fmt changed nothing: the test proves nothing"
+    );
+    let (code, out) = certify();
+    assert_eq!(code, 0, "{out}");
+    assert!(out.contains("its problem is identical"), "{out}");
+    // a number of the problem: INVALID, the number named
+    std::fs::write(&spec_file, after.replacen("[[1, 1]", "[[1, 1.5]", 1)).expect("write");
+    let (code, out) = certify();
+    assert_eq!(code, 1, "{out}");
+    assert!(out.starts_with("INVALID"), "{out}");
+    assert!(out.contains("`problem.plants[0].A[0][1]` differs"), "{out}");
+    assert!(!out.contains("its problem is identical"), "{out}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// `certify` names the controller it checked: a certificate of `verify S
+/// --controller C` shows C, not the controller S names itself.
+#[test]
+fn certify_names_the_controller_it_checked() {
+    let root = tmp("controller");
+    std::fs::copy("models/double_integrator.onnx", root.join("good.onnx")).expect("copy");
+    let spec = std::fs::canonicalize("specs/double_integrator.ravel").expect("spec");
+    let (code, out) = ravel_in(
+        &root,
+        &[
+            "verify",
+            spec.to_str().expect("utf-8"),
+            "--controller",
+            "good.onnx",
+            "--quiet",
+            "--certificate",
+            "c.cert.json",
+        ],
+    );
+    assert_eq!(code, 0, "{out}");
+    let (code, out) = ravel_in(&root, &["certify", "c.cert.json"]);
+    assert_eq!(code, 0, "{out}");
+    let line = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("controller"))
+        .unwrap_or_else(|| panic!("no controller line: {out}"));
+    assert!(line.contains("good.onnx"), "{out}");
+    assert!(!line.contains("models/double_integrator.onnx"), "{out}");
+    assert!(line.contains(&sha_prefix(&root.join("good.onnx"))), "{out}");
+    // also when the answer is INVALID: the file read is named
+    std::fs::copy(
+        "models/double_integrator_tanh.onnx",
+        root.join("other.onnx"),
+    )
+    .expect("copy");
+    let (code, out) = ravel_in(
+        &root,
+        &["certify", "c.cert.json", "--controller", "other.onnx"],
+    );
+    assert_eq!(code, 1, "{out}");
+    assert!(out.contains("SHA-256 differs"), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.contains("other.onnx") && l.contains(&sha_prefix(&root.join("other.onnx")))),
+        "{out}"
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Certificates written before paths were recorded relative to the
+/// certificate hold paths relative to `verify`'s working folder: a path not
+/// found beside the certificate is read from the working folder, with a
+/// note; the hashes and the problem are checked as always.
+#[test]
+fn older_certificates_read_paths_from_the_working_folder() {
+    let root = tmp("older");
+    let (p, _) = certified_project(&root);
+    let file = p.join("certs/di.cert.json");
+    let mut cert: Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).expect("certificate")).expect("json");
+    cert["spec"]["path"] = serde_json::json!("specs/di.ravel");
+    cert["controller"]["path"] = serde_json::json!("models/double_integrator.onnx");
+    std::fs::write(&file, cert.to_string()).expect("write");
+    let (code, out) = ravel_in(&p, &["certify", "certs/di.cert.json"]);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.starts_with("VALID"), "{out}");
+    assert!(out.contains("not beside the certificate"), "{out}");
+    // from elsewhere, neither rule finds it: UNREADABLE, never VALID
+    let (code, out) = ravel_in(&root, &["certify", "p/certs/di.cert.json"]);
+    assert_eq!(code, 2, "{out}");
+    assert!(out.starts_with("UNREADABLE"), "{out}");
+    // a recorded path with control characters is shown escaped
+    cert["spec"]["path"] = serde_json::json!("specs/\u{1b}[2Jdi.ravel");
+    std::fs::write(&file, cert.to_string()).expect("write");
+    let (code, out) = ravel_in(&p, &["certify", "certs/di.cert.json"]);
+    assert_eq!(code, 2, "{out}");
+    assert!(!out.contains('\u{1b}'), "{out:?}");
+    assert!(out.contains("\\u{1b}[2Jdi.ravel"), "{out}");
+    let _ = std::fs::remove_dir_all(&root);
 }

@@ -808,3 +808,124 @@ fn carrl_csv_output() {
         assert!(lo <= hi, "{l}");
     }
 }
+
+/// Every file in `dir`, sorted (names only).
+fn listing(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// One result, one file: specs that share a file name (in two folders)
+/// get distinct certificates and plots, named alike for any `--jobs` and
+/// under `--shard`; each certificate is VALID for its own spec only; no
+/// temporary file is left behind. A pair given twice is refused before
+/// anything runs.
+#[test]
+fn a_batch_never_writes_two_results_to_one_file() {
+    let root = std::env::temp_dir().join(format!("ravel-names-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    for d in ["a", "b", "models"] {
+        std::fs::create_dir_all(root.join(d)).expect("dir");
+    }
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::copy(
+        here.join("models/double_integrator.onnx"),
+        root.join("models/double_integrator.onnx"),
+    )
+    .expect("model");
+    // same file name, different problems (the second's goal is missed)
+    std::fs::copy(
+        here.join("specs/double_integrator.ravel"),
+        root.join("a/di.ravel"),
+    )
+    .expect("spec");
+    std::fs::copy(
+        here.join("specs/double_integrator_falsified.ravel"),
+        root.join("b/di.ravel"),
+    )
+    .expect("spec");
+    let run = |extra: &[&str], out: &str, code: i32| {
+        let o = bin()
+            .current_dir(&root)
+            .args([
+                "verify",
+                "a/di.ravel",
+                "b/di.ravel",
+                "--quiet",
+                "--no-timing",
+            ])
+            .args(["--certificate", &format!("{out}/certs")])
+            .args(["--plot", &format!("{out}/plots")])
+            .args(extra)
+            .output()
+            .expect("runs");
+        assert_eq!(
+            o.status.code(),
+            Some(code),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    run(&["--jobs", "1"], "one", 1);
+    run(&["--jobs", "2"], "two", 1);
+    // a's shard is VERIFIED, b's FALSIFIED
+    run(&["--shard", "1/2"], "shards", 0);
+    run(&["--shard", "2/2"], "shards", 1);
+    for out in ["one", "two", "shards"] {
+        assert_eq!(
+            listing(&root.join(out).join("certs")),
+            ["a~di.cert.json", "b~di.cert.json"],
+            "{out}"
+        );
+        assert_eq!(
+            listing(&root.join(out).join("plots")),
+            ["a~di.svg", "b~di.svg"],
+            "{out}"
+        );
+    }
+    for (own, other) in [("a", "b"), ("b", "a")] {
+        let cert = format!("one/certs/{own}~di.cert.json");
+        let o = bin()
+            .current_dir(&root)
+            .args(["certify", &cert])
+            .output()
+            .expect("runs");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(0), "{text}");
+        assert!(text.starts_with("VALID"), "{text}");
+        assert!(text.contains(&format!("{own}/di.ravel")), "{text}");
+        // and not for the other spec of the same name
+        let o = bin()
+            .current_dir(&root)
+            .args(["certify", &cert, "--spec", &format!("{other}/di.ravel")])
+            .output()
+            .expect("runs");
+        assert_eq!(o.status.code(), Some(1), "{own} with {other}");
+        // the plots are the pairs' own: only b's has a counterexample
+        let svg =
+            std::fs::read_to_string(root.join(format!("one/plots/{own}~di.svg"))).expect("plot");
+        assert_eq!(svg.contains("id=\"counterexample\""), own == "b", "{own}");
+    }
+    // the same pair twice cannot be told apart: exit 2, nothing run or written
+    let o = bin()
+        .current_dir(&root)
+        .args([
+            "verify",
+            "a/di.ravel",
+            "./a/di.ravel",
+            "--certificate",
+            "twice",
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(o.stdout.is_empty());
+    let msg = String::from_utf8_lossy(&o.stderr);
+    assert!(msg.contains("given twice"), "{msg}");
+    assert!(!root.join("twice").exists());
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -123,8 +123,9 @@ pub struct Options {
 enum Work {
     /// An argument that named nothing usable.
     Argument(String),
-    /// A (spec, controller) pair.
-    Pair(PathBuf, Option<PathBuf>),
+    /// A (spec, controller) pair and the name of its files (certificate,
+    /// plot) without extension, unique in the batch.
+    Pair(PathBuf, Option<PathBuf>, String),
 }
 
 /// The verdict class of one item.
@@ -215,7 +216,7 @@ fn run(
     cell_threads: usize,
     position: Option<(usize, usize)>,
 ) -> Item {
-    let (path, controller) = match work {
+    let (path, controller, file_name) = match work {
         Work::Argument(e) => {
             return error_item(
                 index,
@@ -226,7 +227,7 @@ fn run(
                 json!({ "spec": null, "verdict": "ERROR", "errors": [{ "code": null, "message": e }] }),
             )
         }
-        Work::Pair(p, c) => (p, c.as_deref()),
+        Work::Pair(p, c, n) => (p, c.as_deref(), n.as_str()),
     };
     let l = match load_with(path, controller) {
         Ok(l) => l,
@@ -246,7 +247,7 @@ fn run(
         Ok(crate::check::Task::Network(c)) => {
             return run_network(
                 index,
-                (path, controller),
+                (path, controller, file_name),
                 &l,
                 c,
                 opts,
@@ -300,9 +301,10 @@ fn run(
     let mut json = crate::report::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
     json["index"] = json!(index);
     if let Some(target) = &opts.certificate {
-        let id = identity(path, &l.source);
-        let cert = crate::certificate::build(&plan, &outcome, &id);
-        let file = certificate_file(target, cert_dir, path, controller);
+        let file = certificate_file(target, cert_dir, file_name);
+        let id = identity(&file, path, &l.source);
+        let mut cert = crate::certificate::build(&plan, &outcome, &id);
+        record_controller(&mut cert, &file, &plan.controller_resolved);
         if let Err(msg) = write_certificate(&file, &cert) {
             fail_item(
                 (&mut json, &mut stderr, &mut class),
@@ -314,8 +316,7 @@ fn run(
     if let Some(dir) = &opts.plot {
         let (i, j) = opts.plot_dims;
         let n = plan.closed_loop.states();
-        let file =
-            dir.join(super::certificate_name(path, controller).replace(".cert.json", ".svg"));
+        let file = dir.join(format!("{file_name}.svg"));
         let result = if i >= n || j >= n {
             Err(format!(
                 "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
@@ -326,7 +327,7 @@ fn run(
                 .filter_map(|k| crate::execute::simulate(&plan, k))
                 .collect();
             let svg = crate::plot::svg(&l.display, &plan, &outcome, (i, j), &samples);
-            std::fs::write(&file, svg).map_err(|e| {
+            super::write_atomically(&file, svg.as_bytes()).map_err(|e| {
                 format!(
                     "cannot write plot `{}`: {e}",
                     crate::diag::sanitize(&file.display().to_string())
@@ -391,32 +392,47 @@ fn fail_item((json, stderr, class): (&mut Value, &mut String, &mut Class), key: 
     *class = Class::Error;
 }
 
-/// Who a certificate is about: the spec's path and hash.
-fn identity(path: &Path, source: &str) -> crate::certificate::Identity {
+/// The folder a certificate file is written into.
+fn folder_of(file: &Path) -> &Path {
+    match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
+/// Who a certificate written to `file` is about: the spec's path, relative
+/// to the certificate's folder (so that `certify` works from any working
+/// folder, and after the folder is moved with the spec), and its hash.
+fn identity(file: &Path, spec: &Path, source: &str) -> crate::certificate::Identity {
     crate::certificate::Identity {
-        spec_path: path.display().to_string(),
+        spec_path: super::relative_to(folder_of(file), spec)
+            .display()
+            .to_string(),
         spec_sha256: crate::check::sha256_hex(source.as_bytes()),
     }
 }
 
-/// Where a pair's certificate goes: the `--certificate` file, or a file
-/// named after the pair in the certificate folder.
-fn certificate_file(
-    target: &Path,
-    cert_dir: Option<&Path>,
-    path: &Path,
-    controller: Option<&Path>,
-) -> PathBuf {
+/// Record the controller's path (as read) relative to the folder of the
+/// certificate `file`, as the spec's.
+fn record_controller(cert: &mut Value, file: &Path, resolved: &str) {
+    cert["controller"]["path"] = json!(super::relative_to(folder_of(file), Path::new(resolved))
+        .display()
+        .to_string());
+}
+
+/// Where a pair's certificate goes: the `--certificate` file, or the pair's
+/// file in the certificate folder.
+fn certificate_file(target: &Path, cert_dir: Option<&Path>, file_name: &str) -> PathBuf {
     match cert_dir {
-        Some(d) => d.join(super::certificate_name(path, controller)),
+        Some(d) => d.join(format!("{file_name}.cert.json")),
         None => target.to_path_buf(),
     }
 }
 
-/// Write a certificate; the error message for people.
+/// Write a certificate (atomically); the error message for people.
 fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
     let text = serde_json::to_string(cert).unwrap_or_default();
-    std::fs::write(file, text + "\n").map_err(|e| {
+    super::write_atomically(file, (text + "\n").as_bytes()).map_err(|e| {
         format!(
             "cannot write certificate `{}`: {e}",
             crate::diag::sanitize(&file.display().to_string())
@@ -427,7 +443,7 @@ fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
 /// Run one network spec (no output; everything is returned).
 fn run_network(
     index: usize,
-    (path, controller): (&Path, Option<&Path>),
+    (path, controller, file_name): (&Path, Option<&Path>, &str),
     l: &super::Loaded,
     checked: &crate::check::NetworkChecked,
     opts: &Options,
@@ -454,9 +470,10 @@ fn run_network(
         json["controller"] = json!(c.display().to_string());
     }
     if let Some(target) = &opts.certificate {
-        let id = identity(path, &l.source);
-        let cert = crate::certificate::build_network(&plan, &outcome, &id);
-        let file = certificate_file(target, cert_dir, path, controller);
+        let file = certificate_file(target, cert_dir, file_name);
+        let id = identity(&file, path, &l.source);
+        let mut cert = crate::certificate::build_network(&plan, &outcome, &id);
+        record_controller(&mut cert, &file, &plan.model_resolved);
         if let Err(msg) = write_certificate(&file, &cert) {
             fail_item(
                 (&mut json, &mut stderr, &mut class),
@@ -663,9 +680,10 @@ struct InOrder<E> {
 pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> ExitCode {
     let run_started = Instant::now();
     let (pairs, errors) = super::pairs(specs, controllers);
+    // file names from the whole batch, so every shard names a pair alike
+    let names = super::output_names(&pairs);
     let mut work: Vec<Work> = errors.into_iter().map(Work::Argument).collect();
-    work.extend(pairs.into_iter().map(|(s, c)| Work::Pair(s, c)));
-    let total = work.len();
+    let total = work.len() + pairs.len();
     let mine: Vec<usize> = (0..total)
         .filter(|i| opts.shard.is_none_or(|s| i % s.n == s.k - 1))
         .collect();
@@ -674,6 +692,22 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         .certificate
         .as_deref()
         .filter(|c| total > 1 || c.is_dir());
+    let names = match names {
+        Ok(n) => n,
+        // only files in a folder need names; a collision there is refused
+        // before anything runs
+        Err(e) if cert_dir.is_some() || opts.plot.is_some() => {
+            err(&format!("error: {e}\n"));
+            return ExitCode::from(exit::INPUT_ERROR);
+        }
+        Err(_) => vec![String::new(); pairs.len()],
+    };
+    work.extend(
+        pairs
+            .into_iter()
+            .zip(names)
+            .map(|((s, c), n)| Work::Pair(s, c, n)),
+    );
     for d in cert_dir.into_iter().chain(opts.plot.as_deref()) {
         if let Err(e) = std::fs::create_dir_all(d) {
             err(&format!(

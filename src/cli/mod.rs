@@ -3,6 +3,7 @@
 
 mod batch;
 
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -58,7 +59,9 @@ enum Cmd {
         time_limit: Option<f64>,
         /// Write a `ravel-certificate/1` for each result: to this file for a
         /// single result, else into this folder (created if missing), one
-        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair.
+        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair
+        /// (with folders, `a~<spec>`, where names would collide); written
+        /// atomically.
         #[arg(long, value_name = "PATH")]
         certificate: Option<PathBuf>,
         /// Run this many (spec, controller) pairs at once, or a single
@@ -80,7 +83,8 @@ enum Cmd {
         quiet: bool,
         /// Write one SVG per result into this folder (created if missing):
         /// the reachable sets per step, simulated trajectories, X0, goal,
-        /// avoid sets and any counterexample, projected on two states.
+        /// avoid sets and any counterexample, projected on two states (named
+        /// as the certificates, with `.svg`).
         #[arg(long, value_name = "DIR")]
         plot: Option<PathBuf>,
         /// The two state coordinates a plot shows (default 0,1).
@@ -129,10 +133,12 @@ enum Cmd {
         /// Certificate files.
         #[arg(required = true)]
         certificates: Vec<PathBuf>,
-        /// The spec (default: the path recorded in the certificate).
+        /// The spec (default: the path recorded in the certificate, relative
+        /// to the certificate's folder).
         #[arg(long, value_name = "PATH")]
         spec: Option<PathBuf>,
-        /// The controller (default: the path recorded in the certificate).
+        /// The controller (default: the path recorded in the certificate,
+        /// relative to the certificate's folder).
         #[arg(long, value_name = "PATH")]
         controller: Option<PathBuf>,
     },
@@ -423,16 +429,152 @@ fn read_json(file: &Path) -> Result<Value, String> {
     serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))
 }
 
-/// The certificate file name of a (spec, controller) pair in a folder.
-fn certificate_name(spec: &Path, controller: Option<&Path>) -> String {
-    let stem = |p: &Path| {
-        p.file_stem()
-            .map_or_else(|| "spec".to_string(), |s| s.to_string_lossy().into_owned())
-    };
-    match controller {
-        Some(c) => format!("{}--{}.cert.json", stem(spec), stem(c)),
-        None => format!("{}.cert.json", stem(spec)),
+/// The file names (without extension) of the results of a batch's (spec,
+/// controller) pairs, computed from the whole pair list (so a shard names a
+/// pair as the whole batch does): `<spec stem>` or `<spec stem>--<controller
+/// stem>`; where names collide (compared without case, for file systems that
+/// ignore it), the colliding pairs' names take their spec's folders, nearest
+/// first, joined by `~` (`a~double_integrator`), one folder at a time until
+/// they differ, and then, if the specs' paths alone cannot tell them apart,
+/// their controller's folders (`s--x~c`). An error names two pairs that no
+/// folder tells apart (the same pair given twice).
+fn output_names(pairs: &[(PathBuf, Option<PathBuf>)]) -> Result<Vec<String>, String> {
+    /// A path's folders (outermost first; `..` as `up`) and its file stem.
+    fn parts(p: &Path, fallback: &str) -> (Vec<String>, String) {
+        let stem = p.file_stem().map_or_else(
+            || fallback.to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        let folders = p
+            .parent()
+            .into_iter()
+            .flat_map(Path::components)
+            .filter_map(|c| match c {
+                std::path::Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                std::path::Component::ParentDir => Some("up".to_string()),
+                _ => None,
+            })
+            .collect();
+        (folders, stem)
     }
+    fn join((folders, stem): &(Vec<String>, String), depth: usize) -> String {
+        let mut s: Vec<&str> = folders[folders.len() - depth..]
+            .iter()
+            .map(String::as_str)
+            .collect();
+        s.push(stem);
+        s.join("~")
+    }
+    let split: Vec<_> = pairs
+        .iter()
+        .map(|(s, c)| {
+            (
+                parts(s, "spec"),
+                c.as_deref().map(|c| parts(c, "controller")),
+            )
+        })
+        .collect();
+    let mut depth = vec![(0usize, 0usize); pairs.len()];
+    let name = |i: usize, (ds, dc): (usize, usize)| {
+        let (s, c) = &split[i];
+        match c {
+            Some(c) => format!("{}--{}", join(s, ds), join(c, dc)),
+            None => join(s, ds),
+        }
+    };
+    loop {
+        let mut groups: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+        for (i, &d) in depth.iter().enumerate() {
+            groups.entry(name(i, d).to_lowercase()).or_default().push(i);
+        }
+        let colliding: Vec<&Vec<usize>> = groups.values().filter(|g| g.len() > 1).collect();
+        if colliding.is_empty() {
+            return Ok((0..pairs.len()).map(|i| name(i, depth[i])).collect());
+        }
+        // a spec folder more where one is left, else a controller folder more
+        let mut grown = false;
+        for g in &colliding {
+            for &i in *g {
+                if depth[i].0 < split[i].0 .0.len() {
+                    depth[i].0 += 1;
+                    grown = true;
+                }
+            }
+        }
+        if !grown {
+            for g in &colliding {
+                for &i in *g {
+                    if split[i].1.as_ref().is_some_and(|c| depth[i].1 < c.0.len()) {
+                        depth[i].1 += 1;
+                        grown = true;
+                    }
+                }
+            }
+        }
+        if !grown {
+            let (a, b) = (colliding[0][0], colliding[0][1]);
+            let show = |i: usize| {
+                let (s, c) = &pairs[i];
+                let s = crate::diag::sanitize(&s.display().to_string());
+                match c {
+                    Some(c) => format!(
+                        "`{s}` with `{}`",
+                        crate::diag::sanitize(&c.display().to_string())
+                    ),
+                    None => format!("`{s}`"),
+                }
+            };
+            return Err(format!(
+                "{} and {} would write their certificates or plots to the same file, and no folder of their paths tells them apart (the same pair given twice?); nothing was run",
+                show(a),
+                show(b),
+            ));
+        }
+    }
+}
+
+/// Write `bytes` to `file` atomically: into a new temporary file beside it
+/// (`.NAME.tmp-PID-N`, `NAME` cut to 64 characters, created exclusively), flushed to disk, then renamed
+/// over `file`, so a reader sees the old file or the whole new one, never
+/// half of one; an existing file's permissions are kept. On failure the
+/// temporary file is removed and `file` is left as it was.
+fn write_atomically(file: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let Some(name) = file.file_name() else {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the path names no file",
+        ));
+    };
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    // the name's start only: a long name must not make the temporary one
+    // longer than the file system allows
+    let start: String = name.to_string_lossy().chars().take(64).collect();
+    let tmp = dir.join(format!(".{start}.tmp-{}-{n}", std::process::id()));
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)?;
+    let fill = |f: &mut std::fs::File| {
+        f.write_all(bytes)?;
+        if let Ok(old) = std::fs::metadata(file) {
+            f.set_permissions(old.permissions())?;
+        }
+        f.sync_all()
+    };
+    let written = fill(&mut f).and_then(|()| {
+        drop(f);
+        std::fs::rename(&tmp, file)
+    });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// The first place two JSON values differ, as a path (`problem.plants[0].A[1]`).
@@ -467,32 +609,97 @@ fn first_difference(a: &Value, b: &Value, path: &str) -> Option<String> {
     }
 }
 
+/// Where a certificate's recorded path is read: relative to the
+/// certificate's own folder (as `verify` records it); a relative path not
+/// found there but found in the working folder is read from there (a
+/// certificate written before paths were recorded relative to it), with a
+/// note saying so. Absolute paths are read as they are.
+fn recorded_path(cert_dir: &Path, recorded: &str) -> (PathBuf, Option<String>) {
+    let p = Path::new(recorded);
+    if p.is_absolute() {
+        return (p.to_path_buf(), None);
+    }
+    let beside = cert_dir.join(p);
+    if beside.exists() || !p.exists() {
+        return (beside, None);
+    }
+    let note = format!(
+        "note: `{}` is not beside the certificate; read as recorded, from the working folder (a certificate written before paths were recorded relative to it)",
+        crate::diag::sanitize(recorded)
+    );
+    (p.to_path_buf(), Some(note))
+}
+
+/// The first 12 hex digits of a SHA-256, for people.
+fn short_hash(h: &str) -> String {
+    crate::diag::sanitize(&h.chars().take(12).collect::<String>())
+}
+
 /// Check one certificate file: the exit code it earns and the text to print.
+/// Every answer that got that far names the spec and the controller it
+/// checked (path and SHA-256 prefix).
 fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (u8, String) {
     use crate::certify::Answer;
     let name = crate::diag::sanitize(&file.display().to_string());
-    let unreadable = |why: String| (exit::INPUT_ERROR, format!("UNREADABLE  {name}: {why}"));
-    let invalid = |why: String| (exit::FALSIFIED, format!("INVALID     {name}: {why}"));
+    // after the answer's line: the files checked, then notes
+    let mut files: Vec<String> = Vec::new();
+    let mut notes: Vec<String> = Vec::new();
+    let with = |head: String, files: &[String], notes: &[String]| {
+        let mut text = head;
+        for l in files.iter().chain(notes) {
+            text += &format!("\n  {l}");
+        }
+        text
+    };
+    let unreadable = |why: String, files: &[String], notes: &[String]| {
+        (
+            exit::INPUT_ERROR,
+            with(format!("UNREADABLE  {name}: {why}"), files, notes),
+        )
+    };
+    let invalid = |why: String, files: &[String], notes: &[String]| {
+        (
+            exit::FALSIFIED,
+            with(format!("INVALID     {name}: {why}"), files, notes),
+        )
+    };
     let cert = match read_json(file) {
         Ok(v) => v,
-        Err(e) => return unreadable(e),
+        Err(e) => return unreadable(e, &[], &[]),
     };
-    let recorded = |key: &str| {
-        cert.get(key)
-            .and_then(|v| v.get("path"))
-            .and_then(Value::as_str)
-            .map(PathBuf::from)
+    // empty for a certificate in the working folder: paths stay as recorded
+    let cert_dir = file.parent().unwrap_or(Path::new(""));
+    let mut recorded = |key: &str| {
+        let (path, note) = recorded_path(
+            cert_dir,
+            cert.get(key)
+                .and_then(|v| v.get("path"))
+                .and_then(Value::as_str)?,
+        );
+        notes.extend(note);
+        Some(path)
     };
-    let Some(spec_path) = spec.map(Path::to_path_buf).or_else(|| recorded("spec")) else {
-        return unreadable("no spec path recorded; pass --spec".into());
+    // an explicit --spec / --controller is relative to the working folder
+    let spec_path = match spec {
+        Some(s) => Some(s.to_path_buf()),
+        None => recorded("spec"),
     };
-    let Some(ctrl_path) = controller
-        .map(Path::to_path_buf)
-        .or_else(|| recorded("controller"))
-    else {
-        return unreadable("no controller path recorded; pass --controller".into());
+    let ctrl_path = match controller {
+        Some(c) => Some(c.to_path_buf()),
+        None => recorded("controller"),
+    };
+    let Some(spec_path) = spec_path else {
+        return unreadable("no spec path recorded; pass --spec".into(), &[], &notes);
+    };
+    let Some(ctrl_path) = ctrl_path else {
+        return unreadable(
+            "no controller path recorded; pass --controller".into(),
+            &[],
+            &notes,
+        );
     };
     let spec_name = crate::diag::sanitize(&spec_path.display().to_string());
+    let ctrl_name = crate::diag::sanitize(&ctrl_path.display().to_string());
     let source = match read_request(&crate::ReadRequest {
         path: spec_path.clone(),
         inside: None,
@@ -500,7 +707,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         whole: true,
     }) {
         Ok(b) => b,
-        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}")),
+        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}"), &[], &notes),
     };
     let hash = |key: &str, field: &str| {
         cert.get(key)
@@ -509,23 +716,32 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             .unwrap_or("")
             .to_string()
     };
-    if crate::check::sha256_hex(&source) != hash("spec", "sha256") {
-        return invalid(format!(
-            "spec `{spec_name}` is not the one certified (SHA-256 differs)"
-        ));
-    }
+    let spec_sha = crate::check::sha256_hex(&source);
+    files.push(format!(
+        "spec        {spec_name} (SHA-256 {})",
+        short_hash(&spec_sha)
+    ));
+    // the text may differ (comments, layout): the problem decides
+    let text_differs = spec_sha != hash("spec", "sha256");
     let Ok(source) = String::from_utf8(source) else {
-        return unreadable(format!("spec `{spec_name}` is not UTF-8 text"));
+        return unreadable(
+            format!("spec `{spec_name}` is not UTF-8 text"),
+            &files,
+            &notes,
+        );
     };
     let dir = spec_path.parent().unwrap_or(Path::new("."));
     let task = match crate::front_end_task(&source, dir, &read_request, Some(&ctrl_path)) {
         Ok(t) => t,
         Err(d) => {
-            return unreadable(format!(
-                "spec `{spec_name}` with controller `{}` does not check ({} error(s); run `ravel check`)",
-                crate::diag::sanitize(&ctrl_path.display().to_string()),
-                d.len()
-            ))
+            return unreadable(
+                format!(
+                    "spec `{spec_name}` with controller `{ctrl_name}` does not check ({} error(s); run `ravel check`)",
+                    d.len()
+                ),
+                &files,
+                &notes,
+            );
         }
     };
     // the model, its hashes and the problem as the spec states it
@@ -541,23 +757,48 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             (plan.net, plan.model_sha256, problem)
         }
     };
+    files.push(format!(
+        "controller  {ctrl_name} (SHA-256 {})",
+        short_hash(&sha)
+    ));
     if sha != hash("controller", "sha256") {
-        return invalid("the controller file is not the one certified (SHA-256 differs)".into());
+        return invalid(
+            "the controller file is not the one certified (SHA-256 differs)".into(),
+            &files,
+            &notes,
+        );
     }
     if crate::certificate::network_sha256(&net) != hash("controller", "network_sha256") {
         return invalid(
             "the controller's network (external data included) is not the one certified".into(),
+            &files,
+            &notes,
         );
     }
+    let text_note = format!(
+        "note: the spec's text differs from the certified one (SHA-256 {}, certified {})",
+        short_hash(&spec_sha),
+        short_hash(&hash("spec", "sha256"))
+    );
     if let Some(d) = first_difference(
         &problem,
         cert.get("problem").unwrap_or(&Value::Null),
         "problem",
     ) {
-        return invalid(format!(
-            "the recorded problem is not the spec's: `{}` differs",
-            crate::diag::sanitize(&d)
-        ));
+        if text_differs {
+            notes.push(text_note);
+        }
+        return invalid(
+            format!(
+                "the recorded problem is not the spec's: `{}` differs",
+                crate::diag::sanitize(&d)
+            ),
+            &files,
+            &notes,
+        );
+    }
+    if text_differs {
+        notes.push(format!("{text_note}; its problem is identical"));
     }
     let report = crate::certify::check(&cert, &net);
     let (code, head) = match &report.answer {
@@ -579,10 +820,8 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             text += &format!("\n  {}", crate::diag::sanitize_to(m, 600));
         }
     }
-    for p in &report.properties {
-        text += &format!("\n  {p}");
-    }
-    (code, text)
+    notes.extend(report.properties.iter().cloned());
+    (code, with(text, &files, &notes))
 }
 
 /// A line diff of `a` and `b` (longest common subsequence), `-`/`+` lines
@@ -693,11 +932,7 @@ fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
         // write beside, then rename: a crash never leaves half a spec (and a
         // symbolic link keeps pointing at the formatted file)
         let target = std::fs::canonicalize(f).unwrap_or_else(|_| f.clone());
-        let tmp = target.with_extension("ravel.fmt-tmp");
-        let written =
-            std::fs::write(&tmp, &formatted).and_then(|()| std::fs::rename(&tmp, &target));
-        if let Err(e) = written {
-            let _ = std::fs::remove_file(&tmp);
+        if let Err(e) = write_atomically(&target, formatted.as_bytes()) {
             err(&format!("error: cannot write `{name}`: {e}\n"));
             code = exit::INPUT_ERROR;
         } else if out(&format!("formatted {name}")).is_err() {
@@ -707,13 +942,31 @@ fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
     ExitCode::from(code)
 }
 
-/// `path` as seen from the folder `dir` (both made absolute; `..` where
-/// they part), or `path` itself when either cannot be resolved.
-fn relative_to(dir: &Path, path: &Path) -> PathBuf {
-    let (Ok(d), Ok(p)) = (dir.canonicalize(), path.canonicalize()) else {
-        return path.to_path_buf();
+/// `path` as seen from the folder `dir`, for a file written into `dir`
+/// that names `path`: a relative path (`..` where they part) computed from
+/// the real folders (symbolic links to folders resolved; the file's own
+/// name kept), or `path` made absolute when there is none (different roots)
+/// or a folder cannot be resolved.
+pub(crate) fn relative_to(dir: &Path, path: &Path) -> PathBuf {
+    let absolute = || std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let real = match (path.parent(), path.file_name()) {
+        (Some(p), Some(n)) => {
+            let p = if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            };
+            p.canonicalize().map(|p| p.join(n))
+        }
+        _ => path.canonicalize(),
+    };
+    let (Ok(d), Ok(p)) = (dir.canonicalize(), real) else {
+        return absolute();
     };
     let (dc, pc): (Vec<_>, Vec<_>) = (d.components().collect(), p.components().collect());
+    if dc.first() != pc.first() {
+        return p;
+    }
     let common = dc.iter().zip(&pc).take_while(|(a, b)| a == b).count();
     let mut out = PathBuf::new();
     for _ in common..dc.len() {
@@ -780,7 +1033,7 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
         return fail(format!("the spec imported from `{name}` does not check"));
     }
     match output {
-        Some(file) => match std::fs::write(file, &spec) {
+        Some(file) => match write_atomically(file, spec.as_bytes()) {
             Ok(()) => ExitCode::from(exit::VERIFIED),
             Err(e) => fail(format!(
                 "cannot write `{}`: {e}",
@@ -900,5 +1153,132 @@ pub fn main() -> ExitCode {
             network,
             output,
         } => import_vnnlib(&property, &network, output.as_deref(), color),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(s: &str, c: Option<&str>) -> (PathBuf, Option<PathBuf>) {
+        (PathBuf::from(s), c.map(PathBuf::from))
+    }
+
+    #[test]
+    fn names_are_stems_unless_they_collide() {
+        // unique stems keep today's names
+        let names = output_names(&[pair("specs/di.ravel", None), pair("specs/quad.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["di", "quad"]);
+        // a shared stem takes folders, nearest first, only where needed
+        let names = output_names(&[
+            pair("x/a/di.ravel", Some("c.onnx")),
+            pair("x/b/di.ravel", Some("c.onnx")),
+            pair("di.ravel", Some("c.onnx")),
+            pair("x/quad.ravel", Some("c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["a~di--c", "b~di--c", "di--c", "quad--c"]);
+        // names that differ only in case collide (case-insensitive file systems)
+        let names =
+            output_names(&[pair("A/Di.ravel", None), pair("b/di.ravel", None)]).expect("distinct");
+        assert_eq!(names, ["A~Di", "b~di"]);
+        // one spec, controllers of one name in two folders
+        let names = output_names(&[
+            pair("s.ravel", Some("x/c.onnx")),
+            pair("s.ravel", Some("y/c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["s--x~c", "s--y~c"]);
+        // folders that differ only far up
+        let names = output_names(&[pair("p/m/n/di.ravel", None), pair("q/m/n/di.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["p~m~n~di", "q~m~n~di"]);
+    }
+
+    #[test]
+    fn a_pair_given_twice_cannot_be_named() {
+        let e = output_names(&[pair("a/di.ravel", None), pair("./a/di.ravel", None)])
+            .expect_err("the same pair");
+        assert!(e.contains("given twice"), "{e}");
+        let e = output_names(&[
+            pair("s.ravel", Some("c.onnx")),
+            pair("s.ravel", Some("c.onnx")),
+        ])
+        .expect_err("the same pair");
+        assert!(e.contains("`s.ravel` with `c.onnx`"), "{e}");
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ravel-atomic-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("dir");
+        d
+    }
+
+    #[test]
+    fn atomic_writes_replace_whole_files_and_leave_nothing_behind() {
+        let d = scratch("ok");
+        let f = d.join("x.cert.json");
+        write_atomically(&f, b"first").expect("written");
+        write_atomically(&f, b"second").expect("replaced");
+        assert_eq!(std::fs::read(&f).expect("read"), b"second");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+            write_atomically(&f, b"third").expect("replaced");
+            let mode = std::fs::metadata(&f).expect("meta").permissions().mode();
+            assert_eq!(mode & 0o777, 0o600, "permissions kept");
+        }
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["x.cert.json"]);
+        // a name as long as file systems allow (255 bytes) still has room
+        // for its temporary file
+        let long = d.join("n".repeat(255));
+        write_atomically(&long, b"long").expect("written");
+        assert_eq!(std::fs::read(&long).expect("read"), b"long");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_failed_atomic_write_leaves_the_target_and_no_temporary_file() {
+        let d = scratch("fail");
+        // the target is a non-empty folder: the rename fails
+        let target = d.join("taken");
+        std::fs::create_dir_all(target.join("inside")).expect("dir");
+        assert!(write_atomically(&target, b"data").is_err());
+        assert!(target.join("inside").is_dir());
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["taken"], "no temporary file left");
+        // a folder that does not exist: an error, nothing created
+        assert!(write_atomically(&d.join("no/such/file"), b"data").is_err());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn relative_paths_part_where_the_folders_do() {
+        let d = scratch("rel");
+        std::fs::create_dir_all(d.join("certs")).expect("dir");
+        std::fs::create_dir_all(d.join("specs/x")).expect("dir");
+        std::fs::write(d.join("specs/x/s.ravel"), "").expect("file");
+        assert_eq!(
+            relative_to(&d.join("certs"), &d.join("specs/x/s.ravel")),
+            Path::new("../specs/x/s.ravel")
+        );
+        assert_eq!(
+            relative_to(&d.join("specs/x"), &d.join("specs/x/s.ravel")),
+            Path::new("s.ravel")
+        );
+        // an unresolvable folder: the path made absolute, never relative to the cwd
+        let r = relative_to(&d.join("certs"), Path::new("no/such/s.ravel"));
+        assert!(r.is_absolute(), "{}", r.display());
+        let _ = std::fs::remove_dir_all(&d);
     }
 }

@@ -208,7 +208,7 @@ fn refinement_cap(cells: usize) -> usize {
 
 /// Cells of the VERIFIED evidence, each with the chain of boxes and the
 /// witness of every step up to `steps`, derived with the checker's own
-/// step. A cell whose chain does not prove every VERIFIED property
+/// step. With `refine`, a cell whose chain does not prove every VERIFIED property
 /// ([`certify::CellCheck`]) is bisected along its widest side (relative to
 /// X0's box) and its halves derived in its place, depth first, until every
 /// cell proves them or the cells would exceed [`refinement_cap`]: the
@@ -216,7 +216,13 @@ fn refinement_cap(cells: usize) -> usize {
 /// checker's boxes (Reach-SDP, hull or polytope boundaries, unrolled
 /// CROWN, a parent cell's intersection), and smaller cells tighten the
 /// checker's boxes. The error says why the evidence is not checkable.
-fn derive(plan: &Plan, outcome: &Outcome, header: &Value, cert: &Value) -> Result<Value, String> {
+fn derive(
+    plan: &Plan,
+    outcome: &Outcome,
+    header: &Value,
+    cert: &Value,
+    refine: bool,
+) -> Result<Value, String> {
     let cl = &plan.closed_loop;
     let (plants, w, v) = loop_data(cl);
     let steps = header["steps"].as_u64().unwrap_or(0) as usize;
@@ -236,7 +242,13 @@ fn derive(plan: &Plan, outcome: &Outcome, header: &Value, cert: &Value) -> Resul
     todo.reverse();
     let mut cells = Vec::with_capacity(todo.len());
     while let Some((start, sets)) = todo.pop() {
-        let failure = match derive_cell(plan, &plants, (&w, &v), &start, sets, steps, unrolled) {
+        let derived = derive_cell(plan, &plants, (&w, &v), &start, sets, steps, unrolled);
+        let failure = match derived {
+            Ok(cell) if !refine => {
+                cells.push(cell);
+                continue;
+            }
+            Err(e) if !refine => return Err(e),
             Ok(cell) => match checker.check(&cell) {
                 Ok(()) => {
                     cells.push(cell);
@@ -453,27 +465,44 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
     };
     let header = evidence_header(plan, steps);
     cert["evidence"] = header.clone();
-    let evidence = match derive(plan, outcome, &header, &cert) {
-        Ok(ev) => ev,
-        Err(why) => json!({ "status": "unsupported", "reason": why }),
-    };
-    cert["evidence"] = evidence;
-    if cert["evidence"]["status"] == "checkable" {
+    // the analysis's cells first; the refinement only where the checker's
+    // chain on them does not prove the verdicts (each cell then checked on
+    // its own, which costs a second chain per cell)
+    let mut failure = None;
+    for refine in [false, true] {
+        let evidence = match derive(plan, outcome, &header, &cert, refine) {
+            Ok(ev) => ev,
+            Err(why) if refine => {
+                cert["evidence"] = json!({ "status": "unsupported", "reason": why });
+                return cert;
+            }
+            Err(why) => {
+                failure = Some(why);
+                continue;
+            }
+        };
+        let mut candidate = cert.clone();
+        candidate["evidence"] = evidence;
         // the checker's own sets may not prove what the analysis proved
-        let report = certify::check(&cert, &plan.closed_loop.net);
-        if let Some(why) = report.evidence_failure {
-            cert["evidence"] = json!({
-                "status": "unsupported",
-                "reason": format!(
-                    "the checker's own bounds do not prove the verdict ({why}): either the analysis ({}) used bounds tighter than the checker re-derives (Reach-SDP multipliers are not checkable yet), or its verdict is wrong",
-                    plan.propagator.name()
-                ),
-            });
-        } else if let Answer::Unreadable(e) = report.answer {
-            cert["evidence"] =
-                json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+        let report = certify::check(&candidate, &plan.closed_loop.net);
+        match (report.evidence_failure, report.answer) {
+            (Some(why), _) => failure = Some(why),
+            (None, Answer::Unreadable(e)) => {
+                cert["evidence"] =
+                    json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+                return cert;
+            }
+            (None, _) => return candidate,
         }
     }
+    cert["evidence"] = json!({
+        "status": "unsupported",
+        "reason": format!(
+            "the checker's own bounds do not prove the verdict ({}): either the analysis ({}) used bounds tighter than the checker re-derives, or its verdict is wrong",
+            failure.unwrap_or_default(),
+            plan.propagator.name()
+        ),
+    });
     cert
 }
 

@@ -1417,3 +1417,86 @@ fn radius_search(
         analyses,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DVector;
+
+    #[test]
+    fn candidates_become_float32_values_inside_the_set() {
+        let t = InputType::F32;
+        // the upper face 0.30000003 rounds to a float32 above it: moved down
+        let b = Region::Box(IBox::new(vec![0.1], vec![0.30000003]));
+        assert_eq!(
+            representable(&b, t, &[0.30000003]),
+            Some(vec![f64::from(0.3f32)])
+        );
+        // no float32 in [0.30000002, 0.30000004]: nothing
+        let none = Region::Box(IBox::new(vec![0.30000002], vec![0.30000004]));
+        assert_eq!(representable(&none, t, &[0.30000003]), None);
+        // float64: unchanged
+        assert_eq!(
+            representable(&b, InputType::F64, &[0.30000003]),
+            Some(vec![0.30000003])
+        );
+        // a ball point just inside in f64 whose rounding leaves the ball
+        // steps towards the centre
+        let ball = Region::Ball {
+            center: vec![0.0, 0.0],
+            radius: vec![0.1, 0.1],
+            norm: Norm::L2,
+        };
+        let edge = 0.1 / 2f64.sqrt() * (1.0 - 1e-15);
+        let r = representable(&ball, t, &[edge, edge]).expect("a float32 inside");
+        assert!(ball.contains_point(&r) && r.iter().all(|v| t.represents(*v)));
+    }
+
+    /// The fixed-order float32 evaluation lies in the enclosure of every
+    /// order, and so does the reverse order, on random networks.
+    #[test]
+    fn the_stored_enclosure_holds_every_summation_order() {
+        let mut rng = Rng::new(9);
+        for case in 0..300 {
+            let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
+            let widths = [2, 1 + rng.below(10), 1 + rng.below(10), 3];
+            let mut layers = Vec::new();
+            for (k, pair) in widths.windows(2).enumerate() {
+                let s = 10f64.powi(rng.below(7) as i32 - 3);
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(pair[1], pair[0], |_, _| s * rng.normal()),
+                    b: DVector::from_fn(pair[1], |_, _| s * rng.normal()),
+                });
+                if k + 2 < widths.len() {
+                    layers.push(Layer::Act(act));
+                }
+            }
+            let net = Network::new(2, layers);
+            let x: Vec<f64> = (0..2).map(|_| f64::from(rng.normal() as f32)).collect();
+            let e = stored_enclosure(&net, &x).expect("no overflow at these sizes");
+            let mut rev: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+            for layer in &net.layers {
+                match layer {
+                    Layer::Affine { w, b } => {
+                        rev = (0..w.nrows())
+                            .map(|i| {
+                                let mut s = b[i] as f32;
+                                for j in (0..w.ncols()).rev() {
+                                    s = (w[(i, j)] as f32).mul_add(rev[j], s);
+                                }
+                                s
+                            })
+                            .collect();
+                    }
+                    Layer::Act(a) => rev
+                        .iter_mut()
+                        .for_each(|v| *v = a.eval(f64::from(*v)) as f32),
+                }
+            }
+            let rev: Vec<f64> = rev.into_iter().map(f64::from).collect();
+            for y in [net.forward_stored(&x), rev] {
+                assert!(e.contains_point(&y), "case {case}: {y:?} outside {e:?}");
+            }
+        }
+    }
+}

@@ -343,3 +343,77 @@ fn falsified_inputs_violate_in_float32_for_every_activation() {
         "only {seen} counterexamples: the test checks little"
     );
 }
+
+/// The loader records the graph input's element type: float32 for a
+/// `float` input (and when none is declared), float64 for `double`.
+#[test]
+fn the_loader_records_the_input_type() {
+    use prost::Message;
+    use ravel::onnx::build::{GraphBuilder, Storage};
+    use ravel::onnx::proto::{dtype, ModelProto};
+    let mut g = GraphBuilder::new(1, Storage::RawF64);
+    g.network(&scale(0.5), false);
+    let (bytes, _) = g.finish(1);
+    let load = |bytes: &[u8]| {
+        ravel::onnx::load(bytes, &Default::default())
+            .expect("loads")
+            .net
+            .input_type
+    };
+    assert_eq!(load(&bytes), InputType::F32);
+    let retyped = |t: Option<i32>| {
+        let mut m = ModelProto::decode(bytes.as_slice()).expect("decodes");
+        let graph = m.graph.as_mut().expect("graph");
+        let tensor = graph.input[0]
+            .r#type
+            .as_mut()
+            .and_then(|t| t.tensor_type.as_mut())
+            .expect("a tensor input");
+        tensor.elem_type = t;
+        m.encode_to_vec()
+    };
+    assert_eq!(load(&retyped(Some(dtype::DOUBLE))), InputType::F64);
+    assert_eq!(load(&retyped(None)), InputType::F32);
+}
+
+/// Through the command line: a float32 ONNX model, a spec whose box bound
+/// is no float32, `verify --format json` reports the float32 input inside
+/// the box, and `verify --certificate` then `certify` answer VALID.
+#[test]
+fn the_command_line_reports_float32_inputs() {
+    use ravel::onnx::build::{GraphBuilder, Storage};
+    let dir = std::env::temp_dir().join(format!("ravel-cex-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut g = GraphBuilder::new(1, Storage::RawF32);
+    g.network(&scale(1.0), false);
+    std::fs::write(dir.join("model.onnx"), g.finish(1).0).expect("model written");
+    let spec = dir.join("face.ravel");
+    std::fs::write(
+        &spec,
+        "network face {\n    input  x[1]\n    output y[1]\n}\n\nmodel \"model.onnx\"\n\n\
+         input X = box(x[0] in [0.1, 0.3000003])\n\nrequire low = { y[0] <= 0.3 }\n\n\
+         analysis {\n    propagator  crown\n    partitioner uniform [1]\n    samples     100\n}\n",
+    )
+    .expect("spec written");
+    let cert = dir.join("face.cert.json");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .args(["verify", "--format", "json", "--certificate"])
+        .arg(&cert)
+        .arg(&spec)
+        .output()
+        .expect("ravel runs");
+    let v: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let p = &v["results"][0]["properties"][0];
+    assert_eq!(p["status"], "FALSIFIED", "{v}");
+    let x = p["counterexample"]["input"][0].as_f64().expect("an input");
+    assert_eq!(x, f64::from((0.3000003f64 as f32).next_down()));
+    let check = std::process::Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .arg("certify")
+        .arg(&cert)
+        .output()
+        .expect("ravel runs");
+    let text = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success() && text.contains("VALID"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -3,7 +3,10 @@
 //!
 //! The network that is verified is the real-arithmetic function defined by the
 //! weights stored here (ONNX `float` weights are converted to `f64` exactly).
-//! [`Network::forward`] evaluates it in `f64` for simulation.
+//! [`Network::forward`] evaluates it in `f64` for simulation;
+//! [`Network::forward_stored`] evaluates it as a runtime would evaluate the
+//! model as stored, in the precision of its input type ([`InputType`]:
+//! float32 for a float32 ONNX model), for counterexamples.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -87,6 +90,114 @@ pub fn sigmoid(z: f64) -> f64 {
     }
 }
 
+/// The element type of a network's input, which is also the precision a
+/// runtime evaluates the stored model in: a counterexample must be a value of
+/// this type ([`InputType::round`]) and must violate the property when the
+/// network is evaluated in it ([`Network::forward_stored`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputType {
+    /// ONNX `float` (and the default: every value of it is also an `f64`,
+    /// and its rounding errors bound an `f64` evaluation's).
+    F32,
+    /// ONNX `double`.
+    F64,
+}
+
+impl InputType {
+    /// The ONNX name.
+    pub fn name(self) -> &'static str {
+        match self {
+            InputType::F32 => "float32",
+            InputType::F64 => "float64",
+        }
+    }
+
+    /// The value of this type nearest to `v` (ties to even), as an `f64`
+    /// (infinite when `v` lies beyond the type's range).
+    pub fn round(self, v: f64) -> f64 {
+        match self {
+            InputType::F32 => f64::from(v as f32),
+            InputType::F64 => v,
+        }
+    }
+
+    /// Whether `v` is a finite value of this type.
+    pub fn represents(self, v: f64) -> bool {
+        v.is_finite() && self.round(v) == v
+    }
+
+    /// The smallest value of this type that is `≥ v` (`v` finite and within
+    /// the type's range).
+    pub fn ceil(self, v: f64) -> f64 {
+        match self {
+            InputType::F32 => {
+                let r = v as f32;
+                f64::from(if f64::from(r) < v { r.next_up() } else { r })
+            }
+            InputType::F64 => v,
+        }
+    }
+
+    /// The largest value of this type that is `≤ v`.
+    pub fn floor(self, v: f64) -> f64 {
+        match self {
+            InputType::F32 => {
+                let r = v as f32;
+                f64::from(if f64::from(r) > v { r.next_down() } else { r })
+            }
+            InputType::F64 => v,
+        }
+    }
+
+    /// The next value of this type from `v` (a value of it) towards `to`.
+    pub fn step_towards(self, v: f64, to: f64) -> f64 {
+        match self {
+            InputType::F32 if to > v => f64::from((v as f32).next_up()),
+            InputType::F32 if to < v => f64::from((v as f32).next_down()),
+            InputType::F64 if to > v => v.next_up(),
+            InputType::F64 if to < v => v.next_down(),
+            _ => v,
+        }
+    }
+
+    /// The unit roundoff `u` (half the spacing of the values in `[1, 2)`):
+    /// a rounded result is `v·(1 + δ)`, `|δ| ≤ u`, outside the subnormals.
+    pub fn unit_roundoff(self) -> f64 {
+        match self {
+            InputType::F32 => f64::from(f32::EPSILON) / 2.0,
+            InputType::F64 => f64::EPSILON / 2.0,
+        }
+    }
+
+    /// The smallest positive (subnormal) value: a rounded product is off by
+    /// at most half of it in the subnormal range.
+    pub fn min_positive(self) -> f64 {
+        match self {
+            InputType::F32 => f64::from(f32::from_bits(1)),
+            InputType::F64 => f64::from_bits(1),
+        }
+    }
+
+    /// The largest finite value.
+    pub fn max(self) -> f64 {
+        match self {
+            InputType::F32 => f64::from(f32::MAX),
+            InputType::F64 => f64::MAX,
+        }
+    }
+
+    /// What ravel assumes of a runtime's `tanh` and sigmoid in this
+    /// precision: within this absolute distance of the exact function (2⁻¹⁸,
+    /// 64 float32 units in the last place at 1, for float32; 2⁻⁴⁰ for
+    /// float64). ReLU is exact in every precision.
+    pub fn activation_error(self) -> f64 {
+        match self {
+            InputType::F32 => 2f64.powi(-18),
+            InputType::F64 => 2f64.powi(-40),
+        }
+    }
+}
+
 /// One step of a network.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Layer {
@@ -108,13 +219,26 @@ pub struct Network {
     pub layers: Vec<Layer>,
     /// Input dimension.
     pub inputs: usize,
+    /// The input's element type: the precision of the model as stored
+    /// ([`InputType::F32`] unless the loader read `double`).
+    pub input_type: InputType,
 }
 
 impl Network {
     /// A network with the given input size and layers. Dimensions must chain;
     /// the ONNX loader and the generators guarantee it.
     pub fn new(inputs: usize, layers: Vec<Layer>) -> Network {
-        Network { layers, inputs }
+        Network {
+            layers,
+            inputs,
+            input_type: InputType::F32,
+        }
+    }
+
+    /// The same network with the input element type `t`.
+    pub fn with_input_type(mut self, t: InputType) -> Network {
+        self.input_type = t;
+        self
     }
 
     /// The width of the value after layer `i` (`i = 0` is the input).
@@ -180,6 +304,41 @@ impl Network {
         h
     }
 
+    /// Evaluate the network as a runtime evaluates the stored model, in the
+    /// precision of its input type: for float32, `x` rounded to float32
+    /// (callers pass float32 values), every weight and bias rounded to
+    /// float32 (stored float32 weights are unchanged), each affine output
+    /// summed in a fixed order, `W₀h₀ + W₁h₁ + …` then `+ b`, every product
+    /// and sum rounded to float32 (no fused multiply-add), ReLU exact, `tanh`
+    /// and the sigmoid computed in `f64` and rounded to float32. For float64
+    /// it is [`Network::forward`]. Runtimes may sum in other orders; the
+    /// counterexample rule bounds every order (`execute::network`).
+    pub fn forward_stored(&self, x: &[f64]) -> Vec<f64> {
+        if self.input_type == InputType::F64 {
+            return self.forward(x);
+        }
+        let mut h: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+        for layer in &self.layers {
+            match layer {
+                Layer::Affine { w, b } => {
+                    let mut z = vec![0.0f32; w.nrows()];
+                    for (i, zi) in z.iter_mut().enumerate() {
+                        let mut s = 0.0f32;
+                        for (j, hj) in h.iter().enumerate().take(w.ncols()) {
+                            let p = (w[(i, j)] as f32) * *hj;
+                            s = if j == 0 { p } else { s + p };
+                        }
+                        *zi = s + b[i] as f32;
+                    }
+                    h = z;
+                }
+                Layer::Act(Activation::Relu) => h.iter_mut().for_each(|v| *v = v.max(0.0)),
+                Layer::Act(a) => h.iter_mut().for_each(|v| *v = a.eval(f64::from(*v)) as f32),
+            }
+        }
+        h.into_iter().map(f64::from).collect()
+    }
+
     /// The hidden activations used, in order of first appearance (for reports).
     pub fn activations(&self) -> Vec<Activation> {
         let mut out = Vec::new();
@@ -199,7 +358,7 @@ impl Network {
     pub fn with_saturation(&self, lo: &[f64], hi: &[f64]) -> Network {
         let mut layers = self.layers.clone();
         layers.extend(clamp_layers(lo.len(), Some(lo), Some(hi)));
-        Network::new(self.inputs, layers)
+        Network::new(self.inputs, layers).with_input_type(self.input_type)
     }
 }
 

@@ -144,3 +144,45 @@ fn unsupported_constructs_are_refused_with_their_line() {
         .expect_err("escape");
     assert!(!e.message.contains('\u{1b}'), "{e:?}");
 }
+
+/// VNN-LIB bounds are decimals that float32 models cannot take as they are
+/// (as in VNN-COMP 2021, where some counterexamples in the box in float64
+/// left it once cast to float32): the counterexample is a float32 input
+/// inside the box; a box holding no float32 is never FALSIFIED.
+#[test]
+fn counterexamples_are_float32_inputs_of_the_box() {
+    let property = |lo: &str, hi: &str| {
+        format!(
+            "(declare-const X_0 Real)\n(declare-const X_1 Real)\n(declare-const Y_0 Real)\n\
+             (declare-const Y_1 Real)\n(declare-const Y_2 Real)\n\
+             (assert (and (<= X_0 {hi}) (>= X_0 {lo}) (<= X_1 {hi}) (>= X_1 {lo})))\n\
+             (assert (> (+ Y_1 (* -1.0 Y_2)) 0.5))\n(assert (< (- Y_0 (* 2 Y_1)) -1.5))\n"
+        )
+    };
+    let verify = |text: &str| {
+        let spec = ravel::vnnlib::import(text, "../../../models/classifier.onnx", "f", "f")
+            .expect("imports");
+        let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel::cli::read_request, None)
+            .unwrap_or_else(|d| panic!("the imported spec does not check: {d:?}\n{spec}"));
+        let Task::Network(c) = task else {
+            panic!("not a network spec")
+        };
+        let plan = ravel::lower::lower_network(&c);
+        let ctl = NetControl {
+            elapsed: &|| 0.0,
+            time_limit: None,
+            threads: 1,
+        };
+        execute_network(&plan, &ctl)
+    };
+    // [-0.30000003, -0.30000001] holds one float32, -0.30000001192…
+    let out = verify(&property("-0.30000003", "-0.30000001"));
+    assert_eq!(out.verdict.as_str(), "FALSIFIED");
+    let w = out.properties[0].counterexample.as_ref().expect("witness");
+    let only = f64::from(-0.3f32);
+    assert_eq!(w.input, vec![only, only]);
+    // [-0.30000004, -0.30000002] holds none: violated in real arithmetic only
+    let out = verify(&property("-0.30000004", "-0.30000002"));
+    assert_eq!(out.verdict.as_str(), "UNSURE");
+    assert!(out.properties[0].real_only.is_some());
+}

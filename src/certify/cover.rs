@@ -11,7 +11,7 @@ use super::bounds::Bx;
 
 /// Work limit: coordinates compared (pieces × cells scanned × dimension)
 /// before the answer is "undecided" — a few seconds at most.
-const MAX_WORK: usize = 2_000_000_000;
+pub const MAX_WORK: usize = 2_000_000_000;
 
 /// `Ok` when `cells` cover every point of `target` except in pieces that
 /// `misses` shows to lie outside the set of interest; otherwise
@@ -22,13 +22,23 @@ pub fn covers(
     target: &Bx,
     misses: &dyn Fn(&Bx) -> bool,
 ) -> Result<(), Option<Vec<f64>>> {
+    covers_within(cells, target, misses, MAX_WORK)
+}
+
+/// [`covers`] with the work limit `max_work` instead of [`MAX_WORK`].
+pub fn covers_within(
+    cells: &[Bx],
+    target: &Bx,
+    misses: &dyn Fn(&Bx) -> bool,
+    max_work: usize,
+) -> Result<(), Option<Vec<f64>>> {
     let n = target.lo.len();
     let mut stack = vec![target.clone()];
     let mut work = 0usize;
     while let Some(piece) = stack.pop() {
         // the scan below looks at up to every cell, every coordinate
         work = work.saturating_add(cells.len().max(1).saturating_mul(n.max(1)));
-        if work > MAX_WORK {
+        if work > max_work {
             return Err(None);
         }
         // a cell overlapping the piece: with positive length along every

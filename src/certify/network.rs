@@ -14,21 +14,29 @@
 //!   member, some row separating it by a positive margin; for robustness to
 //!   label `K`, `y_j − y_K < 0` for every `j ≠ K` (a label recorded in the
 //!   verdict: proven on the whole set, it is the centre's label too);
-//! * every FALSIFIED property is violated by the recorded input: it lies in
-//!   the input set, and the outward-rounded interval enclosure of the
-//!   network's output there violates the property as a whole (for a
-//!   robustness property without a label, the enclosure at the centre also
-//!   shows the recorded label is the centre's).
+//! * every FALSIFIED property is violated by the recorded input for the
+//!   model as stored: it is a value of the model's input type (float32
+//!   unless the ONNX input is `double`), it lies in the input set, and the
+//!   property is violated as a whole by the outward-rounded interval
+//!   enclosure of the real-arithmetic network's output, by the checker's
+//!   own fixed-order evaluation in the input type's precision and by its
+//!   own enclosure of every evaluation in that precision, in any summation
+//!   order (for a robustness property without a label, the enclosure at the
+//!   centre also shows the recorded label is the centre's).
 //!
-//! Radius searches and robust action selections are not certified.
+//! More than [`MAX_CELLS`] cells, or a coverage test that cannot decide
+//! within its work limit, is UNREADABLE (not checkable), as in the
+//! closed-loop checker. Radius searches and robust action selections are
+//! not certified.
 
 use nalgebra::DMatrix;
 use serde_json::Value;
 
 use super::bounds::{network_box, Bx, NetBounds};
-use super::cover::covers;
+use super::cover::{covers_within, MAX_WORK};
 use super::{decide, get, num, uint, vector, Answer, Report, R};
-use crate::nn::Network;
+use crate::limits::MAX_CELLS;
+use crate::nn::{Activation, InputType, Layer, Network};
 use crate::num::{dot_box_upper, sum_lower, sum_upper};
 
 /// The input set as recorded.
@@ -233,6 +241,170 @@ fn violates(p: &Prop, label: usize, y: &Bx) -> bool {
     }
 }
 
+/// The checker's own evaluation of the model as stored, in its input type's
+/// precision (its own code and its own order, not the analysis's): per
+/// affine output the bias first, then `w_j·h_j` in index order, every
+/// product and sum rounded to the type (weights and biases rounded to it),
+/// ReLU exact, `tanh` and the sigmoid computed in `f64` and rounded.
+fn stored_forward(net: &Network, x: &[f64]) -> Vec<f64> {
+    match net.input_type {
+        InputType::F32 => {
+            let mut h: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+            for layer in &net.layers {
+                h = match layer {
+                    Layer::Affine { w, b } => b
+                        .iter()
+                        .enumerate()
+                        .map(|(i, bi)| {
+                            let mut s = *bi as f32;
+                            for (j, hj) in h.iter().enumerate().take(w.ncols()) {
+                                s += w[(i, j)] as f32 * hj;
+                            }
+                            s
+                        })
+                        .collect(),
+                    Layer::Act(Activation::Relu) => h.iter().map(|v| v.max(0.0)).collect(),
+                    Layer::Act(a) => h.iter().map(|v| a.eval(f64::from(*v)) as f32).collect(),
+                };
+            }
+            h.into_iter().map(f64::from).collect()
+        }
+        InputType::F64 => {
+            let mut h = x.to_vec();
+            for layer in &net.layers {
+                h = match layer {
+                    Layer::Affine { w, b } => b
+                        .iter()
+                        .enumerate()
+                        .map(|(i, bi)| {
+                            let mut s = *bi;
+                            for (j, hj) in h.iter().enumerate().take(w.ncols()) {
+                                s += w[(i, j)] * hj;
+                            }
+                            s
+                        })
+                        .collect(),
+                    Layer::Act(a) => h.iter().map(|v| a.eval(*v)).collect(),
+                };
+            }
+            h
+        }
+    }
+}
+
+/// The checker's own enclosure of every evaluation of the model as stored
+/// at `x`, in its input type's precision and any summation order: an affine
+/// output of `n` inputs within `γ(n+1)·(Σ|w||h| + |b|) + n·η` of its exact
+/// value over the previous enclosure (`u` the type's unit roundoff, `η` its
+/// smallest subnormal; weights rounded to the type); ReLU exact; `tanh` and
+/// the sigmoid within the runtime's assumed error
+/// ([`InputType::activation_error`]) and libm's. `None` when a value may
+/// overflow the type or a bound is not finite.
+fn stored_enclosure(net: &Network, x: &[f64]) -> Option<Bx> {
+    let t = net.input_type;
+    let u = t.unit_roundoff();
+    let mut y = Bx::point(x);
+    for layer in &net.layers {
+        y = match layer {
+            Layer::Affine { w, b } => {
+                let n = w.ncols();
+                // γ(n+1), rounded up; k·u < 1/2 or nothing is claimed
+                let ku = (n + 1) as f64 * u;
+                if ku >= 0.5 {
+                    return None;
+                }
+                let g = (ku / (1.0 - ku).next_down()).next_up();
+                let size = y.abs_max();
+                let mut out = Bx {
+                    lo: Vec::with_capacity(w.nrows()),
+                    hi: Vec::with_capacity(w.nrows()),
+                };
+                for (i, bi) in b.iter().enumerate() {
+                    let row: Vec<f64> = (0..n).map(|j| t.round(w[(i, j)])).collect();
+                    let bias = t.round(*bi);
+                    let abs_sum = sum_upper(
+                        row.iter()
+                            .zip(&size)
+                            .map(|(a, m)| (a.abs() * m).next_up())
+                            .chain([bias.abs()]),
+                    );
+                    let err = sum_upper([
+                        (g * abs_sum).next_up(),
+                        (n as f64 * t.min_positive()).next_up(),
+                    ]);
+                    let hi = sum_upper([dot_box_upper(&row, &y.lo, &y.hi), bias, err]);
+                    let neg: Vec<f64> = row.iter().map(|v| -v).collect();
+                    let lo = sum_lower([-dot_box_upper(&neg, &y.lo, &y.hi), bias, -err]);
+                    if !(lo.is_finite() && hi.is_finite() && sum_upper([abs_sum, err]) <= t.max()) {
+                        return None;
+                    }
+                    out.lo.push(lo);
+                    out.hi.push(hi);
+                }
+                out
+            }
+            Layer::Act(Activation::Relu) => Bx {
+                lo: y.lo.iter().map(|v| v.max(0.0)).collect(),
+                hi: y.hi.iter().map(|v| v.max(0.0)).collect(),
+            },
+            Layer::Act(a) => {
+                let d = t.activation_error();
+                let end = |v: f64, up: bool| {
+                    let e = a.eval(v);
+                    if up {
+                        sum_upper([e, a.eval_error(e), d])
+                    } else {
+                        sum_lower([e, -a.eval_error(e), -d])
+                    }
+                };
+                Bx {
+                    lo: y.lo.iter().map(|v| end(*v, false)).collect(),
+                    hi: y.hi.iter().map(|v| end(*v, true)).collect(),
+                }
+            }
+        };
+        if !y.is_proper() {
+            return None;
+        }
+    }
+    Some(y)
+}
+
+/// Why a recorded counterexample input does not falsify the property for
+/// the model as stored (`None`: it does).
+fn replay_input(net: &Network, input: &Input, p: &Prop, label: usize, x: &[f64]) -> Option<String> {
+    let t = net.input_type;
+    if let Some((i, v)) = x.iter().enumerate().find(|(_, v)| !t.represents(**v)) {
+        return Some(format!(
+            "input {i} ({v}) is not a {} value (the model's input type; the nearest is {})",
+            t.name(),
+            t.round(*v)
+        ));
+    }
+    if !input.contains(x) {
+        return Some("the input is not in the input set".into());
+    }
+    let y = network_box(net, &Bx::point(x));
+    if !(y.is_proper() && violates(p, label, &y)) {
+        return Some(
+            "the real-arithmetic network's output there does not certainly violate the property"
+                .into(),
+        );
+    }
+    let fixed = stored_forward(net, x);
+    let any_order = stored_enclosure(net, x);
+    let stored = Bx::point(&fixed).is_proper()
+        && violates(p, label, &Bx::point(&fixed))
+        && any_order.is_some_and(|e| violates(p, label, &e));
+    if !stored {
+        return Some(format!(
+            "the model evaluated in {} does not certainly violate the property (in every summation order)",
+            t.name()
+        ));
+    }
+    None
+}
+
 /// Whether the checker's bounds over `cell` prove the property; `Err` with
 /// the first failing row otherwise.
 fn proves(
@@ -285,15 +457,21 @@ fn proves(
 
 /// Check a network certificate against the model `net`.
 pub fn check(cert: &Value, net: &Network) -> Report {
+    check_within(cert, net, MAX_WORK)
+}
+
+/// [`check`] with the coverage test's work limit `cover_work` (tests use a
+/// small one to reach it cheaply).
+fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
     let mut report = Report::empty();
-    match inner(cert, net, &mut report) {
+    match inner(cert, net, &mut report, cover_work) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
     report
 }
 
-fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
+fn inner(cert: &Value, net: &Network, report: &mut Report, cover_work: usize) -> R<Answer> {
     let problem = get(cert, "problem")?;
     let n = uint(get(problem, "inputs")?, "inputs")?;
     let m = uint(get(problem, "outputs")?, "outputs")?;
@@ -379,12 +557,10 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                 .push(format!("{shown}: UNSURE (no claim)")),
             Some("FALSIFIED") => {
                 let x = vector(get(v, "input")?, n, "counterexample input")?;
-                let inside = input.contains(&x);
-                let y = network_box(net, &Bx::point(&x));
-                let mut ok = inside && y.is_proper() && violates(p, label, &y);
-                if let (Prop::Robust(None), true) = (p, ok) {
+                let mut why = replay_input(net, &input, p, label, &x);
+                if let (Prop::Robust(None), None) = (p, &why) {
                     // the recorded label must be the centre's
-                    ok = input.centre().is_some_and(|c| {
+                    let centre = input.centre().is_some_and(|c| {
                         let yc = network_box(net, &Bx::point(&c));
                         yc.is_proper() && {
                             let r = robust_rows(label, m);
@@ -394,17 +570,17 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                             })
                         }
                     });
+                    if !centre {
+                        why = Some(format!("label {label} is not certainly the centre's"));
+                    }
                 }
+                let ok = why.is_none();
                 if ok {
                     report
                         .properties
                         .push(format!("{shown}: FALSIFIED (input replayed)"));
                 } else {
-                    let why = if inside {
-                        "its output does not certainly violate the property"
-                    } else {
-                        "the input is not in the input set"
-                    };
+                    let why = why.unwrap_or_default();
                     report
                         .properties
                         .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
@@ -424,19 +600,36 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             Some("checkable") => {
                 // `optimise_slopes`: the checker's own slope search
                 let slopes = super::slope_steps(ev)?;
-                let cells: Vec<Bx> = get(ev, "cells")?
+                let cells_json = get(ev, "cells")?
                     .as_array()
-                    .ok_or("`cells` must be an array")?
+                    .ok_or("`cells` must be an array")?;
+                // before any work per cell: the analysis's own limit
+                if cells_json.len() as u64 > MAX_CELLS {
+                    return Err(format!(
+                        "{} cells: more than the {MAX_CELLS} any analysis makes",
+                        cells_json.len()
+                    ));
+                }
+                let cells: Vec<Bx> = cells_json
                     .iter()
                     .map(|c| bx(c, n, "cell"))
                     .collect::<R<_>>()?;
                 report.cells = cells.len();
-                let failure = match covers(&cells, &input.bbox(), &|piece| input.misses(piece)) {
+                let failure = match covers_within(
+                    &cells,
+                    &input.bbox(),
+                    &|piece| input.misses(piece),
+                    cover_work,
+                ) {
                     Err(Some(x)) => {
                         Some(format!("the cells do not cover the input set (near {x:?})"))
                     }
+                    // undecided is not false: the certificate is not checkable
                     Err(None) => {
-                        Some("the cells' coverage could not be decided in the work limit".into())
+                        return Err(
+                            "the cells' coverage of the input set could not be decided within the work limit"
+                                .into(),
+                        )
                     }
                     Ok(()) => verified.iter().find_map(|&(i, label)| {
                         cells.iter().enumerate().find_map(|(c, cell)| {
@@ -477,4 +670,125 @@ fn inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
         }
     }
     Ok(decide(invalid, unsupported))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DVector;
+    use serde_json::json;
+
+    /// A VERIFIED `y ≤ 2` for `y = x` over `[0, 1]`, with two cells.
+    fn cert() -> (Value, Network) {
+        let net = Network::new(
+            1,
+            vec![Layer::Affine {
+                w: DMatrix::from_row_slice(1, 1, &[1.0]),
+                b: DVector::from_column_slice(&[0.0]),
+            }],
+        );
+        let cert = json!({
+            "problem": { "kind": "network", "inputs": 1, "outputs": 1,
+                "input": { "box": { "lo": [0.0], "hi": [1.0] } },
+                "properties": [{ "name": "p", "kind": "require", "rows": [{ "a": [1.0], "b": 2.0 }] }] },
+            "verdicts": [{ "property": "p", "kind": "require", "status": "VERIFIED", "label": null }],
+            "evidence": { "status": "checkable",
+                "cells": [{ "lo": [0.0], "hi": [0.5] }, { "lo": [0.5], "hi": [1.0] }] },
+        });
+        (cert, net)
+    }
+
+    #[test]
+    fn undecided_coverage_is_unreadable_not_invalid() {
+        let (cert, net) = cert();
+        assert_eq!(check(&cert, &net).answer, Answer::Valid);
+        match check_within(&cert, &net, 1).answer {
+            Answer::Unreadable(m) => assert!(m.contains("could not be decided"), "{m}"),
+            other => panic!("expected UNREADABLE, got {other:?}"),
+        }
+    }
+
+    /// The float32 evaluations of random networks in other orders (the
+    /// analysis's column order, the reverse order, one rounding of the
+    /// exact sum) lie in the checker's enclosure of every order.
+    #[test]
+    fn the_stored_enclosure_holds_every_summation_order() {
+        // the checker imports nothing of the analysis, not even its
+        // random numbers: a xorshift of its own
+        struct Xs(u64);
+        impl Xs {
+            fn unit(&mut self) -> f64 {
+                self.0 ^= self.0 << 13;
+                self.0 ^= self.0 >> 7;
+                self.0 ^= self.0 << 17;
+                (self.0 >> 11) as f64 / (1u64 << 53) as f64
+            }
+            fn normal(&mut self) -> f64 {
+                let (a, b) = (self.unit().max(1e-300), self.unit());
+                (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+            }
+            fn below(&mut self, k: usize) -> usize {
+                ((self.unit() * k as f64) as usize).min(k - 1)
+            }
+        }
+        let mut rng = Xs(0x9e37_79b9_7f4a_7c15);
+        for case in 0..300 {
+            let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
+            let widths = [3, 1 + rng.below(12), 1 + rng.below(12), 2];
+            let mut layers = Vec::new();
+            for (k, pair) in widths.windows(2).enumerate() {
+                let s = 10f64.powi(rng.below(7) as i32 - 3);
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(pair[1], pair[0], |_, _| s * rng.normal()),
+                    b: DVector::from_fn(pair[1], |_, _| s * rng.normal()),
+                });
+                if k + 2 < widths.len() {
+                    layers.push(Layer::Act(act));
+                }
+            }
+            let net = Network::new(3, layers);
+            let x: Vec<f64> = (0..3).map(|_| f64::from(rng.normal() as f32)).collect();
+            let e = stored_enclosure(&net, &x).expect("no overflow at these sizes");
+            // reverse order and one rounding per output, in float32
+            let mut rev: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+            let mut once: Vec<f32> = rev.clone();
+            for layer in &net.layers {
+                match layer {
+                    Layer::Affine { w, b } => {
+                        rev = (0..w.nrows())
+                            .map(|i| {
+                                let mut s = 0.0f32;
+                                for j in (0..w.ncols()).rev() {
+                                    s += w[(i, j)] as f32 * rev[j];
+                                }
+                                s + b[i] as f32
+                            })
+                            .collect();
+                        once = (0..w.nrows())
+                            .map(|i| {
+                                let exact: f64 = (0..w.ncols())
+                                    .map(|j| f64::from(w[(i, j)] as f32) * f64::from(once[j]))
+                                    .sum::<f64>()
+                                    + f64::from(b[i] as f32);
+                                exact as f32
+                            })
+                            .collect();
+                    }
+                    Layer::Act(a) => {
+                        for v in rev.iter_mut().chain(once.iter_mut()) {
+                            *v = a.eval(f64::from(*v)) as f32;
+                        }
+                    }
+                }
+            }
+            for y in [
+                net.forward_stored(&x),
+                stored_forward(&net, &x),
+                rev.iter().map(|v| f64::from(*v)).collect(),
+                once.iter().map(|v| f64::from(*v)).collect(),
+            ] {
+                assert!(e.contains(&y), "case {case}: {y:?} outside {e:?}");
+            }
+        }
+    }
 }

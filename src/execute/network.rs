@@ -11,10 +11,15 @@
 //! * A property is VERIFIED when those bounds prove it (`require`: every row
 //!   within its right-hand side; `avoid`: on every cell some row of every
 //!   member strictly separates it; `robust`: `y_K − y_j > 0` for every
-//!   `j ≠ K`), FALSIFIED when an input of the set provably violates it (an
-//!   outward-rounded interval enclosure of `f(x)` violates it as a whole),
-//!   and UNSURE otherwise. A bound that is not finite, or a solver issue on
-//!   the way, never proves anything.
+//!   `j ≠ K`), FALSIFIED when an input of the set provably violates it for
+//!   the network as stored (`confirm`: the input is a value of the model's
+//!   input type — float32 for a float32 model — inside the set, and the
+//!   outward-rounded interval enclosure of the real-arithmetic `f(x)`, the
+//!   fixed-order evaluation in the input type's precision and an enclosure
+//!   of its evaluation in any summation order all violate it as a whole),
+//!   and UNSURE otherwise (with, when the attack found one, an `f64` input
+//!   that violates only the real-arithmetic network). A bound that is not
+//!   finite, or a solver issue on the way, never proves anything.
 //! * A radius search scales the input set about its centre by `s`: bisection
 //!   on `s` with the plan's analysis gives the largest certified scale, and a
 //!   gradient-free attack (samples, then coordinate search) the smallest
@@ -32,8 +37,8 @@ use crate::execute::Status;
 use crate::ir::{Guide, NetPropagator, Partitioner};
 use crate::issue::Issue;
 use crate::lower::NetPlan;
-use crate::nn::Network;
-use crate::num::{dot_box_upper, gamma, sum_upper};
+use crate::nn::{Activation, InputType, Layer, Network};
+use crate::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper};
 use crate::rng::Rng;
 use crate::sets::{IBox, Norm, Region};
 
@@ -77,7 +82,8 @@ impl NetKind {
 /// An input that violates a property, with its output.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Witness {
-    /// The input (inside the input set).
+    /// The input: a value of the network's input type (float32 for a
+    /// float32 model), inside the input set.
     pub input: Vec<f64>,
     /// The network's output at it (f64 evaluation).
     pub output: Vec<f64>,
@@ -102,6 +108,11 @@ pub struct NetPropertyResult {
     pub label_margins: Vec<(usize, f64)>,
     /// FALSIFIED only: the violating input.
     pub counterexample: Option<Witness>,
+    /// UNSURE only: an input of the set (an `f64` point) at which the
+    /// real-arithmetic network provably violates the property, while no
+    /// value of the model's input type that the attack tried violates it as
+    /// stored: why the verdict is not FALSIFIED.
+    pub real_only: Option<Vec<f64>>,
 }
 
 /// The bracket found by a radius search.
@@ -677,24 +688,9 @@ fn violation(kind: &NetPropertyKind, label: Option<usize>, y: &[f64]) -> f64 {
     }
 }
 
-/// Whether the input `x` of `region` provably violates the property: `x`
-/// certainly lies in the region, and an outward-rounded enclosure of `f(x)`
-/// violates it as a whole.
-fn confirm(
-    net: &Network,
-    region: &Region,
-    kind: &NetPropertyKind,
-    label: Option<usize>,
-    x: &[f64],
-) -> bool {
-    if !region.contains_point(x) {
-        return false;
-    }
-    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
-    if !a.is_finite() {
-        return false;
-    }
-    let y = a.output_box(Mode::Ibp);
+/// Whether the output box `y` violates the property as a whole (a NaN
+/// bound violates nothing).
+fn box_violates(kind: &NetPropertyKind, label: Option<usize>, y: &IBox) -> bool {
     let lower = |a: &[f64]| -dot_box_upper(&a.iter().map(|v| -v).collect::<Vec<_>>(), &y.lo, &y.hi);
     match kind {
         NetPropertyKind::Require(p) => p.rows.iter().any(|(a, h)| lower(a) > *h),
@@ -713,6 +709,157 @@ fn confirm(
             })
         }
     }
+}
+
+/// Whether `x` certainly lies in `region` and the outward-rounded enclosure
+/// of the real-arithmetic network's `f(x)` violates the property as a whole.
+fn violates_real(
+    net: &Network,
+    region: &Region,
+    kind: &NetPropertyKind,
+    label: Option<usize>,
+    x: &[f64],
+) -> bool {
+    if !region.contains_point(x) {
+        return false;
+    }
+    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
+    a.is_finite() && box_violates(kind, label, &a.output_box(Mode::Ibp))
+}
+
+/// `γ(k) = k·u / (1 − k·u)` for the unit roundoff `u` (a power of two),
+/// rounded up; `None` when `k·u ≥ 1/2`.
+fn gamma_of(k: usize, u: f64) -> Option<f64> {
+    let ku = k as f64 * u;
+    (ku < 0.5).then(|| (ku / (1.0 - ku).next_down()).next_up())
+}
+
+/// An enclosure of every evaluation of the stored model at `x` (a value of
+/// its input type) in the precision of that type, whatever order a runtime
+/// sums in: each weight and bias rounded to the type; an affine output of
+/// `n` inputs is off its exact value (over the previous enclosure) by at
+/// most `γ(n+1)·(Σ|w||h| + |b|) + n·η` (products and sums rounded to
+/// nearest in any order, with or without fused multiply-add; `η` the
+/// smallest subnormal, for products that underflow); ReLU is exact; `tanh`
+/// and the sigmoid are within [`InputType::activation_error`] of the exact
+/// function. Every bound is rounded outward in `f64`. `None` when a value
+/// may overflow the type (some partial sum of some order could reach
+/// infinity) or a bound is not finite.
+fn stored_enclosure(net: &Network, x: &[f64]) -> Option<IBox> {
+    let t = net.input_type;
+    let (u, eta, top) = (t.unit_roundoff(), t.min_positive(), t.max());
+    let (mut lo, mut hi) = (x.to_vec(), x.to_vec());
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w, b } => {
+                let n = w.ncols();
+                let g = gamma_of(n + 1, u)?;
+                let mag: Vec<f64> = lo
+                    .iter()
+                    .zip(&hi)
+                    .map(|(l, h)| l.abs().max(h.abs()))
+                    .collect();
+                let (mut next_lo, mut next_hi) = (Vec::new(), Vec::new());
+                for i in 0..w.nrows() {
+                    let row: Vec<f64> = (0..n).map(|j| t.round(w[(i, j)])).collect();
+                    let bias = t.round(b[i]);
+                    let abs_row: Vec<f64> = row.iter().map(|v| v.abs()).collect();
+                    let abs_sum = sum_upper([dot_box_upper(&abs_row, &mag, &mag), bias.abs()]);
+                    let err = sum_upper([(g * abs_sum).next_up(), (n as f64 * eta).next_up()]);
+                    let up = sum_upper([dot_box_upper(&row, &lo, &hi), bias, err]);
+                    let down = sum_lower([dot_box_lower(&row, &lo, &hi), bias, -err]);
+                    // every product and partial sum of every order lies within
+                    // abs_sum + err of zero: within range, nothing overflows
+                    let reach = sum_upper([abs_sum, err]);
+                    if !(up.is_finite() && down.is_finite() && reach <= top) {
+                        return None;
+                    }
+                    next_lo.push(down);
+                    next_hi.push(up);
+                }
+                (lo, hi) = (next_lo, next_hi);
+            }
+            Layer::Act(Activation::Relu) => {
+                lo.iter_mut().for_each(|v| *v = v.max(0.0));
+                hi.iter_mut().for_each(|v| *v = v.max(0.0));
+            }
+            Layer::Act(a) => {
+                // monotone: the ends' values, widened by libm's error and the runtime's
+                let d = t.activation_error();
+                for v in lo.iter_mut() {
+                    let e = a.eval(*v);
+                    *v = sum_lower([e, -a.eval_error(e), -d]);
+                }
+                for v in hi.iter_mut() {
+                    let e = a.eval(*v);
+                    *v = sum_upper([e, a.eval_error(e), d]);
+                }
+                if lo.iter().chain(&hi).any(|v| !v.is_finite()) {
+                    return None;
+                }
+            }
+        }
+    }
+    Some(IBox::new(lo, hi))
+}
+
+/// Whether the input `x` of `region` provably violates the property for
+/// the network as stored: `x` is a value of the network's input type and
+/// certainly lies in the region; the outward-rounded enclosure of the
+/// real-arithmetic `f(x)` violates the property as a whole; and so do the
+/// fixed-order evaluation in the input type's precision
+/// ([`Network::forward_stored`]) and the enclosure of every evaluation in
+/// that precision, in any summation order ([`stored_enclosure`]).
+fn confirm(
+    net: &Network,
+    region: &Region,
+    kind: &NetPropertyKind,
+    label: Option<usize>,
+    x: &[f64],
+) -> bool {
+    let t = net.input_type;
+    if !x.iter().all(|v| t.represents(*v)) || !violates_real(net, region, kind, label, x) {
+        return false;
+    }
+    let y = net.forward_stored(x);
+    y.iter().all(|v| v.is_finite())
+        && box_violates(kind, label, &IBox::point(&y))
+        && stored_enclosure(net, x).is_some_and(|e| box_violates(kind, label, &e))
+}
+
+/// The candidate `x` as an input of the stored model: every coordinate
+/// rounded to the nearest value of the input type, and moved to the nearest
+/// such value inside the set's bounding box when rounding left it; a ball
+/// point still outside steps towards the (rounded) centre, one unit in the
+/// last place per coordinate at a time, at most 16 times. `None` when no
+/// such point lies in the set (membership tested rigorously, as every
+/// confirmed input's is).
+fn representable(region: &Region, t: InputType, x: &[f64]) -> Option<Vec<f64>> {
+    let b = region.bbox();
+    let mut r = Vec::with_capacity(x.len());
+    for (i, v) in x.iter().enumerate() {
+        let (lo, hi) = (t.ceil(b.lo[i]), t.floor(b.hi[i]));
+        // no value of the type in [lo, hi] (or a NaN): nothing to report
+        if !(lo <= hi && v.is_finite()) {
+            return None;
+        }
+        r.push(t.round(*v).clamp(lo, hi));
+    }
+    if region.contains_point(&r) {
+        return Some(r);
+    }
+    if let Region::Ball { center, .. } = region {
+        let c: Vec<f64> = center.iter().map(|v| t.round(*v)).collect();
+        for _ in 0..16 {
+            for (ri, ci) in r.iter_mut().zip(&c) {
+                *ri = t.step_towards(*ri, *ci);
+            }
+            if region.contains_point(&r) {
+                return Some(r);
+            }
+        }
+    }
+    None
 }
 
 /// The centre of a box or ball (`None` for a polytope).
@@ -811,8 +958,22 @@ fn project(region: &Region, x: Vec<f64>) -> Option<Vec<f64>> {
     region.contains_point(&x).then_some(x)
 }
 
+/// What an attack found.
+struct Attack {
+    /// A confirmed violation ([`confirm`]): an input of the stored model's
+    /// type, in the set, violating the property as stored and in real
+    /// arithmetic.
+    witness: Option<Witness>,
+    /// Without one: the first input tried (an `f64` point) that violates the
+    /// real-arithmetic network rigorously but had no value of the input
+    /// type near it that [`confirm`] accepts.
+    real_only: Option<Vec<f64>>,
+}
+
 /// Search `region` for a confirmed violation: the sampled inputs first (the
-/// worst ones start a coordinate search with halving steps). Deterministic.
+/// worst ones start a coordinate search with halving steps). Every
+/// candidate is first made a value of the network's input type inside the
+/// region ([`representable`]). Deterministic.
 fn attack(
     net: &Network,
     region: &Region,
@@ -820,17 +981,34 @@ fn attack(
     label: Option<usize>,
     starts: &[Vec<f64>],
     evaluations: usize,
-) -> Option<Witness> {
+) -> Attack {
     let score = |x: &[f64]| violation(kind, label, &net.forward(x));
     let mut ranked: Vec<(f64, &Vec<f64>)> = starts.iter().map(|x| (score(x), x)).collect();
     ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let found = |x: &[f64]| confirm(net, region, kind, label, x);
+    let real_only = std::cell::RefCell::new(None);
+    let found = |x: &[f64]| -> Option<Witness> {
+        let stored = representable(region, net.input_type, x)
+            .filter(|r| confirm(net, region, kind, label, r));
+        if stored.is_none()
+            && real_only.borrow().is_none()
+            && violates_real(net, region, kind, label, x)
+        {
+            *real_only.borrow_mut() = Some(x.to_vec());
+        }
+        stored.map(|input| Witness {
+            output: net.forward(&input),
+            input,
+        })
+    };
+    let done = |w: Witness| Attack {
+        witness: Some(w),
+        real_only: None,
+    };
     for (v, x) in ranked.iter().take(8) {
-        if *v >= 0.0 && found(x) {
-            return Some(Witness {
-                input: x.to_vec(),
-                output: net.forward(x),
-            });
+        if *v >= 0.0 {
+            if let Some(w) = found(x) {
+                return done(w);
+            }
         }
     }
     let b = region.bbox();
@@ -856,11 +1034,10 @@ fn attack(
                     }
                 }
             }
-            if v >= 0.0 && found(&x) {
-                return Some(Witness {
-                    output: net.forward(&x),
-                    input: x,
-                });
+            if v >= 0.0 {
+                if let Some(w) = found(&x) {
+                    return done(w);
+                }
             }
             if !improved {
                 for s in &mut step {
@@ -869,7 +1046,10 @@ fn attack(
             }
         }
     }
-    None
+    Attack {
+        witness: None,
+        real_only: real_only.into_inner(),
+    }
 }
 
 /// Sampled inputs of a region: its special points, then seeded random points.
@@ -1041,16 +1221,19 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             label,
             label_margins,
             counterexample: None,
+            real_only: None,
         };
         if proves(&p.kind, margin) && b.issues.is_empty() {
             result.status = Status::Verified;
-        } else if let Some(w) = may_falsify[k]
-            .then(|| attack(&plan.net, input, &p.kind, label, &inputs, 2000))
-            .flatten()
-        {
-            result.status = Status::Falsified;
-            result.margin = -violation(&p.kind, label, &w.output).max(0.0);
-            result.counterexample = Some(w);
+        } else if may_falsify[k] {
+            let found = attack(&plan.net, input, &p.kind, label, &inputs, 2000);
+            if let Some(w) = found.witness {
+                result.status = Status::Falsified;
+                result.margin = -violation(&p.kind, label, &w.output).max(0.0);
+                result.counterexample = Some(w);
+            } else {
+                result.real_only = found.real_only;
+            }
         }
         properties.push(result);
     }
@@ -1194,7 +1377,7 @@ fn radius_search(
     let attack_at = |s: f64, seed: u64| -> Option<Witness> {
         let region = scaled(input, s);
         let pts = sample_region(&region, plan.samples.clamp(64, 1000), seed);
-        attack(&plan.net, &region, &p.kind, label, &pts, 2000)
+        attack(&plan.net, &region, &p.kind, label, &pts, 2000).witness
     };
     let mut attacked: Option<(f64, Witness)> = None;
     if certified != Some(r.max) && may_falsify {
@@ -1232,5 +1415,88 @@ fn radius_search(
         tolerance: r.tolerance,
         unit: unit_radius(input),
         analyses,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DVector;
+
+    #[test]
+    fn candidates_become_float32_values_inside_the_set() {
+        let t = InputType::F32;
+        // the upper face 0.30000003 rounds to a float32 above it: moved down
+        let b = Region::Box(IBox::new(vec![0.1], vec![0.30000003]));
+        assert_eq!(
+            representable(&b, t, &[0.30000003]),
+            Some(vec![f64::from(0.3f32)])
+        );
+        // no float32 in [0.30000002, 0.30000004]: nothing
+        let none = Region::Box(IBox::new(vec![0.30000002], vec![0.30000004]));
+        assert_eq!(representable(&none, t, &[0.30000003]), None);
+        // float64: unchanged
+        assert_eq!(
+            representable(&b, InputType::F64, &[0.30000003]),
+            Some(vec![0.30000003])
+        );
+        // a ball point just inside in f64 whose rounding leaves the ball
+        // steps towards the centre
+        let ball = Region::Ball {
+            center: vec![0.0, 0.0],
+            radius: vec![0.1, 0.1],
+            norm: Norm::L2,
+        };
+        let edge = 0.1 / 2f64.sqrt() * (1.0 - 1e-15);
+        let r = representable(&ball, t, &[edge, edge]).expect("a float32 inside");
+        assert!(ball.contains_point(&r) && r.iter().all(|v| t.represents(*v)));
+    }
+
+    /// The fixed-order float32 evaluation lies in the enclosure of every
+    /// order, and so does the reverse order, on random networks.
+    #[test]
+    fn the_stored_enclosure_holds_every_summation_order() {
+        let mut rng = Rng::new(9);
+        for case in 0..300 {
+            let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][case % 3];
+            let widths = [2, 1 + rng.below(10), 1 + rng.below(10), 3];
+            let mut layers = Vec::new();
+            for (k, pair) in widths.windows(2).enumerate() {
+                let s = 10f64.powi(rng.below(7) as i32 - 3);
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(pair[1], pair[0], |_, _| s * rng.normal()),
+                    b: DVector::from_fn(pair[1], |_, _| s * rng.normal()),
+                });
+                if k + 2 < widths.len() {
+                    layers.push(Layer::Act(act));
+                }
+            }
+            let net = Network::new(2, layers);
+            let x: Vec<f64> = (0..2).map(|_| f64::from(rng.normal() as f32)).collect();
+            let e = stored_enclosure(&net, &x).expect("no overflow at these sizes");
+            let mut rev: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+            for layer in &net.layers {
+                match layer {
+                    Layer::Affine { w, b } => {
+                        rev = (0..w.nrows())
+                            .map(|i| {
+                                let mut s = b[i] as f32;
+                                for j in (0..w.ncols()).rev() {
+                                    s = (w[(i, j)] as f32).mul_add(rev[j], s);
+                                }
+                                s
+                            })
+                            .collect();
+                    }
+                    Layer::Act(a) => rev
+                        .iter_mut()
+                        .for_each(|v| *v = a.eval(f64::from(*v)) as f32),
+                }
+            }
+            let rev: Vec<f64> = rev.into_iter().map(f64::from).collect();
+            for y in [net.forward_stored(&x), rev] {
+                assert!(e.contains_point(&y), "case {case}: {y:?} outside {e:?}");
+            }
+        }
     }
 }

@@ -18,6 +18,10 @@
 //! `BatchNormalization` is the diagonal affine map whose coefficients
 //! `scale/√(var + ε)` and `B − mean·scale/√(var + ε)` are computed in f64
 //! (each within a few ulps of the exact value).
+//!
+//! The graph input's element type is recorded as the network's
+//! [`InputType`] (`double`: float64; anything else: float32): the type a
+//! counterexample's input must have.
 
 pub mod build;
 pub mod proto;
@@ -31,7 +35,7 @@ use crate::diag::sanitize;
 use crate::limits::{
     MAX_CONTROLLER_BYTES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS, MAX_TENSOR_ELEMENTS, MAX_WIDTH,
 };
-use crate::nn::{Activation, Layer, Network};
+use crate::nn::{Activation, InputType, Layer, Network};
 use proto::{dtype, AttributeProto, ModelProto, NodeProto, TensorProto};
 
 /// Contents of external-data files, by their normalised location (see
@@ -1160,7 +1164,19 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             }
         }
     }
-    let net = Network::new(inputs, low.layers);
+    // the input's element type is the stored model's precision: float64
+    // for `double`, float32 otherwise (the stricter rule: every float32 value
+    // is a float64 one, and float32's rounding errors bound float64's)
+    let input_type = match input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.elem_type)
+    {
+        Some(dtype::DOUBLE) => InputType::F64,
+        _ => InputType::F32,
+    };
+    let net = Network::new(inputs, low.layers).with_input_type(input_type);
     let outputs = net.outputs();
     Ok(Controller {
         net,

@@ -297,6 +297,15 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
                     .collect();
                 s += &format!("  {:width$}             {}\n", "", list.join(", "));
             }
+            if let Some(x) = &p.real_only {
+                s += &format!(
+                    "  {:width$}             not falsified: {} = {} violates it in real arithmetic, but no {} input tried violates it as stored\n",
+                    "",
+                    plan.input_name,
+                    vector(x),
+                    plan.net.input_type.name()
+                );
+            }
         }
     }
     if !out.radii.is_empty() {

@@ -5,8 +5,16 @@
 //! the certificate as witnesses) — certify VALID, and their witnesses
 //! cannot prove a false claim.
 
+use ravel::analysis::shape::Shape;
 use ravel::certify::Answer;
+use ravel::check::{NetProperty, NetPropertyKind};
+use ravel::execute::network::{execute_network, NetControl, NetOutcome};
 use ravel::execute::Status;
+use ravel::ir::{NetPropagator, Partitioner};
+use ravel::lower::NetPlan;
+use ravel::nn::{Layer, Network};
+use ravel::sets::{IBox, Norm, Polytope, Region};
+use serde_json::{json, Value};
 
 /// The double integrator's goal narrowed to `x[1] ≤ 0.2` at step 5:
 /// Reach-SDP proves it on one cell (its box reaches 0.158), Reach-LP does
@@ -79,4 +87,152 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
         ravel::certify::check(&cert, &plan.closed_loop.net).answer,
         Answer::Unsupported(_)
     ));
+}
+
+/// `y = x₀ + x₁` through a ReLU layer that is active on the whole input
+/// set (so the network is exactly linear there).
+fn sum_network() -> Network {
+    Network::new(
+        2,
+        vec![
+            Layer::Affine {
+                w: nalgebra::DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1.0]),
+                b: nalgebra::DVector::from_vec(vec![10.0, 10.0]),
+            },
+            Layer::Act(ravel::nn::Activation::Relu),
+            Layer::Affine {
+                w: nalgebra::DMatrix::from_row_slice(1, 2, &[1.0, 1.0]),
+                b: nalgebra::DVector::from_vec(vec![-20.0]),
+            },
+        ],
+    )
+}
+
+fn plan(input: Region, bound: f64) -> NetPlan {
+    NetPlan {
+        name: "sum".into(),
+        input_name: "x".into(),
+        output_name: "y".into(),
+        model_path: String::new(),
+        model_sha256: String::new(),
+        model_resolved: String::new(),
+        network_summary: String::new(),
+        net: sum_network(),
+        input: Some(input),
+        input_set_name: "X".into(),
+        selects: Vec::new(),
+        properties: vec![NetProperty {
+            name: "bounded".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(vec![1.0], bound)],
+            }),
+        }],
+        radii: Vec::new(),
+        propagator: NetPropagator::Crown,
+        partitioner: Partitioner::Uniform(vec![1, 1]),
+        shape: Shape::Box,
+        samples: 100,
+        seed: 5,
+        slope_steps: 0,
+    }
+}
+
+fn run(p: &NetPlan) -> NetOutcome {
+    execute_network(
+        p,
+        &NetControl {
+            elapsed: &|| 0.0,
+            time_limit: None,
+            threads: 1,
+        },
+    )
+}
+
+fn certificate(p: &NetPlan, out: &NetOutcome) -> Value {
+    let id = ravel::certificate::Identity {
+        spec_path: String::new(),
+        spec_sha256: String::new(),
+    };
+    ravel::certificate::build_network(p, out, &id)
+}
+
+fn answer(cert: &Value, p: &NetPlan) -> Answer {
+    ravel::certify::network::check(cert, &p.net).answer
+}
+
+/// `x₀ + x₁ ≤ 1.5` on the unit ℓ2 ball (its maximum is √2 ≈ 1.414; over
+/// the bounding box it is 2): the analysis proves it with the dual norm,
+/// and so does the checker. The same on the ℓ1 ball (maximum 1).
+#[test]
+fn ball_input_proofs_certify_valid() {
+    for (norm, bound, false_bound) in [(Norm::L2, 1.5, 1.4), (Norm::L1, 1.01, 0.99)] {
+        let ball = Region::Ball {
+            center: vec![0.0, 0.0],
+            radius: vec![1.0, 1.0],
+            norm,
+        };
+        let p = plan(ball.clone(), bound);
+        let out = run(&p);
+        assert_eq!(out.properties[0].status, Status::Verified, "{norm:?}");
+        let cert = certificate(&p, &out);
+        assert_eq!(cert["evidence"]["status"], "checkable", "{norm:?}: {cert}");
+        assert_eq!(answer(&cert, &p), Answer::Valid, "{norm:?}");
+        // a false claim with the same evidence: never VALID
+        let mut forged = cert.clone();
+        forged["problem"]["properties"][0]["rows"][0]["b"] = json!(false_bound);
+        let false_plan = plan(ball, false_bound);
+        assert!(
+            matches!(answer(&forged, &false_plan), Answer::Invalid(_)),
+            "{norm:?}: a false bound certified"
+        );
+    }
+}
+
+/// `x₀ + x₁ ≤ 1.01` on `{x ∈ [0, 1]² | x₀ + x₁ ≤ 1}`: the box alone gives 2,
+/// the polytope 1. The certificate carries one LP dual per row; the checker
+/// bounds the support with it. Duals of any size (negative, huge, wrong
+/// length) cannot prove a false bound.
+#[test]
+fn polytope_input_proofs_certify_valid_with_dual_witnesses() {
+    let poly = Region::Polytope {
+        bbox: IBox::new(vec![0.0, 0.0], vec![1.0, 1.0]),
+        rows: vec![(vec![1.0, 1.0], 1.0)],
+    };
+    let p = plan(poly.clone(), 1.01);
+    let out = run(&p);
+    assert_eq!(out.properties[0].status, Status::Verified);
+    let cert = certificate(&p, &out);
+    assert_eq!(cert["evidence"]["status"], "checkable", "{cert}");
+    assert_eq!(answer(&cert, &p), Answer::Valid);
+    // the claim made false (0.9 < 1): INVALID whatever the duals
+    let false_plan = plan(poly, 0.9);
+    assert_eq!(
+        cert["evidence"]["cells"][0]["duals"]
+            .as_array()
+            .map(Vec::len),
+        Some(1)
+    );
+    for duals in [
+        json!([[1.0]]),
+        json!([[3.5e307]]),
+        json!([[-1.0]]),
+        json!([[1e300, 1e300]]),
+        json!([[]]),
+        json!([]),
+    ] {
+        let mut forged = cert.clone();
+        forged["problem"]["properties"][0]["rows"][0]["b"] = json!(0.9);
+        forged["evidence"]["cells"][0]["duals"] = duals.clone();
+        assert!(
+            matches!(answer(&forged, &false_plan), Answer::Invalid(_)),
+            "duals {duals} proved a false bound"
+        );
+    }
+    // without its duals the true claim is not established (the box alone
+    // gives 2)
+    let mut bare = cert.clone();
+    if let Some(c) = bare["evidence"]["cells"][0].as_object_mut() {
+        c.remove("duals");
+    }
+    assert!(matches!(answer(&bare, &p), Answer::Invalid(_)));
 }

@@ -83,6 +83,10 @@ pub struct Report {
     /// (the certificate writer uses it to tell a checkable certificate from
     /// one the checker's bounds cannot establish).
     pub evidence_failure: Option<String>,
+    /// Network certificates with a polytope input set: per cell, the dual
+    /// vectors its supports used, in the order they were asked for (what
+    /// the writer records; see [`network::check_solving`]).
+    pub duals: Vec<Vec<Vec<f64>>>,
 }
 
 type R<T> = Result<T, String>;
@@ -96,6 +100,7 @@ impl Report {
             cells: 0,
             steps: 0,
             evidence_failure: None,
+            duals: Vec::new(),
         }
     }
 }

@@ -32,7 +32,7 @@
 use nalgebra::DMatrix;
 use serde_json::Value;
 
-use super::bounds::{network_box, Bx, NetBounds};
+use super::bounds::{network_box, Bx, Duals, NetBounds, Start};
 use super::cover::{covers_within, MAX_WORK};
 use super::{decide, get, num, uint, vector, Answer, Report, R};
 use crate::limits::MAX_CELLS;
@@ -52,6 +52,30 @@ enum Input {
         bbox: Bx,
         rows: Vec<(Vec<f64>, f64)>,
     },
+}
+
+impl Input {
+    /// What the checker's supports know of the input set beyond a cell's
+    /// box: the ball, or the polytope's rows with `duals` for their supports.
+    fn start<'a>(&'a self, duals: &'a Duals<'a>) -> Start<'a> {
+        match self {
+            Input::Box(_) => Start::Box,
+            Input::Ball {
+                center,
+                radius,
+                norm,
+            } => Start::Ball {
+                center,
+                radius,
+                norm: match norm {
+                    1 => "1",
+                    2 => "2",
+                    _ => "inf",
+                },
+            },
+            Input::Polytope { rows, .. } => Start::Polytope { rows, duals },
+        }
+    }
 }
 
 /// A property as recorded.
@@ -407,17 +431,27 @@ fn replay_input(net: &Network, input: &Input, p: &Prop, label: usize, x: &[f64])
 
 /// Whether the checker's bounds over `cell` prove the property; `Err` with
 /// the first failing row otherwise.
+///
+/// The back-substituted rows are concretised over the cell intersected with
+/// what `start` knows of the input set: an ℓp ball's dual norm, or a
+/// polytope's rows with dual vectors (one per row, in order).
 fn proves(
     net: &Network,
     cell: &Bx,
     p: &Prop,
     (label, m, slopes): (usize, usize, usize),
+    start: &Start,
 ) -> Result<(), String> {
     let nb = NetBounds::new(net, cell, None).map_err(|t| t.to_string())?;
     match p {
         Prop::Require(rows) => {
             let spec = DMatrix::from_fn(rows.len(), m, |r, c| rows[r].0[c]);
-            for (k, (u, (_, b))) in nb.rows_upper(&spec, slopes).iter().zip(rows).enumerate() {
+            for (k, (u, (_, b))) in nb
+                .rows_upper_in(&spec, slopes, start)
+                .iter()
+                .zip(rows)
+                .enumerate()
+            {
                 // a NaN bound proves nothing
                 let holds = u <= b;
                 if !holds {
@@ -429,7 +463,7 @@ fn proves(
             for (k, rows) in members.iter().enumerate() {
                 let spec = DMatrix::from_fn(rows.len(), m, |r, c| -rows[r].0[c]);
                 let sep = nb
-                    .rows_upper(&spec, slopes)
+                    .rows_upper_in(&spec, slopes, start)
                     .iter()
                     .zip(rows)
                     .map(|(u, (_, b))| -u - b)
@@ -442,7 +476,7 @@ fn proves(
         }
         Prop::Robust(_) => {
             let spec = robust_rows(label, m);
-            for (k, u) in nb.rows_upper(&spec, slopes).iter().enumerate() {
+            for (k, u) in nb.rows_upper_in(&spec, slopes, start).iter().enumerate() {
                 let below = *u < 0.0;
                 if !below {
                     return Err(format!(
@@ -462,16 +496,40 @@ pub fn check(cert: &Value, net: &Network) -> Report {
 
 /// [`check`] with the coverage test's work limit `cover_work` (tests use a
 /// small one to reach it cheaply).
-fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
+/// For the certificate writer: check `cert` as [`check`] does, but find the
+/// dual vectors of a polytope input set's supports with `solve` (the
+/// writer's LP: a direction and the cell's box to a dual vector) instead of
+/// reading them; the report's `duals` holds the ones used, per cell. The
+/// writer records them, and the checker then re-checks them as given.
+pub fn check_solving(cert: &Value, net: &Network, solve: CellSolver) -> Report {
     let mut report = Report::empty();
-    match inner(cert, net, &mut report, cover_work) {
+    match inner(cert, net, &mut report, MAX_WORK, Some(solve)) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
     report
 }
 
-fn inner(cert: &Value, net: &Network, report: &mut Report, cover_work: usize) -> R<Answer> {
+/// The writer's dual solver: `max gᵀx` over a cell's box and the input
+/// polytope's rows, to a dual vector of the rows (`None`: no certified one).
+pub type CellSolver<'a> = &'a dyn Fn(&[f64], &Bx) -> Option<Vec<f64>>;
+
+fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
+    let mut report = Report::empty();
+    match inner(cert, net, &mut report, cover_work, None) {
+        Ok(a) => report.answer = a,
+        Err(e) => report.answer = Answer::Unreadable(e),
+    }
+    report
+}
+
+fn inner(
+    cert: &Value,
+    net: &Network,
+    report: &mut Report,
+    cover_work: usize,
+    solve: Option<CellSolver>,
+) -> R<Answer> {
     let problem = get(cert, "problem")?;
     let n = uint(get(problem, "inputs")?, "inputs")?;
     let m = uint(get(problem, "outputs")?, "outputs")?;
@@ -614,6 +672,14 @@ fn inner(cert: &Value, net: &Network, report: &mut Report, cover_work: usize) ->
                     .iter()
                     .map(|c| bx(c, n, "cell"))
                     .collect::<R<_>>()?;
+                // a polytope input's dual witnesses, per cell (absent: none)
+                let given: Vec<Vec<Vec<f64>>> = match (&input, solve) {
+                    (Input::Polytope { .. }, None) => cells_json
+                        .iter()
+                        .map(|c| super::vectors(c.get("duals"), "cell duals"))
+                        .collect::<R<_>>()?,
+                    _ => vec![Vec::new(); cells.len()],
+                };
                 report.cells = cells.len();
                 let failure = match covers_within(
                     &cells,
@@ -631,9 +697,17 @@ fn inner(cert: &Value, net: &Network, report: &mut Report, cover_work: usize) ->
                                 .into(),
                         )
                     }
-                    Ok(()) => verified.iter().find_map(|&(i, label)| {
-                        cells.iter().enumerate().find_map(|(c, cell)| {
-                            proves(net, cell, &props[i].1, (label, m, slopes))
+                    // cell by cell, each cell's properties in order (the
+                    // order its dual vectors are used in)
+                    Ok(()) => cells.iter().enumerate().find_map(|(c, cell)| {
+                        let per_cell = |g: &[f64]| solve.and_then(|f| f(g, cell));
+                        let duals = match solve {
+                            Some(_) => Duals::solved(&per_cell),
+                            None => Duals::given(&given[c]),
+                        };
+                        let start = input.start(&duals);
+                        let failed = verified.iter().find_map(|&(i, label)| {
+                            proves(net, cell, &props[i].1, (label, m, slopes), &start)
                                 .err()
                                 .map(|e| {
                                     format!(
@@ -641,7 +715,9 @@ fn inner(cert: &Value, net: &Network, report: &mut Report, cover_work: usize) ->
                                         crate::diag::sanitize(&props[i].0)
                                     )
                                 })
-                        })
+                        });
+                        report.duals.push(duals.used());
+                        failed
                     }),
                 };
                 for &(i, _) in &verified {

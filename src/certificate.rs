@@ -555,9 +555,11 @@ pub fn network_problem_json(plan: &crate::lower::NetPlan) -> Value {
 
 /// The certificate of a network spec's result: the problem, the verdicts
 /// (a counterexample's input; robustness labels) and, when some property is
-/// VERIFIED, the final cells of the input set's partition as evidence —
-/// checked here by the checker itself, and marked unsupported when its own
-/// box bounds do not prove what the analysis proved.
+/// VERIFIED, the final cells of the input set's partition as evidence (with
+/// a polytope input's dual vectors) — checked here by the checker itself;
+/// where its bounds on a cell fall short, the cell is bisected until they
+/// prove the verdicts (as for closed loops), and the evidence is marked
+/// unsupported when that fails within the budget.
 pub fn build_network(
     plan: &crate::lower::NetPlan,
     outcome: &crate::execute::network::NetOutcome,
@@ -595,33 +597,96 @@ pub fn build_network(
     if !any_verified {
         return cert;
     }
-    cert["evidence"] = json!({
-        "status": "checkable",
-        "slope_steps": plan.slope_steps,
-        "cells": outcome.partition.iter().map(|c| json!({ "lo": c.lo, "hi": c.hi })).collect::<Vec<_>>(),
-    });
+    let header = json!({ "status": "checkable", "slope_steps": plan.slope_steps, "cells": [] });
     // a polytope input set: the supports' dual vectors, found by an LP
     // over each cell's box and recorded per cell as witnesses
-    if let Some(Region::Polytope { rows, .. }) = &plan.input {
-        let solve = |g: &[f64], cell: &Bx| lp::maximize_dual(g, rows, &cell.lo, &cell.hi);
-        let solved = certify::network::check_solving(&cert, &plan.net, &solve);
-        if let Some(cells) = cert["evidence"]["cells"].as_array_mut() {
-            for (cell, duals) in cells.iter_mut().zip(solved.duals) {
+    let rows = match &plan.input {
+        Some(Region::Polytope { rows, .. }) => Some(rows),
+        _ => None,
+    };
+    let lp_duals =
+        |g: &[f64], cell: &Bx| rows.and_then(|r| lp::maximize_dual(g, r, &cell.lo, &cell.hi));
+    let solve: Option<certify::network::CellSolver> = rows.map(|_| &lp_duals as _);
+    // cells with their duals, and whether they prove the verdicts
+    let prove = |cells: &[IBox], coverage: bool| -> (Vec<Value>, certify::Report) {
+        let mut candidate = cert.clone();
+        candidate["evidence"] = header.clone();
+        candidate["evidence"]["cells"] = cells
+            .iter()
+            .map(|c| json!({ "lo": c.lo, "hi": c.hi }))
+            .collect();
+        let report = certify::network::check_cells(&candidate, &plan.net, solve, coverage);
+        let mut out: Vec<Value> = candidate["evidence"]["cells"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
+        if rows.is_some() {
+            for (cell, duals) in out.iter_mut().zip(&report.duals) {
                 cell["duals"] = json!(duals);
             }
         }
+        (out, report)
+    };
+    let (mut cells, first) = prove(&outcome.partition, true);
+    let mut failure = first.evidence_failure;
+    if failure.is_some() {
+        // the refinement: every cell whose bounds fall short is bisected
+        // until they prove the verdicts (depth first, in order), within
+        // the budget; the finer partition is the witness
+        let whole = plan
+            .input
+            .as_ref()
+            .map_or_else(|| IBox::new(Vec::new(), Vec::new()), Region::bbox);
+        let cap = refinement_cap(outcome.partition.len());
+        let mut todo: Vec<IBox> = outcome.partition.iter().rev().cloned().collect();
+        let mut refined = Vec::new();
+        failure = None;
+        while let Some(cell) = todo.pop() {
+            let (one, report) = prove(std::slice::from_ref(&cell), false);
+            match report.evidence_failure {
+                None => {
+                    if let Answer::Unreadable(e) = report.answer {
+                        failure = Some(format!("internal: {e}"));
+                        break;
+                    }
+                    refined.extend(one);
+                }
+                Some(why) if refined.len() + todo.len() + 2 > cap => {
+                    failure = Some(format!(
+                        "{why}; not on up to {cap} cells bisected from the analysis's either"
+                    ));
+                    break;
+                }
+                Some(_) => {
+                    let (a, b) = bisect(&cell, &whole);
+                    todo.push(b);
+                    todo.push(a);
+                }
+            }
+        }
+        if failure.is_none() {
+            cells = refined;
+        }
     }
-    let report = certify::check(&cert, &plan.net);
-    if let Some(why) = report.evidence_failure {
+    cert["evidence"] = header;
+    cert["evidence"]["cells"] = json!(cells);
+    if failure.is_none() {
+        let report = certify::check(&cert, &plan.net);
+        failure = report.evidence_failure;
+        if let (None, Answer::Unreadable(e)) = (&failure, report.answer) {
+            cert["evidence"] =
+                json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+            return cert;
+        }
+    }
+    if let Some(why) = failure {
         cert["evidence"] = json!({
             "status": "unsupported",
             "reason": format!(
-                "the checker's own bounds do not prove the verdict ({why}): the analysis ({}) used bounds tighter than the checker re-derives (the SDP, optimised slopes measured otherwise), or its verdict is wrong",
+                "the checker's own bounds do not prove the verdict ({why}): the analysis ({}) used bounds tighter than the checker re-derives (the SDP), or its verdict is wrong",
                 plan.propagator.name()
             ),
         });
-    } else if let Answer::Unreadable(e) = report.answer {
-        cert["evidence"] = json!({ "status": "unsupported", "reason": format!("internal: {e}") });
     }
     cert
 }

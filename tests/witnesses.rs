@@ -5,6 +5,8 @@
 //! the certificate as witnesses) — certify VALID, and their witnesses
 //! cannot prove a false claim.
 
+mod common;
+
 use ravel::analysis::shape::Shape;
 use ravel::certify::Answer;
 use ravel::check::{NetProperty, NetPropertyKind};
@@ -235,4 +237,49 @@ fn polytope_input_proofs_certify_valid_with_dual_witnesses() {
         c.remove("duals");
     }
     assert!(matches!(answer(&bare, &p), Answer::Invalid(_)));
+}
+
+/// A random ReLU network on a box where the network SDP's bound of `y₀` is
+/// tighter than CROWN's: `require y₀ ≤ b` with `b` between the two is
+/// VERIFIED by the SDP only. The writer bisects the cell until the
+/// checker's CROWN-style bounds prove it: VALID, with more cells than the
+/// analysis used.
+#[test]
+fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
+    let mut rng = ravel::rng::Rng::new(11);
+    let input = Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]));
+    let mut found = false;
+    for _ in 0..20 {
+        let net = common::relu_network(&mut rng, &[2, 8, 8, 1], 1.5, 0.3);
+        let bound_with = |prop: NetPropagator| {
+            let mut p = plan(input.clone(), 1e9);
+            p.net = net.clone();
+            p.propagator = prop;
+            1e9 - run(&p).properties[0].margin
+        };
+        let (sdp, crown) = (
+            bound_with(NetPropagator::Sdp),
+            bound_with(NetPropagator::Crown),
+        );
+        if !(sdp.is_finite() && crown - sdp > 1e-3 * (1.0 + crown.abs())) {
+            continue;
+        }
+        let mut p = plan(input.clone(), (sdp + crown) / 2.0);
+        p.net = net.clone();
+        p.propagator = NetPropagator::Sdp;
+        let out = run(&p);
+        assert_eq!(out.properties[0].status, Status::Verified);
+        let cert = certificate(&p, &out);
+        assert_eq!(
+            cert["evidence"]["status"], "checkable",
+            "{}",
+            cert["evidence"]
+        );
+        let cells = cert["evidence"]["cells"].as_array().map_or(0, Vec::len);
+        assert!(cells > out.partition.len(), "{cells} cells");
+        assert_eq!(answer(&cert, &p), Answer::Valid);
+        found = true;
+        break;
+    }
+    assert!(found, "no network where the SDP is tighter than CROWN");
 }

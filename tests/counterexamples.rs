@@ -9,13 +9,15 @@
 //! numbers that were confirmed: printed as JSON and read back, they are the
 //! same bits and confirm again.
 
+mod common;
+
+use common::{net_certificate, run_net};
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::shape::Shape;
 use ravel::certify::{check, Answer};
 use ravel::check::{NetProperty, NetPropertyKind};
-use ravel::execute::network::{execute_network, NetControl, NetOutcome, Witness};
+use ravel::execute::network::Witness;
 use ravel::execute::Status;
-use ravel::ir::{NetPropagator, Partitioner};
+use ravel::ir::Partitioner;
 use ravel::lower::NetPlan;
 use ravel::nn::{Activation, InputType, Layer, Network};
 use ravel::sets::{IBox, Polytope, Region};
@@ -34,51 +36,18 @@ fn scale(w: f64) -> Network {
 
 /// `require y <= h` over `x ∈ [lo, hi]`.
 fn plan(net: Network, lo: f64, hi: f64, h: f64) -> NetPlan {
-    NetPlan {
-        name: "t".into(),
-        input_name: "x".into(),
-        output_name: "y".into(),
-        model_path: String::new(),
-        model_sha256: String::new(),
-        model_resolved: String::new(),
-        network_summary: String::new(),
+    let mut p = common::net_plan(
         net,
-        input: Some(Region::Box(IBox::new(vec![lo], vec![hi]))),
-        input_set_name: "X".into(),
-        selects: Vec::new(),
-        properties: vec![NetProperty {
+        Region::Box(IBox::new(vec![lo], vec![hi])),
+        vec![NetProperty {
             name: "bounded".into(),
             kind: NetPropertyKind::Require(Polytope {
                 rows: vec![(vec![1.0], h)],
             }),
         }],
-        radii: Vec::new(),
-        propagator: NetPropagator::Crown,
-        partitioner: Partitioner::Uniform(vec![1]),
-        shape: Shape::Box,
-        samples: 200,
-        seed: 3,
-        slope_steps: 0,
-    }
-}
-
-fn run(p: &NetPlan) -> NetOutcome {
-    execute_network(
-        p,
-        &NetControl {
-            elapsed: &|| 0.0,
-            time_limit: None,
-            threads: 1,
-        },
-    )
-}
-
-fn certificate(p: &NetPlan, out: &NetOutcome) -> Value {
-    let id = ravel::certificate::Identity {
-        spec_path: "t".into(),
-        spec_sha256: String::new(),
-    };
-    ravel::certificate::build_network(p, out, &id)
+    );
+    p.seed = 3;
+    p
 }
 
 fn invalid_because(answer: Answer, words: &str) {
@@ -101,7 +70,7 @@ fn a_counterexample_is_a_float32_input_inside_the_box() {
         "the upper bound rounds out of the box"
     );
     let p = plan(scale(1.0), 0.1, hi, 0.3);
-    let out = run(&p);
+    let out = run_net(&p);
     let r = &out.properties[0];
     assert_eq!(r.status, Status::Falsified);
     let x = r.counterexample.as_ref().expect("a counterexample").input[0];
@@ -114,7 +83,7 @@ fn a_counterexample_is_a_float32_input_inside_the_box() {
     let y = p.net.forward_stored(&[x]);
     assert!(y[0] > 0.3, "the float32 evaluation violates: {y:?}");
     // the checker replays it with its own float32 evaluation
-    let cert = certificate(&p, &out);
+    let cert = net_certificate(&p, &out);
     assert_eq!(check(&cert, &p.net).answer, Answer::Valid);
     // the face itself, in the box in f64 but not once cast to float32: INVALID
     let mut face = cert.clone();
@@ -135,7 +104,7 @@ fn a_counterexample_is_a_float32_input_inside_the_box() {
 #[test]
 fn violations_only_between_float32_values_are_unsure() {
     let p = plan(scale(1.0), 0.1, 0.30000002, 0.300000012);
-    let out = run(&p);
+    let out = run_net(&p);
     let r = &out.properties[0];
     assert_eq!(r.status, Status::Unsure);
     assert!(r.counterexample.is_none());
@@ -156,7 +125,7 @@ fn violations_only_between_float32_values_are_unsure() {
         0.30000002,
         0.300000012,
     );
-    assert_eq!(run(&p64).properties[0].status, Status::Falsified);
+    assert_eq!(run_net(&p64).properties[0].status, Status::Falsified);
 }
 
 /// `y = (1 + 2⁻³⁰)·x` over `[0.5, 1]`, `y ≤ 1`: the real network violates at
@@ -168,11 +137,11 @@ fn violations_only_between_float32_values_are_unsure() {
 fn the_model_in_its_own_precision_must_violate() {
     let w = 1.0 + 2f64.powi(-30);
     let p = plan(scale(w), 0.5, 1.0, 1.0);
-    let out = run(&p);
+    let out = run_net(&p);
     assert_eq!(out.properties[0].status, Status::Unsure);
     assert_eq!(out.properties[0].real_only.as_deref(), Some(&[1.0][..]));
     let p64 = plan(scale(w).with_input_type(InputType::F64), 0.5, 1.0, 1.0);
-    let out64 = run(&p64);
+    let out64 = run_net(&p64);
     assert_eq!(out64.properties[0].status, Status::Falsified);
     assert_eq!(
         out64.properties[0]
@@ -188,11 +157,11 @@ fn the_model_in_its_own_precision_must_violate() {
         input: vec![1.0],
         output: p.net.forward(&[1.0]),
     });
-    let cert = certificate(&p, &forged);
+    let cert = net_certificate(&p, &forged);
     invalid_because(check(&cert, &p.net).answer, "evaluated in float32");
     // the same verdict for the float64 model replays
     assert_eq!(
-        check(&certificate(&p64, &out64), &p64.net).answer,
+        check(&net_certificate(&p64, &out64), &p64.net).answer,
         Answer::Valid
     );
 }
@@ -220,10 +189,10 @@ fn a_violation_within_the_float32_error_is_not_confirmed() {
     let mut p = plan(net, 0.0, 0.0, 0.5);
     p.input = Some(Region::Box(IBox::new(vec![1.0; 3], vec![1.0; 3])));
     p.partitioner = Partitioner::Uniform(vec![1, 1, 1]);
-    assert_eq!(run(&p).properties[0].status, Status::Unsure);
+    assert_eq!(run_net(&p).properties[0].status, Status::Unsure);
     // stored as float64 the error bound is far below the violation
     p.net = p.net.clone().with_input_type(InputType::F64);
-    assert_eq!(run(&p).properties[0].status, Status::Falsified);
+    assert_eq!(run_net(&p).properties[0].status, Status::Falsified);
 }
 
 /// A certificate with one cell more than any analysis makes (100 000) is
@@ -231,9 +200,9 @@ fn a_violation_within_the_float32_error_is_not_confirmed() {
 #[test]
 fn network_certificates_have_the_documented_cell_limit() {
     let p = plan(scale(1.0), 0.0, 1.0, 2.0);
-    let out = run(&p);
+    let out = run_net(&p);
     assert_eq!(out.properties[0].status, Status::Verified);
-    let cert = certificate(&p, &out);
+    let cert = net_certificate(&p, &out);
     assert_eq!(check(&cert, &p.net).answer, Answer::Valid);
     let cell = serde_json::json!({ "lo": [0.0], "hi": [1.0] });
     let mut at_limit = cert.clone();
@@ -325,7 +294,7 @@ fn falsified_inputs_violate_in_float32_for_every_activation() {
             let mut p = plan(net.clone(), 0.0, 0.0, y0);
             p.input = Some(Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0])));
             p.partitioner = Partitioner::Uniform(vec![1, 1]);
-            let out = run(&p);
+            let out = run_net(&p);
             if let Some(w) = &out.properties[0].counterexample {
                 seen += 1;
                 assert!(w.input.iter().all(|v| InputType::F32.represents(*v)));
@@ -334,7 +303,10 @@ fn falsified_inputs_violate_in_float32_for_every_activation() {
                     y[0] > y0,
                     "{act:?} case {case}: float32 output {y:?} ≤ {y0}"
                 );
-                assert_eq!(check(&certificate(&p, &out), &net).answer, Answer::Valid);
+                assert_eq!(
+                    check(&net_certificate(&p, &out), &net).answer,
+                    Answer::Valid
+                );
             }
         }
     }

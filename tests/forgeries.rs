@@ -14,6 +14,7 @@
 
 use std::path::Path;
 
+mod common;
 #[allow(dead_code)] // each test crate uses some of it
 #[path = "common/exact.rs"]
 mod exact;
@@ -237,10 +238,8 @@ fn a_forged_counterexample_at_the_top_of_f64_is_replayed_not_trusted() {
 /// certificate may call it proven.
 #[test]
 fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
-    use ravel::analysis::shape::Shape;
     use ravel::check::{NetProperty, NetPropertyKind};
-    use ravel::execute::network::{execute_network, NetControl};
-    use ravel::ir::{NetPropagator, Partitioner};
+    use ravel::ir::NetPropagator;
     use ravel::nn::{Layer, Network};
     use ravel::sets::{IBox, Polytope, Region};
     let n = 5;
@@ -259,40 +258,20 @@ fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
     let (lo, hi) = (1.69e8, 1.70e8);
     let input = IBox::new(vec![-hi, -hi, lo, lo, lo], vec![-lo, -lo, hi, hi, hi]);
     for propagator in [NetPropagator::Crown, NetPropagator::Ibp] {
-        let plan = ravel::lower::NetPlan {
-            name: "deep".into(),
-            input_name: "x".into(),
-            output_name: "y".into(),
-            model_path: String::new(),
-            model_sha256: String::new(),
-            model_resolved: String::new(),
-            network_summary: String::new(),
-            net: net.clone(),
-            input: Some(Region::Box(input.clone())),
-            input_set_name: "X".into(),
-            selects: Vec::new(),
-            properties: vec![NetProperty {
+        let mut plan = common::net_plan(
+            net.clone(),
+            Region::Box(input.clone()),
+            vec![NetProperty {
                 name: "sum".into(),
                 kind: NetPropertyKind::Require(Polytope {
                     rows: vec![(vec![1.0; n], 0.0)],
                 }),
             }],
-            radii: Vec::new(),
-            propagator,
-            partitioner: Partitioner::Uniform(vec![1; n]),
-            shape: Shape::Box,
-            samples: 50,
-            seed: 3,
-            slope_steps: 0,
-        };
-        let mut out = execute_network(
-            &plan,
-            &NetControl {
-                elapsed: &|| 0.0,
-                time_limit: None,
-                threads: 1,
-            },
         );
+        plan.propagator = propagator;
+        plan.samples = 50;
+        plan.seed = 3;
+        let mut out = common::run_net(&plan);
         assert_ne!(
             out.properties[0].status,
             Status::Verified,

@@ -5,53 +5,18 @@
 
 mod common;
 
-use common::random_network;
+use common::{net_plan as plan, random_network, run_net as run};
 use nalgebra::{DMatrix, DVector};
 use ravel::analysis::partition::Budget;
 use ravel::analysis::shape::Shape;
 use ravel::check::{NetProperty, NetPropertyKind, RadiusSpec};
-use ravel::execute::network::{execute_network, NetControl, NetOutcome};
+use ravel::execute::network::{execute_network, NetControl};
 use ravel::execute::Status;
 use ravel::ir::{Guide, NetPropagator, Partitioner};
 use ravel::lower::NetPlan;
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
 use ravel::sets::{IBox, Norm, Polytope, Region};
-
-fn plan(net: Network, input: Region, props: Vec<NetProperty>) -> NetPlan {
-    NetPlan {
-        name: "test".into(),
-        input_name: "x".into(),
-        output_name: "y".into(),
-        model_path: String::new(),
-        model_sha256: String::new(),
-        model_resolved: String::new(),
-        network_summary: String::new(),
-        net,
-        input: Some(input),
-        input_set_name: "X".into(),
-        selects: Vec::new(),
-        properties: props,
-        radii: Vec::new(),
-        propagator: NetPropagator::Crown,
-        partitioner: Partitioner::Uniform(vec![1, 1]),
-        shape: Shape::Box,
-        samples: 200,
-        seed: 7,
-        slope_steps: 0,
-    }
-}
-
-fn run(p: &NetPlan) -> NetOutcome {
-    execute_network(
-        p,
-        &NetControl {
-            elapsed: &|| 0.0,
-            time_limit: None,
-            threads: 1,
-        },
-    )
-}
 
 /// Points of the region other than the executor's samples (another seed).
 fn probe(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {

@@ -7,12 +7,10 @@
 
 mod common;
 
-use ravel::analysis::shape::Shape;
 use ravel::certify::Answer;
 use ravel::check::{NetProperty, NetPropertyKind};
-use ravel::execute::network::{execute_network, NetControl, NetOutcome};
 use ravel::execute::Status;
-use ravel::ir::{NetPropagator, Partitioner};
+use ravel::ir::NetPropagator;
 use ravel::lower::NetPlan;
 use ravel::nn::{Layer, Network};
 use ravel::sets::{IBox, Norm, Polytope, Region};
@@ -111,51 +109,19 @@ fn sum_network() -> Network {
 }
 
 fn plan(input: Region, bound: f64) -> NetPlan {
-    NetPlan {
-        name: "sum".into(),
-        input_name: "x".into(),
-        output_name: "y".into(),
-        model_path: String::new(),
-        model_sha256: String::new(),
-        model_resolved: String::new(),
-        network_summary: String::new(),
-        net: sum_network(),
-        input: Some(input),
-        input_set_name: "X".into(),
-        selects: Vec::new(),
-        properties: vec![NetProperty {
+    let mut p = common::net_plan(
+        sum_network(),
+        input,
+        vec![NetProperty {
             name: "bounded".into(),
             kind: NetPropertyKind::Require(Polytope {
                 rows: vec![(vec![1.0], bound)],
             }),
         }],
-        radii: Vec::new(),
-        propagator: NetPropagator::Crown,
-        partitioner: Partitioner::Uniform(vec![1, 1]),
-        shape: Shape::Box,
-        samples: 100,
-        seed: 5,
-        slope_steps: 0,
-    }
-}
-
-fn run(p: &NetPlan) -> NetOutcome {
-    execute_network(
-        p,
-        &NetControl {
-            elapsed: &|| 0.0,
-            time_limit: None,
-            threads: 1,
-        },
-    )
-}
-
-fn certificate(p: &NetPlan, out: &NetOutcome) -> Value {
-    let id = ravel::certificate::Identity {
-        spec_path: String::new(),
-        spec_sha256: String::new(),
-    };
-    ravel::certificate::build_network(p, out, &id)
+    );
+    p.samples = 100;
+    p.seed = 5;
+    p
 }
 
 fn answer(cert: &Value, p: &NetPlan) -> Answer {
@@ -174,9 +140,9 @@ fn ball_input_proofs_certify_valid() {
             norm,
         };
         let p = plan(ball.clone(), bound);
-        let out = run(&p);
+        let out = common::run_net(&p);
         assert_eq!(out.properties[0].status, Status::Verified, "{norm:?}");
-        let cert = certificate(&p, &out);
+        let cert = common::net_certificate(&p, &out);
         assert_eq!(cert["evidence"]["status"], "checkable", "{norm:?}: {cert}");
         assert_eq!(answer(&cert, &p), Answer::Valid, "{norm:?}");
         // a false claim with the same evidence: never VALID
@@ -201,9 +167,9 @@ fn polytope_input_proofs_certify_valid_with_dual_witnesses() {
         rows: vec![(vec![1.0, 1.0], 1.0)],
     };
     let p = plan(poly.clone(), 1.01);
-    let out = run(&p);
+    let out = common::run_net(&p);
     assert_eq!(out.properties[0].status, Status::Verified);
-    let cert = certificate(&p, &out);
+    let cert = common::net_certificate(&p, &out);
     assert_eq!(cert["evidence"]["status"], "checkable", "{cert}");
     assert_eq!(answer(&cert, &p), Answer::Valid);
     // the claim made false (0.9 < 1): INVALID whatever the duals
@@ -255,7 +221,7 @@ fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
             let mut p = plan(input.clone(), 1e9);
             p.net = net.clone();
             p.propagator = prop;
-            1e9 - run(&p).properties[0].margin
+            1e9 - common::run_net(&p).properties[0].margin
         };
         let (sdp, crown) = (
             bound_with(NetPropagator::Sdp),
@@ -267,9 +233,9 @@ fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
         let mut p = plan(input.clone(), (sdp + crown) / 2.0);
         p.net = net.clone();
         p.propagator = NetPropagator::Sdp;
-        let out = run(&p);
+        let out = common::run_net(&p);
         assert_eq!(out.properties[0].status, Status::Verified);
-        let cert = certificate(&p, &out);
+        let cert = common::net_certificate(&p, &out);
         assert_eq!(
             cert["evidence"]["status"], "checkable",
             "{}",

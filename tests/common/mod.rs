@@ -2,8 +2,15 @@
 #![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
+use ravel::analysis::shape::Shape;
+use ravel::check::NetProperty;
+use ravel::execute::network::{execute_network, NetControl, NetOutcome};
+use ravel::ir::{NetPropagator, Partitioner};
+use ravel::lower::NetPlan;
 use ravel::nn::{Activation, Layer, Network};
 use ravel::rng::Rng;
+use ravel::sets::Region;
+use serde_json::Value;
 
 /// A ReLU network with the given widths (input first, output last),
 /// weights uniform in `±scale/√fan-in`, biases in `±bias`.
@@ -51,4 +58,52 @@ pub fn random_network(
         width = out;
     }
     Network::new(inputs, layers)
+}
+
+/// A network spec's plan without a spec: CROWN on one cell, box shape, 200
+/// samples, seed 7 (callers change what they test).
+pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> NetPlan {
+    let cells = vec![1; net.inputs];
+    NetPlan {
+        name: "test".into(),
+        input_name: "x".into(),
+        output_name: "y".into(),
+        model_path: String::new(),
+        model_sha256: String::new(),
+        model_resolved: String::new(),
+        network_summary: String::new(),
+        net,
+        input: Some(input),
+        input_set_name: "X".into(),
+        selects: Vec::new(),
+        properties,
+        radii: Vec::new(),
+        propagator: NetPropagator::Crown,
+        partitioner: Partitioner::Uniform(cells),
+        shape: Shape::Box,
+        samples: 200,
+        seed: 7,
+        slope_steps: 0,
+    }
+}
+
+/// Execute a network plan on one thread, without a time limit.
+pub fn run_net(p: &NetPlan) -> NetOutcome {
+    execute_network(
+        p,
+        &NetControl {
+            elapsed: &|| 0.0,
+            time_limit: None,
+            threads: 1,
+        },
+    )
+}
+
+/// The certificate of a network result, with an empty identity.
+pub fn net_certificate(p: &NetPlan, out: &NetOutcome) -> Value {
+    let id = ravel::certificate::Identity {
+        spec_path: "t".into(),
+        spec_sha256: String::new(),
+    };
+    ravel::certificate::build_network(p, out, &id)
 }

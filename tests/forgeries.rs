@@ -494,3 +494,99 @@ analysis {{
     // the test reaches verdicts, not only UNSURE
     assert!(verified > 10, "{verified}");
 }
+
+/// A coefficient product that underflows loses up to η/2 (η = 4.9e-324),
+/// and the loss is multiplied by the values it applies to. A forged row
+/// `α·x₀ ≤ b` at the last step, with `α·1e-15` rounding from 1.49η to η and
+/// `x₀` up to 9e14, passed the checker as true, and a goal dual of `1/α`
+/// then certified the false goal `x₀ ≤ 7e14` (found by review).
+#[test]
+fn an_underflowing_coefficient_times_a_large_state_proves_nothing() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let spec = |goal: &str| {
+        format!(
+            r#"
+system under {{
+    state   x[2]
+    control u[1]
+    A = [[0, 1e-15], [0, 1e15]]
+    B = [[0], [0]]
+    C = [[0, 0], [0, 0]]
+    u in box([-1, 1])
+}}
+controller "models/double_integrator.onnx"
+initial X0 = box(x[0] in [0, 0], x[1] in [1e14, 9e14])
+goal G = {{ {goal} }}
+horizon 2
+analysis {{
+    propagator reach_lp
+    samples 100
+}}
+"#
+        )
+    };
+    let (plan_true, out_true) = analyse(&spec("x[0] <= 1e15"), dir);
+    let honest = certificate(&plan_true, &out_true);
+    assert_eq!(answer(&honest, &plan_true), Answer::Valid);
+    let (plan, out) = analyse(&spec("x[0] <= 7e14"), dir);
+    assert_ne!(out.properties[0].status, Status::Verified);
+    let mut forged = certificate(&plan, &out);
+    forged["evidence"] = honest["evidence"].clone();
+    set_status(&mut forged, "G", "VERIFIED");
+    // α·1e-15 is 1.49η exactly enough, and rounds to η
+    let alpha = 7.361578123034574e-309;
+    assert_eq!(alpha * 1e-15, f64::from_bits(1));
+    let cell = &mut forged["evidence"]["cells"][0];
+    cell["steps"][1]["rows"] = json!([{ "a": [alpha, 0.0], "b": 4.4466e-294 }]);
+    cell["goal_duals"] = json!([[1.0 / alpha]]);
+    let a = answer(&forged, &plan);
+    assert!(!matches!(a, Answer::Valid), "a false goal certified: {a:?}");
+}
+
+/// The same loss in a network certificate: `require 2η·y ≤ 5e-294` with
+/// `y = 0.7·relu(1e15·x)` on `x ∈ [1e14, 9e14]` (its true maximum is
+/// 6.2e-294), forced to VERIFIED, is not VALID.
+#[test]
+fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
+    use ravel::check::{NetProperty, NetPropertyKind};
+    use ravel::nn::{Activation, Layer, Network};
+    use ravel::sets::{IBox, Polytope, Region};
+    let net = Network::new(
+        1,
+        vec![
+            Layer::Affine {
+                w: nalgebra::DMatrix::from_element(1, 1, 1e15),
+                b: nalgebra::DVector::zeros(1),
+            },
+            Layer::Act(Activation::Relu),
+            Layer::Affine {
+                w: nalgebra::DMatrix::from_element(1, 1, 0.7),
+                b: nalgebra::DVector::zeros(1),
+            },
+        ],
+    );
+    let eta = f64::from_bits(1);
+    let input = IBox::new(vec![1e14], vec![9e14]);
+    let plan = common::net_plan(
+        net.clone(),
+        Region::Box(input.clone()),
+        vec![NetProperty {
+            name: "r".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(vec![2.0 * eta], 5e-294)],
+            }),
+        }],
+    );
+    let mut out = common::run_net(&plan);
+    assert_ne!(out.properties[0].status, Status::Verified);
+    out.properties[0].status = Status::Verified;
+    out.properties[0].counterexample = None;
+    let mut cert = common::net_certificate(&plan, &out);
+    cert["evidence"] =
+        json!({ "status": "checkable", "cells": [{ "lo": input.lo, "hi": input.hi }] });
+    let a = ravel::certify::network::check(&cert, &net).answer;
+    assert!(
+        !matches!(a, Answer::Valid),
+        "a false requirement certified: {a:?}"
+    );
+}

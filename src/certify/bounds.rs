@@ -141,9 +141,12 @@ fn abs_times(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
 /// The error bound of a rounded row–matrix product `c·M` (`k` terms per
 /// entry) applied to `|z| ≤ zmax`: `γ(k+1)·|c|·(|M|·zmax)`, with `mz = |M|·zmax`
 /// precomputed; the factor 1.0625 covers the rounding of the bound itself.
-fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], k: usize) -> f64 {
+fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], zmax: &[f64], k: usize) -> f64 {
     let s = sum_upper(c.zip(mz).map(|(c, m)| mul0(c.abs(), *m)));
-    (gamma(k + 1) * s * 1.0625 + TINY).next_up()
+    // every coefficient of `c·M` may also be off by up to k·η/2 ≤ TINY
+    // (products that underflow), times |zᵢ| ≤ zmaxᵢ
+    let under = sum_upper(zmax.iter().map(|z| TINY * z));
+    sum_upper([(gamma(k + 1) * s * 1.0625 + TINY).next_up(), under])
 }
 
 /// `A·B` with plain loops in a fixed order (each entry summed over `k`
@@ -194,7 +197,7 @@ impl Linear {
         let off = (0..self.coef.nrows())
             .map(|r| {
                 let row = self.coef.row(r);
-                let err = product_error(row.iter().copied(), &wz, w.nrows());
+                let err = product_error(row.iter().copied(), &wz, zmax, w.nrows());
                 let consts = row.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
                 sum_upper(consts.chain([self.off[r], err]))
             })
@@ -226,6 +229,7 @@ impl Linear {
                 let v = cj * a;
                 coef[(r, j)] = v;
                 err += v.abs() * zmax[j];
+                terms.push(TINY * zmax[j]);
                 terms.push(mul0(cj, b));
             }
             terms.push((2.0 * U * err * 1.0625 + TINY).next_up());
@@ -1113,8 +1117,8 @@ impl Loop<'_> {
                 let common = sum_upper([
                     sum_upper(f.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
                     dot_box_upper(&f, &self.w.lo, &self.w.hi),
-                    product_error(f.iter().copied(), &ax, n),
-                    product_error(f.iter().copied(), &bu, n),
+                    product_error(f.iter().copied(), &ax, &xmax, n),
+                    product_error(f.iter().copied(), &bu, &umax, n),
                     abs_dot(&f, &delta),
                 ]);
                 let separate = sum_upper([
@@ -1205,9 +1209,9 @@ impl Loop<'_> {
                     sum_upper(l.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
                     dot_box_upper(&l, &self.w.lo, &self.w.hi),
                     dot_box_upper(&g, &self.v.lo, &self.v.hi),
-                    product_error(l.iter().copied(), &ax, n),
-                    product_error(l.iter().copied(), &bu, n),
-                    product_error(g.iter().copied(), &cx, g.len()),
+                    product_error(l.iter().copied(), &ax, &xmax, n),
+                    product_error(l.iter().copied(), &bu, &umax, n),
+                    product_error(g.iter().copied(), &cx, &xmax, g.len()),
                     sum_err,
                     abs_dot(&l, &delta),
                 ])
@@ -1366,7 +1370,7 @@ impl<'a> Chain<'a> {
                     sum_upper([
                         back.off[r],
                         dot_box_upper(&g, &lp.v.lo, &lp.v.hi),
-                        product_error(g.iter().copied(), &cx, g.len()),
+                        product_error(g.iter().copied(), &cx, &xmax, g.len()),
                     ])
                 })
                 .collect();

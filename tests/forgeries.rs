@@ -590,3 +590,68 @@ fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
         "a false requirement certified: {a:?}"
     );
 }
+
+/// The analysis side of the same loss: `y = 0.7·relu(1e15·relu(1e15 −
+/// 1e15·|x|))` peaks at 7e29 at `x = 0`; `require 2η·y ≤ b` with `b` just
+/// below `2η·7e29` is false only for |x| < 3e-14, where no sample lands.
+/// CROWN's back-substitution rounded `2η·0.7` down to η and proved it
+/// (found by review); every slope setting must now leave it unproven.
+#[test]
+fn an_underflowing_coefficient_times_a_huge_hidden_value_is_no_proof() {
+    use ravel::check::{NetProperty, NetPropertyKind};
+    use ravel::nn::{Activation, InputType, Layer, Network};
+    use ravel::sets::{IBox, Polytope, Region};
+    let m = |r: usize, c: usize, v: &[f64]| nalgebra::DMatrix::from_row_slice(r, c, v);
+    let relu = || Layer::Act(Activation::Relu);
+    let net = Network::new(
+        1,
+        vec![
+            Layer::Affine {
+                w: m(2, 1, &[1.0, -1.0]),
+                b: nalgebra::DVector::zeros(2),
+            },
+            relu(),
+            Layer::Affine {
+                w: m(1, 2, &[-1e15, -1e15]),
+                b: nalgebra::DVector::from_element(1, 1e15),
+            },
+            relu(),
+            Layer::Affine {
+                w: m(1, 1, &[1e15]),
+                b: nalgebra::DVector::zeros(1),
+            },
+            relu(),
+            Layer::Affine {
+                w: m(1, 1, &[0.7]),
+                b: nalgebra::DVector::zeros(1),
+            },
+        ],
+    )
+    .with_input_type(InputType::F64);
+    let eta = f64::from_bits(1);
+    let b = 2.0 * eta * 0.7e30 * (1.0 - 1e-12);
+    for steps in [0, 3, 20] {
+        let mut plan = common::net_plan(
+            net.clone(),
+            Region::Box(IBox::new(vec![-1.0], vec![1.0])),
+            vec![NetProperty {
+                name: "r".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![2.0 * eta], b)],
+                }),
+            }],
+        );
+        plan.samples = 1000;
+        plan.seed = 3;
+        plan.slope_steps = steps;
+        let out = common::run_net(&plan);
+        assert_ne!(
+            out.properties[0].status,
+            Status::Verified,
+            "{steps} slope steps: a false requirement verified"
+        );
+        let cert = common::net_certificate(&plan, &out);
+        let a = ravel::certify::network::check(&cert, &net).answer;
+        assert!(!matches!(a, Answer::Valid) || out.properties[0].status != Status::Verified);
+    }
+}

@@ -24,7 +24,7 @@ pub use super::dense::Rows;
 use super::relax::{image, relax, Relax};
 use crate::issue::Issue;
 use crate::nn::{Activation, Layer, Network};
-use crate::num::{gamma, mul0, slack, term_lower, term_upper, Acc, U};
+use crate::num::{self, gamma, mul0, slack, term_lower, term_upper, Acc, TINY, U};
 use crate::sets::{IBox, Region};
 
 /// Rows of linear upper bounds: `sᵣ ≤ coefᵣ · z + offsetᵣ` for every feasible `z`.
@@ -311,6 +311,24 @@ fn relaxation_in_place(coef: &mut Rows, offset: &mut [Acc], rel: &[Relax], abs_i
         }
         acc.add(slack(2.0 * U, row, abs_in));
     }
+}
+
+/// The underflow of one layer's coefficient products in back-substitution,
+/// applied to the values of `b`: a product that underflows is off by up
+/// to η/2 (η the smallest subnormal) however small the coefficients are,
+/// so the relative error terms (`slack`) miss it; with at most 2⁵² products
+/// per coefficient it is at most `TINY·Σ_j max|b_j|` over the coefficients
+/// (rounded up; `+∞` if the sum overflows). Negligible unless values near
+/// 10³⁰ meet coefficients near the subnormal range, where it is what keeps
+/// a bound sound (found by review: a `require 2η·y ≤ b` on a network whose
+/// hidden values reach 10³⁰ was VERIFIED while false).
+fn underflow_allowance(b: &IBox) -> f64 {
+    let s: f64 =
+        b.lo.iter()
+            .zip(&b.hi)
+            .map(|(l, h)| l.abs().max(h.abs()))
+            .sum();
+    num::sat_upper((TINY * s * 1.0625).next_up())
 }
 
 /// Whether a ReLU whose input is at most `hi` is proved inactive (its
@@ -994,7 +1012,8 @@ impl<'a> Analysis<'a> {
             offset: pm_offset,
         };
         let picks: Vec<Option<(usize, f64)>> = single.iter().map(|s| s.flatten()).collect();
-        let mut out = self.scaled(vec![Acc::ZERO; spec.nrows()], &pm, &picks);
+        let all_layers = self.allowance_before(self.net.layers.len());
+        let mut out = self.scaled(vec![Acc::ZERO; spec.nrows()], &pm, &picks, all_layers);
         for (k, &r) in own.iter().enumerate() {
             out.coef.row_mut(r).copy_from_slice(own_coef.row(k));
             out.offset[r] = own_offset[k];
@@ -1052,11 +1071,23 @@ impl<'a> Analysis<'a> {
     /// (scaling by `|c|` keeps every coefficient's sign, hence every
     /// relaxation it selects), and one neuron's row is the row its bound
     /// was back-substituted from.
+    /// The underflow allowance of rows scaled from stored bounds of the
+    /// value at position `end`: every layer before it, unscaled (a stored
+    /// bound's own allowance is scaled with it), and the scaling's own
+    /// products over the input.
+    fn allowance_before(&self, end: usize) -> f64 {
+        let layers: f64 = (0..end.min(self.boxes.len()))
+            .map(|l| underflow_allowance(&self.boxes[l]))
+            .sum();
+        num::sat_upper((layers + underflow_allowance(&self.boxes[0])) * (1.0 + 4.0 * U))
+    }
+
     fn scaled(
         &self,
         offset: Vec<Acc>,
         pm: &LinearUpper,
         picks: &[Option<(usize, f64)>],
+        allow: f64,
     ) -> LinearUpper {
         let abs_in = self.boxes[0].abs_max();
         let width = pm.coef.ncols();
@@ -1076,6 +1107,7 @@ impl<'a> Analysis<'a> {
                     }
                     acc.add(mul0(a, pm.offset[src]));
                     acc.add(slack(2.0 * U, row, &abs_in));
+                    acc.add(allow);
                 }
                 acc.upper()
             })
@@ -1130,16 +1162,26 @@ impl<'a> Analysis<'a> {
         // with CROWN's own relaxations, rows that have each reached one
         // neuron whose bounds are stored finish from them
         let own_relax = trace.is_none() && std::ptr::eq(relax, self.relax.as_slice());
+        // the underflow of the coefficient products of every layer passed
+        // (added to every row at the end; see `underflow_allowance`)
+        let mut allow = 0.0;
         for i in (0..end).rev() {
             match &self.net.layers[i] {
                 Layer::Affine { w, b } => {
                     if own_relax {
                         if let Some((rows, pm)) = &self.stored[i] {
                             if let Some(picks) = single_rows(&coef, cols, rows) {
-                                return self.scaled(offset, pm, &picks);
+                                // the stored bound scaled by |c| scales its
+                                // own allowance too: every earlier layer's
+                                // allowance is added again, unscaled
+                                let extra = num::sat_upper(
+                                    (allow + self.allowance_before(i + 1)) * (1.0 + 4.0 * U),
+                                );
+                                return self.scaled(offset, pm, &picks, extra);
                             }
                         }
                     }
+                    allow += underflow_allowance(&self.boxes[i]);
                     let ins = self.ins(i);
                     let built;
                     let packed = match &self.packed[i] {
@@ -1168,6 +1210,7 @@ impl<'a> Analysis<'a> {
                         }
                     }
                     relaxation_in_place(&mut coef, &mut offset, &relax[i], &self.abs[i]);
+                    allow += underflow_allowance(&self.boxes[i]);
                 }
             }
         }
@@ -1175,9 +1218,16 @@ impl<'a> Analysis<'a> {
             // a network that starts with a ReLU: back to every input
             coef = coef.columns_moved(cols, None, self.boxes[0].dim());
         }
+        let allow = num::sat_upper(allow * (1.0 + 4.0 * U));
         LinearUpper {
             coef,
-            offset: offset.into_iter().map(Acc::upper).collect(),
+            offset: offset
+                .into_iter()
+                .map(|mut acc| {
+                    acc.add(allow);
+                    acc.upper()
+                })
+                .collect(),
         }
     }
 

@@ -890,8 +890,9 @@ impl ClosedLoop {
         let mut control = over_y
             .through_affine(&self.obs_xv, &self.obs_zero, &xv_abs)
             .split_concretize(n, v);
+        let under = crate::analysis::crown::underflow_of(&u_abs);
         for (o, row) in control.offset.iter_mut().zip(mb_abs.iter_rows()) {
-            *o = sum_upper([*o, slack(k, row, &u_abs)]);
+            *o = sum_upper([*o, slack(k, row, &u_abs), under]);
         }
         let mut out = direct.add(&control, &abs_x);
         if let Some(delta) = self.model_delta(t, x, &u_abs) {

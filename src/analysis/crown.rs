@@ -59,7 +59,13 @@ impl LinearUpper {
         b: &DVector<f64>,
         abs_in: &[f64],
     ) -> LinearUpper {
-        self.through_affine_scaled(w, b, &weight_scale(w, abs_in))
+        let mut out = self.through_affine_scaled(w, b, &weight_scale(w, abs_in));
+        // the coefficient products' underflow (see `underflow_allowance`)
+        let allow = underflow_of(abs_in);
+        for o in &mut out.offset {
+            *o = num::sum_upper([*o, allow]);
+        }
+        out
     }
 
     /// [`LinearUpper::through_affine`] with `|W|·|z'|max` precomputed (see [`weight_scale`]).
@@ -328,6 +334,12 @@ fn underflow_allowance(b: &IBox) -> f64 {
             .zip(&b.hi)
             .map(|(l, h)| l.abs().max(h.abs()))
             .sum();
+    num::sat_upper((TINY * s * 1.0625).next_up())
+}
+
+/// [`underflow_allowance`] of values with magnitudes at most `m`.
+pub fn underflow_of(m: &[f64]) -> f64 {
+    let s: f64 = m.iter().map(|v| v.abs()).sum();
     num::sat_upper((TINY * s * 1.0625).next_up())
 }
 

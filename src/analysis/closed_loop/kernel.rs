@@ -48,7 +48,7 @@ use crate::analysis::crown::{
 };
 use crate::analysis::relax::{image, relax, Relax};
 use crate::nn::{Activation, Layer};
-use crate::num::{abs_max, gamma, mul0, slack, slack_of_sum, term_upper, Acc, U};
+use crate::num::{abs_max, gamma, mul0, slack, slack_of_sum, term_upper, Acc, TINY, U};
 use crate::sets::IBox;
 
 /// The widest layer the kernel takes (neurons). Row-by-row products win
@@ -571,6 +571,21 @@ fn facets_bound(
         cl.model_delta(t, x, &u.abs_max())
     };
     let (k_n, k_p) = (gamma(n + 2), gamma(p + 2));
+    // coefficient products that underflow are off by up to η/2 each,
+    // however small the coefficients: TINY times the magnitudes of every
+    // value a product stage reads (the controller's layers, twice for the
+    // affine and the relaxation stage; the plant's inputs), unscaled, for
+    // every facet (as the general path's `underflow_allowance`)
+    let allow = {
+        let mut s = 0.0;
+        for (l, h) in ws.lo.iter().zip(&ws.hi) {
+            s += 2.0 * abs_max(*l, *h);
+        }
+        for v in [&ws.abs_xv, &ws.abs_xw, &ws.abs_xuw, &u_abs] {
+            s += v.iter().sum::<f64>();
+        }
+        crate::num::sat_upper((TINY * s * 1.0625).next_up())
+    };
     let mut cur = std::mem::take(&mut ws.cur);
     let mut spare = std::mem::take(&mut ws.spare);
     let mut ub = Vec::with_capacity(facets.nrows());
@@ -622,6 +637,7 @@ fn facets_bound(
         let f = &ws.f;
         // Reach-LP: f (A x + c + w) + Λ (Cᵀ x + v) + β
         let mut acc = Acc::of(beta.upper());
+        acc.add(allow);
         // Λ·[Cᵀ I]: its error, then v's terms (Λ·I is Λ, exactly)
         acc.add(slack(k_p, &ws.lam, &ws.wz_obs));
         for (j, &l) in ws.lam.iter().enumerate() {
@@ -648,7 +664,7 @@ fn facets_bound(
         }
         if !alone {
             // CL-CROWN: f (A x + B u + c + w) over x, u and w
-            let mut acc = Acc::ZERO;
+            let mut acc = Acc::of(allow);
             acc.add_products(f, c_vec.as_slice());
             acc.add(slack(k_n, f, &ws.wz_xuw));
             for (j, &s) in ws.s.iter().enumerate() {

@@ -289,7 +289,8 @@ fn bisect(b: &IBox, whole: &IBox) -> (IBox, IBox) {
     let k = (0..b.dim())
         .max_by(|&i, &j| rel(i).total_cmp(&rel(j)))
         .unwrap_or(0);
-    let mid = b.lo[k] + (b.hi[k] - b.lo[k]) / 2.0;
+    // halves first: `hi − lo` may overflow where both ends are finite
+    let mid = b.lo[k] / 2.0 + b.hi[k] / 2.0;
     let (mut lo, mut hi) = (b.clone(), b.clone());
     lo.hi[k] = mid;
     hi.lo[k] = mid;

@@ -516,7 +516,7 @@ pub fn check_cells(
     coverage: bool,
 ) -> Report {
     let mut report = Report::empty();
-    let work = if coverage { MAX_WORK } else { 0 };
+    let work = coverage.then_some(MAX_WORK);
     match inner(cert, net, &mut report, work, solve) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
@@ -530,7 +530,7 @@ pub type CellSolver<'a> = &'a dyn Fn(&[f64], &Bx) -> Option<Vec<f64>>;
 
 fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
     let mut report = Report::empty();
-    match inner(cert, net, &mut report, cover_work, None) {
+    match inner(cert, net, &mut report, Some(cover_work), None) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
@@ -541,7 +541,7 @@ fn inner(
     cert: &Value,
     net: &Network,
     report: &mut Report,
-    cover_work: usize,
+    cover_work: Option<usize>,
     solve: Option<CellSolver>,
 ) -> R<Answer> {
     let problem = get(cert, "problem")?;
@@ -695,11 +695,11 @@ fn inner(
                     _ => vec![Vec::new(); cells.len()],
                 };
                 report.cells = cells.len();
-                // (a work limit of 0: the writer's per-cell check, which
-                // does not ask for coverage)
+                // (no work limit: the writer's per-cell check, which does
+                // not ask for coverage)
                 let covered = match cover_work {
-                    0 => Ok(()),
-                    work => {
+                    None => Ok(()),
+                    Some(work) => {
                         covers_within(&cells, &input.bbox(), &|piece| input.misses(piece), work)
                     }
                 };

@@ -249,3 +249,85 @@ fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
     }
     assert!(found, "no network where the SDP is tighter than CROWN");
 }
+
+/// Monte Carlo: the checker's rows concretised over a cell intersected with
+/// an ℓp ball (dual norm) or a polytope (any nonnegative duals, here random
+/// ones of every size) are never below `s·f(x)` at sampled points of the
+/// intersection, on random ReLU networks.
+#[test]
+fn checker_rows_over_balls_and_polytopes_contain_samples() {
+    use ravel::certify::bounds::{Bx, Duals, NetBounds, Start};
+    let mut rng = ravel::rng::Rng::new(26);
+    let mut checked = 0;
+    for case in 0..60 {
+        let net = common::relu_network(&mut rng, &[2, 6, 6, 2], 1.5, 0.3);
+        let center = [rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)];
+        let radius = [rng.uniform(0.05, 1.0), rng.uniform(0.05, 1.0)];
+        let cell = Bx {
+            lo: vec![center[0] - radius[0], center[1] - radius[1]],
+            hi: vec![center[0] + radius[0], center[1] + radius[1]],
+        };
+        let spec = nalgebra::DMatrix::from_fn(3, 2, |_, _| rng.normal());
+        let nb = NetBounds::new(&net, &cell, None).expect("finite");
+        // the sets and their membership tests
+        let norm = ["1", "2", "inf"][case % 3];
+        let rows: Vec<(Vec<f64>, f64)> = (0..2)
+            .map(|_| {
+                let a = vec![rng.normal(), rng.normal()];
+                let h = a[0] * center[0] + a[1] * center[1] + rng.uniform(0.0, 0.5);
+                (a, h)
+            })
+            .collect();
+        let duals: Vec<Vec<f64>> = (0..spec.nrows())
+            .map(|_| (0..2).map(|_| rng.uniform(0.0, 3.0).powi(3)).collect())
+            .collect();
+        let given = Duals::given(&duals);
+        let starts = [
+            Start::Ball {
+                center: &center,
+                radius: &radius,
+                norm,
+            },
+            Start::Polytope {
+                rows: &rows,
+                duals: &given,
+            },
+        ];
+        for (k, start) in starts.iter().enumerate() {
+            let bound = nb.rows_upper_in(&spec, 0, start);
+            for _ in 0..400 {
+                let x = [
+                    rng.uniform(cell.lo[0], cell.hi[0]),
+                    rng.uniform(cell.lo[1], cell.hi[1]),
+                ];
+                let inside = if k == 0 {
+                    let d = [
+                        (x[0] - center[0]) / radius[0],
+                        (x[1] - center[1]) / radius[1],
+                    ];
+                    match norm {
+                        "1" => d[0].abs() + d[1].abs() <= 1.0,
+                        "2" => d[0] * d[0] + d[1] * d[1] <= 1.0,
+                        _ => true,
+                    }
+                } else {
+                    rows.iter().all(|(a, h)| a[0] * x[0] + a[1] * x[1] <= *h)
+                };
+                if !inside {
+                    continue;
+                }
+                let y = net.forward(&x);
+                for r in 0..spec.nrows() {
+                    let v = spec[(r, 0)] * y[0] + spec[(r, 1)] * y[1];
+                    assert!(
+                        v <= bound[r] + 1e-9 * (1.0 + v.abs()),
+                        "case {case}, set {k}, row {r}: {v} above {}",
+                        bound[r]
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 20_000, "{checked}");
+}

@@ -2,7 +2,7 @@
 //! shipped spec whose certificate is checkable, the analysis time (`execute`
 //! as the CLI runs it, Monte Carlo included), the time to write the
 //! certificate, its size, and the time `certify` spends on it (JSON parsing
-//! and [`ravel::certify::check`]; the front end that both commands run is
+//! and [`ravel_certify::check`]; the front end that both commands run is
 //! left out). Each time is the median of repeated runs (at least three,
 //! until half a second has passed; a run over five seconds is not repeated).
 
@@ -52,7 +52,7 @@ fn main() {
         }
         let source = std::fs::read_to_string(&path).expect("spec");
         let dir = path.parent().unwrap_or(Path::new("."));
-        let Ok(checked) = ravel::front_end(&source, dir, &ravel::cli::read_request) else {
+        let Ok(checked) = ravel::front_end(&source, dir, &ravel_cli::read_request) else {
             continue;
         };
         let plan = ravel::lower::lower(&checked);
@@ -71,10 +71,10 @@ fn main() {
         let mut report = None;
         let check = median(|| {
             let cert: serde_json::Value = serde_json::from_str(&text).expect("json");
-            report = Some(ravel::certify::check(&cert, &plan.closed_loop.net));
+            report = Some(ravel_certify::check(&cert, &plan.closed_loop.net));
         });
         let report = report.expect("ran");
-        if report.answer != ravel::certify::Answer::Valid || report.cells == 0 {
+        if report.answer != ravel_certify::Answer::Valid || report.cells == 0 {
             continue;
         }
         println!(

@@ -26,9 +26,9 @@ mod common;
 use std::path::Path;
 use std::time::Instant;
 
-use ravel::analysis::closed_loop::{Boundary, Propagator};
 use ravel::execute::execute;
 use ravel::lower::{lower, Partitioner};
+use ravel_analysis::closed_loop::{Boundary, Propagator};
 
 /// One row of the table: a name, a propagator, a partitioner and the samples
 /// the method itself needs (0 unless simulation-guided).
@@ -123,7 +123,7 @@ fn main() {
         let mut checked = ravel::front_end(
             &source,
             path.parent().expect("dir"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
         )
         .expect("valid spec");
 

@@ -27,13 +27,13 @@ use std::process::Command;
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::closed_loop::{ClosedLoop, Plant, Propagator};
-use ravel::analysis::crown::{Analysis, Mode};
 use ravel::check::Checked;
 use ravel::execute::{execute_with, propagate_cell, Control};
 use ravel::lower::{lower, Partitioner, Plan};
-use ravel::rng::Rng;
-use ravel::sets::{IBox, Region};
+use ravel_analysis::closed_loop::{ClosedLoop, Plant, Propagator};
+use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::sets::{IBox, Region};
+use ravel_base::rng::Rng;
 
 /// The fastest of repeated runs of `f`, in seconds.
 fn time(mut f: impl FnMut()) -> f64 {
@@ -87,7 +87,7 @@ fn checked(spec: &str) -> Checked {
     ravel::front_end(
         &source,
         path.parent().expect("dir"),
-        &ravel::cli::read_request,
+        &ravel_cli::read_request,
     )
     .expect("valid spec")
 }
@@ -152,10 +152,10 @@ fn crown_madds(widths: &[usize], live: &[usize]) -> f64 {
 
 /// The neurons not proved inactive of each ReLU layer of an analysis
 /// (`live[0]`: the inputs, `live[hidden + 1]`: the outputs).
-fn live_widths(net: &ravel::nn::Network, a: &Analysis, widths: &[usize]) -> Vec<usize> {
+fn live_widths(net: &ravel_base::nn::Network, a: &Analysis, widths: &[usize]) -> Vec<usize> {
     let mut live = vec![widths[0]];
     for (i, layer) in net.layers.iter().enumerate() {
-        if matches!(layer, ravel::nn::Layer::Act(_)) {
+        if matches!(layer, ravel_base::nn::Layer::Act(_)) {
             live.push(a.boxes()[i].hi.iter().filter(|h| **h > 0.0).count());
         }
     }
@@ -354,7 +354,7 @@ fn sdp_step(w: usize) -> f64 {
         0,
         &x0,
         Propagator::ReachSdp,
-        &ravel::analysis::closed_loop::Boundary::Box,
+        &ravel_analysis::closed_loop::Boundary::Box,
     ));
     t.elapsed().as_secs_f64()
 }
@@ -461,7 +461,7 @@ fn batched_cells() {
         });
         let single = time(|| {
             for c in &cells[..16] {
-                std::hint::black_box(ravel::analysis::open_loop::cell_offsets(
+                std::hint::black_box(ravel_analysis::open_loop::cell_offsets(
                     &net,
                     c,
                     Mode::Crown,
@@ -470,7 +470,7 @@ fn batched_cells() {
             }
         }) * 16.0;
         let batched = time(|| {
-            std::hint::black_box(ravel::analysis::batch::crown_offsets(
+            std::hint::black_box(ravel_analysis::batch::crown_offsets(
                 &net,
                 &cells,
                 &dirs,

@@ -4,9 +4,9 @@
 #[path = "../benches/common/mod.rs"]
 mod common;
 
-use ravel::analysis::crown::{Analysis, Mode};
-use ravel::rng::Rng;
-use ravel::sets::IBox;
+use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::sets::IBox;
+use ravel_base::rng::Rng;
 
 fn main() {
     let w: usize = std::env::args()
@@ -39,7 +39,7 @@ fn main() {
         let mut best = f64::INFINITY;
         for _ in 0..10 {
             let t = std::time::Instant::now();
-            std::hint::black_box(ravel::analysis::batch::crown_offsets(
+            std::hint::black_box(ravel_analysis::batch::crown_offsets(
                 &net,
                 &cells,
                 &dirs,

@@ -13,10 +13,10 @@ fn main() {
         .unwrap_or_else(|| "specs/double_integrator.ravel".into());
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(spec);
     let src = std::fs::read_to_string(&path).unwrap();
-    let mut c = ravel::front_end(&src, path.parent().unwrap(), &ravel::cli::read_request).unwrap();
+    let mut c = ravel::front_end(&src, path.parent().unwrap(), &ravel_cli::read_request).unwrap();
     if let Some(p) = args.get(1) {
         if p != "-" {
-            c.propagator = ravel::analysis::closed_loop::Propagator::from_name(p).unwrap();
+            c.propagator = ravel_analysis::closed_loop::Propagator::from_name(p).unwrap();
         }
     }
     let repeats: usize = args.get(2).map_or(2000, |r| r.parse().unwrap());
@@ -28,8 +28,8 @@ fn main() {
     if std::env::var_os("SHOW_LAYERS").is_some() {
         for l in &plan.closed_loop.net.layers {
             match l {
-                ravel::nn::Layer::Affine { w, .. } => eprint!("{}x{} ", w.nrows(), w.ncols()),
-                ravel::nn::Layer::Act(a) => eprint!("{} ", a.name()),
+                ravel_base::nn::Layer::Affine { w, .. } => eprint!("{}x{} ", w.nrows(), w.ncols()),
+                ravel_base::nn::Layer::Act(a) => eprint!("{} ", a.name()),
             }
         }
         eprintln!();

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs the one system library ravel needs: OpenBLAS/LAPACK, which the SDP
-# back-end (clarabel's `sdp` feature) calls; src/blas.rs opens
+# back-end (clarabel's `sdp` feature) calls; crates/analysis/src/blas.rs opens
 # libopenblas.so.0 on the first SDP solve. The -dev package brings the
 # threaded build (safe to call from several threads, which --jobs needs).
 # Idempotent; does nothing when the library is already installed.

@@ -1,173 +1,1288 @@
-//! ravel: a Reach-Avoid Verification Language and its compiler.
-#![deny(unsafe_code)]
+//! The command line, `ravel`: the only crate that touches the file system,
+//! the terminal, the clock and the process exit code. It reads files for
+//! the front end through [`read_request`], runs the library's pipeline and
+//! writes what it returns.
+#![forbid(unsafe_code)]
 
-/// The allocator of every program that links ravel: mimalloc. The analysis
-/// allocates many small vectors per step; glibc's allocator takes an atomic
-/// lock on every call once a second thread exists, which cost the parallel
-/// cell and batch runs about 40 % per thread (see the speed benchmark).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
-pub mod analysis;
-pub mod blas;
-pub mod certificate;
-pub mod certify;
-pub mod check;
-pub mod cli;
+mod batch;
 pub mod demo;
-pub mod diag;
-pub mod execute;
-pub mod expm;
-pub mod fmt;
-pub mod ir;
-pub mod issue;
-pub mod limits;
-pub mod lower;
-pub mod lp;
-pub mod nn;
-pub mod num;
-pub mod onnx;
-pub mod plot;
-pub mod pool;
-pub mod report;
-pub mod rng;
-pub mod sets;
-pub mod syntax;
-pub mod vnnlib;
 
-/// Exact sums of `f64` values for the property tests of directed rounding
-/// (the same file serves the integration tests).
-#[cfg(test)]
-#[path = "../tests/common/exact.rs"]
-mod exact;
-
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
 
-use check::{Checked, ControllerFile, Task};
-use diag::Diagnostic;
+use clap::{Parser, Subcommand, ValueEnum};
+use serde_json::{json, Value};
 
-/// One file the front end asks the caller to read.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ReadRequest {
-    /// The file.
-    pub path: PathBuf,
-    /// When set, the file (after resolving symbolic links) must lie inside
-    /// this folder: external-data files must stay in the controller's folder.
-    pub inside: Option<PathBuf>,
-    /// Read at most this many bytes from the start: more than this is never
-    /// needed (a larger controller file is an error; an external-data file
-    /// is read only as far as the model's tensors need).
-    pub max_bytes: u64,
-    /// Whether a file longer than `max_bytes` is an error (the controller)
-    /// or simply read up to `max_bytes` (external data).
-    pub whole: bool,
+use ravel_syntax::diag::{render, Diagnostic};
+
+/// ravel — verify reach-avoid properties of neural feedback loops.
+#[derive(Parser, Debug)]
+#[command(name = "ravel", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
 }
 
-/// How the front end reads files; the library does no IO of its own. The CLI
-/// passes [`cli::read_request`], which reads regular files only; tests may
-/// pass anything.
-pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, String>;
-
-/// The front end: parse and check a spec, reading its controller (and any
-/// external-data files) through `read`, relative to `spec_dir`.
-///
-/// External-data locations are checked before anything is read: each must
-/// be a plain relative path inside the controller's folder (no `..`, not
-/// absolute), each distinct file is read once, and only as many bytes as
-/// the tensors stored in it need (their total is limited, see
-/// [`limits::MAX_CONTROLLER_BYTES`]).
-pub fn front_end(source: &str, spec_dir: &Path, read: Reader) -> Result<Checked, Vec<Diagnostic>> {
-    front_end_with(source, spec_dir, read, None)
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Parse and check specs (and load their controllers); print diagnostics only.
+    Check {
+        /// Spec files (.ravel), or folders searched recursively for them.
+        #[arg(required = true)]
+        specs: Vec<PathBuf>,
+        /// Check each spec with this controller instead of its own (an .onnx
+        /// file, or a folder searched recursively for them); repeatable.
+        #[arg(long = "controller", value_name = "PATH")]
+        controllers: Vec<PathBuf>,
+    },
+    /// Check, analyse and report a verdict for each spec.
+    Verify {
+        /// Spec files (.ravel), or folders searched recursively for them.
+        #[arg(required = true)]
+        specs: Vec<PathBuf>,
+        /// Verify each spec with this controller instead of its own (an
+        /// .onnx file, or a folder searched recursively for them);
+        /// repeatable: every (spec, controller) pair is one result.
+        #[arg(long = "controller", value_name = "PATH")]
+        controllers: Vec<PathBuf>,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = Format::Text)]
+        format: Format,
+        /// Leave out timing (text output shows it by default; JSON never does unless --timing).
+        #[arg(long, conflicts_with = "timing")]
+        no_timing: bool,
+        /// Include timing in JSON output.
+        #[arg(long)]
+        timing: bool,
+        /// Stop each spec's analysis after this many seconds, soundly: what
+        /// is not finished is UNSURE and the report says so.
+        #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+        time_limit: Option<f64>,
+        /// Write a `ravel-certificate/1` for each result: to this file for a
+        /// single result, else into this folder (created if missing), one
+        /// `<spec>[--<controller>].cert.json` per (spec, controller) pair
+        /// (with folders, `a~<spec>`, where names would collide); written
+        /// atomically.
+        #[arg(long, value_name = "PATH")]
+        certificate: Option<PathBuf>,
+        /// Run this many (spec, controller) pairs at once, or a single
+        /// pair's cells, guided splits and samples on this many threads
+        /// (default: the number of cores); the output is the same for every
+        /// number.
+        #[arg(long, value_name = "N", value_parser = batch::parse_jobs)]
+        jobs: Option<usize>,
+        /// Run only shard K of N: the pairs whose index is K − 1 modulo N
+        /// (JSON output then records the shard; `ravel merge` joins them).
+        #[arg(long, value_name = "K/N", value_parser = batch::parse_shard)]
+        shard: Option<batch::Shard>,
+        /// Which verdicts fail the run: `unsure` (FALSIFIED exits 1, UNSURE
+        /// exits 3) or `falsified` (UNSURE exits 0; JUnit: skipped).
+        #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
+        fail_on: batch::FailOn,
+        /// No progress on standard error.
+        #[arg(long)]
+        quiet: bool,
+        /// Write one SVG per result into this folder (created if missing):
+        /// the reachable sets per step, simulated trajectories, X0, goal,
+        /// avoid sets and any counterexample, projected on two states (named
+        /// as the certificates, with `.svg`).
+        #[arg(long, value_name = "DIR")]
+        plot: Option<PathBuf>,
+        /// The two state coordinates a plot shows (default 0,1).
+        #[arg(long, value_name = "I,J", value_parser = batch::parse_dims, default_value = "0,1")]
+        plot_dims: (usize, usize),
+    },
+    /// Rewrite specs in the canonical layout, comments kept (`--check`:
+    /// change nothing, print a diff and exit 1 when a file would change).
+    Fmt {
+        /// Spec files (.ravel), or folders searched recursively for them.
+        #[arg(required = true)]
+        specs: Vec<PathBuf>,
+        /// Only check: exit 1 and print a diff if a file is not formatted.
+        #[arg(long)]
+        check: bool,
+    },
+    /// Join the JSON reports of `verify --shard K/N --format json` into the
+    /// report of the whole batch (every pair exactly once, in order).
+    Merge {
+        /// The shards' JSON reports.
+        #[arg(required = true)]
+        reports: Vec<PathBuf>,
+        /// Which verdicts fail the run (as for `verify`).
+        #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
+        fail_on: batch::FailOn,
+    },
+    /// Translate a VNN-LIB property into a ravel network spec (printed, or
+    /// written with --output), checked against the network before it is
+    /// shown. Exit code 0, or 2 with the line of what is not supported.
+    ImportVnnlib {
+        /// The property file (.vnnlib).
+        property: PathBuf,
+        /// The ONNX network the property is about.
+        #[arg(long, value_name = "NET.onnx")]
+        network: PathBuf,
+        /// Write the spec to this file (the model path in it is then made
+        /// relative to the file's folder) instead of standard output.
+        #[arg(long, value_name = "FILE")]
+        output: Option<PathBuf>,
+    },
+    /// Re-check certificates written by `verify --certificate`, without
+    /// trusting the analysis: VALID, INVALID (with the first false claim) or
+    /// UNSUPPORTED. Exit code 0 (all valid), 1 (some invalid), 2 (some
+    /// unreadable or unsupported; takes precedence).
+    Certify {
+        /// Certificate files.
+        #[arg(required = true)]
+        certificates: Vec<PathBuf>,
+        /// The spec (default: the path recorded in the certificate, relative
+        /// to the certificate's folder).
+        #[arg(long, value_name = "PATH")]
+        spec: Option<PathBuf>,
+        /// The controller (default: the path recorded in the certificate,
+        /// relative to the certificate's folder).
+        #[arg(long, value_name = "PATH")]
+        controller: Option<PathBuf>,
+    },
 }
 
-/// [`front_end`] with the spec's controller replaced by `controller` (a
-/// path as given on the command line, not relative to the spec), as
-/// `ravel verify SPEC --controller PATH` does; the spec then need not name
-/// a controller at all.
-pub fn front_end_with(
-    source: &str,
-    spec_dir: &Path,
-    read: Reader,
-    controller: Option<&Path>,
-) -> Result<Checked, Vec<Diagnostic>> {
-    match front_end_task(source, spec_dir, read, controller)? {
-        Task::System(c) => Ok(*c),
-        Task::Network(_) => Err(vec![diag::Diagnostic::new(
-            diag::Code::SpecKind,
-            syntax::ast::Span::new(0, 0),
-            "this is a network spec, not a system spec",
-        )
-        .label("a network on its own")
-        .hint("this entry point reads closed-loop specs; `ravel verify` reads both kinds")]),
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err("expected a non-negative number of seconds".into()),
     }
 }
 
-/// The front end for a spec of either kind (a closed loop or a network on
-/// its own); `controller` overrides the spec's controller or model.
-pub fn front_end_task(
-    source: &str,
-    spec_dir: &Path,
-    read: Reader,
-    controller: Option<&Path>,
-) -> Result<Task, Vec<Diagnostic>> {
-    let spec = syntax::parse(source)?;
-    let path = match controller {
-        Some(c) => Some(c.to_path_buf()),
-        None => check::controller_path(&spec).map(|p| spec_dir.join(&p.node)),
-    };
-    let path_override = controller.map(|c| c.display().to_string());
-    let controller = path.map(|path| {
-        let bytes = read(&ReadRequest {
-            path: path.clone(),
-            inside: None,
-            max_bytes: limits::MAX_CONTROLLER_BYTES,
-            whole: true,
-        });
-        let mut external = onnx::ExternalFiles::new();
-        if let Ok(b) = &bytes {
-            let dir = match path.parent() {
-                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-                _ => PathBuf::from("."),
-            };
-            let mut total = 0u64;
-            for req in onnx::external_requests(b) {
-                total = total.saturating_add(req.bytes);
-                let data = if total > limits::MAX_CONTROLLER_BYTES {
-                    Err("the external data of this model exceeds 512 MiB".to_string())
-                } else {
-                    read(&ReadRequest {
-                        path: dir.join(&req.location),
-                        inside: Some(dir.clone()),
-                        max_bytes: req.bytes,
-                        whole: false,
-                    })
-                };
-                external.insert(req.location, data);
+/// A progress line on standard error (only when it is a terminal), redrawn
+/// at most four times a second and erased when the spec is done.
+struct ProgressLine<'a> {
+    name: &'a str,
+    started: Instant,
+    /// Seconds (as `f64` bits) when the line was last written; 0: never.
+    last: std::sync::atomic::AtomicU64,
+}
+
+impl ProgressLine<'_> {
+    fn show(&self, p: ravel::execute::Progress) {
+        use std::sync::atomic::Ordering;
+        let now = self.started.elapsed().as_secs_f64();
+        if now - f64::from_bits(self.last.load(Ordering::Relaxed)) < 0.25 || now < 0.5 {
+            return;
+        }
+        self.last.store(now.to_bits(), Ordering::Relaxed);
+        let what = match p.phase {
+            ravel::execute::Phase::Sampling => "simulating",
+            ravel::execute::Phase::Cells => "propagating cell",
+        };
+        let of = p.total.map_or(String::new(), |t| format!(" of {t}"));
+        err(&format!(
+            "\r\x1b[2K{}: {what} {}{of} ({now:.0} s)",
+            self.name, p.done
+        ));
+    }
+
+    fn clear(&self) {
+        if self.last.load(std::sync::atomic::Ordering::Relaxed) != 0 {
+            err("\r\x1b[2K");
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Format {
+    /// A report per pair for people, and a summary line.
+    Text,
+    /// One JSON document (`ravel-report/1`).
+    Json,
+    /// One JSON result per line, then a summary line.
+    Jsonl,
+    /// JUnit XML: a test suite per pair, a test case per property.
+    Junit,
+    /// CSV of robust action selections (network specs with `select`): one
+    /// row per observation and action, after a header line.
+    Csv,
+}
+
+/// Write to standard output; `Err(())` when it is closed (e.g. piped into
+/// `head`), which ends the run quietly with [`exit::BROKEN_PIPE`].
+fn out(text: &str) -> Result<(), ()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    writeln!(o, "{text}")
+        .and_then(|_| o.flush())
+        .map_err(|_| ())
+}
+
+/// Write to standard error, ignoring a closed stream (nothing else can be done).
+fn err(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().lock().write_all(text.as_bytes());
+}
+
+/// Exit codes (documented in the README).
+pub mod exit {
+    /// Every property of every spec VERIFIED.
+    pub const VERIFIED: u8 = 0;
+    /// Some property FALSIFIED.
+    pub const FALSIFIED: u8 = 1;
+    /// Input or usage error (takes precedence over verdicts).
+    pub const INPUT_ERROR: u8 = 2;
+    /// Some property UNSURE, none FALSIFIED.
+    pub const UNSURE: u8 = 3;
+    /// Standard output was closed before the report was written (128 + SIGPIPE, as shells report it).
+    pub const BROKEN_PIPE: u8 = 141;
+}
+
+/// Read a file the front end asks for ([`ravel::ReadRequest`]): only a
+/// regular file (a FIFO, device or folder is refused without blocking: it is
+/// opened non-blocking and inspected before any read), at most
+/// `max_bytes` bytes, and, for external data, only if its real path (symbolic
+/// links resolved) lies inside the requested folder.
+pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = opts.open(&req.path).map_err(|e| e.to_string())?;
+    let meta = file.metadata().map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a folder"
+        } else {
+            "a special file (FIFO, device or socket)"
+        };
+        return Err(format!("it is {kind}, not a regular file"));
+    }
+    if let Some(dir) = &req.inside {
+        let real = std::fs::canonicalize(&req.path).map_err(|e| e.to_string())?;
+        let root = std::fs::canonicalize(dir).map_err(|e| e.to_string())?;
+        if !real.starts_with(&root) {
+            return Err(
+                "it resolves (through a symbolic link) to a file outside the controller's folder"
+                    .into(),
+            );
+        }
+    }
+    if req.whole && meta.len() > req.max_bytes {
+        return Err(format!(
+            "it has {} bytes, more than the limit of {}",
+            meta.len(),
+            req.max_bytes
+        ));
+    }
+    let mut buf = Vec::with_capacity(meta.len().min(req.max_bytes).min(1 << 26) as usize);
+    file.take(req.max_bytes)
+        .read_to_end(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf)
+}
+
+/// A spec's source and the result of its front end.
+struct Loaded {
+    /// The spec's path (as the JSON `spec` field).
+    name: String,
+    /// The spec's path, and the controller's when it was overridden (for people).
+    display: String,
+    source: String,
+    result: Result<ravel::check::Task, Vec<Diagnostic>>,
+}
+
+/// Files with extension `ext` under `path` (a file is itself; a folder is
+/// searched recursively, in sorted order, without following symbolic links
+/// to folders); an error for a folder without any.
+fn expand(path: &Path, ext: &str) -> Result<Vec<PathBuf>, String> {
+    fn walk(dir: &Path, ext: &str, depth: usize, out: &mut Vec<PathBuf>) -> Result<(), String> {
+        if depth > 32 {
+            return Ok(());
+        }
+        let shown = ravel_syntax::diag::sanitize(&dir.display().to_string());
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(|e| format!("cannot read folder `{shown}`: {e}"))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        for e in entries {
+            let meta = std::fs::symlink_metadata(&e).map_err(|x| x.to_string())?;
+            if meta.is_dir() {
+                walk(&e, ext, depth + 1, out)?;
+            } else if e.extension().is_some_and(|x| x == ext) {
+                out.push(e);
             }
         }
-        ControllerFile {
-            path_override: path_override.clone(),
-            resolved: path.display().to_string(),
-            bytes,
-            external,
+        Ok(())
+    }
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut out = Vec::new();
+    walk(path, ext, 0, &mut out)?;
+    if out.is_empty() {
+        return Err(format!(
+            "no .{ext} file in folder `{}`",
+            ravel_syntax::diag::sanitize(&path.display().to_string())
+        ));
+    }
+    Ok(out)
+}
+
+/// Every (spec, controller) pair the arguments name: each spec with each
+/// controller given, or with its own when none is. Errors are collected, so
+/// one bad argument never hides the others.
+fn pairs(
+    specs: &[PathBuf],
+    controllers: &[PathBuf],
+) -> (Vec<(PathBuf, Option<PathBuf>)>, Vec<String>) {
+    let mut errors = Vec::new();
+    let mut files = Vec::new();
+    for s in specs {
+        match expand(s, "ravel") {
+            Ok(v) => files.extend(v),
+            Err(e) => errors.push(e),
         }
-    });
-    let data: check::DataFiles = check::data_paths(&spec)
-        .into_iter()
-        .map(|p| {
-            // observation files stay in the spec's folder, under the same
-            // rules as a model's external data (checked before any read)
-            let bytes = match onnx::normalise_location(&p) {
-                None => Err("observation files must lie in the spec's folder (a relative path without `..`)".to_string()),
-                Some(rel) => read(&ReadRequest {
-                    path: spec_dir.join(rel),
-                    inside: Some(spec_dir.to_path_buf()),
-                    max_bytes: limits::MAX_SPEC_BYTES,
-                    whole: true,
-                }),
-            };
-            (p, bytes)
+    }
+    let mut ctrls = Vec::new();
+    for c in controllers {
+        match expand(c, "onnx") {
+            Ok(v) => ctrls.extend(v.into_iter().map(Some)),
+            Err(e) => errors.push(e),
+        }
+    }
+    if controllers.is_empty() {
+        ctrls.push(None);
+    }
+    let pairs = files
+        .iter()
+        .flat_map(|s| ctrls.iter().map(move |c| (s.clone(), c.clone())))
+        .collect();
+    (pairs, errors)
+}
+
+fn load_with(path: &Path, controller: Option<&Path>) -> Result<Loaded, String> {
+    let name = ravel_syntax::diag::sanitize(&path.display().to_string());
+    let bytes = read_request(&ravel::ReadRequest {
+        path: path.to_path_buf(),
+        inside: None,
+        max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+        whole: true,
+    })
+    .map_err(|e| format!("cannot read spec `{name}`: {e}"))?;
+    let source =
+        String::from_utf8(bytes).map_err(|_| format!("spec `{name}` is not UTF-8 text"))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let result = ravel::front_end_task(&source, dir, &read_request, controller);
+    let display = match controller {
+        Some(c) => format!(
+            "{name} with controller {}",
+            ravel_syntax::diag::sanitize(&c.display().to_string())
+        ),
+        None => name.clone(),
+    };
+    Ok(Loaded {
+        display,
+        name,
+        source,
+        result,
+    })
+}
+
+fn diag_json(name: &str, source: &str, diags: &[Diagnostic]) -> Value {
+    let errors: Vec<Value> = diags
+        .iter()
+        .map(|d| {
+            let (line, col) = d.span.map_or((0, 0), |s| line_col(source, s.start));
+            json!({ "code": d.code.as_str(), "message": d.message, "label": d.label, "hint": d.hint, "line": line, "column": col })
         })
         .collect();
-    check::check_task(&spec, controller.as_ref(), &data)
+    json!({ "spec": name, "verdict": "ERROR", "errors": errors })
+}
+
+/// 1-based line and column (in characters) of a byte offset; lines end at
+/// LF, CRLF or a lone CR.
+pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(source.len());
+    while !source.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &source[..offset];
+    let line = before.matches('\n').count() + before.matches('\r').count()
+        - before.matches("\r\n").count()
+        + 1;
+    let col = before
+        .rsplit(['\n', '\r'])
+        .next()
+        .map_or(0, |l| l.chars().count())
+        + 1;
+    (line, col)
+}
+
+/// A JSON document from a file (a regular file of at most 512 MiB).
+fn read_json(file: &Path) -> Result<Value, String> {
+    let bytes = read_request(&ravel::ReadRequest {
+        path: file.to_path_buf(),
+        inside: None,
+        max_bytes: ravel_base::limits::MAX_CONTROLLER_BYTES,
+        whole: true,
+    })
+    .map_err(|e| format!("cannot read: {e}"))?;
+    serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))
+}
+
+/// The file names (without extension) of the results of a batch's (spec,
+/// controller) pairs, computed from the whole pair list (so a shard names a
+/// pair as the whole batch does): `<spec stem>` or `<spec stem>--<controller
+/// stem>`; where names collide (compared without case, for file systems that
+/// ignore it), the colliding pairs' names take their spec's folders, nearest
+/// first, joined by `~` (`a~double_integrator`), one folder at a time until
+/// they differ, and then, if the specs' paths alone cannot tell them apart,
+/// their controller's folders (`s--x~c`). An error names two pairs that no
+/// folder tells apart (the same pair given twice).
+fn output_names(pairs: &[(PathBuf, Option<PathBuf>)]) -> Result<Vec<String>, String> {
+    /// A path's folders (outermost first; `..` as `up`) and its file stem.
+    fn parts(p: &Path, fallback: &str) -> (Vec<String>, String) {
+        let stem = p.file_stem().map_or_else(
+            || fallback.to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        let folders = p
+            .parent()
+            .into_iter()
+            .flat_map(Path::components)
+            .filter_map(|c| match c {
+                std::path::Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                std::path::Component::ParentDir => Some("up".to_string()),
+                _ => None,
+            })
+            .collect();
+        (folders, stem)
+    }
+    fn join((folders, stem): &(Vec<String>, String), depth: usize) -> String {
+        let mut s: Vec<&str> = folders[folders.len() - depth..]
+            .iter()
+            .map(String::as_str)
+            .collect();
+        s.push(stem);
+        s.join("~")
+    }
+    let split: Vec<_> = pairs
+        .iter()
+        .map(|(s, c)| {
+            (
+                parts(s, "spec"),
+                c.as_deref().map(|c| parts(c, "controller")),
+            )
+        })
+        .collect();
+    let mut depth = vec![(0usize, 0usize); pairs.len()];
+    let name = |i: usize, (ds, dc): (usize, usize)| {
+        let (s, c) = &split[i];
+        match c {
+            Some(c) => format!("{}--{}", join(s, ds), join(c, dc)),
+            None => join(s, ds),
+        }
+    };
+    loop {
+        let mut groups: BTreeMap<String, Vec<usize>> = BTreeMap::new();
+        for (i, &d) in depth.iter().enumerate() {
+            groups.entry(name(i, d).to_lowercase()).or_default().push(i);
+        }
+        let colliding: Vec<&Vec<usize>> = groups.values().filter(|g| g.len() > 1).collect();
+        if colliding.is_empty() {
+            return Ok((0..pairs.len()).map(|i| name(i, depth[i])).collect());
+        }
+        // a spec folder more where one is left, else a controller folder more
+        let mut grown = false;
+        for g in &colliding {
+            for &i in *g {
+                if depth[i].0 < split[i].0 .0.len() {
+                    depth[i].0 += 1;
+                    grown = true;
+                }
+            }
+        }
+        if !grown {
+            for g in &colliding {
+                for &i in *g {
+                    if split[i].1.as_ref().is_some_and(|c| depth[i].1 < c.0.len()) {
+                        depth[i].1 += 1;
+                        grown = true;
+                    }
+                }
+            }
+        }
+        if !grown {
+            let (a, b) = (colliding[0][0], colliding[0][1]);
+            let show = |i: usize| {
+                let (s, c) = &pairs[i];
+                let s = ravel_syntax::diag::sanitize(&s.display().to_string());
+                match c {
+                    Some(c) => format!(
+                        "`{s}` with `{}`",
+                        ravel_syntax::diag::sanitize(&c.display().to_string())
+                    ),
+                    None => format!("`{s}`"),
+                }
+            };
+            return Err(format!(
+                "{} and {} would write their certificates or plots to the same file, and no folder of their paths tells them apart (the same pair given twice?); nothing was run",
+                show(a),
+                show(b),
+            ));
+        }
+    }
+}
+
+/// Write `bytes` to `file` atomically: into a new temporary file beside it
+/// (`.NAME.tmp-PID-N`, `NAME` cut to 64 characters, created exclusively), flushed to disk, then renamed
+/// over `file`, so a reader sees the old file or the whole new one, never
+/// half of one; an existing file's permissions are kept. On failure the
+/// temporary file is removed and `file` is left as it was.
+fn write_atomically(file: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let Some(name) = file.file_name() else {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the path names no file",
+        ));
+    };
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    // the name's start only: a long name must not make the temporary one
+    // longer than the file system allows
+    let start: String = name.to_string_lossy().chars().take(64).collect();
+    let tmp = dir.join(format!(".{start}.tmp-{}-{n}", std::process::id()));
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)?;
+    let fill = |f: &mut std::fs::File| {
+        f.write_all(bytes)?;
+        if let Ok(old) = std::fs::metadata(file) {
+            f.set_permissions(old.permissions())?;
+        }
+        f.sync_all()
+    };
+    let written = fill(&mut f).and_then(|()| {
+        drop(f);
+        std::fs::rename(&tmp, file)
+    });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// The first place two JSON values differ, as a path (`problem.plants[0].A[1]`).
+fn first_difference(a: &Value, b: &Value, path: &str) -> Option<String> {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x {
+                let p = format!("{path}.{k}");
+                match y.get(k) {
+                    Some(w) => {
+                        if let Some(d) = first_difference(v, w, &p) {
+                            return Some(d);
+                        }
+                    }
+                    None => return Some(p),
+                }
+            }
+            y.keys()
+                .find(|k| !x.contains_key(*k))
+                .map(|k| format!("{path}.{k}"))
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            if x.len() != y.len() {
+                return Some(format!("{path} (length {} vs {})", x.len(), y.len()));
+            }
+            x.iter()
+                .zip(y)
+                .enumerate()
+                .find_map(|(i, (v, w))| first_difference(v, w, &format!("{path}[{i}]")))
+        }
+        _ => (a != b).then(|| path.to_string()),
+    }
+}
+
+/// Where a certificate's recorded path is read: relative to the
+/// certificate's own folder (as `verify` records it); a relative path not
+/// found there but found in the working folder is read from there (a
+/// certificate written before paths were recorded relative to it), with a
+/// note saying so. Absolute paths are read as they are.
+fn recorded_path(cert_dir: &Path, recorded: &str) -> (PathBuf, Option<String>) {
+    let p = Path::new(recorded);
+    if p.is_absolute() {
+        return (p.to_path_buf(), None);
+    }
+    let beside = cert_dir.join(p);
+    if beside.exists() || !p.exists() {
+        return (beside, None);
+    }
+    let note = format!(
+        "note: `{}` is not beside the certificate; read as recorded, from the working folder (a certificate written before paths were recorded relative to it)",
+        ravel_syntax::diag::sanitize(recorded)
+    );
+    (p.to_path_buf(), Some(note))
+}
+
+/// The first 12 hex digits of a SHA-256, for people.
+fn short_hash(h: &str) -> String {
+    ravel_syntax::diag::sanitize(&h.chars().take(12).collect::<String>())
+}
+
+/// Check one certificate file: the exit code it earns and the text to print.
+/// Every answer that got that far names the spec and the controller it
+/// checked (path and SHA-256 prefix).
+fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (u8, String) {
+    use ravel_certify::Answer;
+    let name = ravel_syntax::diag::sanitize(&file.display().to_string());
+    // after the answer's line: the files checked, then notes
+    let mut files: Vec<String> = Vec::new();
+    let mut notes: Vec<String> = Vec::new();
+    let with = |head: String, files: &[String], notes: &[String]| {
+        let mut text = head;
+        for l in files.iter().chain(notes) {
+            text += &format!("\n  {l}");
+        }
+        text
+    };
+    let unreadable = |why: String, files: &[String], notes: &[String]| {
+        (
+            exit::INPUT_ERROR,
+            with(format!("UNREADABLE  {name}: {why}"), files, notes),
+        )
+    };
+    let invalid = |why: String, files: &[String], notes: &[String]| {
+        (
+            exit::FALSIFIED,
+            with(format!("INVALID     {name}: {why}"), files, notes),
+        )
+    };
+    let cert = match read_json(file) {
+        Ok(v) => v,
+        Err(e) => return unreadable(e, &[], &[]),
+    };
+    // empty for a certificate in the working folder: paths stay as recorded
+    let cert_dir = file.parent().unwrap_or(Path::new(""));
+    let mut recorded = |key: &str| {
+        let (path, note) = recorded_path(
+            cert_dir,
+            cert.get(key)
+                .and_then(|v| v.get("path"))
+                .and_then(Value::as_str)?,
+        );
+        notes.extend(note);
+        Some(path)
+    };
+    // an explicit --spec / --controller is relative to the working folder
+    let spec_path = match spec {
+        Some(s) => Some(s.to_path_buf()),
+        None => recorded("spec"),
+    };
+    let ctrl_path = match controller {
+        Some(c) => Some(c.to_path_buf()),
+        None => recorded("controller"),
+    };
+    let Some(spec_path) = spec_path else {
+        return unreadable("no spec path recorded; pass --spec".into(), &[], &notes);
+    };
+    let Some(ctrl_path) = ctrl_path else {
+        return unreadable(
+            "no controller path recorded; pass --controller".into(),
+            &[],
+            &notes,
+        );
+    };
+    let spec_name = ravel_syntax::diag::sanitize(&spec_path.display().to_string());
+    let ctrl_name = ravel_syntax::diag::sanitize(&ctrl_path.display().to_string());
+    let source = match read_request(&ravel::ReadRequest {
+        path: spec_path.clone(),
+        inside: None,
+        max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}"), &[], &notes),
+    };
+    let hash = |key: &str, field: &str| {
+        cert.get(key)
+            .and_then(|v| v.get(field))
+            .and_then(Value::as_str)
+            .unwrap_or("")
+            .to_string()
+    };
+    let spec_sha = ravel::check::sha256_hex(&source);
+    files.push(format!(
+        "spec        {spec_name} (SHA-256 {})",
+        short_hash(&spec_sha)
+    ));
+    // the text may differ (comments, layout): the problem decides
+    let text_differs = spec_sha != hash("spec", "sha256");
+    let Ok(source) = String::from_utf8(source) else {
+        return unreadable(
+            format!("spec `{spec_name}` is not UTF-8 text"),
+            &files,
+            &notes,
+        );
+    };
+    let dir = spec_path.parent().unwrap_or(Path::new("."));
+    let task = match ravel::front_end_task(&source, dir, &read_request, Some(&ctrl_path)) {
+        Ok(t) => t,
+        Err(d) => {
+            return unreadable(
+                format!(
+                    "spec `{spec_name}` with controller `{ctrl_name}` does not check ({} error(s); run `ravel check`)",
+                    d.len()
+                ),
+                &files,
+                &notes,
+            );
+        }
+    };
+    // the model, its hashes and the problem as the spec states it
+    let (net, sha, problem) = match &task {
+        ravel::check::Task::System(c) => {
+            let plan = ravel::lower::lower(c);
+            let problem = ravel::certificate::problem_json(&plan);
+            (plan.closed_loop.net, plan.controller_sha256, problem)
+        }
+        ravel::check::Task::Network(c) => {
+            let plan = ravel::lower::lower_network(c);
+            let problem = ravel::certificate::network_problem_json(&plan);
+            (plan.net, plan.model_sha256, problem)
+        }
+    };
+    files.push(format!(
+        "controller  {ctrl_name} (SHA-256 {})",
+        short_hash(&sha)
+    ));
+    if sha != hash("controller", "sha256") {
+        return invalid(
+            "the controller file is not the one certified (SHA-256 differs)".into(),
+            &files,
+            &notes,
+        );
+    }
+    if ravel::certificate::network_sha256(&net) != hash("controller", "network_sha256") {
+        return invalid(
+            "the controller's network (external data included) is not the one certified".into(),
+            &files,
+            &notes,
+        );
+    }
+    let text_note = format!(
+        "note: the spec's text differs from the certified one (SHA-256 {}, certified {})",
+        short_hash(&spec_sha),
+        short_hash(&hash("spec", "sha256"))
+    );
+    if let Some(d) = first_difference(
+        &problem,
+        cert.get("problem").unwrap_or(&Value::Null),
+        "problem",
+    ) {
+        if text_differs {
+            notes.push(text_note);
+        }
+        return invalid(
+            format!(
+                "the recorded problem is not the spec's: `{}` differs",
+                ravel_syntax::diag::sanitize(&d)
+            ),
+            &files,
+            &notes,
+        );
+    }
+    if text_differs {
+        notes.push(format!("{text_note}; its problem is identical"));
+    }
+    let report = ravel_certify::check(&cert, &net);
+    let (code, head) = match &report.answer {
+        Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
+        Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),
+        Answer::Unsupported(_) => (exit::INPUT_ERROR, "UNSUPPORTED".to_string()),
+        Answer::Unreadable(_) => (exit::INPUT_ERROR, "UNREADABLE ".to_string()),
+    };
+    let mut text = format!("{head} {name} ({spec_name}");
+    if report.cells > 0 && report.steps > 0 {
+        text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
+    } else if report.cells > 0 {
+        text += &format!(", {} cell(s)", report.cells);
+    }
+    text += ")";
+    match &report.answer {
+        Answer::Valid => {}
+        Answer::Invalid(m) | Answer::Unsupported(m) | Answer::Unreadable(m) => {
+            text += &format!("\n  {}", ravel_syntax::diag::sanitize_to(m, 600));
+        }
+    }
+    notes.extend(report.properties.iter().cloned());
+    (code, with(text, &files, &notes))
+}
+
+/// A line diff of `a` and `b` (longest common subsequence), `-`/`+` lines
+/// with one line of context; a whole-file replacement when the files are
+/// too long to compare line by line.
+fn diff(name: &str, a: &str, b: &str) -> String {
+    let (x, y): (Vec<&str>, Vec<&str>) = (a.lines().collect(), b.lines().collect());
+    let mut out = format!("--- {name}\n+++ {name} (formatted)\n");
+    if x.len().saturating_mul(y.len()) > 4_000_000 {
+        out.extend(x.iter().map(|l| format!("-{l}\n")));
+        out.extend(y.iter().map(|l| format!("+{l}\n")));
+        return out;
+    }
+    // lcs[i][j]: common subsequence length of x[i..] and y[j..]
+    let mut lcs = vec![vec![0u32; y.len() + 1]; x.len() + 1];
+    for i in (0..x.len()).rev() {
+        for j in (0..y.len()).rev() {
+            lcs[i][j] = if x[i] == y[j] {
+                lcs[i + 1][j + 1] + 1
+            } else {
+                lcs[i + 1][j].max(lcs[i][j + 1])
+            };
+        }
+    }
+    let (mut i, mut j) = (0, 0);
+    while i < x.len() || j < y.len() {
+        if i < x.len() && j < y.len() && x[i] == y[j] {
+            i += 1;
+            j += 1;
+        } else if i < x.len() && (j == y.len() || lcs[i + 1][j] >= lcs[i][j + 1]) {
+            out += &format!("{:>5} -{}\n", i + 1, x[i]);
+            i += 1;
+        } else {
+            out += &format!("{:>5} +{}\n", j + 1, y[j]);
+            j += 1;
+        }
+    }
+    out
+}
+
+/// `ravel fmt`.
+fn fmt_files(specs: &[PathBuf], check: bool) -> ExitCode {
+    let mut code = exit::VERIFIED;
+    let mut files = Vec::new();
+    for s in specs {
+        match expand(s, "ravel") {
+            Ok(v) => files.extend(v),
+            Err(e) => {
+                err(&format!("error: {e}\n"));
+                code = exit::INPUT_ERROR;
+            }
+        }
+    }
+    for f in &files {
+        let name = ravel_syntax::diag::sanitize(&f.display().to_string());
+        let bytes = match read_request(&ravel::ReadRequest {
+            path: f.clone(),
+            inside: None,
+            max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+            whole: true,
+        }) {
+            Ok(b) => b,
+            Err(e) => {
+                err(&format!("error: cannot read `{name}`: {e}\n"));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+        };
+        let Ok(source) = String::from_utf8(bytes) else {
+            err(&format!("error: `{name}` is not UTF-8 text\n"));
+            code = exit::INPUT_ERROR;
+            continue;
+        };
+        let formatted = match ravel_syntax::fmt::format(&source) {
+            Ok(t) => t,
+            Err(ravel_syntax::fmt::Error::Syntax(d)) => {
+                err(&render(
+                    &d,
+                    &name,
+                    &source,
+                    100,
+                    std::io::stderr().is_terminal(),
+                ));
+                err(&format!("{name}: not formatted (it does not parse)\n"));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+            Err(ravel_syntax::fmt::Error::Changed) => {
+                err(&format!(
+                    "error: `{name}`: formatting would change its meaning (a ravel bug, please report it); the file is left as it is\n"
+                ));
+                code = exit::INPUT_ERROR;
+                continue;
+            }
+        };
+        if formatted == source {
+            continue;
+        }
+        if check {
+            if out(&diff(&name, &source, &formatted)).is_err() {
+                return ExitCode::from(exit::BROKEN_PIPE);
+            }
+            if code == exit::VERIFIED {
+                code = exit::FALSIFIED;
+            }
+            continue;
+        }
+        // write beside, then rename: a crash never leaves half a spec (and a
+        // symbolic link keeps pointing at the formatted file)
+        let target = std::fs::canonicalize(f).unwrap_or_else(|_| f.clone());
+        if let Err(e) = write_atomically(&target, formatted.as_bytes()) {
+            err(&format!("error: cannot write `{name}`: {e}\n"));
+            code = exit::INPUT_ERROR;
+        } else if out(&format!("formatted {name}")).is_err() {
+            return ExitCode::from(exit::BROKEN_PIPE);
+        }
+    }
+    ExitCode::from(code)
+}
+
+/// `path` as seen from the folder `dir`, for a file written into `dir`
+/// that names `path`: a relative path (`..` where they part) computed from
+/// the real folders (symbolic links to folders resolved; the file's own
+/// name kept), or `path` made absolute when there is none (different roots)
+/// or a folder cannot be resolved.
+pub(crate) fn relative_to(dir: &Path, path: &Path) -> PathBuf {
+    let absolute = || std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let real = match (path.parent(), path.file_name()) {
+        (Some(p), Some(n)) => {
+            let p = if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            };
+            p.canonicalize().map(|p| p.join(n))
+        }
+        _ => path.canonicalize(),
+    };
+    let (Ok(d), Ok(p)) = (dir.canonicalize(), real) else {
+        return absolute();
+    };
+    let (dc, pc): (Vec<_>, Vec<_>) = (d.components().collect(), p.components().collect());
+    if dc.first() != pc.first() {
+        return p;
+    }
+    let common = dc.iter().zip(&pc).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..dc.len() {
+        out.push("..");
+    }
+    for c in &pc[common..] {
+        out.push(c);
+    }
+    out
+}
+
+/// `ravel import-vnnlib`: the spec, checked by the front end with the network.
+fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: bool) -> ExitCode {
+    let name = ravel_syntax::diag::sanitize(&property.display().to_string());
+    let fail = |msg: String| {
+        err(&format!("error: {msg}\n"));
+        ExitCode::from(exit::INPUT_ERROR)
+    };
+    let bytes = match read_request(&ravel::ReadRequest {
+        path: property.to_path_buf(),
+        inside: None,
+        max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => return fail(format!("cannot read `{name}`: {e}")),
+    };
+    let Ok(text) = String::from_utf8(bytes) else {
+        return fail(format!("`{name}` is not UTF-8 text"));
+    };
+    let dir = match output.and_then(Path::parent) {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let model = if output.is_some() {
+        relative_to(&dir, network)
+    } else {
+        network.to_path_buf()
+    };
+    let stem = property
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ident: String = stem
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let ident = match ident.chars().next() {
+        Some(c) if c.is_ascii_alphabetic() || c == '_' => ident,
+        _ => format!("n_{ident}"),
+    };
+    let spec = match ravel::vnnlib::import(
+        &text,
+        &model.display().to_string(),
+        &ident,
+        &property.display().to_string(),
+    ) {
+        Ok(s) => s,
+        Err(e) => return fail(format!("{name}:{}:{}: {}", e.line, e.column, e.message)),
+    };
+    // the spec must check with the network (sizes included) before anyone sees it
+    if let Err(d) = ravel::front_end_task(&spec, &dir, &read_request, None) {
+        err(&render(&d, "(imported spec)", &spec, 100, color));
+        return fail(format!("the spec imported from `{name}` does not check"));
+    }
+    match output {
+        Some(file) => match write_atomically(file, spec.as_bytes()) {
+            Ok(()) => ExitCode::from(exit::VERIFIED),
+            Err(e) => fail(format!(
+                "cannot write `{}`: {e}",
+                ravel_syntax::diag::sanitize(&file.display().to_string())
+            )),
+        },
+        None => {
+            if out(spec.trim_end()).is_err() {
+                return ExitCode::from(exit::BROKEN_PIPE);
+            }
+            ExitCode::from(exit::VERIFIED)
+        }
+    }
+}
+
+/// Run the CLI with the process arguments.
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() {
+                exit::INPUT_ERROR
+            } else {
+                exit::VERIFIED
+            };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    let color = std::io::stderr().is_terminal();
+    let width = 100;
+    match cli.cmd {
+        Cmd::Check { specs, controllers } => {
+            let mut code = exit::VERIFIED;
+            let (pairs, errors) = pairs(&specs, &controllers);
+            for e in &errors {
+                err(&format!("error: {e}\n"));
+                code = exit::INPUT_ERROR;
+            }
+            for (path, controller) in &pairs {
+                match load_with(path, controller.as_deref()) {
+                    Err(msg) => {
+                        err(&format!("error: {msg}\n"));
+                        code = exit::INPUT_ERROR;
+                    }
+                    Ok(l) => match &l.result {
+                        Ok(_) => {
+                            if out(&format!("ok: {}", l.display)).is_err() {
+                                return ExitCode::from(exit::BROKEN_PIPE);
+                            }
+                        }
+                        Err(d) => {
+                            err(&render(d, &l.display, &l.source, width, color));
+                            err(&format!("{}: {} error(s)\n", l.display, d.len()));
+                            code = exit::INPUT_ERROR;
+                        }
+                    },
+                }
+            }
+            ExitCode::from(code)
+        }
+        Cmd::Certify {
+            certificates,
+            spec,
+            controller,
+        } => {
+            let mut worst = exit::VERIFIED;
+            for file in &certificates {
+                let (code, text) = certify_one(file, spec.as_deref(), controller.as_deref());
+                if out(&text).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
+                }
+                worst = match (worst, code) {
+                    (exit::INPUT_ERROR, _) | (_, exit::INPUT_ERROR) => exit::INPUT_ERROR,
+                    (exit::FALSIFIED, _) | (_, exit::FALSIFIED) => exit::FALSIFIED,
+                    _ => exit::VERIFIED,
+                };
+            }
+            ExitCode::from(worst)
+        }
+        Cmd::Verify {
+            specs,
+            controllers,
+            format,
+            no_timing,
+            timing,
+            time_limit,
+            certificate,
+            jobs,
+            shard,
+            fail_on,
+            quiet,
+            plot,
+            plot_dims,
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let opts = batch::Options {
+                format,
+                no_timing,
+                timing,
+                time_limit,
+                certificate,
+                fail_on,
+                jobs: jobs.unwrap_or(cores),
+                shard,
+                progress: !quiet && std::io::stderr().is_terminal(),
+                color,
+                plot,
+                plot_dims,
+            };
+            batch::verify(&specs, &controllers, &opts)
+        }
+        Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
+        Cmd::Fmt { specs, check } => fmt_files(&specs, check),
+        Cmd::ImportVnnlib {
+            property,
+            network,
+            output,
+        } => import_vnnlib(&property, &network, output.as_deref(), color),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(s: &str, c: Option<&str>) -> (PathBuf, Option<PathBuf>) {
+        (PathBuf::from(s), c.map(PathBuf::from))
+    }
+
+    #[test]
+    fn names_are_stems_unless_they_collide() {
+        // unique stems keep today's names
+        let names = output_names(&[pair("specs/di.ravel", None), pair("specs/quad.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["di", "quad"]);
+        // a shared stem takes folders, nearest first, only where needed
+        let names = output_names(&[
+            pair("x/a/di.ravel", Some("c.onnx")),
+            pair("x/b/di.ravel", Some("c.onnx")),
+            pair("di.ravel", Some("c.onnx")),
+            pair("x/quad.ravel", Some("c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["a~di--c", "b~di--c", "di--c", "quad--c"]);
+        // names that differ only in case collide (case-insensitive file systems)
+        let names =
+            output_names(&[pair("A/Di.ravel", None), pair("b/di.ravel", None)]).expect("distinct");
+        assert_eq!(names, ["A~Di", "b~di"]);
+        // one spec, controllers of one name in two folders
+        let names = output_names(&[
+            pair("s.ravel", Some("x/c.onnx")),
+            pair("s.ravel", Some("y/c.onnx")),
+        ])
+        .expect("distinct");
+        assert_eq!(names, ["s--x~c", "s--y~c"]);
+        // folders that differ only far up
+        let names = output_names(&[pair("p/m/n/di.ravel", None), pair("q/m/n/di.ravel", None)])
+            .expect("distinct");
+        assert_eq!(names, ["p~m~n~di", "q~m~n~di"]);
+    }
+
+    #[test]
+    fn a_pair_given_twice_cannot_be_named() {
+        let e = output_names(&[pair("a/di.ravel", None), pair("./a/di.ravel", None)])
+            .expect_err("the same pair");
+        assert!(e.contains("given twice"), "{e}");
+        let e = output_names(&[
+            pair("s.ravel", Some("c.onnx")),
+            pair("s.ravel", Some("c.onnx")),
+        ])
+        .expect_err("the same pair");
+        assert!(e.contains("`s.ravel` with `c.onnx`"), "{e}");
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ravel-atomic-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("dir");
+        d
+    }
+
+    #[test]
+    fn atomic_writes_replace_whole_files_and_leave_nothing_behind() {
+        let d = scratch("ok");
+        let f = d.join("x.cert.json");
+        write_atomically(&f, b"first").expect("written");
+        write_atomically(&f, b"second").expect("replaced");
+        assert_eq!(std::fs::read(&f).expect("read"), b"second");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&f, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+            write_atomically(&f, b"third").expect("replaced");
+            let mode = std::fs::metadata(&f).expect("meta").permissions().mode();
+            assert_eq!(mode & 0o777, 0o600, "permissions kept");
+        }
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["x.cert.json"]);
+        // a name as long as file systems allow (255 bytes) still has room
+        // for its temporary file
+        let long = d.join("n".repeat(255));
+        write_atomically(&long, b"long").expect("written");
+        assert_eq!(std::fs::read(&long).expect("read"), b"long");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_failed_atomic_write_leaves_the_target_and_no_temporary_file() {
+        let d = scratch("fail");
+        // the target is a non-empty folder: the rename fails
+        let target = d.join("taken");
+        std::fs::create_dir_all(target.join("inside")).expect("dir");
+        assert!(write_atomically(&target, b"data").is_err());
+        assert!(target.join("inside").is_dir());
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names, ["taken"], "no temporary file left");
+        // a folder that does not exist: an error, nothing created
+        assert!(write_atomically(&d.join("no/such/file"), b"data").is_err());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn relative_paths_part_where_the_folders_do() {
+        let d = scratch("rel");
+        std::fs::create_dir_all(d.join("certs")).expect("dir");
+        std::fs::create_dir_all(d.join("specs/x")).expect("dir");
+        std::fs::write(d.join("specs/x/s.ravel"), "").expect("file");
+        assert_eq!(
+            relative_to(&d.join("certs"), &d.join("specs/x/s.ravel")),
+            Path::new("../specs/x/s.ravel")
+        );
+        assert_eq!(
+            relative_to(&d.join("specs/x"), &d.join("specs/x/s.ravel")),
+            Path::new("s.ravel")
+        );
+        // an unresolvable folder: the path made absolute, never relative to the cwd
+        let r = relative_to(&d.join("certs"), Path::new("no/such/s.ravel"));
+        assert!(r.is_absolute(), "{}", r.display());
+        let _ = std::fs::remove_dir_all(&d);
+    }
 }

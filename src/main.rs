@@ -1,5 +1,5 @@
 //! The `ravel` binary: a thin wrapper over [`ravel::cli`].
 
 fn main() -> std::process::ExitCode {
-    ravel::cli::main()
+    ravel_cli::main()
 }

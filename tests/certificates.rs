@@ -9,14 +9,14 @@
 use std::path::Path;
 use std::process::Command;
 
-use ravel::certify::{check, Answer};
-use ravel::nn::Layer;
+use ravel_base::nn::Layer;
+use ravel_certify::{check, Answer};
 use serde_json::Value;
 
 fn run(spec: &str) -> (ravel::lower::Plan, Value) {
     let source = std::fs::read_to_string(spec).expect("spec readable");
     let dir = Path::new(spec).parent().expect("folder");
-    let checked = ravel::front_end(&source, dir, &ravel::cli::read_request).expect("valid spec");
+    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
     let plan = ravel::lower::lower(&checked);
     let outcome = ravel::execute::execute(&plan, &|| 0.0);
     let id = ravel::certificate::Identity {
@@ -477,7 +477,7 @@ fn a_wrong_verified_verdict_never_gets_a_valid_certificate() {
     // evidence cannot establish the verdict and is marked unsupported
     let source = std::fs::read_to_string("specs/double_integrator_falsified.ravel").expect("spec");
     let checked =
-        ravel::front_end(&source, Path::new("specs"), &ravel::cli::read_request).expect("valid");
+        ravel::front_end(&source, Path::new("specs"), &ravel_cli::read_request).expect("valid");
     let plan = ravel::lower::lower(&checked);
     let mut outcome = ravel::execute::execute(&plan, &|| 0.0);
     assert_eq!(
@@ -588,7 +588,7 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
     ] {
         let source = std::fs::read_to_string(spec).expect("spec readable");
         let dir = Path::new(spec).parent().expect("folder");
-        let checked = ravel::front_end(&source, dir, &ravel::cli::read_request).expect("valid");
+        let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid");
         let mut plan = ravel::lower::lower(&checked);
         plan.closed_loop.slope_steps = steps;
         for q in &mut plan.properties {

@@ -13,14 +13,14 @@ mod common;
 
 use common::{net_certificate, run_net};
 use nalgebra::{DMatrix, DVector};
-use ravel::certify::{check, Answer};
 use ravel::check::{NetProperty, NetPropertyKind};
 use ravel::execute::network::Witness;
 use ravel::execute::Status;
 use ravel::ir::Partitioner;
 use ravel::lower::NetPlan;
-use ravel::nn::{Activation, InputType, Layer, Network};
-use ravel::sets::{IBox, Polytope, Region};
+use ravel_analysis::sets::{IBox, Polytope, Region};
+use ravel_base::nn::{Activation, InputType, Layer, Network};
+use ravel_certify::{check, Answer};
 use serde_json::Value;
 
 /// `y = w·x` on one input.
@@ -229,7 +229,7 @@ fn closed_loop_counterexamples_survive_json() {
     );
     let source = std::fs::read_to_string(spec).expect("spec readable");
     let dir = std::path::Path::new(spec).parent().expect("folder");
-    let checked = ravel::front_end(&source, dir, &ravel::cli::read_request).expect("valid spec");
+    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
     let plan = ravel::lower::lower(&checked);
     let out = ravel::execute::execute(&plan, &|| 0.0);
     let json = ravel::report::json("s", &plan, &out, None);
@@ -274,7 +274,7 @@ fn closed_loop_counterexamples_survive_json() {
 /// output violates).
 #[test]
 fn falsified_inputs_violate_in_float32_for_every_activation() {
-    let mut rng = ravel::rng::Rng::new(11);
+    let mut rng = ravel_base::rng::Rng::new(11);
     let mut seen = 0;
     for act in [Activation::Relu, Activation::Tanh, Activation::Sigmoid] {
         for case in 0..6 {

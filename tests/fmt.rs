@@ -44,18 +44,18 @@ fn formatting_keeps_meaning_and_comments_and_is_idempotent() {
         let Ok(src) = std::fs::read_to_string(&path) else {
             continue; // the corpus holds files that are not UTF-8
         };
-        if ravel::syntax::parse(&src).is_err() {
+        if ravel_syntax::parse(&src).is_err() {
             assert!(matches!(
-                ravel::fmt::format(&src),
-                Err(ravel::fmt::Error::Syntax(_))
+                ravel_syntax::fmt::format(&src),
+                Err(ravel_syntax::fmt::Error::Syntax(_))
             ));
             continue;
         }
-        let once = match ravel::fmt::format(&src) {
+        let once = match ravel_syntax::fmt::format(&src) {
             Ok(t) => t,
             Err(e) => panic!("{}: {e:?}", path.display()),
         };
-        let twice = ravel::fmt::format(&once).expect("formats again");
+        let twice = ravel_syntax::fmt::format(&once).expect("formats again");
         assert_eq!(once, twice, "{}: not idempotent", path.display());
         assert_eq!(
             comments(&src),

@@ -19,14 +19,13 @@ mod common;
 #[path = "common/exact.rs"]
 mod exact;
 
-use ravel::certify::{check, Answer};
 use ravel::execute::Status;
+use ravel_certify::{check, Answer};
 use serde_json::{json, Value};
 
 /// Plan and outcome of spec text whose files resolve against `dir`.
 fn analyse(source: &str, dir: &Path) -> (ravel::lower::Plan, ravel::execute::Outcome) {
-    let checked =
-        ravel::front_end(source, dir, &ravel::cli::read_request).expect("the spec checks");
+    let checked = ravel::front_end(source, dir, &ravel_cli::read_request).expect("the spec checks");
     let plan = ravel::lower::lower(&checked);
     let outcome = ravel::execute::execute(&plan, &|| 0.0);
     (plan, outcome)
@@ -95,7 +94,7 @@ fn a_huge_goal_dual_cannot_certify_a_false_goal() {
         let lo: Vec<f64> = serde_json::from_value(last["set"]["lo"].clone()).expect("lo");
         let hi: Vec<f64> = serde_json::from_value(last["set"]["hi"].clone()).expect("hi");
         let ones = vec![1.0; lo.len()];
-        let b = ravel::num::dot_box_upper(&ones, &lo, &hi);
+        let b = ravel_base::num::dot_box_upper(&ones, &lo, &hi);
         let b = b + 1e-9 * (1.0 + b.abs());
         last["rows"] = json!([{ "a": ones, "b": b }]);
         // a dual of 3.5e307 on that row for each of the goal's six rows
@@ -240,8 +239,8 @@ fn a_forged_counterexample_at_the_top_of_f64_is_replayed_not_trusted() {
 fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
     use ravel::check::{NetProperty, NetPropertyKind};
     use ravel::ir::NetPropagator;
-    use ravel::nn::{Layer, Network};
-    use ravel::sets::{IBox, Polytope, Region};
+    use ravel_analysis::sets::{IBox, Polytope, Region};
+    use ravel_base::nn::{Layer, Network};
     let n = 5;
     let layers = (0..20)
         .map(|_| Layer::Affine {
@@ -285,14 +284,14 @@ fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
         out.properties[0].counterexample = None;
         let mut forced = ravel::certificate::build_network(&plan, &out, &id);
         assert!(!matches!(
-            ravel::certify::network::check(&forced, &net).answer,
+            ravel_certify::network::check(&forced, &net).answer,
             Answer::Valid
         ));
         forced["evidence"] = json!({
             "status": "checkable",
             "cells": [{ "lo": input.lo, "hi": input.hi }],
         });
-        let a = ravel::certify::network::check(&forced, &net).answer;
+        let a = ravel_certify::network::check(&forced, &net).answer;
         assert!(
             !matches!(a, Answer::Valid),
             "{propagator:?}: a false requirement certified: {a:?}"
@@ -549,8 +548,8 @@ analysis {{
 #[test]
 fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
     use ravel::check::{NetProperty, NetPropertyKind};
-    use ravel::nn::{Activation, Layer, Network};
-    use ravel::sets::{IBox, Polytope, Region};
+    use ravel_analysis::sets::{IBox, Polytope, Region};
+    use ravel_base::nn::{Activation, Layer, Network};
     let net = Network::new(
         1,
         vec![
@@ -584,7 +583,7 @@ fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
     let mut cert = common::net_certificate(&plan, &out);
     cert["evidence"] =
         json!({ "status": "checkable", "cells": [{ "lo": input.lo, "hi": input.hi }] });
-    let a = ravel::certify::network::check(&cert, &net).answer;
+    let a = ravel_certify::network::check(&cert, &net).answer;
     assert!(
         !matches!(a, Answer::Valid),
         "a false requirement certified: {a:?}"
@@ -599,8 +598,8 @@ fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
 #[test]
 fn an_underflowing_coefficient_times_a_huge_hidden_value_is_no_proof() {
     use ravel::check::{NetProperty, NetPropertyKind};
-    use ravel::nn::{Activation, InputType, Layer, Network};
-    use ravel::sets::{IBox, Polytope, Region};
+    use ravel_analysis::sets::{IBox, Polytope, Region};
+    use ravel_base::nn::{Activation, InputType, Layer, Network};
     let m = |r: usize, c: usize, v: &[f64]| nalgebra::DMatrix::from_row_slice(r, c, v);
     let relu = || Layer::Act(Activation::Relu);
     let net = Network::new(
@@ -651,7 +650,7 @@ fn an_underflowing_coefficient_times_a_huge_hidden_value_is_no_proof() {
             "{steps} slope steps: a false requirement verified"
         );
         let cert = common::net_certificate(&plan, &out);
-        let a = ravel::certify::network::check(&cert, &net).answer;
+        let a = ravel_certify::network::check(&cert, &net).answer;
         assert!(!matches!(a, Answer::Valid) || out.properties[0].status != Status::Verified);
     }
 }

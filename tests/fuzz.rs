@@ -25,8 +25,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use ravel::onnx::ExternalFiles;
-use ravel::rng::Rng;
 use ravel::ReadRequest;
+use ravel_base::rng::Rng;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -262,14 +262,14 @@ fn fuzz_front_end() {
         let started = Instant::now();
         let r = catch_unwind(AssertUnwindSafe(|| {
             // the formatter: idempotent, and never a change of meaning
-            match ravel::fmt::format(&source) {
+            match ravel_syntax::fmt::format(&source) {
                 Ok(f) => assert_eq!(
-                    ravel::fmt::format(&f).ok().as_deref(),
+                    ravel_syntax::fmt::format(&f).ok().as_deref(),
                     Some(f.as_str()),
                     "fmt is not idempotent"
                 ),
-                Err(ravel::fmt::Error::Changed) => panic!("fmt would change the meaning"),
-                Err(ravel::fmt::Error::Syntax(_)) => {}
+                Err(ravel_syntax::fmt::Error::Changed) => panic!("fmt would change the meaning"),
+                Err(ravel_syntax::fmt::Error::Syntax(_)) => {}
             }
             match ravel::front_end_task(&source, Path::new("specs"), &reader, None) {
                 Ok(ravel::check::Task::System(c)) => {
@@ -292,7 +292,7 @@ fn fuzz_front_end() {
                         );
                     }
                     // rendering must not panic either
-                    let _ = ravel::diag::render(&d, "fuzz.ravel", &source, 100, false);
+                    let _ = ravel_syntax::diag::render(&d, "fuzz.ravel", &source, 100, false);
                     false
                 }
             }
@@ -334,42 +334,41 @@ fn fuzz_onnx_loader() {
         cases += 1;
         watchdog.case(&input);
         let started = Instant::now();
-        let r = catch_unwind(AssertUnwindSafe(|| {
-            let mut ext = ExternalFiles::new();
-            for req in ravel::onnx::external_requests(&input) {
-                assert!(req.bytes <= ravel::limits::MAX_CONTROLLER_BYTES);
-                assert!(ravel::onnx::normalise_location(&req.location).is_some());
-                ext.insert(
-                    req.location,
-                    Ok(data.iter().copied().take(req.bytes as usize).collect()),
-                );
-            }
-            match ravel::onnx::load(&input, &ext) {
-                Ok(c) => {
-                    for l in &c.net.layers {
-                        if let ravel::nn::Layer::Affine { w, b } = l {
-                            assert!(w.nrows() as u64 <= ravel::limits::MAX_WIDTH);
-                            assert!(w
-                                .iter()
-                                .chain(b.iter())
-                                .all(|v| v.is_finite() && v.abs() <= ravel::limits::MAX_MAGNITUDE));
-                        }
-                    }
-                    let y = c.net.forward(&vec![0.5; c.inputs]);
-                    assert_eq!(y.len(), c.outputs);
-                    true
-                }
-                Err(e) => {
-                    assert!(!e.message.chars().any(char::is_control), "{:?}", e.message);
-                    assert!(
-                        e.message.chars().count() < 600,
-                        "long message {:?}",
-                        e.message
+        let r =
+            catch_unwind(AssertUnwindSafe(|| {
+                let mut ext = ExternalFiles::new();
+                for req in ravel::onnx::external_requests(&input) {
+                    assert!(req.bytes <= ravel_base::limits::MAX_CONTROLLER_BYTES);
+                    assert!(ravel::onnx::normalise_location(&req.location).is_some());
+                    ext.insert(
+                        req.location,
+                        Ok(data.iter().copied().take(req.bytes as usize).collect()),
                     );
-                    false
                 }
-            }
-        }));
+                match ravel::onnx::load(&input, &ext) {
+                    Ok(c) => {
+                        for l in &c.net.layers {
+                            if let ravel_base::nn::Layer::Affine { w, b } = l {
+                                assert!(w.nrows() as u64 <= ravel_base::limits::MAX_WIDTH);
+                                assert!(w.iter().chain(b.iter()).all(|v| v.is_finite()
+                                    && v.abs() <= ravel_base::limits::MAX_MAGNITUDE));
+                            }
+                        }
+                        let y = c.net.forward(&vec![0.5; c.inputs]);
+                        assert_eq!(y.len(), c.outputs);
+                        true
+                    }
+                    Err(e) => {
+                        assert!(!e.message.chars().any(char::is_control), "{:?}", e.message);
+                        assert!(
+                            e.message.chars().count() < 600,
+                            "long message {:?}",
+                            e.message
+                        );
+                        false
+                    }
+                }
+            }));
         match r {
             Ok(ok) => accepted += usize::from(ok),
             Err(_) => findings.push(report("onnx", cases, &input, "panic")),

@@ -13,11 +13,11 @@ use std::process::Command;
 
 use nalgebra::{DMatrix, DVector};
 use prost::Message;
-use ravel::diag::Code;
-use ravel::nn::{Activation, Layer, Network};
 use ravel::onnx::build::{GraphBuilder, Storage};
 use ravel::onnx::proto::{ModelProto, StringStringEntryProto};
 use ravel::ReadRequest;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_syntax::diag::Code;
 
 /// A fresh folder for one test.
 fn folder(name: &str) -> PathBuf {
@@ -84,26 +84,26 @@ horizon 2
 fn front(
     dir: &Path,
 ) -> (
-    Result<ravel::check::Checked, Vec<ravel::diag::Diagnostic>>,
+    Result<ravel::check::Checked, Vec<ravel_syntax::diag::Diagnostic>>,
     Vec<ReadRequest>,
 ) {
     let log = RefCell::new(Vec::new());
     let reader = |r: &ReadRequest| {
         log.borrow_mut().push(r.clone());
-        ravel::cli::read_request(r)
+        ravel_cli::read_request(r)
     };
     let res = ravel::front_end(SPEC, dir, &reader);
     (res, log.into_inner())
 }
 
-fn codes(res: &Result<ravel::check::Checked, Vec<ravel::diag::Diagnostic>>) -> Vec<Code> {
+fn codes(res: &Result<ravel::check::Checked, Vec<ravel_syntax::diag::Diagnostic>>) -> Vec<Code> {
     match res {
         Ok(_) => Vec::new(),
         Err(d) => d.iter().map(|d| d.code).collect(),
     }
 }
 
-fn messages(res: &Result<ravel::check::Checked, Vec<ravel::diag::Diagnostic>>) -> String {
+fn messages(res: &Result<ravel::check::Checked, Vec<ravel_syntax::diag::Diagnostic>>) -> String {
     match res {
         Ok(_) => String::new(),
         Err(d) => d
@@ -430,12 +430,12 @@ analysis {
         for (width, refused) in [(150, true), (100, false)] {
             let dir = folder(&format!("sdp_size_{outputs}_{width}"));
             let mut g = GraphBuilder::new(2, Storage::RawF32);
-            let mut rng = ravel::rng::Rng::new(5);
+            let mut rng = ravel_base::rng::Rng::new(5);
             let net = common::relu_network(&mut rng, &[2, width, width, outputs], 1.0, 0.1);
             g.network(&net, false);
             let (bytes, _) = g.finish(outputs);
             std::fs::write(dir.join("models/policy.onnx"), bytes).expect("write");
-            let res = ravel::front_end_task(spec, &dir, &ravel::cli::read_request, None);
+            let res = ravel::front_end_task(spec, &dir, &ravel_cli::read_request, None);
             let diags = res.err().unwrap_or_default();
             let got: Vec<Code> = diags.iter().map(|d| d.code).collect();
             let expected = if refused { vec![Code::Limit] } else { vec![] };

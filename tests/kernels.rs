@@ -15,12 +15,12 @@
 //! inside both.
 
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::crown::{plus_minus_identity, Analysis, Mode, Rows};
-use ravel::analysis::relax::{image, relax, Relax};
-use ravel::nn::{Activation, Layer, Network};
-use ravel::num::{dot_box_lower, dot_box_upper, gamma, slack, sum_lower, sum_upper, U};
-use ravel::rng::Rng;
-use ravel::sets::IBox;
+use ravel_analysis::crown::{plus_minus_identity, Analysis, Mode, Rows};
+use ravel_analysis::relax::{image, relax, Relax};
+use ravel_analysis::sets::IBox;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::num::{dot_box_lower, dot_box_upper, gamma, slack, sum_lower, sum_upper, U};
+use ravel_base::rng::Rng;
 
 mod reference {
     use super::*;
@@ -403,8 +403,8 @@ fn closed_loop_kernel_campaign() {
 /// kernel's bounds and the general path's (each within 10⁻⁹, asserted,
 /// with sampled true next states inside the kernel's set).
 fn kernel_case(seed: u64) -> (usize, f64) {
-    use ravel::analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
-    use ravel::sets::Region;
+    use ravel_analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
+    use ravel_analysis::sets::Region;
     let mut worst = 0.0f64;
     let mut close = |a: f64, b: f64| {
         let d = (a - b).abs() / (1.0 + a.abs().max(b.abs()));
@@ -551,8 +551,8 @@ fn kernel_case(seed: u64) -> (usize, f64) {
 /// a state near the top of `f64` or a NaN gives the whole space, flagged.
 #[test]
 fn closed_loop_kernel_overflows_as_the_general_path_does() {
-    use ravel::analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
-    use ravel::sets::Region;
+    use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
+    use ravel_analysis::sets::Region;
     let mut rng = Rng::new(7);
     let net = common::random_network(&mut rng, 2, 1, Activation::Relu, (2, 5));
     let plant = Plant {

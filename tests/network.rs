@@ -7,16 +7,16 @@ mod common;
 
 use common::{net_plan as plan, random_network, run_net as run};
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::partition::Budget;
-use ravel::analysis::shape::Shape;
 use ravel::check::{NetProperty, NetPropertyKind, RadiusSpec};
 use ravel::execute::network::{execute_network, NetControl};
 use ravel::execute::Status;
 use ravel::ir::{Guide, NetPropagator, Partitioner};
 use ravel::lower::NetPlan;
-use ravel::nn::{Activation, Layer, Network};
-use ravel::rng::Rng;
-use ravel::sets::{IBox, Norm, Polytope, Region};
+use ravel_analysis::partition::Budget;
+use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
+use ravel_analysis::shape::Shape;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
 
 /// Points of the region other than the executor's samples (another seed).
 fn probe(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {
@@ -370,7 +370,7 @@ fn carrl_bounds_contain_sampled_values() {
 /// outside the input set, or one that does not violate, is INVALID too.
 #[test]
 fn network_certificates_catch_false_claims() {
-    use ravel::certify::{check, Answer};
+    use ravel_certify::{check, Answer};
     let mut rng = Rng::new(8);
     let net = random_network(&mut rng, 2, 1, Activation::Relu, (2, 6));
     let input = Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]));
@@ -450,7 +450,7 @@ fn time_limit_keeps_every_bound_sound() {
             threads: 1,
         },
     );
-    assert_eq!(late.partition_stop, ravel::analysis::partition::Stop::Time);
+    assert_eq!(late.partition_stop, ravel_analysis::partition::Stop::Time);
     assert_eq!(late.output.offsets, whole);
     let c = &late.selections[0].choices[0];
     assert!(c.lower.iter().all(|v| *v == f64::NEG_INFINITY) && !c.robust_optimal);
@@ -576,20 +576,20 @@ fn a_tied_centre_refutes_nothing() {
 /// layer's bias and the merge error in the constant, a generous 1e-9 for
 /// the rounding of φ.
 fn sdp_output_bound(
-    prog: &ravel::analysis::sdp::StepSdp,
-    merged: &ravel::analysis::sdp::MergedNet,
+    prog: &ravel_analysis::sdp::StepSdp,
+    merged: &ravel_analysis::sdp::MergedNet,
     d: [f64; 2],
-) -> ravel::analysis::sdp::SdpBound {
-    sdp_output_bound_using(prog, merged, d, ravel::analysis::sdp::Solver::Auto)
+) -> ravel_analysis::sdp::SdpBound {
+    sdp_output_bound_using(prog, merged, d, ravel_analysis::sdp::Solver::Auto)
 }
 
 /// [`sdp_output_bound`] with the multipliers of `solver`.
 fn sdp_output_bound_using(
-    prog: &ravel::analysis::sdp::StepSdp,
-    merged: &ravel::analysis::sdp::MergedNet,
+    prog: &ravel_analysis::sdp::StepSdp,
+    merged: &ravel_analysis::sdp::MergedNet,
     d: [f64; 2],
-    solver: ravel::analysis::sdp::Solver,
-) -> ravel::analysis::sdp::SdpBound {
+    solver: ravel_analysis::sdp::Solver,
+) -> ravel_analysis::sdp::SdpBound {
     let (wl, bl) = merged.layers.last().expect("output layer");
     let mut phi = vec![0.0; prog.dim()];
     for k in 0..wl.ncols() {
@@ -612,7 +612,7 @@ fn sdp_output_bound_using(
 /// where Clarabel stops earlier.)
 #[test]
 fn sdp_solvers_agree_bound_for_bound() {
-    use ravel::analysis::sdp::{merge, Solver, StepSdp};
+    use ravel_analysis::sdp::{merge, Solver, StepSdp};
     let mut rng = Rng::new(977);
     let mut compared = 0;
     for case in 0..12 {
@@ -660,7 +660,7 @@ fn sdp_solvers_agree_bound_for_bound() {
 /// into the objective too), some keep some.
 #[test]
 fn sdp_with_stable_neurons_substituted_contains_every_output() {
-    use ravel::analysis::sdp::{merge, StepSdp};
+    use ravel_analysis::sdp::{merge, StepSdp};
     let mut rng = Rng::new(4242);
     let (mut folded_all, mut kept_some) = (0, 0);
     for case in 0..16 {
@@ -704,14 +704,14 @@ fn sdp_with_stable_neurons_substituted_contains_every_output() {
 /// Clarabel for it is refused as too large (no attempt, no memory).
 #[test]
 fn sdp_beyond_clarabels_size_is_the_schur_methods() {
-    use ravel::analysis::sdp::{merge, Solver, StepSdp};
-    use ravel::issue::Issue;
+    use ravel_analysis::issue::Issue;
+    use ravel_analysis::sdp::{merge, Solver, StepSdp};
     let net = common::relu_network(&mut Rng::new(8), &[2, 90, 90, 2], 1.5, 0.2);
     let b = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
     let merged = merge(&net, &DMatrix::identity(2, 2), &b).expect("ReLU network");
     let prog = StepSdp::new(&merged, &b, &[]);
     assert!(
-        prog.kept_neurons() + 3 > ravel::limits::MAX_CLARABEL_SDP_DIM,
+        prog.kept_neurons() + 3 > ravel_base::limits::MAX_CLARABEL_SDP_DIM,
         "only {} neurons kept",
         prog.kept_neurons()
     );
@@ -734,7 +734,7 @@ fn sdp_beyond_clarabels_size_is_the_schur_methods() {
 /// contains the samples.
 #[test]
 fn sdp_with_many_input_rows_goes_to_clarabel() {
-    use ravel::analysis::sdp::{merge, Solver, StepSdp};
+    use ravel_analysis::sdp::{merge, Solver, StepSdp};
     let mut rng = Rng::new(31);
     let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 5));
     let b = IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]);
@@ -765,8 +765,8 @@ fn sdp_with_many_input_rows_goes_to_clarabel() {
 /// INVALID with the search switched off.
 #[test]
 fn network_certificates_check_optimised_slopes() {
-    use ravel::certify::{check, Answer};
     use ravel::execute::network::cell_bounds;
+    use ravel_certify::{check, Answer};
     let mut rng = Rng::new(31);
     let mut found = 0;
     for case in 0..40 {
@@ -818,7 +818,7 @@ fn network_certificates_check_optimised_slopes() {
 /// the inputs that satisfy the row.
 #[test]
 fn sdp_with_a_pinned_input_contains_every_output() {
-    use ravel::analysis::sdp::{merge, StepSdp};
+    use ravel_analysis::sdp::{merge, StepSdp};
     let mut rng = Rng::new(777);
     for case in 0..8 {
         let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 6));

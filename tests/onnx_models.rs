@@ -2,9 +2,9 @@
 //! supported encoding, and every loader error.
 
 use nalgebra::{DMatrix, DVector};
-use ravel::nn::{Activation, Layer, Network};
 use ravel::onnx::build::{GraphBuilder, Storage};
 use ravel::onnx::{load, ExternalFiles, OnnxErrorKind};
+use ravel_base::nn::{Activation, Layer, Network};
 use serde_json::Value;
 
 fn read_model(name: &str) -> ravel::onnx::Controller {
@@ -410,7 +410,7 @@ fn an_onnx_clip_equals_spec_saturation() {
         .replace("u in box([-1, 1])", "")
         .replace("\"../models/double_integrator.onnx\"", "\"clipped.onnx\"");
     let run = |src: &str, dir: &std::path::Path| {
-        let c = ravel::front_end(src, dir, &ravel::cli::read_request).expect("checks");
+        let c = ravel::front_end(src, dir, &ravel_cli::read_request).expect("checks");
         let plan = ravel::lower::lower(&c);
         ravel::execute::execute(&plan, &|| 0.0)
     };

@@ -6,9 +6,9 @@
 
 use std::path::Path;
 
-use ravel::analysis::closed_loop::{Cut, Propagator};
 use ravel::execute::{execute, Status};
 use ravel::lower::lower;
+use ravel_analysis::closed_loop::{Cut, Propagator};
 
 /// `x⁺ = 1e9·x + B u`: from `x[0] ∈ [1, 2]` the true states pass 1e300 at
 /// step 34 and stay positive, so the goal (near the origin, at the horizon)
@@ -42,7 +42,7 @@ fn run(src: &str) -> ravel::execute::Outcome {
     let checked = ravel::front_end(
         src,
         Path::new(env!("CARGO_MANIFEST_DIR")),
-        &ravel::cli::read_request,
+        &ravel_cli::read_request,
     )
     .unwrap_or_else(|d| panic!("spec does not check: {d:?}\n{src}"));
     let plan = lower(&checked);
@@ -158,7 +158,7 @@ fn a_spent_time_limit_leaves_everything_unsure() {
             let checked = ravel::front_end(
                 &src,
                 Path::new(env!("CARGO_MANIFEST_DIR")),
-                &ravel::cli::read_request,
+                &ravel_cli::read_request,
             )
             .expect("valid");
             let plan = lower(&checked);
@@ -199,7 +199,7 @@ fn counterexamples_are_confirmed_only_when_real() {
     let checked = ravel::front_end(
         &src,
         Path::new(env!("CARGO_MANIFEST_DIR")),
-        &ravel::cli::read_request,
+        &ravel_cli::read_request,
     )
     .expect("valid");
     let plan = lower(&checked);

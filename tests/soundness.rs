@@ -8,11 +8,11 @@ mod common;
 
 use common::random_network;
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
-use ravel::analysis::crown::{Analysis, Mode};
-use ravel::nn::{Activation, Layer};
-use ravel::rng::Rng;
-use ravel::sets::{IBox, Norm, Region};
+use ravel_analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
+use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::sets::{IBox, Norm, Region};
+use ravel_base::nn::{Activation, Layer};
+use ravel_base::rng::Rng;
 
 const PROPAGATORS: [Propagator; 6] = Propagator::ALL;
 
@@ -269,7 +269,7 @@ fn every_trajectory_stays_inside_every_reachable_set() {
                     .map(|_| {
                         let pts: Vec<[f64; 2]> =
                             (0..12).map(|_| [rng.normal(), rng.normal()]).collect();
-                        ravel::analysis::shape::hull_directions(&pts, 0.2)
+                        ravel_analysis::shape::hull_directions(&pts, 0.2)
                     })
                     .collect(),
             ));
@@ -387,9 +387,9 @@ fn linear_bounds_hold_pointwise() {
 
 #[test]
 fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
-    use ravel::analysis::open_loop::{output_set, sample_inputs, Partitioner};
-    use ravel::analysis::partition::{Budget, Strategy};
-    use ravel::analysis::shape::Shape;
+    use ravel_analysis::open_loop::{output_set, sample_inputs, Partitioner};
+    use ravel_analysis::partition::{Budget, Strategy};
+    use ravel_analysis::shape::Shape;
     let guided = |strategy, calls| Partitioner::Guided {
         strategy,
         budget: Budget {
@@ -495,10 +495,10 @@ fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
 /// simulation) lies, at every step, in the union of the cells' sets.
 #[test]
 fn every_trajectory_stays_inside_what_execute_reports() {
-    use ravel::analysis::partition::Budget;
     use ravel::execute::execute;
     use ravel::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
-    use ravel::sets::Polytope;
+    use ravel_analysis::partition::Budget;
+    use ravel_analysis::sets::Polytope;
 
     let mut checked = 0usize;
     let mut certified = 0usize;
@@ -611,9 +611,9 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 spec_sha256: String::new(),
             };
             let cert = ravel::certificate::build(&plan, &out, &id);
-            let report = ravel::certify::check(&cert, &plan.closed_loop.net);
+            let report = ravel_certify::check(&cert, &plan.closed_loop.net);
             match &report.answer {
-                ravel::certify::Answer::Valid => {
+                ravel_certify::Answer::Valid => {
                     if out
                         .properties
                         .iter()
@@ -624,7 +624,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 }
                 // only a verdict that Reach-SDP's tightness alone proves may
                 // lack checkable evidence (its multipliers are no witness yet)
-                ravel::certify::Answer::Unsupported(m) if prop == Propagator::ReachSdp => {
+                ravel_certify::Answer::Unsupported(m) if prop == Propagator::ReachSdp => {
                     let _ = m;
                 }
                 other => panic!("{what}: certificate {other:?}"),
@@ -688,7 +688,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
 /// uncertain plants.
 #[test]
 fn trajectories_stay_inside_the_checkers_own_bounds() {
-    use ravel::certify::bounds::{Bx, Chain, Loop, Start};
+    use ravel_certify::bounds::{Bx, Chain, Loop, Start};
     let mut checked = 0usize;
     for seed in 0..90u64 {
         let case = random_case(seed);
@@ -838,7 +838,7 @@ fn cell_threads_give_the_same_outcome() {
         let checked = ravel::front_end(
             &source,
             std::path::Path::new("specs"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
         )
         .expect("valid");
         let plan = ravel::lower::lower(&checked);
@@ -911,7 +911,7 @@ fn batched_simulation_matches_the_scalar_one_bit_for_bit() {
         let checked = ravel::front_end(
             &source,
             path.parent().expect("dir"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
         )
         .expect("valid");
         let plan = ravel::lower::lower(&checked);

@@ -11,7 +11,7 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use ravel::diag::render;
+use ravel_syntax::diag::render;
 
 fn expect_header(source: &str) -> Vec<String> {
     let line = source.lines().next().unwrap_or_default();
@@ -59,7 +59,7 @@ fn fewer_decimals(text: &str) -> String {
 }
 
 fn parse_snapshot(name: &str, source: &str) -> String {
-    match ravel::syntax::parse(source) {
+    match ravel_syntax::parse(source) {
         Ok(ast) => format!("{ast:#?}\n"),
         Err(d) => render(&d, name, source, 100, false),
     }
@@ -74,7 +74,7 @@ fn valid_specs() {
         let checked = match ravel::front_end(
             &source,
             path.parent().expect("spec has a folder"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
         ) {
             Ok(c) => c,
             Err(d) => panic!(
@@ -100,7 +100,7 @@ fn valid_specs() {
         );
         insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
         let mut report = ravel::report::text(&name, &plan, &outcome, None);
-        if plan.propagator == ravel::analysis::closed_loop::Propagator::ReachSdp {
+        if plan.propagator == ravel_analysis::closed_loop::Propagator::ReachSdp {
             // The SDP solver's LAPACK may round differently on another CPU:
             // its certified bounds are snapshotted at 4 decimals.
             report = fewer_decimals(&report);
@@ -117,7 +117,7 @@ fn certificate_summary(
     plan: &ravel::lower::Plan,
     outcome: &ravel::execute::Outcome,
 ) -> String {
-    use ravel::certify::Answer;
+    use ravel_certify::Answer;
     let id = ravel::certificate::Identity {
         spec_path: name.to_string(),
         spec_sha256: String::new(),
@@ -127,7 +127,7 @@ fn certificate_summary(
     let text = serde_json::to_string(&cert).expect("serialisable");
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
     assert_eq!(back, cert, "{name}: certificate does not round-trip");
-    let report = ravel::certify::check(&back, &plan.closed_loop.net);
+    let report = ravel_certify::check(&back, &plan.closed_loop.net);
     assert_eq!(
         report.answer,
         Answer::Valid,
@@ -157,7 +157,7 @@ fn network_specs() {
         let checked = match ravel::front_end_task(
             &source,
             path.parent().expect("spec has a folder"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
             None,
         ) {
             Ok(ravel::check::Task::Network(c)) => c,
@@ -226,10 +226,10 @@ fn network_specs() {
         let text = serde_json::to_string(&cert).expect("serialisable");
         let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
         assert_eq!(back, cert, "{name}: certificate does not round-trip");
-        let checked = ravel::certify::check(&back, &plan.net);
+        let checked = ravel_certify::check(&back, &plan.net);
         assert_eq!(
             checked.answer,
-            ravel::certify::Answer::Valid,
+            ravel_certify::Answer::Valid,
             "{name}: certificate not VALID: {:?}",
             checked.properties
         );
@@ -251,7 +251,7 @@ fn invalid_specs() {
         let diags = match ravel::front_end_task(
             &source,
             path.parent().expect("spec has a folder"),
-            &ravel::cli::read_request,
+            &ravel_cli::read_request,
             None,
         ) {
             Ok(_) => panic!("{name} is an invalid spec but checks without diagnostics"),

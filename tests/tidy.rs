@@ -22,6 +22,7 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 fn every_source_file_opens_with_a_module_comment() {
     let mut files = Vec::new();
     rust_files(&root().join("src"), &mut files);
+    rust_files(&root().join("crates"), &mut files);
     assert!(files.len() > 15);
     for f in files {
         let text = std::fs::read_to_string(&f).expect("readable");
@@ -42,7 +43,7 @@ fn every_diagnostic_code_is_documented_and_exemplified() {
         headers += text.lines().next().unwrap_or_default();
         headers += "\n";
     }
-    for code in ravel::diag::Code::ALL {
+    for code in ravel_syntax::diag::Code::ALL {
         let c = code.as_str();
         assert!(
             docs.contains(&format!("## {c}:")),
@@ -57,7 +58,8 @@ fn every_diagnostic_code_is_documented_and_exemplified() {
 
 #[test]
 fn every_grammar_rule_is_documented() {
-    let g = std::fs::read_to_string(root().join("grammar/ravel.pest")).expect("grammar");
+    let g =
+        std::fs::read_to_string(root().join("crates/syntax/grammar/ravel.pest")).expect("grammar");
     let lines: Vec<&str> = g.lines().collect();
     let mut rules = 0;
     for (i, line) in lines.iter().enumerate() {
@@ -104,37 +106,161 @@ fn readme_example_output_is_what_ravel_prints() {
     assert!(compared > 10);
 }
 
-/// The certificate checker shares no analysis code: outside comments, its
-/// files name only the network type, the rounding helpers, the limits and
-/// the text sanitiser from the rest of the crate.
+/// The crate graph as designed, written once: each crate's folder, its
+/// name, and every crate it may depend on (the workspace's own first). A new
+/// dependency is a change of architecture: add it here, in the same commit,
+/// and to ARCHITECTURE.md.
+const GRAPH: &[(&str, &str, &[&str])] = &[
+    ("crates/base", "ravel-base", &["nalgebra"]),
+    (
+        "crates/syntax",
+        "ravel-syntax",
+        &["ravel-base", "pest", "pest_derive", "miette"],
+    ),
+    // the checker trusts nothing of the analysis: it may use the base crate alone
+    (
+        "crates/certify",
+        "ravel-certify",
+        &["ravel-base", "nalgebra", "serde_json"],
+    ),
+    // the only crate with solvers, threads and `unsafe` (loading BLAS)
+    (
+        "crates/analysis",
+        "ravel-analysis",
+        &[
+            "ravel-base",
+            "nalgebra",
+            "clarabel",
+            "faer",
+            "dyn-stack",
+            "rayon",
+            "libc",
+        ],
+    ),
+    (
+        "crates/ravel",
+        "ravel",
+        &[
+            "ravel-syntax",
+            "ravel-base",
+            "ravel-certify",
+            "ravel-analysis",
+            "nalgebra",
+            "prost",
+            "serde_json",
+            "sha2",
+            "mimalloc",
+        ],
+    ),
+    // the command line: the only crate with clap and the file system
+    (
+        ".",
+        "ravel-cli",
+        &[
+            "ravel",
+            "ravel-analysis",
+            "ravel-base",
+            "ravel-certify",
+            "ravel-syntax",
+            "nalgebra",
+            "prost",
+            "clap",
+            "libc",
+            "serde_json",
+        ],
+    ),
+];
+
+/// The `[dependencies]` of a manifest (the keys only).
+fn dependencies(manifest: &str) -> Vec<String> {
+    let mut deps = Vec::new();
+    let mut inside = false;
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            inside = line == "[dependencies]";
+        } else if inside && !line.is_empty() && !line.starts_with('#') {
+            let key: String = line
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '-' || *c == '_')
+                .collect();
+            deps.push(key);
+        }
+    }
+    deps
+}
+
+/// Every crate depends on exactly the crates the design allows, and the
+/// workspace has exactly the designed crates.
 #[test]
-fn the_checker_imports_no_analysis_code() {
-    // `exact`: the exact sums of the property tests (test builds only)
-    const ALLOWED: [&str; 5] = ["nn", "num", "limits", "diag", "exact"];
-    let mut files = Vec::new();
-    rust_files(&root().join("src/certify"), &mut files);
-    assert!(files.len() >= 3);
-    for f in files {
-        let text = std::fs::read_to_string(&f).expect("readable");
-        for line in text.lines() {
-            let code = line.split("//").next().unwrap_or("");
-            for (i, _) in code.match_indices("crate::") {
-                let rest = &code[i + "crate::".len()..];
-                let name: String = rest
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                    .collect();
-                assert!(
-                    ALLOWED.contains(&name.as_str()),
-                    "{} uses crate::{name}: the checker must stay independent of the analysis",
-                    f.display()
-                );
-            }
+fn the_crate_graph_is_the_designed_one() {
+    let root_manifest = std::fs::read_to_string(root().join("Cargo.toml")).expect("manifest");
+    for (dir, name, allowed) in GRAPH {
+        let manifest =
+            std::fs::read_to_string(root().join(dir).join("Cargo.toml")).expect("crate manifest");
+        assert!(
+            manifest.contains(&format!("name = \"{name}\"")),
+            "{dir} is not the crate {name}"
+        );
+        let mut deps = dependencies(&manifest);
+        deps.sort();
+        let mut want: Vec<String> = allowed.iter().map(|s| s.to_string()).collect();
+        want.sort();
+        assert_eq!(deps, want, "{name}'s dependencies differ from the design");
+        if *dir != "." {
             assert!(
-                !code.contains("clarabel") && !code.contains("super::super"),
-                "{}: {line}",
-                f.display()
+                root_manifest.contains(&format!("\"{dir}\"")),
+                "{dir} is not a workspace member"
             );
         }
     }
+    let mut crates = Vec::new();
+    for e in std::fs::read_dir(root().join("crates")).expect("crates") {
+        crates.push(e.expect("entry").file_name().to_string_lossy().to_string());
+    }
+    assert_eq!(
+        crates.len(),
+        GRAPH.len() - 1,
+        "a crate outside the design: {crates:?}"
+    );
+}
+
+/// `unsafe` is forbidden at every crate's root but the analysis crate's,
+/// which denies it and allows it in the one module that loads BLAS; no
+/// library crate touches the file system, the process or its environment.
+#[test]
+fn only_the_analysis_crate_may_hold_unsafe_code_and_only_the_cli_does_io() {
+    for (dir, name, _) in GRAPH {
+        let lib = root().join(dir).join("src/lib.rs");
+        let text = std::fs::read_to_string(&lib).expect("lib.rs");
+        let want = if *name == "ravel-analysis" {
+            "#![deny(unsafe_code)]"
+        } else {
+            "#![forbid(unsafe_code)]"
+        };
+        assert!(text.contains(want), "{} lacks {want}", lib.display());
+    }
+    let mut files = Vec::new();
+    rust_files(&root().join("crates"), &mut files);
+    let mut allowed_unsafe = 0;
+    for f in files {
+        let text = std::fs::read_to_string(&f).expect("readable");
+        // unit tests may read files and the environment
+        let code = text.split("#[cfg(test)]").next().unwrap_or("");
+        for line in code.lines() {
+            let code = line.split("//").next().unwrap_or("");
+            for io in ["std::fs", "File::", "std::env", "std::process::Command"] {
+                assert!(!code.contains(io), "{}: {line}", f.display());
+            }
+            if code.contains("allow(unsafe_code)") {
+                assert!(
+                    f.ends_with("crates/analysis/src/blas.rs"),
+                    "{}",
+                    f.display()
+                );
+                allowed_unsafe += 1;
+            }
+        }
+    }
+    assert!(allowed_unsafe >= 1);
 }

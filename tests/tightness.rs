@@ -11,15 +11,15 @@
 
 use std::path::Path;
 
-use ravel::analysis::closed_loop::{Boundary, Propagator};
 use ravel::execute::{execute, propagate_cell};
 use ravel::lower::{lower, Partitioner, Plan};
-use ravel::sets::{IBox, Region};
+use ravel_analysis::closed_loop::{Boundary, Propagator};
+use ravel_analysis::sets::{IBox, Region};
 
 fn plan(spec: &str, prop: Propagator, partitioner: Partitioner, boundary: Boundary) -> Plan {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(spec);
     let src = std::fs::read_to_string(&path).expect("spec");
-    let mut c = ravel::front_end(&src, path.parent().expect("dir"), &ravel::cli::read_request)
+    let mut c = ravel::front_end(&src, path.parent().expect("dir"), &ravel_cli::read_request)
         .expect("valid spec");
     c.propagator = prop;
     c.partitioner = partitioner;
@@ -85,7 +85,7 @@ fn partitioned_runs_are_never_looser_than_their_parent() {
                     prop,
                     Partitioner::Guided {
                         guide: ravel::lower::Guide::Gsg,
-                        budget: ravel::analysis::partition::Budget {
+                        budget: ravel_analysis::partition::Budget {
                             calls: 9,
                             min_size: 0.01,
                             seconds: None,

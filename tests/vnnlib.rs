@@ -5,7 +5,7 @@
 
 use ravel::check::{NetPropertyKind, Task};
 use ravel::execute::network::{execute_network, NetControl};
-use ravel::sets::Region;
+use ravel_analysis::sets::Region;
 use std::path::Path;
 
 const DIR: &str = "tests/data/vnnlib";
@@ -18,7 +18,7 @@ fn import(name: &str) -> Result<String, ravel::vnnlib::ImportError> {
 
 fn run(name: &str) -> (ravel::lower::NetPlan, ravel::execute::network::NetOutcome) {
     let spec = import(name).expect("imports");
-    let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel::cli::read_request, None)
+    let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel_cli::read_request, None)
         .unwrap_or_else(|d| panic!("{name}: the imported spec does not check: {d:?}\n{spec}"));
     let Task::Network(c) = task else {
         panic!("{name}: not a network spec")
@@ -55,7 +55,7 @@ fn robustness_disjunction_becomes_a_union() {
     );
     assert_eq!(
         plan.input,
-        Some(Region::Box(ravel::sets::IBox::new(
+        Some(Region::Box(ravel_analysis::sets::IBox::new(
             vec![0.55, 0.25],
             vec![0.65, 0.35]
         )))
@@ -162,7 +162,7 @@ fn counterexamples_are_float32_inputs_of_the_box() {
     let verify = |text: &str| {
         let spec = ravel::vnnlib::import(text, "../../../models/classifier.onnx", "f", "f")
             .expect("imports");
-        let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel::cli::read_request, None)
+        let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel_cli::read_request, None)
             .unwrap_or_else(|d| panic!("the imported spec does not check: {d:?}\n{spec}"));
         let Task::Network(c) = task else {
             panic!("not a network spec")

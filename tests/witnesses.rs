@@ -7,13 +7,13 @@
 
 mod common;
 
-use ravel::certify::Answer;
 use ravel::check::{NetProperty, NetPropertyKind};
 use ravel::execute::Status;
 use ravel::ir::NetPropagator;
 use ravel::lower::NetPlan;
-use ravel::nn::{Layer, Network};
-use ravel::sets::{IBox, Norm, Polytope, Region};
+use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
+use ravel_base::nn::{Layer, Network};
+use ravel_certify::Answer;
 use serde_json::{json, Value};
 
 /// The double integrator's goal narrowed to `x[1] ≤ 0.2` at step 5:
@@ -28,12 +28,9 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let narrowed = source.replace("x[1] in [-1.5, 0.5]", "x[1] in [-1.5, 0.2]");
     assert_ne!(narrowed, source);
     let analyse = |src: &str| {
-        let checked = ravel::front_end(
-            src,
-            std::path::Path::new("specs"),
-            &ravel::cli::read_request,
-        )
-        .expect("the spec checks");
+        let checked =
+            ravel::front_end(src, std::path::Path::new("specs"), &ravel_cli::read_request)
+                .expect("the spec checks");
         let plan = ravel::lower::lower(&checked);
         let outcome = ravel::execute::execute(&plan, &|| 0.0);
         (plan, outcome)
@@ -61,7 +58,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let cells = cert["evidence"]["cells"].as_array().expect("cells").len();
     assert!(cells > 1, "{cells} cell(s)");
     assert_eq!(
-        ravel::certify::check(&cert, &plan.closed_loop.net).answer,
+        ravel_certify::check(&cert, &plan.closed_loop.net).answer,
         Answer::Valid
     );
     // dropping one refined cell leaves X0 uncovered: INVALID
@@ -71,7 +68,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
         .expect("cells")
         .pop();
     assert!(matches!(
-        ravel::certify::check(&dropped, &plan.closed_loop.net).answer,
+        ravel_certify::check(&dropped, &plan.closed_loop.net).answer,
         Answer::Invalid(_)
     ));
     // a goal no analysis proves (x[1] ≤ −0.04 at step 5, while sampled
@@ -84,7 +81,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let cert = ravel::certificate::build(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     assert!(matches!(
-        ravel::certify::check(&cert, &plan.closed_loop.net).answer,
+        ravel_certify::check(&cert, &plan.closed_loop.net).answer,
         Answer::Unsupported(_)
     ));
 }
@@ -99,7 +96,7 @@ fn sum_network() -> Network {
                 w: nalgebra::DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1.0]),
                 b: nalgebra::DVector::from_vec(vec![10.0, 10.0]),
             },
-            Layer::Act(ravel::nn::Activation::Relu),
+            Layer::Act(ravel_base::nn::Activation::Relu),
             Layer::Affine {
                 w: nalgebra::DMatrix::from_row_slice(1, 2, &[1.0, 1.0]),
                 b: nalgebra::DVector::from_vec(vec![-20.0]),
@@ -125,7 +122,7 @@ fn plan(input: Region, bound: f64) -> NetPlan {
 }
 
 fn answer(cert: &Value, p: &NetPlan) -> Answer {
-    ravel::certify::network::check(cert, &p.net).answer
+    ravel_certify::network::check(cert, &p.net).answer
 }
 
 /// `x₀ + x₁ ≤ 1.5` on the unit ℓ2 ball (its maximum is √2 ≈ 1.414; over
@@ -212,7 +209,7 @@ fn polytope_input_proofs_certify_valid_with_dual_witnesses() {
 /// analysis used.
 #[test]
 fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
-    let mut rng = ravel::rng::Rng::new(11);
+    let mut rng = ravel_base::rng::Rng::new(11);
     let input = Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]));
     let mut found = false;
     for _ in 0..20 {
@@ -256,8 +253,8 @@ fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
 /// intersection, on random ReLU networks.
 #[test]
 fn checker_rows_over_balls_and_polytopes_contain_samples() {
-    use ravel::certify::bounds::{Bx, Duals, NetBounds, Start};
-    let mut rng = ravel::rng::Rng::new(26);
+    use ravel_certify::bounds::{Bx, Duals, NetBounds, Start};
+    let mut rng = ravel_base::rng::Rng::new(26);
     let mut checked = 0;
     for case in 0..60 {
         let net = common::relu_network(&mut rng, &[2, 6, 6, 2], 1.5, 0.3);

@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
-use ravel::nn::{Activation, Layer, Network};
-use ravel::rng::Rng;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
 
 /// The CPU model and the hardware threads available.
 pub fn machine() -> String {
@@ -48,7 +48,7 @@ pub fn args() -> (Option<String>, bool) {
 pub fn gsg32() -> ravel::ir::Partitioner {
     ravel::ir::Partitioner::Guided {
         guide: ravel::ir::Guide::Gsg,
-        budget: ravel::analysis::partition::Budget {
+        budget: ravel_analysis::partition::Budget {
             calls: 32,
             min_size: 1.0 / 64.0,
             seconds: None,

@@ -1,6 +1,6 @@
 //! `ravel-carrl-demo`: does certified robust action selection (CARRL) hold up
 //! where the nominal policy collapses? Episodes of the lane-keeping task of
-//! `ravel::demo`, controlled by the Q-network `models/lane_q.onnx`, under an
+//! `ravel_cli::demo`, controlled by the Q-network `models/lane_q.onnx`, under an
 //! observation adversary of growing strength; the average return of the
 //! nominal policy (the largest Q-value at the observation) and of CARRL at
 //! several robustness radii (the largest certified lower bound over the
@@ -15,14 +15,14 @@
 
 use std::process::ExitCode;
 
-use ravel::analysis::shape::Shape;
-use ravel::demo::step;
 use ravel::execute::network::{choose, NetControl};
 use ravel::ir::{NetPropagator, Partitioner};
 use ravel::lower::NetPlan;
-use ravel::nn::Network;
-use ravel::rng::Rng;
-use ravel::sets::Norm;
+use ravel_analysis::sets::Norm;
+use ravel_analysis::shape::Shape;
+use ravel_base::nn::Network;
+use ravel_base::rng::Rng;
+use ravel_cli::demo::step;
 
 /// The adversary's strengths (the ε_adv-box's half-width on both inputs).
 const ADVERSARY: [f64; 5] = [0.0, 0.1, 0.2, 0.3, 0.4];

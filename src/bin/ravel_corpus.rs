@@ -16,11 +16,11 @@ use std::path::Path;
 
 use nalgebra::{DMatrix, DVector};
 use prost::Message;
-use ravel::nn::{Activation, Layer, Network};
 use ravel::onnx::build::{float_attr, int_attr, GraphBuilder, Storage};
 use ravel::onnx::proto::{
     AttributeProto, GraphProto, ModelProto, NodeProto, StringStringEntryProto, TensorProto,
 };
+use ravel_base::nn::{Activation, Layer, Network};
 
 /// The spec every mutation starts from: floats are written with a `.` and
 /// integers without, so a literal's kind is known from its text.

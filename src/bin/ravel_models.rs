@@ -13,10 +13,10 @@ use std::fs;
 use std::path::Path;
 
 use nalgebra::{DMatrix, DVector};
-use ravel::nn::{Activation, Layer, Network};
 use ravel::onnx::build::{GraphBuilder, Storage};
 use ravel::onnx::proto::{AttributeProto, NodeProto};
-use ravel::rng::Rng;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
 
 /// Discrete-time LQR gain `K` (u = −K x) by Riccati iteration.
 fn lqr(a: &DMatrix<f64>, b: &DMatrix<f64>, q: &DMatrix<f64>, r: &DMatrix<f64>) -> DMatrix<f64> {
@@ -69,7 +69,7 @@ impl Mlp {
             }
             Activation::Tanh => 1.0 - z.tanh().powi(2),
             Activation::Sigmoid => {
-                let s = ravel::nn::sigmoid(z);
+                let s = ravel_base::nn::sigmoid(z);
                 s * (1.0 - s)
             }
         }
@@ -372,8 +372,8 @@ fn main() {
     );
 
     // a Q-network for the CARRL demonstration: the optimal action values of
-    // the lane-keeping task (ravel::demo), scaled by 1/20, fitted by MSE
-    let values = ravel::demo::Values::solve(61, 51, 300);
+    // the lane-keeping task (ravel_cli::demo), scaled by 1/20, fitted by MSE
+    let values = ravel_cli::demo::Values::solve(61, 51, 300);
     let mut rng = Rng::new(5);
     let xs: Vec<DVector<f64>> = (0..6000)
         .map(|_| DVector::from_vec(vec![rng.uniform(-1.5, 1.5), rng.uniform(-2.5, 2.5)]))

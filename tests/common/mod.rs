@@ -2,14 +2,14 @@
 #![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
-use ravel::analysis::shape::Shape;
 use ravel::check::NetProperty;
 use ravel::execute::network::{execute_network, NetControl, NetOutcome};
 use ravel::ir::{NetPropagator, Partitioner};
 use ravel::lower::NetPlan;
-use ravel::nn::{Activation, Layer, Network};
-use ravel::rng::Rng;
-use ravel::sets::Region;
+use ravel_analysis::sets::Region;
+use ravel_analysis::shape::Shape;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
 use serde_json::Value;
 
 /// A ReLU network with the given widths (input first, output last),

@@ -1,0 +1,1657 @@
+//! The checker's own arithmetic: interval images, linear bounds through a
+//! ReLU network (back-substitution with relaxations built from *claimed*
+//! pre-activation bounds), and the bound of one closed-loop step on a facet.
+//!
+//! Nothing here calls the analysis: the only shared pieces are the
+//! outward-rounded sums of [`ravel_base::num`] and the [`Network`] type the ONNX
+//! loader fills. Every quantity is an upper (or lower) bound of the exact
+//! real-arithmetic value; each rounded product and sum is covered by an
+//! explicit error term (the model of [`ravel_base::num`]: a sum of `k` rounded
+//! terms is off by at most `γ(k)·Σ|terms|`).
+
+use nalgebra::{DMatrix, DVector};
+
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::num::{dot_box_lower, dot_box_upper, gamma, mul0, sum_lower, sum_upper, TINY, U};
+
+/// A box `lo ≤ x ≤ hi`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bx {
+    /// Lower ends.
+    pub lo: Vec<f64>,
+    /// Upper ends.
+    pub hi: Vec<f64>,
+}
+
+impl Bx {
+    /// The box `[x, x]`.
+    pub fn point(x: &[f64]) -> Bx {
+        Bx {
+            lo: x.to_vec(),
+            hi: x.to_vec(),
+        }
+    }
+
+    /// The box `center ± radius`, rounded outward (a ball's bounding box).
+    pub fn around(center: &[f64], radius: &[f64]) -> Bx {
+        Bx {
+            lo: center
+                .iter()
+                .zip(radius)
+                .map(|(c, r)| sum_lower([*c, -r]))
+                .collect(),
+            hi: center
+                .iter()
+                .zip(radius)
+                .map(|(c, r)| sum_upper([*c, *r]))
+                .collect(),
+        }
+    }
+
+    /// `max |xᵢ|` per coordinate.
+    pub fn abs_max(&self) -> Vec<f64> {
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .map(|(l, h)| l.abs().max(h.abs()))
+            .collect()
+    }
+
+    /// Whether every end is finite and `lo ≤ hi`.
+    pub fn is_proper(&self) -> bool {
+        self.lo.len() == self.hi.len()
+            && self
+                .lo
+                .iter()
+                .zip(&self.hi)
+                .all(|(l, h)| l.is_finite() && h.is_finite() && l <= h)
+    }
+
+    /// Whether `x` lies in the box (exact comparisons).
+    pub fn contains(&self, x: &[f64]) -> bool {
+        x.len() == self.lo.len()
+            && x.iter()
+                .zip(self.lo.iter().zip(&self.hi))
+                .all(|(v, (l, h))| l <= v && v <= h)
+    }
+}
+
+/// Why a bound could not be established.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Trouble {
+    /// A claimed pre-activation bound is tighter than the checker can prove.
+    Neuron {
+        /// Which activation layer (0-based, in network order).
+        layer: usize,
+        /// Which neuron.
+        neuron: usize,
+        /// The claimed interval.
+        claimed: (f64, f64),
+        /// The interval the checker proves.
+        proven: (f64, f64),
+    },
+    /// The witness does not have the network's shape.
+    Shape(String),
+    /// A number came out non-finite.
+    Overflow,
+}
+
+impl std::fmt::Display for Trouble {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Trouble::Neuron {
+                layer,
+                neuron,
+                claimed,
+                proven,
+            } => write!(
+                f,
+                "pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+                claimed.0, claimed.1, proven.0, proven.1
+            ),
+            Trouble::Shape(s) => write!(f, "{s}"),
+            Trouble::Overflow => write!(f, "a bound is not finite"),
+        }
+    }
+}
+
+/// Other proven upper bounds of a pre-activation bound's rows (see
+/// [`NetBounds::with_hook`]).
+type Hook<'h> = &'h dyn Fn(&Linear) -> Vec<f64>;
+
+/// Rows `sᵣ ≤ coefᵣ·z + offᵣ`, valid for every feasible `z`.
+#[derive(Clone, Debug)]
+struct Linear {
+    coef: DMatrix<f64>,
+    off: Vec<f64>,
+}
+
+/// `Σ aᵢ mᵢ` for non-negative terms, rounded up (with the error of the sum).
+fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
+    sum_upper(a.iter().zip(m).map(|(a, m)| mul0(a.abs(), *m)))
+}
+
+/// `|M|·m` rounded up, row by row.
+fn abs_times(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
+    (0..m.nrows())
+        .map(|j| sum_upper((0..m.ncols()).map(|i| mul0(m[(j, i)].abs(), v[i]))))
+        .collect()
+}
+
+/// The error bound of a rounded row–matrix product `c·M` (`k` terms per
+/// entry) applied to `|z| ≤ zmax`: `γ(k+1)·|c|·(|M|·zmax)`, with `mz = |M|·zmax`
+/// precomputed; the factor 1.0625 covers the rounding of the bound itself.
+fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], zmax: &[f64], k: usize) -> f64 {
+    let s = sum_upper(c.zip(mz).map(|(c, m)| mul0(c.abs(), *m)));
+    // every coefficient of `c·M` may also be off by up to k·η/2 ≤ TINY
+    // (products that underflow), times |zᵢ| ≤ zmaxᵢ
+    let under = sum_upper(zmax.iter().map(|z| TINY * z));
+    sum_upper([(gamma(k + 1) * s * 1.0625 + TINY).next_up(), under])
+}
+
+/// `A·B` with plain loops in a fixed order (each entry summed over `k`
+/// ascending, no fused multiply-add): the same bits on every machine, so a
+/// certificate written on one checks on another. (A BLAS-style product
+/// picks its kernel by CPU, and kernels round differently.)
+fn mul(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let (r, k) = a.shape();
+    let c = b.ncols();
+    let mut out = DMatrix::zeros(r, c);
+    for j in 0..c {
+        for p in 0..k {
+            let bpj = b[(p, j)];
+            if bpj == 0.0 {
+                continue;
+            }
+            let col = a.column(p);
+            let mut dst = out.column_mut(j);
+            for i in 0..r {
+                dst[i] += col[i] * bpj;
+            }
+        }
+    }
+    out
+}
+
+/// The `2k × k` matrix `[I; −I]`.
+fn plus_minus(k: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(2 * k, k, |r, c| {
+        if r == c {
+            1.0
+        } else if r == k + c {
+            -1.0
+        } else {
+            0.0
+        }
+    })
+}
+
+impl Linear {
+    /// Substitute `z = W z' + b`, where `|z'| ≤ zmax`. Each new coefficient
+    /// is a rounded `k`-term dot product, off from the exact one by at most
+    /// `γ(k)·Σⱼ|cⱼ||Wⱼᵢ|`; times `|z'ᵢ|max` and summed over `i`, that is
+    /// `γ(k)·|c|·(|W|·zmax)`, which goes into the offset.
+    fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, zmax: &[f64]) -> Linear {
+        let wz = abs_times(w, zmax);
+        let coef = mul(&self.coef, w);
+        let off = (0..self.coef.nrows())
+            .map(|r| {
+                let row = self.coef.row(r);
+                let err = product_error(row.iter().copied(), &wz, zmax, w.nrows());
+                let consts = row.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
+                sum_upper(consts.chain([self.off[r], err]))
+            })
+            .collect();
+        Linear { coef, off }
+    }
+
+    /// Replace `h = σ(z)` by the relaxation lines (upper line for a
+    /// non-negative coefficient, lower line otherwise); `|z| ≤ zmax`.
+    fn through_relax(&self, lines: &[Lines], zmax: &[f64]) -> Linear {
+        let (rows, cols) = self.coef.shape();
+        let mut coef = DMatrix::zeros(rows, cols);
+        let mut off = Vec::with_capacity(rows);
+        let mut terms = Vec::with_capacity(cols + 2);
+        for r in 0..rows {
+            terms.clear();
+            terms.push(self.off[r]);
+            let mut err = 0.0;
+            for (j, l) in lines.iter().enumerate() {
+                let cj = self.coef[(r, j)];
+                if cj == 0.0 {
+                    continue;
+                }
+                let (a, b) = if cj >= 0.0 {
+                    (l.au, l.bu)
+                } else {
+                    (l.al, l.bl)
+                };
+                let v = cj * a;
+                coef[(r, j)] = v;
+                err += v.abs() * zmax[j];
+                terms.push(TINY * zmax[j]);
+                terms.push(mul0(cj, b));
+            }
+            terms.push((2.0 * U * err * 1.0625 + TINY).next_up());
+            off.push(sum_upper(terms.iter().copied()));
+        }
+        Linear { coef, off }
+    }
+
+    /// Upper bounds of the rows over the box.
+    fn over(&self, b: &Bx) -> Vec<f64> {
+        (0..self.coef.nrows())
+            .map(|r| {
+                let row = self.coef.row(r);
+                let terms = row
+                    .iter()
+                    .zip(b.lo.iter().zip(&b.hi))
+                    .map(
+                        |(&a, (&l, &h))| {
+                            if a >= 0.0 {
+                                mul0(a, h)
+                            } else {
+                                mul0(a, l)
+                            }
+                        },
+                    );
+                sum_upper(terms.chain([self.off[r]]))
+            })
+            .collect()
+    }
+}
+
+/// What `NetBounds::linear_optimised` in the analysis minimises for row `r`: the
+/// candidate row's value (any measure) and the network input attaining it.
+type Measure<'m> = dyn Fn(usize, &Linear) -> (f64, Vec<f64>) + 'm;
+
+/// The relaxation of one ReLU on `[l, u]`: `al·z + bl ≤ relu(z) ≤ au·z + bu`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Lines {
+    al: f64,
+    bl: f64,
+    au: f64,
+    bu: f64,
+}
+
+/// The checker's ReLU relaxation. Lower: `0` or `z` (each below `relu`
+/// everywhere), `z` when the positive side is the larger. Upper: a line of
+/// slope `a ≈ u/(u−l)` whose intercept is the certified maximum of
+/// `relu(z) − a z` over `[l, u]` (a convex function: the maximum is at an
+/// end), so the line is valid whatever rounding `a` carries.
+fn relu_lines(l: f64, u: f64) -> Lines {
+    if u <= 0.0 {
+        return Lines {
+            al: 0.0,
+            bl: 0.0,
+            au: 0.0,
+            bu: 0.0,
+        };
+    }
+    if l >= 0.0 {
+        return Lines {
+            al: 1.0,
+            bl: 0.0,
+            au: 1.0,
+            bu: 0.0,
+        };
+    }
+    let a = (u / (u - l)).clamp(0.0, 1.0);
+    let at_l = sum_upper([-(a * l)]);
+    let at_u = sum_upper([u, -(a * u)]);
+    Lines {
+        al: if u >= -l { 1.0 } else { 0.0 },
+        bl: 0.0,
+        au: a,
+        bu: at_l.max(at_u),
+    }
+}
+
+/// `v` pushed up by `k` relative roundings (and an underflow).
+fn up(v: f64, k: f64) -> f64 {
+    (v + v.abs() * k * U * 1.0625 + TINY).next_up()
+}
+
+/// `v` pushed down by `k` relative roundings (and an underflow).
+fn down(v: f64, k: f64) -> f64 {
+    -up(-v, k)
+}
+
+/// Bounds of `σ(z)` (the loader's evaluation error bound, as the analysis uses).
+fn sigma_bounds(act: Activation, z: f64) -> (f64, f64) {
+    let v = act.eval(z);
+    let e = act.eval_error(v);
+    ((v - e).next_down(), (v + e).next_up())
+}
+
+/// Bounds of `σ'(z)` from the bounds of `σ(z)`.
+fn deriv_bounds(act: Activation, z: f64) -> (f64, f64) {
+    let (lo, hi) = sigma_bounds(act, z);
+    match act {
+        Activation::Tanh => {
+            // 1 − t² over t ∈ [lo, hi]
+            let big = lo.abs().max(hi.abs()).min(1.0);
+            let small = if lo <= 0.0 && hi >= 0.0 {
+                0.0
+            } else {
+                lo.abs().min(hi.abs()).min(1.0)
+            };
+            (
+                down(1.0 - up(big * big, 1.0), 1.0).max(0.0),
+                up(1.0 - down(small * small, 1.0), 1.0),
+            )
+        }
+        _ => {
+            // s(1 − s) over s ∈ [lo, hi] ∩ [0, 1]: concave, peak ¼ at ½
+            let (lo, hi) = (lo.max(0.0), hi.min(1.0));
+            let f = |s: f64| s * (1.0 - s);
+            let min = down(f(lo).min(f(hi)), 3.0).max(0.0);
+            let max = if lo <= 0.5 && 0.5 <= hi {
+                0.25
+            } else {
+                up(f(lo).max(f(hi)), 3.0)
+            };
+            (min, max)
+        }
+    }
+}
+
+/// Where `σ'(z) = a` on the side of `z ≥ 0` (`positive`) or `z ≤ 0`:
+/// only an approximation (any point gives a valid bound below).
+fn stationary(act: Activation, a: f64, positive: bool) -> f64 {
+    let z = match act {
+        Activation::Tanh => (1.0 - a).max(0.0).sqrt().atanh(),
+        _ => {
+            let s = 0.5 * (1.0 + (1.0 - 4.0 * a).max(0.0).sqrt());
+            (s / (1.0 - s)).ln()
+        }
+    };
+    let z = if z.is_finite() { z } else { 0.0 };
+    if positive {
+        z
+    } else {
+        -z
+    }
+}
+
+/// Certified bounds of `g(z) = σ(z) − a z` over `[p, q]` on a piece where
+/// `σ` is convex (`convex`) or concave. The extreme at an end is exact up to
+/// rounding; the one inside is bounded by the tangent of `g` at an
+/// approximate stationary point `ẑ` (a concave `g` lies below every tangent,
+/// a convex one above), evaluated at both ends with `g'(ẑ)` as an interval.
+fn gap_bounds(act: Activation, a: f64, p: f64, q: f64, convex: bool) -> (f64, f64) {
+    let g_up = |z: f64| sum_upper([sigma_bounds(act, z).1, -(a * z)]);
+    let g_lo = |z: f64| sum_lower([sigma_bounds(act, z).0, -(a * z)]);
+    let ends_max = g_up(p).max(g_up(q));
+    let ends_min = g_lo(p).min(g_lo(q));
+    let zh = stationary(act, a, !convex).clamp(p, q);
+    let (dl, dh) = deriv_bounds(act, zh);
+    let (dl, dh) = (sum_lower([dl, -a]), sum_upper([dh, -a]));
+    let tangent = |z: f64, upper: bool| {
+        let (el, eh) = (sum_lower([z, -zh]), sum_upper([z, -zh]));
+        let corners = [dl * el, dl * eh, dh * el, dh * eh];
+        if upper {
+            let m = corners.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));
+            sum_upper([g_up(zh), up(m, 1.0)])
+        } else {
+            let m = corners.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+            sum_lower([g_lo(zh), down(m, 1.0)])
+        }
+    };
+    if convex {
+        (tangent(p, false).min(tangent(q, false)), ends_max)
+    } else {
+        (ends_min, tangent(p, true).max(tangent(q, true)))
+    }
+}
+
+/// The checker's relaxation of tanh or sigmoid on `[l, u]`: two lines of
+/// the chord's slope, their intercepts the certified infimum and supremum
+/// of `σ(z) − a z` over the interval (σ is convex for `z ≤ 0` and concave
+/// for `z ≥ 0`, so the interval is split at 0).
+fn smooth_lines(act: Activation, l: f64, u: f64) -> Lines {
+    let (fl, fu) = (act.eval(l), act.eval(u));
+    let peak = if act == Activation::Tanh { 1.0 } else { 0.25 };
+    let a = if u > l { (fu - fl) / (u - l) } else { 0.0 };
+    let a = if a.is_finite() {
+        a.clamp(0.0, peak)
+    } else {
+        0.0
+    };
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    if l < 0.0 {
+        let (a_lo, a_hi) = gap_bounds(act, a, l, u.min(0.0), true);
+        lo = lo.min(a_lo);
+        hi = hi.max(a_hi);
+    }
+    if u >= 0.0 {
+        let (a_lo, a_hi) = gap_bounds(act, a, l.max(0.0), u, false);
+        lo = lo.min(a_lo);
+        hi = hi.max(a_hi);
+    }
+    Lines {
+        al: a,
+        bl: lo,
+        au: a,
+        bu: hi,
+    }
+}
+
+/// `b` widened by `2⁻³⁶·(1 + |v|)` at each end `v`: far below any bound's
+/// meaning, far above the last-bit differences between two machines' libm
+/// (which the tanh and sigmoid relaxations go through). The certificate
+/// writer claims widened bounds, so a checker elsewhere proves them too.
+pub fn widen(b: &Bx) -> Bx {
+    const HAIR: f64 = 1.0 / 68_719_476_736.0; // 2⁻³⁶
+    Bx {
+        lo: b
+            .lo
+            .iter()
+            .map(|v| (v - HAIR * (1.0 + v.abs())).next_down())
+            .collect(),
+        hi: b
+            .hi
+            .iter()
+            .map(|v| (v + HAIR * (1.0 + v.abs())).next_up())
+            .collect(),
+    }
+}
+
+/// Certified interval image of a box under `z = W x + b`.
+pub fn affine_box(w: &DMatrix<f64>, b: &[f64], x: &Bx) -> Bx {
+    let mut lo = Vec::with_capacity(w.nrows());
+    let mut hi = Vec::with_capacity(w.nrows());
+    for (j, bj) in b.iter().enumerate().take(w.nrows()) {
+        let row: Vec<f64> = w.row(j).iter().copied().collect();
+        lo.push(sum_lower([dot_box_lower(&row, &x.lo, &x.hi), *bj]));
+        hi.push(sum_upper([dot_box_upper(&row, &x.lo, &x.hi), *bj]));
+    }
+    Bx { lo, hi }
+}
+
+/// Interval image of a monotone activation, rounded outward (tanh and
+/// sigmoid through the loader's evaluation error bound).
+fn act_box(act: Activation, x: &Bx) -> Bx {
+    let f = |z: f64, up: bool| -> f64 {
+        match act {
+            Activation::Relu => z.max(0.0),
+            Activation::Tanh | Activation::Sigmoid => {
+                let v = act.eval(z);
+                let e = act.eval_error(v);
+                if up {
+                    (v + e).next_up()
+                } else {
+                    (v - e).next_down()
+                }
+            }
+        }
+    };
+    Bx {
+        lo: x.lo.iter().map(|&z| f(z, false)).collect(),
+        hi: x.hi.iter().map(|&z| f(z, true)).collect(),
+    }
+}
+
+/// Interval evaluation of the network (IBP), for replaying a trajectory.
+pub fn network_box(net: &Network, y: &Bx) -> Bx {
+    let mut x = y.clone();
+    for layer in &net.layers {
+        x = match layer {
+            Layer::Affine { w, b } => affine_box(w, b.as_slice(), &x),
+            Layer::Act(a) => act_box(*a, &x),
+        };
+    }
+    x
+}
+
+/// Pre-activation bounds of every activation layer, in network order.
+pub type Witness = Vec<Bx>;
+
+/// The network over one input box, as the checker bounds it.
+pub struct NetBounds<'a> {
+    net: &'a Network,
+    /// `boxes[i]`: the value before layer `i` (`boxes[0]` is the input box).
+    boxes: Vec<Bx>,
+    /// Relaxations of activation layers (empty for affine layers).
+    lines: Vec<Vec<Lines>>,
+    /// The pre-activation bounds used (the witness).
+    pub witness: Witness,
+}
+
+impl<'a> NetBounds<'a> {
+    /// Bound `net` over `y`. With `claimed`, each activation layer's
+    /// pre-activation box must contain what the checker proves from the
+    /// previous claims (IBP intersected with back-substitution), and the
+    /// claimed box is used from then on; without, the proven box is used.
+    pub fn new(net: &'a Network, y: &Bx, claimed: Option<&[Bx]>) -> Result<NetBounds<'a>, Trouble> {
+        NetBounds::with_hook(net, y, claimed, None, false)
+    }
+
+    /// [`NetBounds::new`], where every pre-activation bound (a linear bound
+    /// over the input `y`) is also handed to `hook`, which returns other
+    /// proven upper bounds of its rows (the unrolled chain bounds them
+    /// through earlier steps); the smaller is kept.
+    fn with_hook(
+        net: &'a Network,
+        y: &Bx,
+        claimed: Option<&[Bx]>,
+        hook: Option<Hook>,
+        widened: bool,
+    ) -> Result<NetBounds<'a>, Trouble> {
+        let mut s = NetBounds {
+            net,
+            boxes: vec![y.clone()],
+            lines: Vec::with_capacity(net.layers.len()),
+            witness: Vec::new(),
+        };
+        if !y.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let acts = net
+            .layers
+            .windows(2)
+            .filter(|w| matches!(w, [Layer::Affine { .. }, Layer::Act(_)]))
+            .count();
+        if let Some(c) = claimed {
+            if c.len() != acts {
+                return Err(Trouble::Shape(format!(
+                    "{} pre-activation boxes for {} activation layers",
+                    c.len(),
+                    acts
+                )));
+            }
+        }
+        for (i, layer) in net.layers.iter().enumerate() {
+            let cur = &s.boxes[i];
+            let (next, lines) = match layer {
+                Layer::Affine { w, b } => {
+                    let mut next = affine_box(w, b.as_slice(), cur);
+                    if matches!(net.layers.get(i + 1), Some(Layer::Act(_))) {
+                        let k = w.nrows();
+                        let spec = Linear {
+                            coef: plus_minus(k),
+                            off: vec![0.0; 2 * k],
+                        };
+                        let back = s.backward(spec, i + 1);
+                        let mut up = back.over(y);
+                        if let Some(h) = hook {
+                            for (u, o) in up.iter_mut().zip(h(&back)) {
+                                if !o.is_nan() {
+                                    *u = u.min(o);
+                                }
+                            }
+                        }
+                        for j in 0..k {
+                            next.hi[j] = next.hi[j].min(up[j]);
+                            next.lo[j] = next.lo[j].max(-up[k + j]);
+                        }
+                        if !next.is_proper() {
+                            return Err(Trouble::Overflow);
+                        }
+                        let layer_no = s.witness.len();
+                        if let Some(c) = claimed.and_then(|c| c.get(layer_no)) {
+                            if c.lo.len() != k || c.hi.len() != k {
+                                return Err(Trouble::Shape(format!(
+                                    "activation layer {layer_no}: {} bounds for {k} neurons",
+                                    c.lo.len()
+                                )));
+                            }
+                            for j in 0..k {
+                                // NaN claims fail this test too
+                                let ok = c.lo[j] <= next.lo[j] && c.hi[j] >= next.hi[j];
+                                if !ok || !c.lo[j].is_finite() || !c.hi[j].is_finite() {
+                                    return Err(Trouble::Neuron {
+                                        layer: layer_no,
+                                        neuron: j,
+                                        claimed: (c.lo[j], c.hi[j]),
+                                        proven: (next.lo[j], next.hi[j]),
+                                    });
+                                }
+                            }
+                            next = c.clone();
+                        } else if widened {
+                            next = widen(&next);
+                        }
+                        s.witness.push(next.clone());
+                    }
+                    (next, Vec::new())
+                }
+                Layer::Act(Activation::Relu) => {
+                    let lines = cur
+                        .lo
+                        .iter()
+                        .zip(&cur.hi)
+                        .map(|(&l, &u)| relu_lines(l, u))
+                        .collect();
+                    (act_box(Activation::Relu, cur), lines)
+                }
+                Layer::Act(a) => {
+                    let lines = cur
+                        .lo
+                        .iter()
+                        .zip(&cur.hi)
+                        .map(|(&l, &u)| smooth_lines(*a, l, u))
+                        .collect();
+                    (act_box(*a, cur), lines)
+                }
+            };
+            if !next.is_proper() {
+                return Err(Trouble::Overflow);
+            }
+            s.boxes.push(next);
+            s.lines.push(lines);
+        }
+        Ok(s)
+    }
+
+    /// Back-substitute a bound on the value before layer `end` to the input.
+    fn backward(&self, mut bound: Linear, end: usize) -> Linear {
+        for i in (0..end).rev() {
+            let zmax = self.boxes[i].abs_max();
+            bound = match &self.net.layers[i] {
+                Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
+                Layer::Act(_) => bound.through_relax(&self.lines[i], &zmax),
+            };
+        }
+        bound
+    }
+
+    /// The output box: IBP intersected with back-substitution of `±I`.
+    pub fn output(&self) -> Bx {
+        let mut out = self
+            .boxes
+            .last()
+            .cloned()
+            .unwrap_or_else(|| self.boxes[0].clone());
+        let m = out.lo.len();
+        let spec = Linear {
+            coef: plus_minus(m),
+            off: vec![0.0; 2 * m],
+        };
+        let up = self
+            .backward(spec, self.net.layers.len())
+            .over(&self.boxes[0]);
+        for j in 0..m {
+            out.hi[j] = out.hi[j].min(up[j]);
+            out.lo[j] = out.lo[j].max(-up[m + j]);
+        }
+        out
+    }
+
+    /// Upper bounds of `s·f(y)` over the input box for every row `s` of
+    /// `spec`: back-substitution (with `slopes` steps of the checker's own
+    /// slope search, measured over the input box), intersected with the
+    /// output box's support.
+    pub fn rows_upper(&self, spec: &DMatrix<f64>, slopes: usize) -> Vec<f64> {
+        self.rows_upper_in(spec, slopes, &Start::Box)
+    }
+
+    /// [`NetBounds::rows_upper`] with the back-substituted rows concretised
+    /// over the input box intersected with what `start` knows of the inputs
+    /// (an ℓp ball: its dual norm; a polytope: the dual vectors `start`
+    /// gives, one per row in order), each the smaller of the box's and the
+    /// other's support ([`Start::support`]). The slope search measures its
+    /// candidates over the box (any slopes give a sound line).
+    pub fn rows_upper_in(&self, spec: &DMatrix<f64>, slopes: usize, start: &Start) -> Vec<f64> {
+        let out = self.boxes.last().unwrap_or(&self.boxes[0]);
+        let input = &self.boxes[0];
+        let concretise = |lin: Linear| -> Vec<f64> {
+            match start {
+                Start::Box => lin.over(input),
+                _ => (0..lin.coef.nrows())
+                    .map(|r| {
+                        let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                        sum_upper([start.support(&row, input), lin.off[r]])
+                    })
+                    .collect(),
+            }
+        };
+        let back = if slopes == 0 {
+            concretise(self.linear(spec.clone()))
+        } else {
+            let measure = |_: usize, cand: &Linear| -> (f64, Vec<f64>) {
+                let corner = (0..input.lo.len())
+                    .map(|j| {
+                        if cand.coef[(0, j)] >= 0.0 {
+                            input.hi[j]
+                        } else {
+                            input.lo[j]
+                        }
+                    })
+                    .collect();
+                (cand.over(input)[0], corner)
+            };
+            concretise(self.linear_optimised(spec.clone(), slopes, &measure))
+        };
+        (0..spec.nrows())
+            .map(|r| {
+                let row: Vec<f64> = spec.row(r).iter().copied().collect();
+                let ibp = ravel_base::num::dot_box_upper(&row, &out.lo, &out.hi);
+                if back[r].is_nan() {
+                    ibp
+                } else {
+                    ibp.min(back[r])
+                }
+            })
+            .collect()
+    }
+
+    /// [`NetBounds::backward`] of one row with the given relaxation
+    /// lines, recording the row's coefficients on each activation's output.
+    fn backward_traced(
+        &self,
+        mut bound: Linear,
+        lines: &[Vec<Lines>],
+        trace: &mut [Vec<f64>],
+    ) -> Linear {
+        for i in (0..self.net.layers.len()).rev() {
+            let zmax = self.boxes[i].abs_max();
+            bound = match &self.net.layers[i] {
+                Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
+                Layer::Act(_) => {
+                    trace[i] = bound.coef.row(0).iter().copied().collect();
+                    bound.through_relax(&lines[i], &zmax)
+                }
+            };
+        }
+        bound
+    }
+
+    /// [`NetBounds::linear`] with the lower slopes of the unstable ReLUs
+    /// searched per row: `steps` steps of projected gradient on
+    /// `measure(row, candidate) = (value, input where it is attained)`,
+    /// the best candidate kept (CROWN's own lines to begin with). The
+    /// checker's own search: a lower line `a·z` with `a ∈ [0, 1]` lies
+    /// below `relu` everywhere, so every candidate is a sound bound
+    /// whatever the search does; only how tight it is depends on it.
+    fn linear_optimised(&self, spec: DMatrix<f64>, steps: usize, measure: &Measure) -> Linear {
+        let mut best = self.linear(spec.clone());
+        let layers = self.net.layers.len();
+        let unstable = |i: usize, l: &Lines| {
+            matches!(self.net.layers[i], Layer::Act(Activation::Relu)) && l.au > 0.0 && l.au < 1.0
+        };
+        for r in 0..spec.nrows() {
+            let row = Linear {
+                coef: spec.rows(r, 1).into_owned(),
+                off: vec![0.0],
+            };
+            let mut lines = self.lines.clone();
+            let mut trace = vec![Vec::new(); layers];
+            let mut cand = self.backward_traced(row.clone(), &lines, &mut trace);
+            let mut at = measure(r, &cand).1;
+            let own = Linear {
+                coef: best.coef.rows(r, 1).into_owned(),
+                off: vec![best.off[r]],
+            };
+            let mut best_value = measure(r, &own).0;
+            for k in 0..steps {
+                // gradient: forward from `at` through the lines the row's signs chose
+                let mut h = at.clone();
+                let mut grad: Vec<Vec<f64>> = vec![Vec::new(); layers];
+                for (i, layer) in self.net.layers.iter().enumerate() {
+                    match layer {
+                        Layer::Affine { w, b } => {
+                            h = (0..w.nrows())
+                                .map(|j| {
+                                    (0..w.ncols()).map(|c| w[(j, c)] * h[c]).sum::<f64>() + b[j]
+                                })
+                                .collect();
+                        }
+                        Layer::Act(_) => {
+                            grad[i] = vec![0.0; h.len()];
+                            for (j, z) in h.iter_mut().enumerate() {
+                                let (l, c) = (lines[i][j], trace[i].get(j).copied().unwrap_or(0.0));
+                                if c >= 0.0 {
+                                    *z = l.au * *z + l.bu;
+                                } else {
+                                    if unstable(i, &l) {
+                                        grad[i][j] = c * *z;
+                                    }
+                                    *z = l.al * *z + l.bl;
+                                }
+                            }
+                        }
+                    }
+                }
+                let gmax = grad.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+                if !(gmax > 0.0 && gmax.is_finite()) {
+                    break;
+                }
+                let rate = 0.5 * 0.8f64.powi(k as i32) / gmax;
+                let mut moved = false;
+                for (i, g) in grad.iter().enumerate() {
+                    for (j, gj) in g.iter().enumerate() {
+                        if *gj != 0.0 {
+                            let al = (lines[i][j].al - rate * gj).clamp(0.0, 1.0);
+                            moved |= al != lines[i][j].al;
+                            lines[i][j].al = al;
+                            lines[i][j].bl = 0.0;
+                        }
+                    }
+                }
+                if !moved {
+                    break;
+                }
+                cand = self.backward_traced(row.clone(), &lines, &mut trace);
+                let (v, point) = measure(r, &cand);
+                at = point;
+                if v < best_value {
+                    best_value = v;
+                    best.coef.set_row(r, &cand.coef.row(0));
+                    best.off[r] = cand.off[0];
+                }
+            }
+        }
+        best
+    }
+
+    /// `S π(y) ≤ G y + h` over the input box, for specification rows `S`.
+    fn linear(&self, spec: DMatrix<f64>) -> Linear {
+        let rows = spec.nrows();
+        self.backward(
+            Linear {
+                coef: spec,
+                off: vec![0.0; rows],
+            },
+            self.net.layers.len(),
+        )
+    }
+}
+
+/// One plant as the checker reads it (rows of matrices).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlantRows {
+    /// `A` (`n × n`).
+    pub a: DMatrix<f64>,
+    /// `B` (`n × m`).
+    pub b: DMatrix<f64>,
+    /// `c` (`n`).
+    pub c: Vec<f64>,
+    /// Entrywise error bounds of `A`, `B`, `c` (continuous-time plants).
+    pub err: Option<(DMatrix<f64>, DMatrix<f64>, Vec<f64>)>,
+}
+
+/// Finds a dual vector for the support of a direction (the writer's LP).
+pub type Solver<'a> = &'a dyn Fn(&[f64]) -> Option<Vec<f64>>;
+
+/// Dual vectors for supports over a polytope, in the order the supports
+/// are asked for: read from a certificate (the checker), or obtained from
+/// `solve` and recorded (the writer, which may use an LP solver; the
+/// checker never does). Any vector is sound: it only decides how tight
+/// the support is.
+pub struct Duals<'a> {
+    given: &'a [Vec<f64>],
+    solve: Option<Solver<'a>>,
+    used: std::cell::RefCell<Vec<Vec<f64>>>,
+}
+
+impl<'a> Duals<'a> {
+    /// Duals read from a certificate.
+    pub fn given(given: &'a [Vec<f64>]) -> Duals<'a> {
+        Duals {
+            given,
+            solve: None,
+            used: std::cell::RefCell::new(Vec::new()),
+        }
+    }
+
+    /// Duals found by `solve(c)` for each support of `c`.
+    pub fn solved(solve: Solver<'a>) -> Duals<'a> {
+        Duals {
+            given: &[],
+            solve: Some(solve),
+            used: std::cell::RefCell::new(Vec::new()),
+        }
+    }
+
+    /// The duals used so far, in order.
+    pub fn used(&self) -> Vec<Vec<f64>> {
+        self.used.borrow().clone()
+    }
+
+    fn next(&self, c: &[f64]) -> Vec<f64> {
+        let k = self.used.borrow().len();
+        let mu = match self.solve {
+            Some(f) => f(c).unwrap_or_default(),
+            None => self.given.get(k).cloned().unwrap_or_default(),
+        };
+        self.used.borrow_mut().push(mu.clone());
+        mu
+    }
+}
+
+impl std::fmt::Debug for Duals<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Duals({} used)", self.used.borrow().len())
+    }
+}
+
+/// `max c·x` over `{x ∈ box | H x ≤ h}` bounded with a dual `μ ≥ 0` (entries
+/// below zero or NaN count as 0): `μ·h + max_box (c − Hᵀμ)·x`, every
+/// rounding covered; `+∞` when `μ` does not fit the rows.
+fn dual_support(c: &[f64], rows: &[(Vec<f64>, f64)], mu: &[f64], x: &Bx) -> f64 {
+    if mu.len() != rows.len() {
+        return f64::INFINITY;
+    }
+    let mu: Vec<f64> = mu.iter().map(|m| if *m > 0.0 { *m } else { 0.0 }).collect();
+    let n = c.len();
+    let mut r = c.to_vec();
+    let mut mag: Vec<f64> = c.iter().map(|v| v.abs()).collect();
+    for ((a, _), m) in rows.iter().zip(&mu) {
+        if *m == 0.0 {
+            continue;
+        }
+        for j in 0..n {
+            let t = a[j] * m;
+            r[j] -= t;
+            mag[j] += t.abs();
+        }
+    }
+    let xmax = x.abs_max();
+    let k = rows.len() + 2;
+    let err =
+        sum_upper((0..n).map(|j| mul0((gamma(k) * mag[j] * 1.0625 + TINY).next_up(), xmax[j])));
+    let mh = sum_upper(rows.iter().zip(&mu).map(|((_, h), m)| mul0(*m, *h)));
+    sum_upper([dot_box_upper(&r, &x.lo, &x.hi), err, mh])
+}
+
+/// What is known of the states a step starts from beyond their box: at
+/// step 0 of an ℓp-ball initial set, the ball; for a polytope initial set or
+/// a polytope reachable set, its inequalities (with dual witnesses for the
+/// supports). Supports are the smaller of the box's and the other's.
+#[derive(Clone, Copy, Debug)]
+pub enum Start<'a> {
+    /// `{x ∈ box | H x ≤ h}`, supports bounded with the duals.
+    Polytope {
+        /// The rows `(H_r, h_r)`.
+        rows: &'a [(Vec<f64>, f64)],
+        /// Where the dual vectors come from.
+        duals: &'a Duals<'a>,
+    },
+    /// The box is all that is known.
+    Box,
+    /// `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}`, `norm` one of `1`, `2`, `inf`.
+    Ball {
+        /// Centre.
+        center: &'a [f64],
+        /// Radius per coordinate.
+        radius: &'a [f64],
+        /// The norm's name.
+        norm: &'a str,
+    },
+}
+
+impl Start<'_> {
+    /// An upper bound of `max c·x` over the box `x` intersected with what is known.
+    pub fn support(&self, c: &[f64], x: &Bx) -> f64 {
+        let boxed = dot_box_upper(c, &x.lo, &x.hi);
+        match self {
+            Start::Box => boxed,
+            Start::Polytope { rows, duals } => {
+                let mu = duals.next(c);
+                let b = dual_support(c, rows, &mu, x);
+                if b.is_nan() {
+                    boxed
+                } else {
+                    boxed.min(b)
+                }
+            }
+            Start::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                // c·centre + ‖diag(r) c‖ in the dual norm
+                let scaled: Vec<f64> = c
+                    .iter()
+                    .zip(*radius)
+                    .map(|(c, r)| (c.abs() * r).next_up())
+                    .collect();
+                let dual = match *norm {
+                    "inf" => sum_upper(scaled.iter().copied()),
+                    "1" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    _ => sum_upper(scaled.iter().map(|v| (v * v).next_up()))
+                        .sqrt()
+                        .next_up(),
+                };
+                let ball = sum_upper(
+                    c.iter()
+                        .zip(*center)
+                        .map(|(c, z)| mul0(*c, *z))
+                        .chain([dual]),
+                );
+                if ball.is_nan() {
+                    boxed
+                } else {
+                    boxed.min(ball)
+                }
+            }
+        }
+    }
+}
+
+/// The loop data one step needs.
+pub struct Loop<'a> {
+    /// The plant of this step.
+    pub plant: &'a PlantRows,
+    /// `C` (`n × p`): `y = Cᵀx + v`.
+    pub obs: &'a DMatrix<f64>,
+    /// Process noise box.
+    pub w: &'a Bx,
+    /// Sensor noise box.
+    pub v: &'a Bx,
+    /// The controller, saturation included.
+    pub net: &'a Network,
+    /// Slope-optimisation steps of every back-substitution through the
+    /// controller (the analysis's `optimise_slopes`; see
+    /// `NetBounds::linear_optimised` in the analysis).
+    pub slopes: usize,
+}
+
+impl Loop<'_> {
+    /// The box of `Cᵀx + v` for `x ∈ x`.
+    pub fn observation(&self, x: &Bx) -> Bx {
+        let p = self.obs.ncols();
+        let mut lo = Vec::with_capacity(p);
+        let mut hi = Vec::with_capacity(p);
+        for j in 0..p {
+            let col: Vec<f64> = self.obs.column(j).iter().copied().collect();
+            lo.push(sum_lower([dot_box_lower(&col, &x.lo, &x.hi), self.v.lo[j]]));
+            hi.push(sum_upper([dot_box_upper(&col, &x.lo, &x.hi), self.v.hi[j]]));
+        }
+        Bx { lo, hi }
+    }
+
+    /// `δᵢ = Σⱼ E_A,ij |xⱼ|max + Σⱼ E_B,ij |uⱼ|max + E_c,i`, rounded up (zero for an exact plant).
+    fn model_delta(&self, xmax: &[f64], umax: &[f64]) -> Vec<f64> {
+        match &self.plant.err {
+            None => vec![0.0; self.plant.a.nrows()],
+            Some((ea, eb, ec)) => (0..ea.nrows())
+                .map(|i| {
+                    let ra: Vec<f64> = ea.row(i).iter().copied().collect();
+                    let rb: Vec<f64> = eb.row(i).iter().copied().collect();
+                    sum_upper([abs_dot(&ra, xmax), abs_dot(&rb, umax), ec[i]])
+                })
+                .collect(),
+        }
+    }
+
+    /// Upper bounds of `fᵣ·x⁺` for the rows `fᵣ` of `facets`, over
+    /// `x ∈ x` (and what `start` knows), `w ∈ W`, `v ∈ V`, with the network
+    /// bounded over the observation box: per row the smaller of
+    /// (a) back-substitution of `fᵣᵀB` through the network (Reach-LP) and
+    /// (b) `fᵣᵀB` over the control box `u` (the separate bound), each plus
+    /// the exact-plant terms, the model error and every rounding error.
+    pub fn facet_bounds(
+        &self,
+        facets: &DMatrix<f64>,
+        x: &Bx,
+        start: &Start,
+        nb: &NetBounds,
+        u: &Bx,
+    ) -> Vec<f64> {
+        let n = x.lo.len();
+        let xmax = x.abs_max();
+        let umax = u.abs_max();
+        let delta = self.model_delta(&xmax, &umax);
+        let fa = mul(facets, &self.plant.a);
+        let fb = mul(facets, &self.plant.b);
+        let ax = abs_times(&self.plant.a, &xmax);
+        let bu = abs_times(&self.plant.b, &umax);
+        // (a): F x⁺ bounded linearly in x
+        let lin = self.back_step(
+            &Linear {
+                coef: facets.clone(),
+                off: vec![0.0; facets.nrows()],
+            },
+            x,
+            nb,
+            u,
+        );
+        (0..facets.nrows())
+            .map(|r| {
+                let f: Vec<f64> = facets.row(r).iter().copied().collect();
+                let fa_r: Vec<f64> = fa.row(r).iter().copied().collect();
+                let fb_r: Vec<f64> = fb.row(r).iter().copied().collect();
+                let common = sum_upper([
+                    sum_upper(f.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
+                    dot_box_upper(&f, &self.w.lo, &self.w.hi),
+                    product_error(f.iter().copied(), &ax, &xmax, n),
+                    product_error(f.iter().copied(), &bu, &umax, n),
+                    abs_dot(&f, &delta),
+                ]);
+                let separate = sum_upper([
+                    start.support(&fa_r, x),
+                    dot_box_upper(&fb_r, &u.lo, &u.hi),
+                    common,
+                ]);
+                let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                let reach_lp = sum_upper([start.support(&row, x), lin.off[r]]);
+                if reach_lp.is_nan() || separate.is_nan() {
+                    f64::NAN
+                } else {
+                    reach_lp.min(separate)
+                }
+            })
+            .collect()
+    }
+
+    /// One step of back-substitution: rows `L x⁺ ≤ …` (`lin`, over the
+    /// next state) become rows linear in the state `x ∈ x`: `L A x` exactly
+    /// up to rounding, `L B π(y)` through the network (CROWN with the
+    /// witness's relaxations), `y = Cᵀx + v` substituted, `v` and `w`
+    /// bounded over their boxes, plus `L c`, the model error and every
+    /// rounding error. The tutorial's lemma for Reach-LP, and one link of
+    /// the unrolled chain.
+    fn back_step(&self, lin: &Linear, x: &Bx, nb: &NetBounds, u: &Bx) -> Linear {
+        let n = x.lo.len();
+        let xmax = x.abs_max();
+        let umax = u.abs_max();
+        let delta = self.model_delta(&xmax, &umax);
+        let la = mul(&lin.coef, &self.plant.a);
+        let lb = mul(&lin.coef, &self.plant.b);
+        let ax = abs_times(&self.plant.a, &xmax);
+        let bu = abs_times(&self.plant.b, &umax);
+        let ct = self.obs.transpose();
+        let net = if self.slopes == 0 {
+            nb.linear(lb)
+        } else {
+            // a candidate row over y, measured by what this step makes of
+            // it: L A x + G Cᵀx over x's box, G v over v's box, offsets
+            let measure = |r: usize, cand: &Linear| -> (f64, Vec<f64>) {
+                let g: Vec<f64> = cand.coef.row(0).iter().copied().collect();
+                let total: Vec<f64> = (0..n)
+                    .map(|j| la[(r, j)] + (0..g.len()).map(|k| g[k] * ct[(k, j)]).sum::<f64>())
+                    .collect();
+                let xs: Vec<f64> = (0..n)
+                    .map(|j| if total[j] >= 0.0 { x.hi[j] } else { x.lo[j] })
+                    .collect();
+                let vs: Vec<f64> = (0..g.len())
+                    .map(|k| {
+                        if g[k] >= 0.0 {
+                            self.v.hi[k]
+                        } else {
+                            self.v.lo[k]
+                        }
+                    })
+                    .collect();
+                let value = sum_upper(
+                    (0..n)
+                        .map(|j| mul0(total[j], xs[j]))
+                        .chain((0..g.len()).map(|k| mul0(g[k], vs[k])))
+                        .chain([cand.off[0]]),
+                );
+                let ys = (0..g.len())
+                    .map(|k| (0..n).map(|j| ct[(k, j)] * xs[j]).sum::<f64>() + vs[k])
+                    .collect();
+                (value, ys)
+            };
+            nb.linear_optimised(lb, self.slopes, &measure)
+        };
+        let gc = mul(&net.coef, &ct);
+        let cx = abs_times(&ct, &xmax);
+        let coef = la + gc;
+        let off = (0..lin.coef.nrows())
+            .map(|r| {
+                let l: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                let g: Vec<f64> = net.coef.row(r).iter().copied().collect();
+                // the sum LA + GC is one more rounding per entry
+                let sum_err = sum_upper(
+                    coef.row(r)
+                        .iter()
+                        .zip(&xmax)
+                        .map(|(c, m)| mul0((c.abs() * U).next_up(), *m)),
+                );
+                sum_upper([
+                    lin.off[r],
+                    net.off[r],
+                    sum_upper(l.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
+                    dot_box_upper(&l, &self.w.lo, &self.w.hi),
+                    dot_box_upper(&g, &self.v.lo, &self.v.hi),
+                    product_error(l.iter().copied(), &ax, &xmax, n),
+                    product_error(l.iter().copied(), &bu, &umax, n),
+                    product_error(g.iter().copied(), &cx, &xmax, g.len()),
+                    sum_err,
+                    abs_dot(&l, &delta),
+                ])
+            })
+            .collect();
+        Linear { coef, off }
+    }
+
+    /// The checker's bound of the next state's box from the box `x`, with
+    /// the network witness (`claimed`) or without (then the witness used is
+    /// returned, for the certificate writer).
+    pub fn step(
+        &self,
+        x: &Bx,
+        start: &Start,
+        claimed: Option<&[Bx]>,
+    ) -> Result<(Bx, Witness), Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let y = self.observation(x);
+        let nb = NetBounds::new(self.net, &y, claimed)?;
+        let u = nb.output();
+        if !u.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let n = x.lo.len();
+        let ub = self.facet_bounds(&plus_minus(n), x, start, &nb, &u);
+        let next = Bx {
+            lo: ub[n..].iter().map(|v| -v).collect(),
+            hi: ub[..n].to_vec(),
+        };
+        if !next.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        Ok((next, nb.witness))
+    }
+
+    /// A rigorous enclosure of the next state from every state in `x` with
+    /// fixed noise values (interval arithmetic through network and plant,
+    /// plus the model error): for replaying a counterexample.
+    pub fn enclose(&self, x: &Bx, w: &[f64], v: &[f64]) -> Option<Bx> {
+        let vb = Bx::point(v);
+        let y = Loop { v: &vb, ..*self }.observation(x);
+        let u = network_box(self.net, &y);
+        if !(y.is_proper() && u.is_proper()) {
+            return None;
+        }
+        let n = x.lo.len();
+        let delta = self.model_delta(&x.abs_max(), &u.abs_max());
+        let mut lo = Vec::with_capacity(n);
+        let mut hi = Vec::with_capacity(n);
+        for i in 0..n {
+            let ra: Vec<f64> = self.plant.a.row(i).iter().copied().collect();
+            let rb: Vec<f64> = self.plant.b.row(i).iter().copied().collect();
+            let c = self.plant.c[i];
+            lo.push(sum_lower([
+                dot_box_lower(&ra, &x.lo, &x.hi),
+                dot_box_lower(&rb, &u.lo, &u.hi),
+                c,
+                w[i],
+                -delta[i],
+            ]));
+            hi.push(sum_upper([
+                dot_box_upper(&ra, &x.lo, &x.hi),
+                dot_box_upper(&rb, &u.lo, &u.hi),
+                c,
+                w[i],
+                delta[i],
+            ]));
+        }
+        let b = Bx { lo, hi };
+        b.is_proper().then_some(b)
+    }
+}
+
+/// What one step of a chain proves.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stepped {
+    /// The box of the next states.
+    pub next: Bx,
+    /// Upper bounds of the next states along the extra directions.
+    pub offsets: Vec<f64>,
+    /// The pre-activation bounds used.
+    pub witness: Witness,
+}
+
+/// One step of a cell's chain, kept for back-substitution by later steps.
+struct Link<'a> {
+    lp: Loop<'a>,
+    x: Bx,
+    nb: NetBounds<'a>,
+    u: Bx,
+}
+
+/// A cell's chain of steps as the checker builds it: step by step from the
+/// cell's box, each next box the checker's one-step bound of the previous
+/// one; with `unrolled`, also the bound of `x_t` back-substituted through
+/// every earlier step to the cell (CROWN on the unrolled loop), and every
+/// hidden neuron's bound likewise (the smaller is kept).
+pub struct Chain<'a> {
+    start: Start<'a>,
+    unrolled: bool,
+    links: Vec<Link<'a>>,
+}
+
+impl<'a> Chain<'a> {
+    /// An empty chain; `start` is what the unrolled bounds know of the cell
+    /// beyond its box (a ball; polytope rows are used by the first step only).
+    pub fn new(start: Start<'a>, unrolled: bool) -> Chain<'a> {
+        Chain {
+            start,
+            unrolled,
+            links: Vec::new(),
+        }
+    }
+
+    /// Upper bounds of the rows of `lin` (linear in `x_s`, `s` the number
+    /// of links) over every state reachable from the cell: substituted
+    /// back through every link and bounded over the cell.
+    fn unroll(&self, mut lin: Linear) -> Vec<f64> {
+        for link in self.links.iter().rev() {
+            lin = link.lp.back_step(&lin, &link.x, &link.nb, &link.u);
+        }
+        let Some(first) = self.links.first() else {
+            return vec![f64::INFINITY; lin.coef.nrows()];
+        };
+        (0..lin.coef.nrows())
+            .map(|r| {
+                let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
+                sum_upper([self.start.support(&row, &first.x), lin.off[r]])
+            })
+            .collect()
+    }
+
+    /// The network over the observation box of `x` for the next step, with
+    /// every neuron also bounded through the earlier steps when unrolled.
+    fn net_bounds(
+        &self,
+        lp: &Loop<'a>,
+        x: &Bx,
+        claimed: Option<&[Bx]>,
+        widened: bool,
+    ) -> Result<NetBounds<'a>, Trouble> {
+        let s = self.links.len();
+        let y = lp.observation(x);
+        let ct = lp.obs.transpose();
+        let xmax = x.abs_max();
+        let cx = abs_times(&ct, &xmax);
+        // a bound linear in y_s becomes one linear in x_s, then is unrolled
+        let through = |back: &Linear| -> Vec<f64> {
+            let coef = mul(&back.coef, &ct);
+            let off = (0..back.coef.nrows())
+                .map(|r| {
+                    let g: Vec<f64> = back.coef.row(r).iter().copied().collect();
+                    sum_upper([
+                        back.off[r],
+                        dot_box_upper(&g, &lp.v.lo, &lp.v.hi),
+                        product_error(g.iter().copied(), &cx, &xmax, g.len()),
+                    ])
+                })
+                .collect();
+            self.unroll(Linear { coef, off })
+        };
+        let hook: Option<Hook> = if self.unrolled && s > 0 {
+            Some(&through)
+        } else {
+            None
+        };
+        NetBounds::with_hook(lp.net, &y, claimed, hook, widened)
+    }
+
+    /// Pre-activation bounds for the next step from `x` as the certificate
+    /// writer claims them: each layer's proven bound, computed from the
+    /// earlier layers' claims, [`widen`]ed.
+    pub fn witness(&self, lp: &Loop<'a>, x: &Bx) -> Result<Witness, Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        Ok(self.net_bounds(lp, x, None, true)?.witness)
+    }
+
+    /// The next step from the box `x` (the cell's box for the first step,
+    /// else the previous claimed box; `start` says what else is known of
+    /// it) with loop `lp`: its proven box, the proven offsets along the
+    /// extra `directions` (rows), and the witness used (checked against
+    /// `claimed` when given).
+    pub fn step(
+        &mut self,
+        lp: Loop<'a>,
+        x: &Bx,
+        start: Start,
+        directions: Option<&DMatrix<f64>>,
+        claimed: Option<&[Bx]>,
+    ) -> Result<Stepped, Trouble> {
+        if !x.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let s = self.links.len();
+        let nb = self.net_bounds(&lp, x, claimed, false)?;
+        let u = nb.output();
+        if !u.is_proper() {
+            return Err(Trouble::Overflow);
+        }
+        let n = x.lo.len();
+        let extra = directions.map_or(0, DMatrix::nrows);
+        let mut facets = DMatrix::zeros(2 * n + extra, n);
+        facets
+            .view_mut((0, 0), (2 * n, n))
+            .copy_from(&plus_minus(n));
+        if let Some(d) = directions {
+            if d.ncols() != n {
+                return Err(Trouble::Shape(format!(
+                    "directions of width {} for {n} states",
+                    d.ncols()
+                )));
+            }
+            facets.view_mut((2 * n, 0), (extra, n)).copy_from(d);
+        }
+        let mut ub = lp.facet_bounds(&facets, x, &start, &nb, &u);
+        if self.unrolled && s > 0 {
+            let rows = facets.nrows();
+            let lin = lp.back_step(
+                &Linear {
+                    coef: facets.clone(),
+                    off: vec![0.0; rows],
+                },
+                x,
+                &nb,
+                &u,
+            );
+            for (b, o) in ub.iter_mut().zip(self.unroll(lin)) {
+                if !o.is_nan() {
+                    *b = b.min(o);
+                }
+            }
+        }
+        let next = Bx {
+            lo: ub[n..2 * n].iter().map(|v| -v).collect(),
+            hi: ub[..n].to_vec(),
+        };
+        let offsets = ub[2 * n..].to_vec();
+        if !next.is_proper() || offsets.iter().any(|v| !v.is_finite()) {
+            return Err(Trouble::Overflow);
+        }
+        let witness = nb.witness.clone();
+        self.links.push(Link {
+            lp,
+            x: x.clone(),
+            nb,
+            u,
+        });
+        Ok(Stepped {
+            next,
+            offsets,
+            witness,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::exact::{is_upper, Extreme, Fixed};
+    use nalgebra::{DMatrix, DVector};
+
+    /// The exact `a·v` for coefficients `±2^k`.
+    fn exact_dot(a: &[(f64, u32)], v: &[f64]) -> Fixed {
+        a.iter().zip(v).fold(Fixed::ZERO, |s, (&(sign, k), &x)| {
+            let t = Fixed::of_scaled(x, k);
+            s.add(if sign > 0.0 { t } else { t.neg() })
+        })
+    }
+
+    /// The checker's supports over a box and a polytope with given duals
+    /// (the goal check of a closed-loop certificate, and a polytope start),
+    /// with duals of any size (3.5e307 among them) and boxes near
+    /// `f64::MAX`: never below `c·v` at a box vertex `v` that satisfies the
+    /// rows (exactly), so no dual makes a false containment pass.
+    #[test]
+    fn dual_supports_bound_every_feasible_vertex_at_any_magnitude() {
+        let mut g = Extreme::new(77);
+        let mut feasible = 0;
+        for _ in 0..3_000 {
+            let n = 1 + g.below(3);
+            let (mut lo, mut hi) = (Vec::new(), Vec::new());
+            for _ in 0..n {
+                let (p, q) = (g.value(), g.value());
+                lo.push(p.min(q));
+                hi.push(p.max(q));
+            }
+            let x = Bx { lo, hi };
+            let signed = |g: &mut Extreme| -> Vec<(f64, u32)> {
+                (0..n)
+                    .map(|_| {
+                        let sign = if g.below(2) == 0 { 1.0 } else { -1.0 };
+                        (sign, g.below(3) as u32)
+                    })
+                    .collect()
+            };
+            let coef = |a: &[(f64, u32)]| -> Vec<f64> {
+                a.iter().map(|&(s, k)| s * f64::from(1u32 << k)).collect()
+            };
+            let c = signed(&mut g);
+            let raw: Vec<Vec<(f64, u32)>> = (0..1 + g.below(2)).map(|_| signed(&mut g)).collect();
+            let rows: Vec<(Vec<f64>, f64)> = raw.iter().map(|a| (coef(a), g.value())).collect();
+            let mu: Vec<f64> = rows
+                .iter()
+                .map(|_| match g.below(4) {
+                    0 => 3.5e307,
+                    1 => g.value().abs(),
+                    2 => g.unit() * 4.0,
+                    _ => 1e300,
+                })
+                .collect();
+            let given = [mu];
+            let duals = Duals::given(&given);
+            let start = Start::Polytope {
+                rows: &rows,
+                duals: &duals,
+            };
+            let bound = start.support(&coef(&c), &x);
+            for corner in 0..1usize << n {
+                let v: Vec<f64> = (0..n)
+                    .map(|j| {
+                        if corner >> j & 1 == 1 {
+                            x.hi[j]
+                        } else {
+                            x.lo[j]
+                        }
+                    })
+                    .collect();
+                let inside = raw
+                    .iter()
+                    .zip(&rows)
+                    .all(|(a, (_, h))| exact_dot(a, &v).le(Fixed::of(*h)));
+                if inside {
+                    feasible += 1;
+                    assert!(
+                        is_upper(bound, exact_dot(&c, &v)),
+                        "support {bound:e} below c·v at {v:?} (c {c:?}, rows {rows:?}, duals {given:?})"
+                    );
+                }
+            }
+        }
+        assert!(feasible > 1_000, "{feasible}");
+    }
+
+    #[test]
+    fn relu_lines_bound_relu_on_their_interval() {
+        for (l, u) in [(-1.0, 2.0), (-3.0, 0.5), (-1e-300, 1e-300), (-0.1, 0.3)] {
+            let r = relu_lines(l, u);
+            for k in 0..=100 {
+                let z: f64 = l + (u - l) * k as f64 / 100.0;
+                let relu = z.max(0.0);
+                assert!(r.al * z + r.bl <= relu + 1e-15);
+                assert!(r.au * z + r.bu >= relu);
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_lines_bound_tanh_and_sigmoid_on_their_interval() {
+        let cases = [
+            (-3.0, 2.0),
+            (-0.5, -0.1),
+            (0.2, 4.0),
+            (-1e-9, 1e-9),
+            (-40.0, 40.0),
+            (1.5, 1.5),
+            (-0.3, 0.0),
+            (0.0, 0.3),
+        ];
+        for act in [Activation::Tanh, Activation::Sigmoid] {
+            for (l, u) in cases {
+                let r = smooth_lines(act, l, u);
+                for k in 0..=2000 {
+                    let z: f64 = l + (u - l) * k as f64 / 2000.0;
+                    let v = act.eval(z);
+                    assert!(r.al * z + r.bl <= v + 1e-15, "{act:?} [{l}, {u}] at {z}");
+                    assert!(r.au * z + r.bu >= v - 1e-15, "{act:?} [{l}, {u}] at {z}");
+                }
+                // and not loose: the lines are within the interval's image width
+                let w = act.eval(u) - act.eval(l);
+                assert!(
+                    r.bu - r.bl <= w + 1e-9,
+                    "{act:?} [{l}, {u}]: gap {}",
+                    r.bu - r.bl
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn network_bounds_contain_samples() {
+        let net = Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(3, 2, &[1.0, -1.0, 0.5, 2.0, -1.5, 0.3]),
+                    b: DVector::from_column_slice(&[0.1, -0.2, 0.3]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 3, &[1.0, -2.0, 0.7]),
+                    b: DVector::from_column_slice(&[0.05]),
+                },
+            ],
+        );
+        let y = Bx {
+            lo: vec![-1.0, -0.5],
+            hi: vec![0.5, 1.0],
+        };
+        let nb = NetBounds::new(&net, &y, None).expect("finite");
+        let out = nb.output();
+        let lin = nb.linear(DMatrix::from_element(1, 1, 1.0));
+        let (g, h) = (
+            lin.coef.row(0).iter().copied().collect::<Vec<f64>>(),
+            lin.off[0],
+        );
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let x = [-1.0 + 1.5 * i as f64 / 20.0, -0.5 + 1.5 * j as f64 / 20.0];
+                let v = net.forward(&x)[0];
+                assert!(out.lo[0] <= v && v <= out.hi[0]);
+                assert!(v <= g[0] * x[0] + g[1] * x[1] + h + 1e-12);
+            }
+        }
+        // the witness checks against itself, and a tightened one does not
+        let w = nb.witness.clone();
+        assert!(NetBounds::new(&net, &y, Some(&w)).is_ok());
+        let mut bad = w.clone();
+        bad[0].hi[1] -= 0.01;
+        assert!(matches!(
+            NetBounds::new(&net, &y, Some(&bad)),
+            Err(Trouble::Neuron {
+                layer: 0,
+                neuron: 1,
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,1053 @@
+//! The certificate checker: re-checks a verdict from a `ravel-certificate/1`
+//! file without trusting the analysis that produced it.
+//!
+//! # What a VALID answer proves
+//!
+//! For the problem recorded in the certificate (plants, noise boxes, initial
+//! set, goal and avoid sets, horizon; `ravel certify` first checks that it
+//! is exactly the problem its spec lowers to, and that the spec and
+//! controller files have the recorded SHA-256) and the controller as loaded
+//! (saturation included):
+//!
+//! * every VERIFIED property holds for **every** trajectory: the cells cover
+//!   the initial set; every claimed set of every cell contains the checker's
+//!   own one-step bound of the previous claimed set, computed with the
+//!   witness (pre-activation bounds of every hidden layer, each checked
+//!   against the checker's own bound from the earlier ones); the final sets
+//!   lie in the goal; and at every constrained step one inequality of each
+//!   avoid-set member separates the set from it;
+//! * every FALSIFIED property is violated by the recorded trajectory: its
+//!   initial state and noise values lie in their sets, and the
+//!   outward-rounded interval enclosure of the true trajectory from them
+//!   violates the property at the recorded step as a whole.
+//!
+//! UNSURE properties claim nothing and are not checked.
+//!
+//! # What it trusts
+//!
+//! This module (its arithmetic is its own: interval images, ReLU
+//! relaxations, back-substitution, box coverage), the outward-rounded sums
+//! of [`ravel_base::num`], the ONNX loader and the front end that maps a spec to
+//! its problem (parse, check, lower), and `serde_json`. It does not call
+//! the propagators, the partitioners, the LP or SDP solvers or the Monte
+//! Carlo simulation; nothing it uses was computed by them except the
+//! numbers in the certificate, which it checks. With `slope_steps` in the
+//! evidence it searches its own lower ReLU slopes (`bounds.rs`); any slope
+//! in [0, 1] is sound, so the search is not trusted either.
+//!
+//! # What it does not check yet
+//!
+//! Claimed sets are boxes. When the checker's box chain does not prove a
+//! verdict that the analysis proved with tighter sets (polytope or hull
+//! boundaries, unrolled CROWN), the certificate says so and the answer is
+//! UNSUPPORTED (never VALID).
+
+#![forbid(unsafe_code)]
+
+pub mod bounds;
+mod cover;
+pub mod network;
+
+/// Exact sums of `f64` values for the property tests of directed rounding
+/// (the same file serves the integration tests; each crate uses part of it).
+#[cfg(test)]
+#[allow(dead_code)]
+#[path = "../../../tests/common/exact.rs"]
+mod exact;
+
+use serde_json::Value;
+
+use bounds::{Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
+use ravel_base::nn::Network;
+use ravel_base::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
+
+/// The certificate format this module reads and `ravel::certificate` writes.
+pub const FORMAT: &str = "ravel-certificate/1";
+
+/// The answer about one certificate.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Answer {
+    /// Every claim holds.
+    Valid,
+    /// A claim is false: the first failing item, for people.
+    Invalid(String),
+    /// Some claim cannot be checked (and none was found false): why.
+    Unsupported(String),
+    /// The certificate is not a readable `ravel-certificate/1`: why.
+    Unreadable(String),
+}
+
+/// The checker's report: the answer and one line per property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Report {
+    /// The answer.
+    pub answer: Answer,
+    /// `name: STATUS (checked | not checked: why | no claim)` per property.
+    pub properties: Vec<String>,
+    /// Cells and steps of the VERIFIED evidence that were checked.
+    pub cells: usize,
+    /// Steps per cell.
+    pub steps: usize,
+    /// The first false claim of the VERIFIED evidence, if one was found
+    /// (the certificate writer uses it to tell a checkable certificate from
+    /// one the checker's bounds cannot establish).
+    pub evidence_failure: Option<String>,
+    /// Network certificates with a polytope input set: per cell, the dual
+    /// vectors its supports used, in the order they were asked for (what
+    /// the writer records; see [`network::check_solving`]).
+    pub duals: Vec<Vec<Vec<f64>>>,
+}
+
+type R<T> = Result<T, String>;
+
+impl Report {
+    /// A report with nothing checked yet.
+    fn empty() -> Report {
+        Report {
+            answer: Answer::Valid,
+            properties: Vec::new(),
+            cells: 0,
+            steps: 0,
+            evidence_failure: None,
+            duals: Vec::new(),
+        }
+    }
+}
+
+/// The answer from the first false claim and the first claim that could
+/// not be checked.
+fn decide(invalid: Option<String>, unsupported: Option<String>) -> Answer {
+    match (invalid, unsupported) {
+        (Some(m), _) => Answer::Invalid(m),
+        (None, Some(m)) => Answer::Unsupported(m),
+        (None, None) => Answer::Valid,
+    }
+}
+
+fn get<'a>(v: &'a Value, key: &str) -> R<&'a Value> {
+    v.get(key).ok_or_else(|| format!("missing field `{key}`"))
+}
+
+fn num(v: &Value) -> R<f64> {
+    v.as_f64()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| "expected a finite number".to_string())
+}
+
+fn uint(v: &Value, what: &str) -> R<usize> {
+    v.as_u64()
+        .and_then(|x| usize::try_from(x).ok())
+        .ok_or_else(|| format!("`{what}` must be a non-negative integer"))
+}
+
+fn vector(v: &Value, len: usize, what: &str) -> R<Vec<f64>> {
+    let a = v
+        .as_array()
+        .ok_or_else(|| format!("`{what}` must be an array"))?;
+    if a.len() != len {
+        return Err(format!("`{what}` has {} entries, expected {len}", a.len()));
+    }
+    a.iter()
+        .map(|x| num(x).map_err(|e| format!("`{what}`: {e}")))
+        .collect()
+}
+
+fn matrix(v: &Value, rows: usize, cols: usize, what: &str) -> R<nalgebra::DMatrix<f64>> {
+    let a = v
+        .as_array()
+        .ok_or_else(|| format!("`{what}` must be an array of rows"))?;
+    if a.len() != rows {
+        return Err(format!("`{what}` has {} rows, expected {rows}", a.len()));
+    }
+    let mut m = nalgebra::DMatrix::zeros(rows, cols);
+    for (i, r) in a.iter().enumerate() {
+        for (j, x) in vector(r, cols, what)?.into_iter().enumerate() {
+            m[(i, j)] = x;
+        }
+    }
+    Ok(m)
+}
+
+fn boxed(v: &Value, n: usize, what: &str) -> R<Bx> {
+    let b = Bx {
+        lo: vector(get(v, "lo")?, n, what)?,
+        hi: vector(get(v, "hi")?, n, what)?,
+    };
+    if !b.is_proper() {
+        return Err(format!("`{what}` is not a box (lo > hi somewhere)"));
+    }
+    Ok(b)
+}
+
+/// A claimed box: finite numbers of the right count; `lo > hi` is allowed
+/// (an empty claim is a false claim, caught by the checks that use it).
+fn claimed_box(v: &Value, n: usize, what: &str) -> R<Bx> {
+    Ok(Bx {
+        lo: vector(get(v, "lo")?, n, what)?,
+        hi: vector(get(v, "hi")?, n, what)?,
+    })
+}
+
+/// Rows `(a, b)` of `a·x ≤ b`.
+fn rows(v: &Value, n: usize, what: &str) -> R<Vec<(Vec<f64>, f64)>> {
+    v.as_array()
+        .ok_or_else(|| format!("`{what}` must be an array"))?
+        .iter()
+        .map(|r| Ok((vector(get(r, "a")?, n, what)?, num(get(r, "b")?)?)))
+        .collect()
+}
+
+/// A property as the checker reads it.
+enum Prop {
+    Goal(Vec<(Vec<f64>, f64)>),
+    Avoid {
+        members: Vec<Vec<(Vec<f64>, f64)>>,
+        steps: (usize, usize),
+    },
+}
+
+/// Inequalities `a·x ≤ b`.
+type Rows = Vec<(Vec<f64>, f64)>;
+
+/// The initial set as the checker reads it.
+enum Initial {
+    Box(Bx),
+    Polytope {
+        bbox: Bx,
+        rows: Vec<(Vec<f64>, f64)>,
+    },
+    /// `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}`; the norm is `1`, `2` or `inf`.
+    Ball {
+        center: Vec<f64>,
+        radius: Vec<f64>,
+        norm: String,
+    },
+}
+
+impl Initial {
+    /// A box containing the set (part of a polytope's definition; the
+    /// ball's, rounded outward).
+    fn bbox(&self) -> Bx {
+        match self {
+            Initial::Box(b) | Initial::Polytope { bbox: b, .. } => b.clone(),
+            Initial::Ball { center, radius, .. } => Bx::around(center, radius),
+        }
+    }
+
+    /// What step 0 knows beyond a cell's box.
+    fn start(&self) -> Start<'_> {
+        match self {
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => Start::Ball {
+                center,
+                radius,
+                norm,
+            },
+            Initial::Box(_) | Initial::Polytope { .. } => Start::Box,
+        }
+    }
+
+    /// Whether the box `b` certainly misses the set: one inequality of a
+    /// polytope separates it, or its point nearest a ball's centre is
+    /// farther than the radius (rounded toward the centre).
+    fn misses(&self, b: &Bx) -> bool {
+        match self {
+            Initial::Box(_) => false,
+            Initial::Polytope { rows, .. } => rows
+                .iter()
+                .any(|(a, h)| sum_lower([dot_box_lower(a, &b.lo, &b.hi), -h]) > 0.0),
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                let mut scaled = Vec::with_capacity(center.len());
+                for i in 0..center.len() {
+                    let gap =
+                        sum_lower([b.lo[i], -center[i]]).max(sum_lower([center[i], -b.hi[i]]));
+                    if gap <= 0.0 {
+                        scaled.push(0.0);
+                    } else if radius[i] > 0.0 {
+                        scaled.push((gap / radius[i]).next_down());
+                    } else {
+                        return true;
+                    }
+                }
+                let len = match norm.as_str() {
+                    "inf" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    "1" => sum_lower(scaled.iter().copied()),
+                    _ => sum_lower(scaled.iter().map(|v| (v * v).next_down())),
+                };
+                len > 1.0
+            }
+        }
+    }
+
+    /// Whether `x` certainly lies in the set (outward-rounded tests).
+    fn contains(&self, x: &[f64]) -> bool {
+        match self {
+            Initial::Box(b) => b.contains(x),
+            Initial::Polytope { bbox, rows } => {
+                bbox.contains(x)
+                    && rows.iter().all(|(a, b)| {
+                        sum_upper(a.iter().zip(x).map(|(a, x)| a * x).chain([-b])) <= 0.0
+                    })
+            }
+            Initial::Ball {
+                center,
+                radius,
+                norm,
+            } => {
+                if x.len() != center.len() {
+                    return false;
+                }
+                // |xᵢ − cᵢ| / rᵢ, rounded up (0 where rᵢ = 0 and xᵢ = cᵢ)
+                let mut scaled = Vec::with_capacity(x.len());
+                for ((x, c), r) in x.iter().zip(center).zip(radius) {
+                    let d = sum_upper([*x, -c]).abs().max(sum_lower([*x, -c]).abs());
+                    if d == 0.0 {
+                        scaled.push(0.0);
+                    } else if *r > 0.0 {
+                        scaled.push((d / r).next_up());
+                    } else {
+                        return false;
+                    }
+                }
+                let total = match norm.as_str() {
+                    "inf" => scaled.iter().fold(0.0f64, |m, v| m.max(*v)),
+                    "1" => sum_upper(scaled.iter().copied()),
+                    "2" => sum_upper(scaled.iter().map(|v| (v * v).next_up())),
+                    _ => return false,
+                };
+                total <= 1.0
+            }
+        }
+    }
+}
+
+/// The problem as the checker reads it.
+struct Problem {
+    n: usize,
+    horizon: usize,
+    plants: Vec<PlantRows>,
+    obs: nalgebra::DMatrix<f64>,
+    w: Bx,
+    v: Bx,
+    initial: Initial,
+    props: Vec<(String, Prop)>,
+}
+
+impl Problem {
+    fn read(p: &Value, net: &Network) -> R<Problem> {
+        let n = uint(get(p, "states")?, "states")?;
+        let m = uint(get(p, "controls")?, "controls")?;
+        let q = uint(get(p, "observations")?, "observations")?;
+        let horizon = uint(get(p, "horizon")?, "horizon")?;
+        let max = ravel_base::limits::MAX_DIM as usize;
+        if n == 0 || n > max || m > max || q > max {
+            return Err("dimensions out of range".into());
+        }
+        if horizon > ravel_base::limits::MAX_HORIZON as usize {
+            return Err("horizon out of range".into());
+        }
+        if net.inputs != q || net.outputs() != m {
+            return Err(format!(
+                "the controller maps {} inputs to {} outputs; the problem needs {q} → {m}",
+                net.inputs,
+                net.outputs()
+            ));
+        }
+        let plants = get(p, "plants")?
+            .as_array()
+            .filter(|a| !a.is_empty())
+            .ok_or("`plants` must be a non-empty array")?
+            .iter()
+            .map(|pl| {
+                let err = match get(pl, "error")? {
+                    Value::Null => None,
+                    e => Some((
+                        matrix(get(e, "A")?, n, n, "error.A")?,
+                        matrix(get(e, "B")?, n, m, "error.B")?,
+                        vector(get(e, "c")?, n, "error.c")?,
+                    )),
+                };
+                Ok(PlantRows {
+                    a: matrix(get(pl, "A")?, n, n, "A")?,
+                    b: matrix(get(pl, "B")?, n, m, "B")?,
+                    c: vector(get(pl, "c")?, n, "c")?,
+                    err,
+                })
+            })
+            .collect::<R<Vec<_>>>()?;
+        let init = get(p, "initial")?;
+        let initial = if let Some(b) = init.get("box") {
+            Initial::Box(boxed(b, n, "initial")?)
+        } else if let Some(p) = init.get("polytope") {
+            Initial::Polytope {
+                bbox: boxed(get(p, "bbox")?, n, "initial bbox")?,
+                rows: rows(get(p, "rows")?, n, "initial rows")?,
+            }
+        } else if let Some(b) = init.get("ball") {
+            let norm = get(b, "norm")?.as_str().unwrap_or("").to_string();
+            if !matches!(norm.as_str(), "1" | "2" | "inf") {
+                return Err("the ball's norm must be \"1\", \"2\" or \"inf\"".into());
+            }
+            let radius = vector(get(b, "radius")?, n, "initial radius")?;
+            if radius.iter().any(|r| *r < 0.0) {
+                return Err("a ball radius is negative".into());
+            }
+            Initial::Ball {
+                center: vector(get(b, "center")?, n, "initial center")?,
+                radius,
+                norm,
+            }
+        } else {
+            return Err("`initial` must be a box, a polytope or a ball".into());
+        };
+        let props = get(p, "properties")?
+            .as_array()
+            .ok_or("`properties` must be an array")?
+            .iter()
+            .map(|pr| {
+                let name = get(pr, "name")?
+                    .as_str()
+                    .ok_or("`name` must be a string")?
+                    .to_string();
+                let kind = match get(pr, "kind")?.as_str() {
+                    Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
+                    Some("avoid") => {
+                        let s = get(pr, "steps")?;
+                        let steps = (
+                            uint(get(s, "first")?, "steps.first")?,
+                            uint(get(s, "last")?, "steps.last")?,
+                        );
+                        let members = get(pr, "members")?
+                            .as_array()
+                            .ok_or("`members` must be an array")?
+                            .iter()
+                            .map(|mb| rows(mb, n, "avoid rows"))
+                            .collect::<R<Vec<_>>>()?;
+                        Prop::Avoid { members, steps }
+                    }
+                    _ => return Err("`kind` must be \"goal\" or \"avoid\"".to_string()),
+                };
+                Ok((name, kind))
+            })
+            .collect::<R<Vec<_>>>()?;
+        Ok(Problem {
+            n,
+            horizon,
+            plants,
+            obs: matrix(get(p, "observation")?, n, q, "observation")?,
+            w: boxed(get(p, "process_noise")?, n, "process_noise")?,
+            v: boxed(get(p, "sensor_noise")?, q, "sensor_noise")?,
+            initial,
+            props,
+        })
+    }
+
+    fn at<'a>(&'a self, t: usize, net: &'a Network, slopes: usize) -> Loop<'a> {
+        Loop {
+            plant: &self.plants[t.min(self.plants.len() - 1)],
+            obs: &self.obs,
+            w: &self.w,
+            v: &self.v,
+            net,
+            slopes,
+        }
+    }
+
+    /// The last step a property constrains.
+    fn last_step(&self, p: &Prop) -> usize {
+        match p {
+            Prop::Goal(_) => self.horizon,
+            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+        }
+    }
+}
+
+/// The name of coordinate `i`'s upper or lower facet, for messages.
+fn facet(i: usize, upper: bool) -> String {
+    format!(
+        "x[{i}] {}",
+        if upper { "upper bound" } else { "lower bound" }
+    )
+}
+
+/// Check one certificate against the controller `net` (saturation
+/// included), or, for a network spec's certificate, against its model.
+pub fn check(cert: &Value, net: &Network) -> Report {
+    if cert
+        .get("problem")
+        .and_then(|p| p.get("kind"))
+        .and_then(Value::as_str)
+        == Some("network")
+        && cert.get("format").and_then(Value::as_str) == Some(FORMAT)
+    {
+        return network::check(cert, net);
+    }
+    let mut report = Report::empty();
+    match check_inner(cert, net, &mut report) {
+        Ok(answer) => report.answer = answer,
+        Err(e) => report.answer = Answer::Unreadable(e),
+    }
+    report
+}
+
+fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
+    match get(cert, "format")?.as_str() {
+        Some(FORMAT) => {}
+        Some(other) => {
+            return Err(format!(
+                "format `{}` is not {FORMAT}",
+                ravel_base::text::sanitize(other)
+            ))
+        }
+        None => return Err("`format` must be a string".into()),
+    }
+    let problem = Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
+    let verdicts = get(cert, "verdicts")?
+        .as_array()
+        .ok_or("`verdicts` must be an array")?;
+    if verdicts.len() != problem.props.len() {
+        return Err(format!(
+            "{} verdicts for {} properties",
+            verdicts.len(),
+            problem.props.len()
+        ));
+    }
+    let mut invalid: Option<String> = None;
+    let mut unsupported: Option<String> = None;
+    let mut verified = Vec::new();
+    for (i, (v, (name, prop))) in verdicts.iter().zip(&problem.props).enumerate() {
+        if get(v, "property")?.as_str() != Some(name.as_str()) {
+            return Err(format!(
+                "verdict {i} is not about property `{}`",
+                ravel_base::text::sanitize(name)
+            ));
+        }
+        let shown = ravel_base::text::sanitize(name);
+        match get(v, "status")?.as_str() {
+            Some("VERIFIED") => verified.push(i),
+            Some("UNSURE") => report
+                .properties
+                .push(format!("{shown}: UNSURE (no claim)")),
+            Some("FALSIFIED") => {
+                let step = uint(get(v, "step")?, "step")?;
+                match replay(&problem, net, prop, step, get(v, "trajectory")?)? {
+                    Ok(()) => report.properties.push(format!(
+                        "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
+                    )),
+                    Err(why) => {
+                        let msg = format!("property `{shown}`: the counterexample {why}");
+                        report
+                            .properties
+                            .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
+                        invalid.get_or_insert(msg);
+                    }
+                }
+            }
+            _ => {
+                return Err(format!(
+                    "verdict {i}: `status` must be VERIFIED, FALSIFIED or UNSURE"
+                ))
+            }
+        }
+    }
+    if !verified.is_empty() {
+        let ev = get(cert, "evidence")?;
+        match get(ev, "status")?.as_str() {
+            Some("checkable") => {
+                let needed = verified
+                    .iter()
+                    .map(|&i| problem.last_step(&problem.props[i].1))
+                    .max()
+                    .unwrap_or(0);
+                match evidence(&problem, net, ev, needed, &verified, report)? {
+                    Ok(()) => {
+                        for &i in &verified {
+                            let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                            report
+                                .properties
+                                .push(format!("{shown}: VERIFIED (checked)"));
+                        }
+                    }
+                    Err(msg) => {
+                        for &i in &verified {
+                            let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                            report
+                                .properties
+                                .push(format!("{shown}: VERIFIED — not established"));
+                        }
+                        report.evidence_failure = Some(msg.clone());
+                        invalid.get_or_insert(msg);
+                    }
+                }
+            }
+            Some("unsupported") => {
+                let why = get(ev, "reason")?.as_str().unwrap_or("no reason given");
+                let why = ravel_base::text::sanitize_to(why, 600);
+                for &i in &verified {
+                    let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                    report
+                        .properties
+                        .push(format!("{shown}: VERIFIED — not checkable: {why}"));
+                }
+                unsupported.get_or_insert(why);
+            }
+            _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
+        }
+    }
+    Ok(decide(invalid, unsupported))
+}
+
+/// The analysis's `optimise_slopes` from the evidence (the checker then
+/// searches its own slopes; absent in certificates written before the
+/// setting existed: 0), within the analysis's own limit.
+fn slope_steps(ev: &Value) -> R<usize> {
+    let slopes = match ev.get("slope_steps") {
+        None => 0,
+        Some(v) => uint(v, "evidence.slope_steps")?,
+    };
+    if slopes as u64 > ravel_base::limits::MAX_SLOPE_STEPS {
+        return Err(format!(
+            "{slopes} slope-optimisation steps: more than the {} any analysis makes",
+            ravel_base::limits::MAX_SLOPE_STEPS
+        ));
+    }
+    Ok(slopes)
+}
+
+/// One cell's checked chain: its box, the claimed sets from step 0 (the
+/// box) to the last step, the last set's inequalities and the goal rows'
+/// duals over them.
+struct CellChain {
+    start: Bx,
+    sets: Vec<Bx>,
+    last_rows: Rows,
+    goal_duals: Vec<Vec<f64>>,
+}
+
+/// The evidence's settings every cell is checked with.
+#[derive(Clone, Copy)]
+struct Mode {
+    steps: usize,
+    unrolled: bool,
+    slopes: usize,
+}
+
+/// Read the evidence's settings; the inner error is evidence that cannot
+/// serve the verified properties.
+fn mode(problem: &Problem, ev: &Value, needed: usize) -> R<Result<Mode, String>> {
+    let steps = uint(get(ev, "steps")?, "evidence.steps")?;
+    if steps < needed || steps > problem.horizon {
+        return Ok(Err(format!(
+            "the evidence covers steps 0..={steps}, the verified properties need 0..={needed}"
+        )));
+    }
+    let unrolled = match ev.get("mode").and_then(Value::as_str) {
+        Some("unrolled") => true,
+        Some("one_step") => false,
+        _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
+    };
+    Ok(Ok(Mode {
+        steps,
+        unrolled,
+        slopes: slope_steps(ev)?,
+    }))
+}
+
+/// Check the VERIFIED evidence; the outer error is an unreadable
+/// certificate, the inner one the first false claim.
+fn evidence(
+    problem: &Problem,
+    net: &Network,
+    ev: &Value,
+    needed: usize,
+    verified: &[usize],
+    report: &mut Report,
+) -> R<Result<(), String>> {
+    let mode = match mode(problem, ev, needed)? {
+        Ok(m) => m,
+        Err(e) => return Ok(Err(e)),
+    };
+    let cells_json = get(ev, "cells")?
+        .as_array()
+        .ok_or("`evidence.cells` must be an array")?;
+    // the checker's work grows with cells × steps: the analysis's own limits
+    if cells_json.len() as u64 > ravel_base::limits::MAX_CELLS {
+        return Err(format!(
+            "{} cells: more than the {} any analysis makes",
+            cells_json.len(),
+            ravel_base::limits::MAX_CELLS
+        ));
+    }
+    let mut chains = Vec::with_capacity(cells_json.len());
+    for (c, cell) in cells_json.iter().enumerate() {
+        match cell_chain(problem, net, cell, mode, c)? {
+            Ok(chain) => chains.push(chain),
+            Err(e) => return Ok(Err(e)),
+        }
+    }
+    let cells: Vec<Bx> = chains.iter().map(|ch| ch.start.clone()).collect();
+    let x0 = &problem.initial;
+    match cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
+        Ok(()) => {}
+        Err(Some(p)) => {
+            return Ok(Err(format!(
+                "the cells do not cover the initial set: {p:?} is in no cell"
+            )))
+        }
+        // undecided is not false: the certificate is not checkable
+        Err(None) => {
+            return Err(
+                "the cells' coverage of the initial set could not be decided within the work limit"
+                    .into(),
+            )
+        }
+    }
+    for &i in verified {
+        for (c, chain) in chains.iter().enumerate() {
+            if let Err(e) = cell_proves(problem, i, chain, c) {
+                return Ok(Err(e));
+            }
+        }
+    }
+    report.cells = cells.len();
+    report.steps = mode.steps;
+    Ok(Ok(()))
+}
+
+/// Check one cell's chain of claimed sets (`c` names it in messages); the
+/// outer error is an unreadable cell, the inner one the first false claim.
+fn cell_chain(
+    problem: &Problem,
+    net: &Network,
+    cell: &Value,
+    mode: Mode,
+    c: usize,
+) -> R<Result<CellChain, String>> {
+    let Mode {
+        steps,
+        unrolled,
+        slopes,
+    } = mode;
+    let n = problem.n;
+    let start = claimed_box(get(cell, "box")?, n, "cell box")?;
+    if !start.is_proper() {
+        return Ok(Err(format!("cell {c}'s box is empty")));
+    }
+    let claims = get(cell, "steps")?
+        .as_array()
+        .ok_or("`steps` must be an array")?;
+    if claims.len() != steps {
+        return Err(format!(
+            "cell {c} has {} steps, expected {steps}",
+            claims.len()
+        ));
+    }
+    let mut chain = vec![start.clone()];
+    let mut links = Chain::new(problem.initial.start(), unrolled);
+    // the inequalities of the previous claimed set (step 0: a polytope X0's)
+    let mut prev_rows: Vec<(Vec<f64>, f64)> = match &problem.initial {
+        Initial::Polytope { rows, .. } => rows.clone(),
+        Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
+    };
+    for (k, claim) in claims.iter().enumerate() {
+        let t = k + 1;
+        let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
+        let rows_now = match claim.get("rows") {
+            None => Vec::new(),
+            Some(r) => rows(r, n, "claimed rows")?,
+        };
+        let given = vectors(claim.get("duals"), "duals")?;
+        let duals = Duals::given(&given);
+        let start_k = if !prev_rows.is_empty() {
+            Start::Polytope {
+                rows: &prev_rows,
+                duals: &duals,
+            }
+        } else if k == 0 {
+            problem.initial.start()
+        } else {
+            Start::Box
+        };
+        let directions = (!rows_now.is_empty())
+            .then(|| nalgebra::DMatrix::from_fn(rows_now.len(), n, |r, j| rows_now[r].0[j]));
+        let witness = get(claim, "preactivations")?
+            .as_array()
+            .ok_or("`preactivations` must be an array")?
+            .iter()
+            .map(|b| {
+                let len = b.get("lo").and_then(Value::as_array).map_or(0, Vec::len);
+                claimed_box(b, len, "pre-activation bounds")
+            })
+            .collect::<R<Vec<_>>>()?;
+        let prev = &chain[k];
+        let stepped = links.step(
+            problem.at(k, net, slopes),
+            prev,
+            start_k,
+            directions.as_ref(),
+            Some(&witness),
+        );
+        let proven = match stepped {
+            Ok(st) => {
+                for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
+                    // a claim holds only against a number (NaN proves nothing)
+                    if b.is_nan() || o.is_nan() || b < o {
+                        return Ok(Err(format!(
+                            "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
+                            ravel_base::text::compact(o - b)
+                        )));
+                    }
+                }
+                st.next
+            }
+            Err(Trouble::Neuron {
+                layer,
+                neuron,
+                claimed,
+                proven,
+            }) => {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+                    claimed.0, claimed.1, proven.0, proven.1
+                )))
+            }
+            Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
+            Err(Trouble::Overflow) => {
+                return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
+            }
+        };
+        for i in 0..n {
+            if proven.hi[i].is_nan() || set.hi[i] < proven.hi[i] {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                    facet(i, true),
+                    set.hi[i],
+                    proven.hi[i],
+                    ravel_base::text::compact(proven.hi[i] - set.hi[i])
+                )));
+            }
+            if proven.lo[i].is_nan() || set.lo[i] > proven.lo[i] {
+                return Ok(Err(format!(
+                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                    facet(i, false),
+                    set.lo[i],
+                    proven.lo[i],
+                    ravel_base::text::compact(set.lo[i] - proven.lo[i])
+                )));
+            }
+        }
+        chain.push(set);
+        prev_rows = rows_now;
+    }
+    let goal_duals = vectors(cell.get("goal_duals"), "goal_duals")?;
+    Ok(Ok(CellChain {
+        start,
+        sets: chain,
+        last_rows: prev_rows,
+        goal_duals,
+    }))
+}
+
+/// A list of number vectors of any lengths (absent: none).
+fn vectors(v: Option<&Value>, what: &str) -> R<Vec<Vec<f64>>> {
+    match v {
+        None => Ok(Vec::new()),
+        Some(d) => d
+            .as_array()
+            .ok_or_else(|| format!("`{what}` must be an array"))?
+            .iter()
+            .map(|v| {
+                let len = v.as_array().map_or(0, Vec::len);
+                vector(v, len, what)
+            })
+            .collect(),
+    }
+}
+
+/// Whether one cell's checked chain proves VERIFIED property `i`.
+fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Result<(), String> {
+    let (name, prop) = &problem.props[i];
+    let shown = ravel_base::text::sanitize(name);
+    let sets = &chain.sets;
+    match prop {
+        Prop::Goal(g) => {
+            let last = &sets[problem.horizon];
+            let duals = Duals::given(&chain.goal_duals);
+            let support = Start::Polytope {
+                rows: &chain.last_rows,
+                duals: &duals,
+            };
+            for (r, (a, b)) in g.iter().enumerate() {
+                let top = if chain.last_rows.is_empty() {
+                    dot_box_upper(a, &last.lo, &last.hi)
+                } else {
+                    support.support(a, last)
+                };
+                let worst = sum_upper([top, -b]);
+                if worst.is_nan() || worst > 0.0 {
+                    return Err(format!(
+                        "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",
+                        problem.horizon,
+                        ravel_base::text::compact(worst)
+                    ));
+                }
+            }
+        }
+        Prop::Avoid { members, steps: s } => {
+            for (t, set) in sets
+                .iter()
+                .enumerate()
+                .take(problem.last_step(prop) + 1)
+                .skip(s.0)
+            {
+                for (k, mb) in members.iter().enumerate() {
+                    let separated = mb
+                        .iter()
+                        .any(|(a, b)| sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0);
+                    if !separated {
+                        return Err(format!(
+                            "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The certificate writer's view of the checker: one cell at a time.
+///
+/// The writer may refine the analysis's partition until every cell's
+/// chain proves the VERIFIED properties (a witness the checker re-checks as
+/// a whole: coverage included). `CellCheck` reads the problem, the
+/// verdicts and the evidence's settings once and checks single cells with
+/// the same code as [`check`].
+pub struct CellCheck<'a> {
+    problem: Problem,
+    net: &'a Network,
+    verified: Vec<usize>,
+    mode: Mode,
+}
+
+impl<'a> CellCheck<'a> {
+    /// From a certificate whose evidence has its settings (`steps`, `mode`,
+    /// `slope_steps`; the cells are not read).
+    pub fn new(cert: &Value, net: &'a Network) -> Result<CellCheck<'a>, String> {
+        let problem =
+            Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
+        let verdicts = get(cert, "verdicts")?
+            .as_array()
+            .ok_or("`verdicts` must be an array")?;
+        let verified: Vec<usize> = verdicts
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.get("status").and_then(Value::as_str) == Some("VERIFIED"))
+            .map(|(i, _)| i)
+            .filter(|&i| i < problem.props.len())
+            .collect();
+        let needed = verified
+            .iter()
+            .map(|&i| problem.last_step(&problem.props[i].1))
+            .max()
+            .unwrap_or(0);
+        let mode = mode(&problem, get(cert, "evidence")?, needed)??;
+        Ok(CellCheck {
+            problem,
+            net,
+            verified,
+            mode,
+        })
+    }
+
+    /// Whether `cell` (a certificate cell: its box, its claimed steps)
+    /// proves every VERIFIED property on its own; the first failure.
+    pub fn check(&self, cell: &Value) -> Result<(), String> {
+        let chain = cell_chain(&self.problem, self.net, cell, self.mode, 0)??;
+        for &i in &self.verified {
+            cell_proves(&self.problem, i, &chain, 0)?;
+        }
+        Ok(())
+    }
+}
+
+/// Replay a counterexample rigorously; the outer error is an unreadable
+/// trajectory, the inner one why it does not violate the property.
+fn replay(
+    problem: &Problem,
+    net: &Network,
+    prop: &Prop,
+    step: usize,
+    tr: &Value,
+) -> R<Result<(), String>> {
+    let n = problem.n;
+    let q = problem.obs.ncols();
+    if step > problem.horizon {
+        return Ok(Err(format!(
+            "names step {step}, beyond the horizon {}",
+            problem.horizon
+        )));
+    }
+    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < step || vs.len() < step {
+        return Err(format!(
+            "the trajectory has noise for fewer than {step} steps"
+        ));
+    }
+    if !problem.initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    let mut x = Bx::point(&x0);
+    for t in 0..step {
+        let w = vector(&ws[t], n, "process_noise")?;
+        let v = vector(&vs[t], q, "sensor_noise")?;
+        if !problem.w.contains(&w) {
+            return Ok(Err(format!(
+                "has process noise outside its box at step {t}"
+            )));
+        }
+        if !problem.v.contains(&v) {
+            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+        }
+        match problem.at(t, net, 0).enclose(&x, &w, &v) {
+            Some(next) => x = next,
+            None => return Ok(Err(format!("overflows at step {}", t + 1))),
+        }
+    }
+    let violated = match prop {
+        Prop::Goal(g) => {
+            step == problem.horizon
+                && g.iter()
+                    .any(|(a, b)| sum_lower([dot_box_lower(a, &x.lo, &x.hi), -b]) > 0.0)
+        }
+        Prop::Avoid { members, steps } => {
+            steps.0 <= step
+                && step <= problem.last_step(prop)
+                && members.iter().any(|mb| {
+                    mb.iter()
+                        .all(|(a, b)| sum_upper([dot_box_upper(a, &x.lo, &x.hi), -b]) <= 0.0)
+                })
+        }
+    };
+    Ok(if violated {
+        Ok(())
+    } else {
+        Err(format!(
+            "does not certainly violate the property at step {step} (enclosure {:?} … {:?})",
+            x.lo, x.hi
+        ))
+    })
+}

@@ -1,0 +1,693 @@
+//! The certificate writer: a `ravel-certificate/1` document for one
+//! verified (spec, controller) pair, which [`ravel_certify`] re-checks
+//! without trusting the analysis.
+//!
+//! The claimed sets are not the analysis's own sets: for every cell of the
+//! partition the writer re-derives the chain of boxes with the checker's
+//! one-step bound ([`ravel_certify::bounds::Loop::step`]) and records the
+//! pre-activation bounds it used as the witness, so a correct certificate
+//! checks exactly (no rounding differences between two implementations).
+//! Where the checker's chain on a cell does not prove a VERIFIED property
+//! (the analysis's method was tighter: Reach-SDP, unrolled CROWN, polytope
+//! sets, a parent cell's intersection), the writer bisects the cell and
+//! derives the halves instead, until every cell's chain proves it: the
+//! finer partition is the witness, and the checker re-checks it as any
+//! other (coverage included). When that fails within the refinement's
+//! budget, or the evidence is of a kind the checker does not handle yet,
+//! the evidence is marked `unsupported` with the reason, and `ravel
+//! certify` answers UNSUPPORTED, never VALID. See `docs/certificates.md`.
+
+use serde_json::{json, Value};
+
+use nalgebra::DMatrix;
+use ravel_analysis::closed_loop::{ClosedLoop, Propagator};
+
+use crate::execute::{Outcome, Status, Trajectory};
+use crate::lower::{Plan, PropertyKind};
+use ravel_analysis::lp;
+use ravel_analysis::sets::{IBox, Region};
+use ravel_base::nn::{Layer, Network};
+use ravel_certify::bounds::{widen, Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
+use ravel_certify::{self as certify, Answer, FORMAT};
+
+/// Who made the certificate and from which files.
+#[derive(Clone, Debug)]
+pub struct Identity {
+    /// The spec's path as recorded (the CLI records it relative to the
+    /// certificate's folder, where `certify` reads it).
+    pub spec_path: String,
+    /// SHA-256 of the spec's bytes.
+    pub spec_sha256: String,
+}
+
+fn rows_json(m: &nalgebra::DMatrix<f64>) -> Value {
+    Value::Array(
+        (0..m.nrows())
+            .map(|i| json!(m.row(i).iter().copied().collect::<Vec<f64>>()))
+            .collect(),
+    )
+}
+
+fn box_json(b: &IBox) -> Value {
+    json!({ "lo": b.lo, "hi": b.hi })
+}
+
+fn bx_json(b: &Bx) -> Value {
+    json!({ "lo": b.lo, "hi": b.hi })
+}
+
+fn ineq_json(rows: &[(Vec<f64>, f64)]) -> Value {
+    Value::Array(
+        rows.iter()
+            .map(|(a, b)| json!({ "a": a, "b": b }))
+            .collect(),
+    )
+}
+
+/// The problem as a certificate records it: what the checker reads, and
+/// what `ravel certify` compares with the spec's own lowering.
+pub fn problem_json(plan: &Plan) -> Value {
+    let cl = &plan.closed_loop;
+    let plants: Vec<Value> = cl
+        .plants()
+        .into_iter()
+        .map(|p| {
+            let error = match &p.err {
+                None => Value::Null,
+                Some(e) => json!({ "A": rows_json(&e.a), "B": rows_json(&e.b), "c": e.c.as_slice() }),
+            };
+            json!({ "A": rows_json(&p.a), "B": rows_json(&p.b), "c": p.c.as_slice(), "error": error })
+        })
+        .collect();
+    let initial = match &plan.initial {
+        Region::Box(b) => json!({ "box": box_json(b) }),
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => json!({ "ball": { "center": center, "radius": radius, "norm": norm.name() } }),
+        Region::Polytope { bbox, rows } => {
+            json!({ "polytope": { "bbox": box_json(bbox), "rows": ineq_json(rows) } })
+        }
+    };
+    let properties: Vec<Value> = plan
+        .properties
+        .iter()
+        .map(|p| match &p.kind {
+            PropertyKind::Goal(g) => {
+                json!({ "name": p.name, "kind": "goal", "rows": ineq_json(&g.rows) })
+            }
+            PropertyKind::Avoid { members, steps } => json!({
+                "name": p.name,
+                "kind": "avoid",
+                "steps": { "first": steps.0, "last": steps.1 },
+                "members": members.iter().map(|m| ineq_json(&m.rows)).collect::<Vec<_>>(),
+            }),
+        })
+        .collect();
+    json!({
+        "states": cl.states(),
+        "controls": cl.plant.b.ncols(),
+        "observations": cl.plant.obs.ncols(),
+        "horizon": plan.horizon,
+        "plants": plants,
+        "observation": rows_json(&cl.plant.obs),
+        "process_noise": box_json(&cl.plant.w),
+        "sensor_noise": box_json(&cl.plant.v),
+        "control_limits": plan.limits.as_ref().map(box_json),
+        "initial": initial,
+        "properties": properties,
+    })
+}
+
+/// SHA-256 of the network as analysed (every layer's numbers, saturation
+/// included): it covers external-data files, which the controller file's
+/// own hash does not.
+pub fn network_sha256(net: &Network) -> String {
+    let mut bytes = Vec::new();
+    bytes.extend((net.inputs as u64).to_le_bytes());
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w, b } => {
+                bytes.push(b'A');
+                bytes.extend((w.nrows() as u64).to_le_bytes());
+                bytes.extend((w.ncols() as u64).to_le_bytes());
+                for i in 0..w.nrows() {
+                    for j in 0..w.ncols() {
+                        bytes.extend(w[(i, j)].to_bits().to_le_bytes());
+                    }
+                }
+                for v in b.iter() {
+                    bytes.extend(v.to_bits().to_le_bytes());
+                }
+            }
+            Layer::Act(a) => {
+                bytes.push(b'S');
+                bytes.extend(a.name().as_bytes());
+            }
+        }
+    }
+    crate::check::sha256_hex(&bytes)
+}
+
+fn trajectory_json(tr: &Trajectory) -> Value {
+    json!({
+        "initial": tr.states.first(),
+        "process_noise": tr.process_noise,
+        "sensor_noise": tr.sensor_noise,
+        "controls": tr.controls,
+        "states": tr.states,
+    })
+}
+
+/// The closed loop's plants and noise boxes in the checker's types.
+pub fn loop_data(cl: &ClosedLoop) -> (Vec<PlantRows>, Bx, Bx) {
+    let plants = cl
+        .plants()
+        .into_iter()
+        .map(|p| PlantRows {
+            a: p.a.clone(),
+            b: p.b.clone(),
+            c: p.c.as_slice().to_vec(),
+            err: p
+                .err
+                .as_ref()
+                .map(|e| (e.a.clone(), e.b.clone(), e.c.as_slice().to_vec())),
+        })
+        .collect();
+    let boxed = |b: &IBox| Bx {
+        lo: b.lo.clone(),
+        hi: b.hi.clone(),
+    };
+    (plants, boxed(&cl.plant.w), boxed(&cl.plant.v))
+}
+
+/// The VERIFIED evidence's settings, without cells: `steps`, `mode`,
+/// `slope_steps`.
+fn evidence_header(plan: &Plan, steps: usize) -> Value {
+    // the unrolled chain costs quadratic time in the horizon: only when the
+    // analysis itself unrolled
+    let unrolled = plan.propagator == Propagator::CrownUnrolled;
+    let mode = if unrolled { "unrolled" } else { "one_step" };
+    json!({
+        "status": "checkable",
+        "mode": mode,
+        "slope_steps": plan.closed_loop.slope_steps,
+        "steps": steps,
+        "cells": [],
+    })
+}
+
+/// The most cells the writer's refinement may make: sixteen times the
+/// analysis's partition, at least 256, within the checker's cell limit.
+fn refinement_cap(cells: usize) -> usize {
+    (cells.saturating_mul(16))
+        .max(256)
+        .min(ravel_base::limits::MAX_CELLS as usize)
+}
+
+/// Cells of the VERIFIED evidence, each with the chain of boxes and the
+/// witness of every step up to `steps`, derived with the checker's own
+/// step. With `refine`, a cell whose chain does not prove every VERIFIED property
+/// ([`certify::CellCheck`]) is bisected along its widest side (relative to
+/// X0's box) and its halves derived in its place, depth first, until every
+/// cell proves them or the cells would exceed [`refinement_cap`]: the
+/// analysis may have proved the verdict with tighter sets than the
+/// checker's boxes (Reach-SDP, hull or polytope boundaries, unrolled
+/// CROWN, a parent cell's intersection), and smaller cells tighten the
+/// checker's boxes. The error says why the evidence is not checkable.
+fn derive(
+    plan: &Plan,
+    outcome: &Outcome,
+    header: &Value,
+    cert: &Value,
+    refine: bool,
+) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let (plants, w, v) = loop_data(cl);
+    let steps = header["steps"].as_u64().unwrap_or(0) as usize;
+    let unrolled = header["mode"] == "unrolled";
+    let checker = certify::CellCheck::new(cert, &cl.net).map_err(|e| format!("internal: {e}"))?;
+    let x0 = plan.initial.bbox();
+    let cap = refinement_cap(outcome.cells.len());
+    // (the cell's box, the analysis's sets for it when it is its cell)
+    let mut todo: Vec<(IBox, Option<&[Region]>)> = Vec::with_capacity(outcome.cells.len());
+    for (c, sets) in outcome.cells.iter().enumerate() {
+        let start = sets
+            .first()
+            .map(Region::bbox)
+            .ok_or_else(|| format!("cell {c} has no sets"))?;
+        todo.push((start, Some(sets.as_slice())));
+    }
+    todo.reverse();
+    let mut cells = Vec::with_capacity(todo.len());
+    while let Some((start, sets)) = todo.pop() {
+        let derived = derive_cell(plan, &plants, (&w, &v), &start, sets, steps, unrolled);
+        let failure = match derived {
+            Ok(cell) if !refine => {
+                cells.push(cell);
+                continue;
+            }
+            Err(e) if !refine => return Err(e),
+            Ok(cell) => match checker.check(&cell) {
+                Ok(()) => {
+                    cells.push(cell);
+                    continue;
+                }
+                Err(e) => e,
+            },
+            Err(e) => e,
+        };
+        // split in place: the halves come next, so the order is fixed
+        if cells.len() + todo.len() + 2 > cap {
+            return Err(format!(
+                "the checker's own bounds do not prove the verdict ({failure}), not on the analysis's cells nor on up to {cap} cells bisected from them: either the analysis ({}) used bounds tighter than the checker re-derives, or its verdict is wrong",
+                plan.propagator.name()
+            ));
+        }
+        let (a, b) = bisect(&start, &x0);
+        todo.push((b, None));
+        todo.push((a, None));
+    }
+    let mut ev = header.clone();
+    ev["cells"] = json!(cells);
+    Ok(ev)
+}
+
+/// Halves of `b` across its widest side relative to `whole`'s (the
+/// midpoint rounded to a double; the halves share it, so they cover `b`).
+fn bisect(b: &IBox, whole: &IBox) -> (IBox, IBox) {
+    let rel = |i: usize| {
+        let w = whole.hi[i] - whole.lo[i];
+        let d = b.hi[i] - b.lo[i];
+        if w > 0.0 {
+            d / w
+        } else {
+            d
+        }
+    };
+    let k = (0..b.dim())
+        .max_by(|&i, &j| rel(i).total_cmp(&rel(j)))
+        .unwrap_or(0);
+    // halves first: `hi − lo` may overflow where both ends are finite
+    let mid = b.lo[k] / 2.0 + b.hi[k] / 2.0;
+    let (mut lo, mut hi) = (b.clone(), b.clone());
+    lo.hi[k] = mid;
+    hi.lo[k] = mid;
+    (lo, hi)
+}
+
+/// One cell of the evidence: the chain of boxes from `start` with the
+/// witness of every step. With the analysis's `sets` for the cell, a step
+/// whose set is a polytope claims its directions too.
+fn derive_cell(
+    plan: &Plan,
+    plants: &[PlantRows],
+    (w, v): (&Bx, &Bx),
+    start: &IBox,
+    sets: Option<&[Region]>,
+    steps: usize,
+    unrolled: bool,
+) -> Result<Value, String> {
+    let cl = &plan.closed_loop;
+    let mut set = Bx {
+        lo: start.lo.clone(),
+        hi: start.hi.clone(),
+    };
+    let mut claims = Vec::with_capacity(steps);
+    let first = match &plan.initial {
+        Region::Ball {
+            center,
+            radius,
+            norm,
+        } => Start::Ball {
+            center,
+            radius,
+            norm: norm.name(),
+        },
+        Region::Box(_) | Region::Polytope { .. } => Start::Box,
+    };
+    let mut chain = Chain::new(first, unrolled);
+    // the previous set's inequalities (step 0: a polytope X0's)
+    let mut prev_rows: Vec<(Vec<f64>, f64)> = match &plan.initial {
+        Region::Polytope { rows, .. } => rows.clone(),
+        Region::Box(_) | Region::Ball { .. } => Vec::new(),
+    };
+    for t in 0..steps {
+        let lp = Loop {
+            plant: &plants[t.min(plants.len() - 1)],
+            obs: &cl.plant.obs,
+            w,
+            v,
+            net: &cl.net,
+            slopes: cl.slope_steps,
+        };
+        let fail = |e: Trouble| format!("the checker's bound of a cell at step {}: {e}", t + 1);
+        // the analysis's directions for the next set, if it is a polytope
+        let directions = match sets.and_then(|s| s.get(t + 1)) {
+            Some(Region::Polytope { rows, .. }) if !rows.is_empty() => {
+                let n = set.lo.len();
+                Some(DMatrix::from_fn(rows.len(), n, |r, j| rows[r].0[j]))
+            }
+            _ => None,
+        };
+        let (lo, hi) = (set.lo.clone(), set.hi.clone());
+        let solve = |g: &[f64]| lp::maximize_dual(g, &prev_rows, &lo, &hi);
+        let duals = Duals::solved(&solve);
+        let start = if !prev_rows.is_empty() {
+            Start::Polytope {
+                rows: &prev_rows,
+                duals: &duals,
+            }
+        } else if t == 0 {
+            first
+        } else {
+            Start::Box
+        };
+        // claims are widened by a hair, so that a checker on another
+        // machine (whose libm may round tanh, exp, … differently) proves
+        // them too; the next step starts from the widened claims
+        let witness = chain.witness(&lp, &set).map_err(fail)?;
+        let stepped = chain
+            .step(lp, &set, start, directions.as_ref(), Some(&witness))
+            .map_err(fail)?;
+        let next = widen(&stepped.next);
+        let rows_next: Vec<(Vec<f64>, f64)> = match &directions {
+            Some(d) => (0..d.nrows())
+                .map(|r| {
+                    let o = stepped.offsets[r];
+                    let o = widen(&Bx {
+                        lo: vec![o],
+                        hi: vec![o],
+                    })
+                    .hi[0];
+                    (d.row(r).iter().copied().collect(), o)
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut claim = json!({
+            "set": bx_json(&next),
+            "preactivations": witness.iter().map(bx_json).collect::<Vec<_>>(),
+        });
+        if !rows_next.is_empty() {
+            claim["rows"] = ineq_json(&rows_next);
+        }
+        if !prev_rows.is_empty() {
+            claim["duals"] = json!(duals.used());
+        }
+        claims.push(claim);
+        set = next;
+        prev_rows = rows_next;
+    }
+    let mut cell = json!({ "box": box_json(start), "steps": claims });
+    if !prev_rows.is_empty() {
+        // duals of the goal rows over the last set
+        let goal_duals: Vec<Vec<f64>> = plan
+            .properties
+            .iter()
+            .filter_map(|p| match &p.kind {
+                PropertyKind::Goal(g) => Some(g),
+                PropertyKind::Avoid { .. } => None,
+            })
+            .flat_map(|g| g.rows.iter())
+            .map(|(a, _)| lp::maximize_dual(a, &prev_rows, &set.lo, &set.hi).unwrap_or_default())
+            .collect();
+        cell["goal_duals"] = json!(goal_duals);
+    }
+    Ok(cell)
+}
+
+/// The certificate of one (spec, controller) result.
+pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
+    let verdicts: Vec<Value> = plan
+        .properties
+        .iter()
+        .zip(&outcome.properties)
+        .map(|(p, r)| {
+            let mut v =
+                json!({ "property": p.name, "kind": r.kind.as_str(), "status": r.status.as_str() });
+            if r.status == Status::Falsified {
+                v["step"] = json!(r.step);
+                v["trajectory"] = r
+                    .counterexample
+                    .as_ref()
+                    .map_or(Value::Null, trajectory_json);
+            }
+            v
+        })
+        .collect();
+    let needed = plan
+        .properties
+        .iter()
+        .zip(&outcome.properties)
+        .filter(|(_, r)| r.status == Status::Verified)
+        .map(|(p, _)| p.last_step().min(plan.horizon))
+        .max();
+    let mut cert = json!({
+        "format": FORMAT,
+        "tool": { "name": "ravel", "version": env!("CARGO_PKG_VERSION") },
+        "spec": { "path": id.spec_path, "sha256": id.spec_sha256 },
+        "controller": {
+            "path": plan.controller_resolved,
+            "sha256": plan.controller_sha256,
+            "network_sha256": network_sha256(&plan.closed_loop.net),
+        },
+        "analysis": {
+            "propagator": plan.propagator.name(),
+            "cells": outcome.partition.len(),
+        },
+        "problem": problem_json(plan),
+        "verdicts": verdicts,
+        "evidence": json!({ "status": "none" }),
+    });
+    let Some(steps) = needed else {
+        return cert;
+    };
+    let header = evidence_header(plan, steps);
+    cert["evidence"] = header.clone();
+    // the analysis's cells first; the refinement only where the checker's
+    // chain on them does not prove the verdicts (each cell then checked on
+    // its own, which costs a second chain per cell)
+    let mut failure = None;
+    for refine in [false, true] {
+        let evidence = match derive(plan, outcome, &header, &cert, refine) {
+            Ok(ev) => ev,
+            Err(why) if refine => {
+                cert["evidence"] = json!({ "status": "unsupported", "reason": why });
+                return cert;
+            }
+            Err(why) => {
+                failure = Some(why);
+                continue;
+            }
+        };
+        let mut candidate = cert.clone();
+        candidate["evidence"] = evidence;
+        // the checker's own sets may not prove what the analysis proved
+        let report = certify::check(&candidate, &plan.closed_loop.net);
+        match (report.evidence_failure, report.answer) {
+            (Some(why), _) => failure = Some(why),
+            (None, Answer::Unreadable(e)) => {
+                cert["evidence"] =
+                    json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+                return cert;
+            }
+            (None, _) => return candidate,
+        }
+    }
+    cert["evidence"] = json!({
+        "status": "unsupported",
+        "reason": format!(
+            "the checker's own bounds do not prove the verdict ({}): either the analysis ({}) used bounds tighter than the checker re-derives, or its verdict is wrong",
+            failure.unwrap_or_default(),
+            plan.propagator.name()
+        ),
+    });
+    cert
+}
+
+/// The problem of a network spec as a certificate records it (and `ravel
+/// certify` compares it with the spec's, number for number).
+pub fn network_problem_json(plan: &crate::lower::NetPlan) -> Value {
+    use crate::check::NetPropertyKind;
+    use ravel_analysis::sets::Region;
+    let rows = |r: &[(Vec<f64>, f64)]| -> Value {
+        r.iter().map(|(a, b)| json!({ "a": a, "b": b })).collect()
+    };
+    let bx = |b: &ravel_analysis::sets::IBox| json!({ "lo": b.lo, "hi": b.hi });
+    let input = match &plan.input {
+        Some(Region::Box(b)) => json!({ "box": bx(b) }),
+        Some(Region::Ball {
+            center,
+            radius,
+            norm,
+        }) => json!({ "ball": { "center": center, "radius": radius, "norm": norm.name() } }),
+        Some(Region::Polytope { bbox, rows: r }) => {
+            json!({ "polytope": { "bbox": bx(bbox), "rows": rows(r) } })
+        }
+        None => Value::Null,
+    };
+    let props: Vec<Value> = plan
+        .properties
+        .iter()
+        .map(|p| match &p.kind {
+            NetPropertyKind::Require(poly) => {
+                json!({ "name": p.name, "kind": "require", "rows": rows(&poly.rows) })
+            }
+            NetPropertyKind::Avoid(members) => json!({
+                "name": p.name,
+                "kind": "avoid",
+                "members": members.iter().map(|m| rows(&m.rows)).collect::<Vec<_>>(),
+            }),
+            NetPropertyKind::Robust(label) => {
+                json!({ "name": p.name, "kind": "robust", "label": label })
+            }
+        })
+        .collect();
+    json!({
+        "kind": "network",
+        "inputs": plan.net.inputs,
+        "outputs": plan.net.outputs(),
+        "input": input,
+        "properties": props,
+    })
+}
+
+/// The certificate of a network spec's result: the problem, the verdicts
+/// (a counterexample's input; robustness labels) and, when some property is
+/// VERIFIED, the final cells of the input set's partition as evidence (with
+/// a polytope input's dual vectors) — checked here by the checker itself;
+/// where its bounds on a cell fall short, the cell is bisected until they
+/// prove the verdicts (as for closed loops), and the evidence is marked
+/// unsupported when that fails within the budget.
+pub fn build_network(
+    plan: &crate::lower::NetPlan,
+    outcome: &crate::execute::network::NetOutcome,
+    id: &Identity,
+) -> Value {
+    let verdicts: Vec<Value> = outcome
+        .properties
+        .iter()
+        .map(|r| {
+            let mut v = json!({ "property": r.name, "kind": r.kind.as_str(), "status": r.status.as_str(), "label": r.label });
+            if let (Status::Falsified, Some(w)) = (r.status, &r.counterexample) {
+                v["input"] = json!(w.input);
+            }
+            v
+        })
+        .collect();
+    let any_verified = outcome
+        .properties
+        .iter()
+        .any(|r| r.status == Status::Verified);
+    let mut cert = json!({
+        "format": FORMAT,
+        "tool": { "name": "ravel", "version": env!("CARGO_PKG_VERSION") },
+        "spec": { "path": id.spec_path, "sha256": id.spec_sha256 },
+        "controller": {
+            "path": plan.model_resolved,
+            "sha256": plan.model_sha256,
+            "network_sha256": network_sha256(&plan.net),
+        },
+        "analysis": { "propagator": plan.propagator.name(), "cells": outcome.partition.len() },
+        "problem": network_problem_json(plan),
+        "verdicts": verdicts,
+        "evidence": json!({ "status": "none" }),
+    });
+    if !any_verified {
+        return cert;
+    }
+    let header = json!({ "status": "checkable", "slope_steps": plan.slope_steps, "cells": [] });
+    // a polytope input set: the supports' dual vectors, found by an LP
+    // over each cell's box and recorded per cell as witnesses
+    let rows = match &plan.input {
+        Some(Region::Polytope { rows, .. }) => Some(rows),
+        _ => None,
+    };
+    let lp_duals =
+        |g: &[f64], cell: &Bx| rows.and_then(|r| lp::maximize_dual(g, r, &cell.lo, &cell.hi));
+    let solve: Option<certify::network::CellSolver> = rows.map(|_| &lp_duals as _);
+    // cells with their duals, and whether they prove the verdicts
+    let prove = |cells: &[IBox], coverage: bool| -> (Vec<Value>, certify::Report) {
+        let mut candidate = cert.clone();
+        candidate["evidence"] = header.clone();
+        candidate["evidence"]["cells"] = cells
+            .iter()
+            .map(|c| json!({ "lo": c.lo, "hi": c.hi }))
+            .collect();
+        let report = certify::network::check_cells(&candidate, &plan.net, solve, coverage);
+        let mut out: Vec<Value> = candidate["evidence"]["cells"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
+        if rows.is_some() {
+            for (cell, duals) in out.iter_mut().zip(&report.duals) {
+                cell["duals"] = json!(duals);
+            }
+        }
+        (out, report)
+    };
+    let (mut cells, first) = prove(&outcome.partition, true);
+    let mut failure = first.evidence_failure;
+    if failure.is_some() {
+        // the refinement: every cell whose bounds fall short is bisected
+        // until they prove the verdicts (depth first, in order), within
+        // the budget; the finer partition is the witness
+        let whole = plan
+            .input
+            .as_ref()
+            .map_or_else(|| IBox::new(Vec::new(), Vec::new()), Region::bbox);
+        let cap = refinement_cap(outcome.partition.len());
+        let mut todo: Vec<IBox> = outcome.partition.iter().rev().cloned().collect();
+        let mut refined = Vec::new();
+        failure = None;
+        while let Some(cell) = todo.pop() {
+            let (one, report) = prove(std::slice::from_ref(&cell), false);
+            match report.evidence_failure {
+                None => {
+                    if let Answer::Unreadable(e) = report.answer {
+                        failure = Some(format!("internal: {e}"));
+                        break;
+                    }
+                    refined.extend(one);
+                }
+                Some(why) if refined.len() + todo.len() + 2 > cap => {
+                    failure = Some(format!(
+                        "{why}; not on up to {cap} cells bisected from the analysis's either"
+                    ));
+                    break;
+                }
+                Some(_) => {
+                    let (a, b) = bisect(&cell, &whole);
+                    todo.push(b);
+                    todo.push(a);
+                }
+            }
+        }
+        if failure.is_none() {
+            cells = refined;
+        }
+    }
+    cert["evidence"] = header;
+    cert["evidence"]["cells"] = json!(cells);
+    if failure.is_none() {
+        let report = certify::check(&cert, &plan.net);
+        failure = report.evidence_failure;
+        if let (None, Answer::Unreadable(e)) = (&failure, report.answer) {
+            cert["evidence"] =
+                json!({ "status": "unsupported", "reason": format!("internal: {e}") });
+            return cert;
+        }
+    }
+    if let Some(why) = failure {
+        cert["evidence"] = json!({
+            "status": "unsupported",
+            "reason": format!(
+                "the checker's own bounds do not prove the verdict ({why}): the analysis ({}) used bounds tighter than the checker re-derives (the SDP), or its verdict is wrong",
+                plan.propagator.name()
+            ),
+        });
+    }
+    cert
+}

@@ -1,0 +1,87 @@
+//! The controller: load it from the bytes the caller read and check its
+//! sizes against the plant.
+
+use super::{onnx_code, ControllerFile, Ctx};
+use crate::onnx::{self, Controller};
+use ravel_syntax::ast::*;
+use ravel_syntax::diag::{Code, Diagnostic};
+
+/// Load the controller named at `path` from `controller` (the caller's
+/// read), and check its input size against the observation size `p_dim`
+/// (`has_c`: whether the spec gave `C`) and its outputs against the control.
+pub(super) fn controller(
+    cx: &mut Ctx,
+    path: Option<&Spanned<String>>,
+    controller: Option<&ControllerFile>,
+    p_dim: Option<usize>,
+    has_c: bool,
+    control: &Option<(String, usize)>,
+) -> Option<Controller> {
+    let mut ctrl = None;
+    if let Some(path) = path {
+        match controller {
+            None => cx.err(
+                Diagnostic::new(
+                    Code::ControllerUnreadable,
+                    path.span,
+                    format!(
+                        "controller `{}` was not read",
+                        ravel_syntax::diag::sanitize(&path.node)
+                    ),
+                )
+                .label("not available")
+                .hint("the controller file must be readable next to the spec"),
+            ),
+            Some(file) => match &file.bytes {
+                Err(msg) => cx.err(
+                    Diagnostic::new(
+                        Code::ControllerUnreadable,
+                        path.span,
+                        format!(
+                            "cannot read controller `{}`: {}",
+                            ravel_syntax::diag::sanitize(&path.node),
+                            ravel_syntax::diag::sanitize(msg)
+                        ),
+                    )
+                    .label("this file")
+                    .hint("paths are relative to the spec file's folder"),
+                ),
+                Ok(bytes) => match onnx::load(bytes, &file.external) {
+                    Err(e) => cx.err(
+                        Diagnostic::new(onnx_code(e.kind), path.span, e.message)
+                            .label("in this controller")
+                            .hint(e.hint),
+                    ),
+                    Ok(c) => {
+                        if let Some(p) = p_dim {
+                            if c.inputs != p {
+                                let what = if has_c {
+                                    format!("C has {p} columns")
+                                } else {
+                                    format!("without C the controller sees the full state ({p})")
+                                };
+                                cx.err(
+                                    Diagnostic::new(Code::ControllerInputs, path.span, format!("the controller takes {} inputs but observations have {p} components", c.inputs))
+                                        .label(format!("{} inputs", c.inputs))
+                                        .hint(format!("{what}; the controller's input size must match")),
+                                );
+                            }
+                        }
+                        if let Some((un, m)) = &control {
+                            if c.outputs != *m {
+                                cx.err(
+                                    Diagnostic::new(Code::ControllerOutputs, path.span, format!("the controller has {} outputs but `{un}` has {m} components", c.outputs))
+                                        .label(format!("{} outputs", c.outputs))
+                                        .hint(format!("declare `control {un}[{}]` or use a controller with {m} outputs", c.outputs)),
+                                );
+                            }
+                        }
+                        ctrl = Some(c);
+                    }
+                },
+            },
+        }
+    }
+
+    ctrl
+}

@@ -1,0 +1,748 @@
+//! Network specs: one network on its own (the tutorial's "Analyzing NNs in
+//! Isolation"): its input and output vectors, the model, the input set, the
+//! properties over the outputs (`require`, `avoid`, `robust`), radius
+//! searches, and the analysis block (propagator, partitioner, output shape).
+
+use std::collections::BTreeMap;
+
+use super::{analysis, controller, sha256_hex, ControllerFile, Ctx};
+use crate::ir::{NetPropagator, Partitioner};
+use crate::onnx::Controller;
+use ravel_analysis::sets::{Polytope, Region};
+use ravel_analysis::shape::Shape;
+use ravel_base::limits::{within, MAX_POLYTOPE_DIM, MAX_SDP_DIM, MAX_STORED_NUMBERS};
+use ravel_syntax::ast::*;
+use ravel_syntax::diag::{compact, Code, Diagnostic};
+
+/// What a network property demands of the outputs `y = f(x)` on the whole input set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum NetPropertyKind {
+    /// Every inequality holds: `y` lies in the polytope.
+    Require(Polytope),
+    /// `y` lies in no member of the union.
+    Avoid(Vec<Polytope>),
+    /// `y[label] > y[j]` for every other `j`; without a label, the label of
+    /// the input set's centre (decided by `execute`).
+    Robust(Option<usize>),
+}
+
+/// A named network property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetProperty {
+    /// Its name.
+    pub name: String,
+    /// What it demands.
+    pub kind: NetPropertyKind,
+}
+
+/// A minimal-adversarial-perturbation search: the input set scaled about its
+/// centre by `s ∈ [0, max]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RadiusSpec {
+    /// Its name.
+    pub name: String,
+    /// The index of the property in [`NetworkChecked::properties`].
+    pub property: usize,
+    /// The largest scale tried.
+    pub max: f64,
+    /// Bisection stops when the bracket is narrower than this.
+    pub tolerance: f64,
+}
+
+/// A network spec that passed every check.
+#[derive(Clone, Debug)]
+pub struct NetworkChecked {
+    /// The network's name.
+    pub name: String,
+    /// The input vector's name and dimension.
+    pub input: (String, usize),
+    /// The output vector's name and dimension.
+    pub output: (String, usize),
+    /// The model's path: as written, or as given on the command line.
+    pub model_path: String,
+    /// SHA-256 of the model file, in hex.
+    pub model_sha256: String,
+    /// The path the model was read from.
+    pub model_resolved: String,
+    /// The loaded model.
+    pub model: Controller,
+    /// The input set's name and region (absent in a spec that only selects actions).
+    pub input_set: Option<(String, Region)>,
+    /// The robust action selections.
+    pub selects: Vec<SelectSpec>,
+    /// The properties, in source order.
+    pub properties: Vec<NetProperty>,
+    /// The radius searches, in source order.
+    pub radii: Vec<RadiusSpec>,
+    /// The propagator.
+    pub propagator: NetPropagator,
+    /// How the input set is split.
+    pub partitioner: Partitioner,
+    /// The output set's shape.
+    pub shape: Shape,
+    /// Monte Carlo samples.
+    pub samples: usize,
+    /// Monte Carlo seed.
+    pub seed: u64,
+    /// Projected-gradient steps on the lower ReLU slopes (0: CROWN's own).
+    pub slope_steps: usize,
+}
+
+/// Robust action selection (CARRL): every observation's ε-ball.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectSpec {
+    /// Its name.
+    pub name: String,
+    /// The ball's radius per input.
+    pub epsilon: Vec<f64>,
+    /// The ball's norm.
+    pub norm: ravel_analysis::sets::Norm,
+    /// The observations (each of the input size).
+    pub observations: Vec<Vec<f64>>,
+}
+
+/// The most observations of one select block.
+pub const MAX_OBSERVATIONS: usize = 1_000_000;
+
+/// Defaults of a radius search: the declared set's scale, and a bracket of 1e-3 of it.
+const DEFAULT_RADIUS_MAX: f64 = 1.0;
+/// The largest scale a radius search may try.
+const MAX_RADIUS_SCALE: f64 = 1e6;
+
+/// A system-spec item in a network spec (or the reverse).
+fn wrong_kind(cx: &mut Ctx, span: Span, what: &str, network: bool) {
+    let instead = match (what, network) {
+        ("`goal`", true) => Some("`require NAME = { … }` states what the outputs must satisfy"),
+        ("`initial`", true) => Some("`input NAME = …` is the set of inputs"),
+        ("`controller`", true) => Some("`model \"path.onnx\"` names the network"),
+        ("`model`", false) => Some("`controller \"path.onnx\"` names the closed loop's network"),
+        ("`input`", false) => Some("`initial NAME = …` is the closed loop's initial set"),
+        ("`require`", false) => Some("`goal NAME = …` states where the final states must be"),
+        _ => None,
+    };
+    if let Some(instead) = instead {
+        cx.err(
+            Diagnostic::new(
+                Code::SpecKind,
+                span,
+                format!(
+                    "{what} belongs to {} spec",
+                    if network { "a system" } else { "a network" }
+                ),
+            )
+            .label(if network {
+                "in a network spec"
+            } else {
+                "in a system spec"
+            })
+            .hint(format!("here {instead}")),
+        );
+        return;
+    }
+    let (here, hint) = if network {
+        (
+            "in a network spec",
+            "a network spec has `network`, `model`, `input`, `require`, `avoid`, `robust`, `radius` and `analysis`; closed loops are stated in a system spec",
+        )
+    } else {
+        (
+            "in a system spec",
+            "a system spec has `system`, `controller`, `initial`, `goal`, `avoid`, `horizon` and `analysis`; a network on its own is stated in a network spec (`network NAME { input x[n] output y[m] }`)",
+        )
+    };
+    cx.err(
+        Diagnostic::new(
+            Code::SpecKind,
+            span,
+            format!(
+                "{what} belongs to {} spec",
+                if network { "a system" } else { "a network" }
+            ),
+        )
+        .label(here)
+        .hint(hint),
+    );
+}
+
+/// The span of an item, for [`wrong_kind`] reports.
+pub(super) fn item_span(item: &Item) -> Span {
+    match item {
+        Item::System(s) => s.span,
+        Item::Network(n) => n.span,
+        Item::Controller(p) | Item::Model(p) => p.span,
+        Item::Initial(d) | Item::Goal(d) | Item::Input(d) | Item::Require(d) => d.span,
+        Item::Avoid(a) => a.span,
+        Item::Horizon(h) => h.span,
+        Item::Analysis(a) => a.span,
+        Item::Robust(r) => r.span,
+        Item::Radius(r) => r.span,
+        Item::Select(r) => r.span,
+    }
+}
+
+/// Whether the spec states a network on its own: it has a `network` block,
+/// or (without a `system` block) an item only network specs have.
+pub fn is_network_spec(spec: &Spec) -> bool {
+    let has = |f: fn(&Item) -> bool| spec.items.iter().any(f);
+    has(|i| matches!(i, Item::Network(_)))
+        || (!has(|i| matches!(i, Item::System(_)))
+            && has(|i| {
+                matches!(
+                    i,
+                    Item::Model(_)
+                        | Item::Input(_)
+                        | Item::Require(_)
+                        | Item::Robust(_)
+                        | Item::Radius(_)
+                        | Item::Select(_)
+                )
+            }))
+}
+
+/// Whether `name` is not taken yet (it is taken now); a duplicate is reported.
+fn fresh<'a>(cx: &mut Ctx, names: &mut BTreeMap<&'a str, Span>, name: &'a Spanned<String>) -> bool {
+    if let Some(first) = names.get(name.node.as_str()) {
+        cx.duplicate(&format!("the name `{}`", name.node), *first, name.span);
+        return false;
+    }
+    names.insert(&name.node, name.span);
+    true
+}
+
+/// Report the items of a network spec in a system spec.
+pub(super) fn network_items_in_system(cx: &mut Ctx, spec: &Spec) {
+    for item in &spec.items {
+        let what = match item {
+            Item::Network(_) => "`network`",
+            Item::Model(_) => "`model`",
+            Item::Input(_) => "`input`",
+            Item::Require(_) => "`require`",
+            Item::Robust(_) => "`robust`",
+            Item::Radius(_) => "`radius`",
+            Item::Select(_) => "`select`",
+            _ => continue,
+        };
+        wrong_kind(cx, item_span(item), what, false);
+    }
+}
+
+/// Check a network spec. `model` is the model file as read by the caller.
+pub(super) fn check_network(
+    cx: &mut Ctx,
+    spec: &Spec,
+    model: Option<&ControllerFile>,
+    data: &super::DataFiles,
+) -> Option<NetworkChecked> {
+    let whole = Span::new(0, 0);
+    let mut networks: Vec<&NetworkDecl> = Vec::new();
+    let mut models: Vec<&Spanned<String>> = Vec::new();
+    let mut inputs: Vec<&SetDef> = Vec::new();
+    let mut analyses: Vec<&Analysis> = Vec::new();
+    // properties in source order: (name, span, what)
+    let mut props: Vec<&Item> = Vec::new();
+    let mut radii: Vec<&RadiusDef> = Vec::new();
+    let mut select_defs: Vec<&SelectDef> = Vec::new();
+    for item in &spec.items {
+        match item {
+            Item::Select(d) => select_defs.push(d),
+            Item::Network(n) => networks.push(n),
+            Item::Model(m) => models.push(m),
+            Item::Input(i) => inputs.push(i),
+            Item::Analysis(a) => analyses.push(a),
+            Item::Require(_) | Item::Avoid(_) | Item::Robust(_) => props.push(item),
+            Item::Radius(r) => radii.push(r),
+            Item::System(_) => wrong_kind(cx, item_span(item), "`system`", true),
+            Item::Controller(_) => wrong_kind(cx, item_span(item), "`controller`", true),
+            Item::Initial(_) => wrong_kind(cx, item_span(item), "`initial`", true),
+            Item::Goal(_) => wrong_kind(cx, item_span(item), "`goal`", true),
+            Item::Horizon(_) => wrong_kind(cx, item_span(item), "`horizon`", true),
+        }
+    }
+    for (what, spans) in [
+        (
+            "the network",
+            networks.iter().map(|n| n.name.span).collect::<Vec<_>>(),
+        ),
+        ("the model", models.iter().map(|m| m.span).collect()),
+        (
+            "the input set",
+            inputs.iter().map(|i| i.name.span).collect(),
+        ),
+        (
+            "the analysis block",
+            analyses.iter().map(|a| a.span).collect(),
+        ),
+    ] {
+        if let Some((first, rest)) = spans.split_first() {
+            for s in rest {
+                cx.duplicate(what, *first, *s);
+            }
+        }
+    }
+    let path_override = model.and_then(|f| f.path_override.clone());
+    let missing = |cx: &mut Ctx, what: &str, example: &str| {
+        cx.err(
+            Diagnostic::new(Code::Missing, whole, format!("the spec has no {what}"))
+                .label("required item missing")
+                .hint(format!("add {example}")),
+        )
+    };
+    if networks.is_empty() {
+        missing(
+            cx,
+            "network block",
+            "`network NAME { input x[n] output y[m] }`",
+        );
+    }
+    if models.is_empty() && path_override.is_none() {
+        missing(cx, "model", "`model \"path/to/network.onnx\"`");
+    }
+    // a spec that only selects actions needs no input set
+    if inputs.is_empty() && (select_defs.is_empty() || !props.is_empty() || !radii.is_empty()) {
+        missing(cx, "input set", "`input X = box(x[0] in [lo, hi], …)`");
+    }
+
+    // ---- the network block: input and output vectors ----
+    let mut input: Option<(String, usize)> = None;
+    let mut output: Option<(String, usize)> = None;
+    if let Some(n) = networks.first() {
+        for (list, role, slot) in [
+            (&n.input, "input", &mut input),
+            (&n.output, "output", &mut output),
+        ] {
+            match list.split_first() {
+                None => cx.err(
+                    Diagnostic::new(
+                        Code::Missing,
+                        n.span,
+                        format!("the network block declares no {role} vector"),
+                    )
+                    .label(format!("no `{role}`"))
+                    .hint(format!(
+                        "add `{role} {}[n]` with the model's {role} size",
+                        if role == "input" { "x" } else { "y" }
+                    )),
+                ),
+                Some(((name, dim), rest)) => {
+                    for (again, _) in rest {
+                        cx.duplicate(&format!("the {role} vector"), name.span, again.span);
+                    }
+                    *slot = cx
+                        .positive(dim, &format!("the {role} dimension"))
+                        .map(|d| (name.node.clone(), d));
+                }
+            }
+        }
+        if let (Some((a, _)), Some((b, _))) = (&input, &output) {
+            if let (true, Some((i, _)), Some((o, _))) = (a == b, n.input.first(), n.output.first())
+            {
+                cx.duplicate(&format!("the vector name `{a}`"), i.span, o.span);
+            }
+        }
+    }
+
+    // ---- the model ----
+    let effective: Option<Spanned<String>> = match (&path_override, models.first()) {
+        (Some(p), first) => Some(Spanned {
+            node: p.clone(),
+            span: first.map_or(whole, |c| c.span),
+        }),
+        (None, first) => first.map(|c| (*c).clone()),
+    };
+    let net = controller::controller(cx, effective.as_ref(), model, None, false, &None);
+    if let (Some(c), Some(path)) = (&net, &effective) {
+        for (role, have, decl, code) in [
+            ("inputs", c.inputs, &input, Code::ControllerInputs),
+            ("outputs", c.outputs, &output, Code::ControllerOutputs),
+        ] {
+            if let Some((name, n)) = decl {
+                if have != *n {
+                    cx.err(
+                        Diagnostic::new(
+                            code,
+                            path.span,
+                            format!("the model has {have} {role} but `{name}` has {n} components"),
+                        )
+                        .label(format!("{have} {role}"))
+                        .hint(format!(
+                            "declare `{}put {name}[{have}]` in the network block, or use a model with {n} {role}",
+                            if role == "inputs" { "in" } else { "out" }
+                        )),
+                    );
+                }
+            }
+        }
+    }
+    let sha = model
+        .and_then(|f| f.bytes.as_ref().ok())
+        .map(|b| sha256_hex(b))
+        .unwrap_or_default();
+
+    // ---- the input set ----
+    let mut input_set = None;
+    if let (Some((xn, n)), Some(def)) = (&input, inputs.first()) {
+        let members = &def.set.node.members;
+        if members.len() > 1 {
+            cx.err(
+                Diagnostic::new(
+                    Code::SetKind,
+                    def.set.span,
+                    "the input set cannot be a union",
+                )
+                .label("a union")
+                .hint("state each part in its own spec, or use the bounding box"),
+            );
+        } else if let Some(first) = members.first() {
+            let region = match &first.node {
+                SetAtom::Box(b) => {
+                    let sb = Spanned {
+                        node: b.clone(),
+                        span: first.span,
+                    };
+                    cx.box_set(&sb, xn, *n, true, "the input set")
+                        .map(Region::Box)
+                }
+                SetAtom::Polytope(_) if *n > MAX_POLYTOPE_DIM => {
+                    cx.err(
+                        Diagnostic::new(
+                            Code::Limit,
+                            first.span,
+                            format!("a polytope input set in {n} dimensions, beyond the limit of {MAX_POLYTOPE_DIM}"),
+                        )
+                        .label("too many dimensions for a polytope")
+                        .hint("use a box or a ball, which are bounded in closed form"),
+                    );
+                    None
+                }
+                SetAtom::Polytope(cs) => cx
+                    .polytope(cs, xn, *n)
+                    .and_then(|p| cx.bounded_polytope(p, first.span, "the input set")),
+                SetAtom::Ball(b) => cx.ball(b, first.span, xn, *n),
+            };
+            input_set = region.map(|r| (def.name.node.clone(), r));
+        }
+    }
+
+    // ---- properties ----
+    let mut names: BTreeMap<&str, Span> = BTreeMap::new();
+    if let Some(i) = inputs.first() {
+        names.insert(&i.name.node, i.name.span);
+    }
+    let mut properties = Vec::new();
+    let mut index: BTreeMap<String, usize> = BTreeMap::new();
+    let mut all_ok = true;
+    for item in &props {
+        let (name, kind) = match item {
+            Item::Require(d) => {
+                let kind = output.as_ref().and_then(|(yn, m)| {
+                    let members = &d.set.node.members;
+                    if members.len() > 1 {
+                        cx.err(
+                            Diagnostic::new(Code::SetKind, d.set.span, "a `require` set cannot be a union")
+                                .label("a union")
+                                .hint("every inequality must hold; to exclude a union, state it with `avoid`"),
+                        );
+                        return None;
+                    }
+                    members
+                        .first()
+                        .and_then(|a| cx.set_atom(a, yn, *m, "a `require` set"))
+                        .map(NetPropertyKind::Require)
+                });
+                (&d.name, kind)
+            }
+            Item::Avoid(a) => {
+                if let Some(s) = &a.steps {
+                    cx.err(
+                        Diagnostic::new(Code::SpecKind, s.span, "a network spec has no steps")
+                            .label("steps of a closed loop")
+                            .hint("remove `at …`: a network's avoid set constrains its outputs on the whole input set"),
+                    );
+                }
+                let kind = output.as_ref().and_then(|(yn, m)| {
+                    let members: Vec<Option<Polytope>> = a
+                        .set
+                        .node
+                        .members
+                        .iter()
+                        .map(|x| cx.set_atom(x, yn, *m, "the avoid set"))
+                        .collect();
+                    members
+                        .iter()
+                        .all(Option::is_some)
+                        .then(|| NetPropertyKind::Avoid(members.into_iter().flatten().collect()))
+                });
+                (&a.name, kind)
+            }
+            Item::Robust(r) => {
+                let kind = output.as_ref().and_then(|(yn, m)| {
+                    if *m < 2 {
+                        cx.err(
+                            Diagnostic::new(Code::Label, r.span, format!("robustness compares labels, but `{yn}` has one component"))
+                                .label("one output, no labels to compare")
+                                .hint("state a threshold with `require`, e.g. `require P = { y[0] >= 0 }`"),
+                        );
+                        return None;
+                    }
+                    match &r.label {
+                        Some(l) if l.node >= *m as u64 => {
+                            cx.err(
+                                Diagnostic::new(Code::Label, l.span, format!("label {} is out of range", l.node))
+                                    .label(format!("`{yn}` has {m} components"))
+                                    .hint(format!("labels run from 0 to {}", m - 1)),
+                            );
+                            None
+                        }
+                        Some(l) => Some(NetPropertyKind::Robust(Some(l.node as usize))),
+                        None => match &input_set {
+                            Some((_, Region::Polytope { .. })) => {
+                                cx.err(
+                                    Diagnostic::new(Code::Label, r.span, "a polytope input set has no centre to take the label from")
+                                        .label("which label?")
+                                        .hint("name the label: `robust NAME label K`"),
+                                );
+                                None
+                            }
+                            _ => Some(NetPropertyKind::Robust(None)),
+                        },
+                    }
+                });
+                (&r.name, kind)
+            }
+            _ => continue,
+        };
+        if !fresh(cx, &mut names, name) {
+            all_ok = false;
+            continue;
+        }
+        match kind {
+            Some(kind) => {
+                index.insert(name.node.clone(), properties.len());
+                properties.push(NetProperty {
+                    name: name.node.clone(),
+                    kind,
+                });
+            }
+            None => all_ok = false,
+        }
+    }
+
+    // ---- radius searches ----
+    let mut radius_specs = Vec::new();
+    for r in &radii {
+        if !fresh(cx, &mut names, &r.name) {
+            all_ok = false;
+            continue;
+        }
+        let property = match index.get(&r.property.node) {
+            Some(k) => Some(*k),
+            None => {
+                // a property with an error was reported already
+                let known = props.iter().any(|p| match p {
+                    Item::Require(d) => d.name.node == r.property.node,
+                    Item::Avoid(a) => a.name.node == r.property.node,
+                    Item::Robust(x) => x.name.node == r.property.node,
+                    _ => false,
+                });
+                if !known {
+                    let list: Vec<&str> = index.keys().map(String::as_str).collect();
+                    let mut d = Diagnostic::new(
+                        Code::UnknownName,
+                        r.property.span,
+                        format!("unknown property `{}`", r.property.node),
+                    )
+                    .label("no such property");
+                    d = match ravel_syntax::diag::did_you_mean(
+                        &r.property.node,
+                        list.iter().copied(),
+                    ) {
+                        Some(s) => d.hint(format!("did you mean `{s}`?")),
+                        None if list.is_empty() => {
+                            d.hint("define the property first: `require`, `avoid` or `robust`")
+                        }
+                        None => d.hint(format!("properties: {}", list.join(", "))),
+                    };
+                    cx.err(d);
+                }
+                None
+            }
+        };
+        if let Some((_, Region::Polytope { .. })) = &input_set {
+            cx.err(
+                Diagnostic::new(Code::Radius, r.span, "a radius is searched by scaling the input set about its centre, and a polytope has none")
+                    .label("no centre")
+                    .hint("state the input set as a box or a ball around the nominal input"),
+            );
+            all_ok = false;
+            continue;
+        }
+        let (mut max, mut tolerance) = (DEFAULT_RADIUS_MAX, None);
+        let mut ok = true;
+        let mut seen: Vec<(&str, Span)> = Vec::new();
+        for (k, v) in &r.budget {
+            if let Some((_, first)) = seen.iter().find(|(s, _)| *s == k.node) {
+                cx.duplicate(&format!("the item `{}`", k.node), *first, k.span);
+                ok = false;
+                continue;
+            }
+            seen.push((&k.node, k.span));
+            let x = cx.finite(v);
+            match k.node.as_str() {
+                "max" if x > 0.0 && x <= MAX_RADIUS_SCALE => max = x,
+                "tolerance" if x > 0.0 => tolerance = Some(x),
+                "max" | "tolerance" => {
+                    cx.err(
+                        Diagnostic::new(Code::Radius, v.span, format!("`{}` must be positive{}", k.node, if k.node == "max" { " and at most 1e6" } else { "" }))
+                            .label(compact(v.node).to_string())
+                            .hint("`max` is the largest scale of the input set tried (1 = the set as declared); `tolerance` the width at which bisection stops"),
+                    );
+                    ok = false;
+                }
+                other => {
+                    let mut d = Diagnostic::new(
+                        Code::UnknownName,
+                        k.span,
+                        format!("unknown radius item `{other}`"),
+                    )
+                    .label("not a radius item");
+                    d = match ravel_syntax::diag::did_you_mean(other, ["max", "tolerance"]) {
+                        Some(s) => d.hint(format!("did you mean `{s}`? Items: max s, tolerance t")),
+                        None => d.hint("items: max s (default 1), tolerance t (default max/1000)"),
+                    };
+                    cx.err(d);
+                    ok = false;
+                }
+            }
+        }
+        let tolerance = tolerance.unwrap_or(max * 1e-3);
+        match (property, ok) {
+            (Some(property), true) => radius_specs.push(RadiusSpec {
+                name: r.name.node.clone(),
+                property,
+                max,
+                tolerance,
+            }),
+            _ => all_ok = false,
+        }
+    }
+
+    // ---- robust action selection ----
+    let mut selects = Vec::new();
+    for d in &select_defs {
+        if !fresh(cx, &mut names, &d.name) {
+            all_ok = false;
+            continue;
+        }
+        if let (Some((xn, n)), Some((_, m))) = (&input, &output) {
+            match super::select::select(cx, d, xn, *n, *m, data) {
+                Some(s) => selects.push(s),
+                None => all_ok = false,
+            }
+        }
+    }
+
+    // ---- analysis ----
+    let an = analysis::analysis(cx, &analyses, &input, Some(&output));
+    if let (Some(span), Some(c)) = (an.sdp_span, &net) {
+        if let Some(act) = c.net.layers.iter().find_map(|l| match l {
+            ravel_base::nn::Layer::Act(a) if *a != ravel_base::nn::Activation::Relu => Some(*a),
+            _ => None,
+        }) {
+            cx.err(
+                Diagnostic::new(
+                    Code::SdpActivation,
+                    span,
+                    format!(
+                        "the SDP relaxation encodes ReLU networks only, but the model uses {}",
+                        act.name()
+                    ),
+                )
+                .label("needs a ReLU network")
+                .hint("use `crown` or `fast_lin`, which handle tanh and sigmoid"),
+            );
+        }
+        // the SDP's matrix: the inputs, every hidden neuron, and 1
+        let dim = c.net.inputs as u64 + c.net.activation_neurons() as u64 + 1;
+        if dim > MAX_SDP_DIM {
+            cx.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    span,
+                    format!("the SDP relaxation would solve semidefinite programs of dimension {dim}, beyond the limit of {MAX_SDP_DIM}"),
+                )
+                .label("too large for the SDP relaxation")
+                .hint("use `crown`, or a smaller network"),
+            );
+        }
+    }
+    if let (Some(span), true) = (an.hull_span, an.samples == 0) {
+        cx.err(
+            Diagnostic::new(
+                Code::Boundary,
+                span,
+                "a convex-hull shape takes its directions from Monte Carlo samples, but `samples` is 0",
+            )
+            .label("no samples to shape it")
+            .hint("draw samples (e.g. `samples 1000`) or use `shape polytope 8`"),
+        );
+    }
+    if let (Some((g, span)), true) = (an.guided_span, an.samples == 0) {
+        cx.err(
+            Diagnostic::new(
+                Code::Partition,
+                span,
+                format!(
+                    "the `{}` partitioner is guided by Monte Carlo samples, but `samples` is 0",
+                    g.name()
+                ),
+            )
+            .label("no samples to guide it")
+            .hint("draw samples (e.g. `samples 1000`)"),
+        );
+    }
+    // stored bounds: cells × directions
+    if let (Some((_, m)), Some(part)) = (&output, &an.partition) {
+        let cells = match part {
+            Partitioner::Uniform(grid) => grid.iter().map(|k| *k as u64).collect::<Vec<_>>(),
+            Partitioner::Guided { budget, .. } => vec![budget.calls as u64],
+        };
+        let mut factors = cells;
+        factors.push(2 * *m as u64 + 48);
+        if !within(&factors, MAX_STORED_NUMBERS) {
+            cx.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    analyses.first().map_or(whole, |a| a.span),
+                    format!(
+                        "the partition's cells would store more than {MAX_STORED_NUMBERS} bounds"
+                    ),
+                )
+                .label("too many cells")
+                .hint("use fewer cells or a smaller call budget"),
+            );
+        }
+    }
+
+    if !cx.diags.is_empty() || !all_ok {
+        return None;
+    }
+    Some(NetworkChecked {
+        name: networks.first()?.name.node.clone(),
+        input: input?,
+        output: output?,
+        model_path: effective?.node,
+        model_sha256: sha,
+        model_resolved: model.map(|f| f.resolved.clone()).unwrap_or_default(),
+        model: net?,
+        input_set,
+        selects,
+        properties,
+        radii: radius_specs,
+        propagator: an.net_propagator?,
+        partitioner: an.partition?,
+        shape: an.shape?,
+        samples: an.samples,
+        seed: an.seed,
+        slope_steps: an.slope_steps,
+    })
+}

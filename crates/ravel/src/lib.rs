@@ -1,0 +1,152 @@
+//! ravel: a Reach-Avoid Verification Language and its compiler.
+#![forbid(unsafe_code)]
+
+/// The allocator of every program that links ravel: mimalloc. The analysis
+/// allocates many small vectors per step; glibc's allocator takes an atomic
+/// lock on every call once a second thread exists, which cost the parallel
+/// cell and batch runs about 40 % per thread (see the speed benchmark).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+pub mod certificate;
+pub mod check;
+pub mod execute;
+pub mod ir;
+pub mod lower;
+pub mod onnx;
+pub mod plot;
+pub mod report;
+pub mod vnnlib;
+
+use std::path::{Path, PathBuf};
+
+use check::{Checked, ControllerFile, Task};
+use ravel_base::limits;
+use ravel_syntax as syntax;
+use ravel_syntax::diag::{self, Diagnostic};
+
+/// One file the front end asks the caller to read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ReadRequest {
+    /// The file.
+    pub path: PathBuf,
+    /// When set, the file (after resolving symbolic links) must lie inside
+    /// this folder: external-data files must stay in the controller's folder.
+    pub inside: Option<PathBuf>,
+    /// Read at most this many bytes from the start: more than this is never
+    /// needed (a larger controller file is an error; an external-data file
+    /// is read only as far as the model's tensors need).
+    pub max_bytes: u64,
+    /// Whether a file longer than `max_bytes` is an error (the controller)
+    /// or simply read up to `max_bytes` (external data).
+    pub whole: bool,
+}
+
+/// How the front end reads files; the library does no IO of its own. The CLI
+/// passes `ravel_cli::read_request`, which reads regular files only; tests may
+/// pass anything.
+pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, String>;
+
+/// The front end: parse and check a spec, reading its controller (and any
+/// external-data files) through `read`, relative to `spec_dir`.
+///
+/// External-data locations are checked before anything is read: each must
+/// be a plain relative path inside the controller's folder (no `..`, not
+/// absolute), each distinct file is read once, and only as many bytes as
+/// the tensors stored in it need (their total is limited, see
+/// [`limits::MAX_CONTROLLER_BYTES`]).
+pub fn front_end(source: &str, spec_dir: &Path, read: Reader) -> Result<Checked, Vec<Diagnostic>> {
+    front_end_with(source, spec_dir, read, None)
+}
+
+/// [`front_end`] with the spec's controller replaced by `controller` (a
+/// path as given on the command line, not relative to the spec), as
+/// `ravel verify SPEC --controller PATH` does; the spec then need not name
+/// a controller at all.
+pub fn front_end_with(
+    source: &str,
+    spec_dir: &Path,
+    read: Reader,
+    controller: Option<&Path>,
+) -> Result<Checked, Vec<Diagnostic>> {
+    match front_end_task(source, spec_dir, read, controller)? {
+        Task::System(c) => Ok(*c),
+        Task::Network(_) => Err(vec![diag::Diagnostic::new(
+            diag::Code::SpecKind,
+            syntax::ast::Span::new(0, 0),
+            "this is a network spec, not a system spec",
+        )
+        .label("a network on its own")
+        .hint("this entry point reads closed-loop specs; `ravel verify` reads both kinds")]),
+    }
+}
+
+/// The front end for a spec of either kind (a closed loop or a network on
+/// its own); `controller` overrides the spec's controller or model.
+pub fn front_end_task(
+    source: &str,
+    spec_dir: &Path,
+    read: Reader,
+    controller: Option<&Path>,
+) -> Result<Task, Vec<Diagnostic>> {
+    let spec = syntax::parse(source)?;
+    let path = match controller {
+        Some(c) => Some(c.to_path_buf()),
+        None => check::controller_path(&spec).map(|p| spec_dir.join(&p.node)),
+    };
+    let path_override = controller.map(|c| c.display().to_string());
+    let controller = path.map(|path| {
+        let bytes = read(&ReadRequest {
+            path: path.clone(),
+            inside: None,
+            max_bytes: limits::MAX_CONTROLLER_BYTES,
+            whole: true,
+        });
+        let mut external = onnx::ExternalFiles::new();
+        if let Ok(b) = &bytes {
+            let dir = match path.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            let mut total = 0u64;
+            for req in onnx::external_requests(b) {
+                total = total.saturating_add(req.bytes);
+                let data = if total > limits::MAX_CONTROLLER_BYTES {
+                    Err("the external data of this model exceeds 512 MiB".to_string())
+                } else {
+                    read(&ReadRequest {
+                        path: dir.join(&req.location),
+                        inside: Some(dir.clone()),
+                        max_bytes: req.bytes,
+                        whole: false,
+                    })
+                };
+                external.insert(req.location, data);
+            }
+        }
+        ControllerFile {
+            path_override: path_override.clone(),
+            resolved: path.display().to_string(),
+            bytes,
+            external,
+        }
+    });
+    let data: check::DataFiles = check::data_paths(&spec)
+        .into_iter()
+        .map(|p| {
+            // observation files stay in the spec's folder, under the same
+            // rules as a model's external data (checked before any read)
+            let bytes = match onnx::normalise_location(&p) {
+                None => Err("observation files must lie in the spec's folder (a relative path without `..`)".to_string()),
+                Some(rel) => read(&ReadRequest {
+                    path: spec_dir.join(rel),
+                    inside: Some(spec_dir.to_path_buf()),
+                    max_bytes: limits::MAX_SPEC_BYTES,
+                    whole: true,
+                }),
+            };
+            (p, bytes)
+        })
+        .collect();
+    check::check_task(&spec, controller.as_ref(), &data)
+}

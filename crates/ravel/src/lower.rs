@@ -1,0 +1,229 @@
+//! Lowering: a [`Checked`] spec → an analysis [`Plan`], a checked network
+//! spec → a [`NetPlan`]. Cannot fail.
+//!
+//! Lowering decides *what* to compute: it appends the control saturation to
+//! the network, assembles the closed loop, keeps the partitioner (the cells
+//! themselves are made by [`crate::execute`], which may refine them), and
+//! turns goal and avoid sets into properties over the steps they constrain.
+
+use crate::check::Checked;
+pub use crate::ir::{Guide, Partitioner};
+use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
+use ravel_analysis::sets::{IBox, Polytope, Region};
+use ravel_base::nn::Layer;
+
+/// What a property demands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PropertyKind {
+    /// The final reachable set lies in this set.
+    Goal(Polytope),
+    /// No reachable set at these steps touches any member.
+    Avoid {
+        /// The union's members.
+        members: Vec<Polytope>,
+        /// First and last step (inclusive, clipped to the horizon).
+        steps: (usize, usize),
+    },
+}
+
+/// A named property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Property {
+    /// The set's name from the spec.
+    pub name: String,
+    /// What it demands.
+    pub kind: PropertyKind,
+}
+
+impl Property {
+    /// The last step the property constrains (the horizon for a goal).
+    pub fn last_step(&self) -> usize {
+        match &self.kind {
+            PropertyKind::Goal(_) => usize::MAX,
+            PropertyKind::Avoid { steps, .. } => steps.1,
+        }
+    }
+}
+
+/// Everything the executor needs, as plain data.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The system's name.
+    pub system: String,
+    /// The state vector's name.
+    pub state_name: String,
+    /// The control vector's name.
+    pub control_name: String,
+    /// The controller path: as written in the spec, or as given on the command line.
+    pub controller_path: String,
+    /// SHA-256 of the controller file, in hex.
+    pub controller_sha256: String,
+    /// The path the controller was read from.
+    pub controller_resolved: String,
+    /// A one-line description of the network, e.g. `2 → 5 relu → 5 relu → 1`.
+    pub network_summary: String,
+    /// The closed loop (saturation already part of the network).
+    pub closed_loop: ClosedLoop,
+    /// The time step when the spec's plant was continuous-time (already discretised).
+    pub dt: Option<f64>,
+    /// Control limits, if any (for reports).
+    pub limits: Option<IBox>,
+    /// The initial set.
+    pub initial: Region,
+    /// Its name.
+    pub initial_name: String,
+    /// How the initial set is split.
+    pub partitioner: Partitioner,
+    /// The shape of the reachable sets.
+    pub boundary: Boundary,
+    /// Number of steps.
+    pub horizon: usize,
+    /// The propagator.
+    pub propagator: Propagator,
+    /// The properties, goal first, then avoid sets in spec order.
+    pub properties: Vec<Property>,
+    /// Monte Carlo samples.
+    pub samples: usize,
+    /// Monte Carlo seed.
+    pub seed: u64,
+}
+
+fn summary(c: &Checked) -> String {
+    describe(&c.controller)
+}
+
+/// `2 → 5 relu → 5 relu → 1`, with the loader's notes.
+fn describe(c: &crate::onnx::Controller) -> String {
+    let net = &c.net;
+    let mut parts = vec![net.inputs.to_string()];
+    for (i, layer) in net.layers.iter().enumerate() {
+        if let Layer::Act(a) = layer {
+            parts.push(format!("{} {}", net.width_at(i), a.name()));
+        }
+    }
+    parts.push(net.outputs().to_string());
+    let chain = parts.join(" → ");
+    if c.notes.is_empty() {
+        chain
+    } else {
+        format!("{chain}; {}", c.notes.join(", "))
+    }
+}
+
+/// Lower a checked spec to a plan.
+pub fn lower(c: &Checked) -> Plan {
+    let net = match &c.limits {
+        Some(l) => c.controller.net.with_saturation(&l.lo, &l.hi),
+        None => c.controller.net.clone(),
+    };
+    let mut properties = Vec::new();
+    if let Some(g) = &c.goal {
+        properties.push(Property {
+            name: g.name.clone(),
+            kind: PropertyKind::Goal(g.set.clone()),
+        });
+    }
+    for a in &c.avoids {
+        properties.push(Property {
+            name: a.name.clone(),
+            kind: PropertyKind::Avoid {
+                members: a.members.clone(),
+                steps: (a.steps.0, a.steps.1.min(c.horizon)),
+            },
+        });
+    }
+    Plan {
+        system: c.system.clone(),
+        state_name: c.state.0.clone(),
+        control_name: c.control.0.clone(),
+        controller_path: c.controller_path.clone(),
+        controller_sha256: c.controller_sha256.clone(),
+        controller_resolved: c.controller_resolved.clone(),
+        network_summary: summary(c),
+        closed_loop: ClosedLoop::time_varying(c.plants.clone(), net)
+            .with_slope_steps(c.slope_steps),
+        dt: c.dt,
+        limits: c.limits.clone(),
+        initial: c.initial.1.clone(),
+        initial_name: c.initial.0.clone(),
+        partitioner: c.partitioner.clone(),
+        boundary: c.boundary.clone(),
+        horizon: c.horizon,
+        propagator: c.propagator,
+        properties,
+        samples: c.samples,
+        seed: c.seed,
+    }
+}
+
+/// Everything the executor needs for a network spec, as plain data.
+#[derive(Clone, Debug)]
+pub struct NetPlan {
+    /// The network's name.
+    pub name: String,
+    /// The input vector's name.
+    pub input_name: String,
+    /// The output vector's name.
+    pub output_name: String,
+    /// The model path: as written, or as given on the command line.
+    pub model_path: String,
+    /// SHA-256 of the model file, in hex.
+    pub model_sha256: String,
+    /// The path the model was read from.
+    pub model_resolved: String,
+    /// A one-line description of the network.
+    pub network_summary: String,
+    /// The network.
+    pub net: ravel_base::nn::Network,
+    /// The input set (absent in a spec that only selects actions).
+    pub input: Option<Region>,
+    /// Its name.
+    pub input_set_name: String,
+    /// The robust action selections, in spec order.
+    pub selects: Vec<crate::check::SelectSpec>,
+    /// The properties, in spec order.
+    pub properties: Vec<crate::check::NetProperty>,
+    /// The radius searches, in spec order.
+    pub radii: Vec<crate::check::RadiusSpec>,
+    /// The propagator.
+    pub propagator: crate::ir::NetPropagator,
+    /// How the input set is split.
+    pub partitioner: Partitioner,
+    /// The output set's shape.
+    pub shape: ravel_analysis::shape::Shape,
+    /// Monte Carlo samples.
+    pub samples: usize,
+    /// Monte Carlo seed.
+    pub seed: u64,
+    /// Projected-gradient steps on the lower ReLU slopes of CROWN (0: CROWN's own).
+    pub slope_steps: usize,
+}
+
+/// Lower a checked network spec to a plan.
+pub fn lower_network(c: &crate::check::NetworkChecked) -> NetPlan {
+    NetPlan {
+        name: c.name.clone(),
+        input_name: c.input.0.clone(),
+        output_name: c.output.0.clone(),
+        model_path: c.model_path.clone(),
+        model_sha256: c.model_sha256.clone(),
+        model_resolved: c.model_resolved.clone(),
+        network_summary: describe(&c.model),
+        net: c.model.net.clone(),
+        input: c.input_set.as_ref().map(|i| i.1.clone()),
+        input_set_name: c
+            .input_set
+            .as_ref()
+            .map(|i| i.0.clone())
+            .unwrap_or_default(),
+        selects: c.selects.clone(),
+        properties: c.properties.clone(),
+        radii: c.radii.clone(),
+        propagator: c.propagator,
+        partitioner: c.partitioner.clone(),
+        shape: c.shape.clone(),
+        samples: c.samples,
+        seed: c.seed,
+        slope_steps: c.slope_steps,
+    }
+}

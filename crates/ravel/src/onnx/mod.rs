@@ -1,0 +1,1191 @@
+//! ONNX controllers: decoding (prost, no code generation), lowering the graph
+//! to a [`Network`], and a small writer used by the model generator and tests.
+//!
+//! Supported graphs are chains on one vector input: `Gemm` (alpha, beta,
+//! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `LeakyRelu`, `Tanh`,
+//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
+//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
+//! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
+//! `Dropout` (inference), plus `Constant`. Weights may be float32, float64
+//! (or integer and bool constants), stored in `raw_data`, in the typed
+//! fields, or in external data files.
+//!
+//! Semantics: the network ravel verifies is the real-arithmetic function of
+//! the stored weights (float32 values are widened to f64 exactly). `Clip`
+//! and `LeakyRelu` become ReLU layers that compute them exactly. `Div` by a
+//! constant `c` is read as multiplication by the f64 nearest to `1/c`, a
+//! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64, and
+//! `BatchNormalization` is the diagonal affine map whose coefficients
+//! `scale/√(var + ε)` and `B − mean·scale/√(var + ε)` are computed in f64
+//! (each within a few ulps of the exact value).
+//!
+//! The graph input's element type is recorded as the network's
+//! [`InputType`] (`double`: float64; anything else: float32): the type a
+//! counterexample's input must have.
+
+pub mod build;
+pub mod proto;
+
+use std::collections::{BTreeMap, HashMap};
+
+use nalgebra::{DMatrix, DVector};
+use prost::Message;
+
+use proto::{dtype, AttributeProto, ModelProto, NodeProto, TensorProto};
+use ravel_base::limits::{
+    MAX_CONTROLLER_BYTES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS, MAX_TENSOR_ELEMENTS, MAX_WIDTH,
+};
+use ravel_base::nn::{Activation, InputType, Layer, Network};
+use ravel_syntax::diag::sanitize;
+
+/// Contents of external-data files, by their normalised location (see
+/// [`normalise_location`]). A read failure is kept as its message so the
+/// checker can report it.
+pub type ExternalFiles = BTreeMap<String, Result<Vec<u8>, String>>;
+
+/// What went wrong while loading a controller.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OnnxErrorKind {
+    /// Not a decodable ONNX protobuf.
+    Decode,
+    /// An operator, attribute value or data type ravel does not support.
+    Unsupported,
+    /// A NaN or infinite weight (or a division by zero).
+    NonFinite,
+    /// A graph that is not a chain on one input, or inconsistent shapes.
+    Malformed,
+    /// An external-data file that is missing or too short.
+    ExternalData,
+}
+
+/// A problem with an ONNX file, with a message and a hint for the user.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OnnxError {
+    /// The category (mapped to a diagnostic code by `check`).
+    pub kind: OnnxErrorKind,
+    /// What is wrong, naming the node, tensor or attribute.
+    pub message: String,
+    /// How to fix it.
+    pub hint: String,
+}
+
+fn err(kind: OnnxErrorKind, message: impl Into<String>, hint: impl Into<String>) -> OnnxError {
+    OnnxError {
+        kind,
+        message: message.into(),
+        hint: hint.into(),
+    }
+}
+
+/// A controller loaded from ONNX: the network and the declared input and output sizes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Controller {
+    /// Exporter ops rewritten into the chain (e.g. `clip [-1, 1]`), for reports.
+    pub notes: Vec<String>,
+    /// The network as a chain of layers.
+    pub net: Network,
+    /// Number of inputs.
+    pub inputs: usize,
+    /// Number of outputs.
+    pub outputs: usize,
+}
+
+/// A tensor shape for a message: at most 8 dimensions are listed.
+fn shape_text<T: std::fmt::Display>(dims: &[T]) -> String {
+    let shown: Vec<String> = dims.iter().take(8).map(|d| d.to_string()).collect();
+    if dims.len() > 8 {
+        format!("[{}, … ({} dimensions)]", shown.join(", "), dims.len())
+    } else {
+        format!("[{}]", shown.join(", "))
+    }
+}
+
+/// An external-data file the loader will need: its normalised location
+/// (relative to the model's folder, without `.` components) and how many
+/// bytes from its start the model's tensors need (the largest
+/// `offset + length` over the tensors stored in it, each length being what
+/// the tensor's declared shape and type need).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExternalRequest {
+    /// The normalised location.
+    pub location: String,
+    /// Bytes needed from the start of the file.
+    pub bytes: u64,
+}
+
+/// A tensor's `location` as a plain relative path inside the model's
+/// folder: `/`-separated normal components (`.` components dropped, so `./x`
+/// and `x` are one file). `None` for an absolute path, a `..` component, a
+/// backslash, a NUL, or nothing left.
+pub fn normalise_location(location: &str) -> Option<String> {
+    if location.starts_with('/') || location.contains('\\') || location.contains('\0') {
+        return None;
+    }
+    let mut parts = Vec::new();
+    for c in location.split('/') {
+        match c {
+            "" | "." => {}
+            ".." => return None,
+            // a Windows drive prefix such as `C:` is not a plain name either
+            c if c.contains(':') => return None,
+            c => parts.push(c),
+        }
+    }
+    (!parts.is_empty()).then(|| parts.join("/"))
+}
+
+/// The external-data files the model's tensors use, each once, with the
+/// number of bytes needed from each, so the caller reads no file outside the
+/// model's folder and nothing beyond what the declared shapes need.
+/// Tensors whose location, offset, length or shape is invalid are left out:
+/// [`load`] reports them. Undecodable bytes give an empty list.
+pub fn external_requests(bytes: &[u8]) -> Vec<ExternalRequest> {
+    let Ok(model) = ModelProto::decode(bytes) else {
+        return Vec::new();
+    };
+    let mut need: BTreeMap<String, u64> = BTreeMap::new();
+    let mut visit = |t: &TensorProto| {
+        if t.data_location != Some(1) {
+            return;
+        }
+        let Ok(ext) = external_entry(t) else {
+            return;
+        };
+        let Some(end) = ext.offset.checked_add(ext.length) else {
+            return;
+        };
+        let e = need.entry(ext.location).or_insert(0);
+        *e = (*e).max(end);
+    };
+    if let Some(g) = &model.graph {
+        g.initializer.iter().for_each(&mut visit);
+        for n in &g.node {
+            for a in &n.attribute {
+                if let Some(t) = &a.t {
+                    visit(t);
+                }
+            }
+        }
+    }
+    need.into_iter()
+        .map(|(location, bytes)| ExternalRequest { location, bytes })
+        .collect()
+}
+
+/// Where a tensor's external data is: normalised location, offset, and the
+/// length its declared shape and type need.
+struct ExternalEntry {
+    location: String,
+    offset: u64,
+    length: u64,
+}
+
+/// Validate a tensor's external-data entry before anything is read.
+fn external_entry(t: &TensorProto) -> Result<ExternalEntry, OnnxError> {
+    let name = tensor_name(t);
+    let (numel, width) = tensor_size(t)?;
+    let needed = numel
+        .checked_mul(width as u64)
+        .filter(|b| *b <= MAX_CONTROLLER_BYTES);
+    let Some(needed) = needed else {
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            format!("tensor '{name}' is too large"),
+            "ravel reads controllers of at most 512 MiB",
+        ));
+    };
+    let mut location = None;
+    let (mut offset, mut length) = (0u64, None);
+    for e in &t.external_data {
+        let v = e.value.clone().unwrap_or_default();
+        let number = |what: &str| {
+            v.trim().parse::<u64>().map_err(|_| {
+                err(
+                    OnnxErrorKind::ExternalData,
+                    format!(
+                        "tensor '{name}' has an external-data {what} '{}' that is not a byte count",
+                        sanitize(&v)
+                    ),
+                    "re-export the model with its data file",
+                )
+            })
+        };
+        match e.key.as_deref() {
+            Some("location") => location = Some(v.clone()),
+            Some("offset") => offset = number("offset")?,
+            Some("length") => length = Some(number("length")?),
+            _ => {}
+        }
+    }
+    let Some(raw) = location else {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!("tensor '{name}' is external but has no location"),
+            "re-export the model with its data file",
+        ));
+    };
+    let Some(location) = normalise_location(&raw) else {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!(
+                "external data location '{}' of tensor '{name}' is not a file inside the controller's folder",
+                sanitize(&raw)
+            ),
+            "external data must be a relative path without `..` next to the .onnx file; re-export the model",
+        ));
+    };
+    if offset
+        .checked_add(needed)
+        .is_none_or(|end| end > MAX_CONTROLLER_BYTES)
+    {
+        return Err(err(
+            OnnxErrorKind::ExternalData,
+            format!(
+                "external data of tensor '{name}' ends beyond 512 MiB (offset {offset}, {needed} bytes)"
+            ),
+            "ravel reads at most 512 MiB of external data; re-export the model",
+        ));
+    }
+    if let Some(l) = length {
+        if l != needed {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!(
+                    "tensor '{name}' declares {l} bytes of external data but its shape needs {needed}"
+                ),
+                "the .data file does not belong to this model: re-export both together",
+            ));
+        }
+    }
+    Ok(ExternalEntry {
+        location,
+        offset,
+        length: needed,
+    })
+}
+
+/// A tensor's number of elements (checked against the limits, without
+/// overflow) and the width in bytes of its element type.
+fn tensor_size(t: &TensorProto) -> Result<(u64, usize), OnnxError> {
+    let name = tensor_name(t);
+    let mut numel = 1u64;
+    for &d in &t.dims {
+        if d < 0 {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("tensor '{name}' has a negative dimension {d}"),
+                "re-export the model",
+            ));
+        }
+        numel = numel
+            .checked_mul(d as u64)
+            .filter(|n| *n <= MAX_TENSOR_ELEMENTS)
+            .ok_or_else(|| {
+                err(
+                    OnnxErrorKind::Malformed,
+                    format!(
+                        "tensor '{name}' has more than {MAX_TENSOR_ELEMENTS} elements (shape {})",
+                        shape_text(&t.dims)
+                    ),
+                    "ravel verifies controllers of at most 16777216 weights per tensor",
+                )
+            })?;
+    }
+    let dt = t.data_type.unwrap_or(0);
+    let width = match dt {
+        dtype::BOOL => 1,
+        dtype::FLOAT | dtype::INT32 => 4,
+        dtype::DOUBLE | dtype::INT64 => 8,
+        other => {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "tensor '{name}' has ONNX data type {other} ({}), which ravel does not read",
+                    dtype_name(other)
+                ),
+                "export the weights as float32 or float64",
+            ))
+        }
+    };
+    Ok((numel, width))
+}
+
+/// A constant tensor.
+#[derive(Clone, Debug)]
+struct Tensor {
+    dims: Vec<usize>,
+    data: Vec<f64>,
+}
+
+fn node_label(n: &NodeProto) -> String {
+    let op = sanitize(n.op_type.as_deref().unwrap_or_default());
+    match n.name.as_deref() {
+        Some(name) if !name.is_empty() => format!("node '{}' ({op})", sanitize(name)),
+        _ => format!(
+            "the {op} node producing '{}'",
+            sanitize(n.output.first().map_or("", String::as_str))
+        ),
+    }
+}
+
+/// The tensor's name, made safe to show.
+fn tensor_name(t: &TensorProto) -> String {
+    t.name
+        .as_deref()
+        .map_or_else(|| "<unnamed>".into(), sanitize)
+}
+
+/// Decode a tensor's values to f64 (integers are converted too).
+fn tensor_values(t: &TensorProto, external: &ExternalFiles) -> Result<Tensor, OnnxError> {
+    let name = tensor_name(t);
+    let (numel, width) = tensor_size(t)?;
+    // tensor_size bounds every dimension and their product
+    let dims: Vec<usize> = t.dims.iter().map(|d| *d as usize).collect();
+    let numel = numel as usize;
+    let dt = t.data_type.unwrap_or(0);
+    let raw: Option<Vec<u8>> = if t.data_location == Some(1) {
+        Some(read_external(t, external)?)
+    } else {
+        t.raw_data.clone()
+    };
+    let data: Vec<f64> = match raw {
+        Some(bytes) => {
+            if bytes.len() != numel * width {
+                return Err(err(
+                    OnnxErrorKind::Malformed,
+                    format!(
+                        "tensor '{name}' has {} bytes of data but its shape {} needs {}",
+                        bytes.len(),
+                        shape_text(&dims),
+                        numel * width
+                    ),
+                    "re-export the model",
+                ));
+            }
+            match dt {
+                dtype::BOOL => bytes.iter().map(|b| f64::from(u8::from(*b != 0))).collect(),
+                dtype::FLOAT => bytes
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes(le(c)) as f64)
+                    .collect(),
+                dtype::INT32 => bytes
+                    .chunks_exact(4)
+                    .map(|c| i32::from_le_bytes(le(c)) as f64)
+                    .collect(),
+                dtype::DOUBLE => bytes
+                    .chunks_exact(8)
+                    .map(|c| f64::from_le_bytes(le(c)))
+                    .collect(),
+                _ => bytes
+                    .chunks_exact(8)
+                    .map(|c| i64::from_le_bytes(le(c)) as f64)
+                    .collect(),
+            }
+        }
+        None => match dt {
+            dtype::FLOAT => t.float_data.iter().map(|v| *v as f64).collect(),
+            dtype::DOUBLE => t.double_data.clone(),
+            dtype::INT32 | dtype::BOOL => t.int32_data.iter().map(|v| *v as f64).collect(),
+            _ => t.int64_data.iter().map(|v| *v as f64).collect(),
+        },
+    };
+    if data.len() != numel {
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            format!(
+                "tensor '{name}' has {} values but its shape {} needs {numel}",
+                data.len(),
+                shape_text(&dims)
+            ),
+            "re-export the model",
+        ));
+    }
+    Ok(Tensor { dims, data })
+}
+
+/// The first `N` bytes of a chunk (chunks come from `chunks_exact(N)`, so
+/// they have exactly `N`; a shorter one would give zeros, never a panic).
+fn le<const N: usize>(c: &[u8]) -> [u8; N] {
+    let mut a = [0u8; N];
+    for (d, s) in a.iter_mut().zip(c) {
+        *d = *s;
+    }
+    a
+}
+
+fn dtype_name(d: i32) -> &'static str {
+    match d {
+        2 => "uint8",
+        3 => "int8",
+        9 => "bool",
+        10 => "float16",
+        16 => "bfloat16",
+        _ => "unsupported",
+    }
+}
+
+fn read_external(t: &TensorProto, external: &ExternalFiles) -> Result<Vec<u8>, OnnxError> {
+    let name = tensor_name(t);
+    let ext = external_entry(t)?;
+    let shown = sanitize(&ext.location);
+    let bytes = match external.get(&ext.location) {
+        Some(Ok(b)) => b,
+        Some(Err(msg)) => {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!(
+                    "cannot read external data file '{shown}' of tensor '{name}': {}",
+                    sanitize(msg)
+                ),
+                "keep the .data file next to the .onnx file, as a regular file",
+            ))
+        }
+        None => {
+            return Err(err(
+                OnnxErrorKind::ExternalData,
+                format!("external data file '{shown}' of tensor '{name}' was not provided"),
+                "keep the .data file next to the .onnx file",
+            ))
+        }
+    };
+    let range = usize::try_from(ext.offset).ok().and_then(|o| {
+        let end = o.checked_add(usize::try_from(ext.length).ok()?)?;
+        bytes.get(o..end)
+    });
+    match range {
+        Some(r) => Ok(r.to_vec()),
+        None => Err(err(
+            OnnxErrorKind::ExternalData,
+            format!(
+                "external data of tensor '{name}' ({} bytes at offset {}) runs past the end of '{shown}' ({} bytes)",
+                ext.length,
+                ext.offset,
+                bytes.len()
+            ),
+            "the .data file does not belong to this model: re-export both together",
+        )),
+    }
+}
+
+fn attr<'a>(n: &'a NodeProto, name: &str) -> Option<&'a AttributeProto> {
+    n.attribute.iter().find(|a| a.name.as_deref() == Some(name))
+}
+
+fn attr_i(n: &NodeProto, name: &str, default: i64) -> i64 {
+    attr(n, name).and_then(|a| a.i).unwrap_or(default)
+}
+
+fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
+    attr(n, name)
+        .and_then(|a| a.f)
+        .map(|f| f as f64)
+        .unwrap_or(default)
+}
+
+/// The ops ravel accepts, for hints.
+pub const SUPPORTED_OPS: &str =
+    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
+
+struct Lowering {
+    consts: HashMap<String, Tensor>,
+    current: String,
+    width: Option<usize>,
+    layers: Vec<Layer>,
+    /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
+    notes: Vec<String>,
+}
+
+impl Lowering {
+    /// Split a binary node's inputs into (const, is_const_first).
+    fn const_operand(&self, n: &NodeProto) -> Result<(Tensor, bool), OnnxError> {
+        if n.input.len() != 2 {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} needs two inputs", node_label(n)),
+                "re-export the model",
+            ));
+        }
+        let (Some(a), Some(b)) = (n.input.first(), n.input.get(1)) else {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} needs two inputs", node_label(n)),
+                "re-export the model",
+            ));
+        };
+        if a == &self.current {
+            self.consts.get(b).cloned().map(|t| (t, false))
+        } else if b == &self.current {
+            self.consts.get(a).cloned().map(|t| (t, true))
+        } else {
+            None
+        }
+        .ok_or_else(|| {
+            err(
+                OnnxErrorKind::Unsupported,
+                format!("{} combines two computed values; ravel supports only chains with constant operands", node_label(n)),
+                "export a plain feed-forward network (no skip connections)",
+            )
+        })
+    }
+
+    fn width(&self) -> Result<usize, OnnxError> {
+        self.width.ok_or_else(|| {
+            err(
+                OnnxErrorKind::Malformed,
+                "the input size is unknown before the first element-wise op",
+                "give the graph input a static shape",
+            )
+        })
+    }
+
+    /// A per-element vector from a constant of 1 or `width` elements.
+    fn broadcast(&self, n: &NodeProto, t: &Tensor) -> Result<DVector<f64>, OnnxError> {
+        let w = self.width()?;
+        if t.data.len() == 1 {
+            Ok(DVector::from_element(
+                w,
+                t.data.first().copied().unwrap_or(0.0),
+            ))
+        } else if t.data.len() == w {
+            Ok(DVector::from_column_slice(&t.data))
+        } else {
+            Err(err(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "{} uses a constant of {} elements on a value of width {w}",
+                    node_label(n),
+                    t.data.len()
+                ),
+                "the constant must be a scalar or have one entry per element",
+            ))
+        }
+    }
+
+    fn push_affine(&mut self, w: DMatrix<f64>, b: DVector<f64>) {
+        self.width = Some(w.nrows());
+        self.layers.push(Layer::Affine { w, b });
+    }
+
+    /// Refuse a layer wider than [`MAX_WIDTH`] before it is built.
+    fn check_width(n: &NodeProto, width: usize) -> Result<(), OnnxError> {
+        if width as u64 > MAX_WIDTH {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} has width {width}, more than ravel's limit of {MAX_WIDTH}",
+                    node_label(n)
+                ),
+                "ravel verifies controllers whose layers have at most 4096 neurons",
+            ));
+        }
+        Ok(())
+    }
+
+    fn add_bias(&mut self, bias: DVector<f64>) {
+        if let Some(Layer::Affine { b, .. }) = self.layers.last_mut() {
+            if b.iter().all(|v| *v == 0.0) && b.len() == bias.len() {
+                *b = bias; // exact: the previous bias is zero
+                return;
+            }
+        }
+        let n = bias.len();
+        self.push_affine(DMatrix::identity(n, n), bias);
+    }
+
+    fn node(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let op = n.op_type.clone().unwrap_or_default();
+        if n.domain
+            .as_deref()
+            .is_some_and(|d| !d.is_empty() && d != "ai.onnx")
+        {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} is in operator domain '{}'",
+                    node_label(n),
+                    sanitize(n.domain.as_deref().unwrap_or_default())
+                ),
+                format!("ravel supports the default ONNX domain: {SUPPORTED_OPS}"),
+            ));
+        }
+        let out = n.output.first().cloned().unwrap_or_default();
+        if op == "Constant" {
+            let t = attr(n, "value").and_then(|a| a.t.as_ref()).ok_or_else(|| {
+                err(
+                    OnnxErrorKind::Unsupported,
+                    format!("{} has no tensor 'value'", node_label(n)),
+                    "use a tensor-valued Constant",
+                )
+            })?;
+            let t = tensor_values(t, &ExternalFiles::new())?;
+            check_finite(&format!("constant '{}'", sanitize(&out)), &t)?;
+            self.consts.insert(out, t);
+            return Ok(());
+        }
+        let first = n.input.first().cloned().unwrap_or_default();
+        let uses_current = n.input.iter().any(|i| i == &self.current);
+        if !uses_current {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} does not consume the running value '{}'",
+                    node_label(n),
+                    sanitize(&self.current)
+                ),
+                "export a plain feed-forward network on one input (constant folding on)",
+            ));
+        }
+        match op.as_str() {
+            "Gemm" => {
+                if first != self.current || attr_i(n, "transA", 0) != 0 {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} must have the data as its first input and transA = 0",
+                            node_label(n)
+                        ),
+                        "re-export with the input as A",
+                    ));
+                }
+                let bname = n.input.get(1).cloned().unwrap_or_default();
+                let bt = self.consts.get(&bname).cloned().ok_or_else(|| {
+                    err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} has a non-constant weight '{}'",
+                            node_label(n),
+                            sanitize(&bname)
+                        ),
+                        "weights must be initializers",
+                    )
+                })?;
+                if bt.dims.len() != 2 {
+                    return Err(err(
+                        OnnxErrorKind::Malformed,
+                        format!(
+                            "{} has weight of shape {}, expected 2-D",
+                            node_label(n),
+                            shape_text(&bt.dims)
+                        ),
+                        "re-export the model",
+                    ));
+                }
+                let &[r, c] = bt.dims.as_slice() else {
+                    return Err(err(
+                        OnnxErrorKind::Malformed,
+                        format!("{} has a weight that is not 2-D", node_label(n)),
+                        "re-export the model",
+                    ));
+                };
+                Self::check_width(n, r.max(c))?;
+                let m = DMatrix::from_row_slice(r, c, &bt.data);
+                let alpha = attr_f(n, "alpha", 1.0);
+                let beta = attr_f(n, "beta", 1.0);
+                if !(alpha.is_finite() && beta.is_finite()) {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!(
+                            "{} has a non-finite alpha ({alpha}) or beta ({beta})",
+                            node_label(n)
+                        ),
+                        "re-export the model",
+                    ));
+                }
+                let mut w = if attr_i(n, "transB", 0) != 0 {
+                    m
+                } else {
+                    m.transpose()
+                };
+                if alpha != 1.0 {
+                    w *= alpha;
+                }
+                self.expect_width(n, w.ncols())?;
+                let outputs = w.nrows();
+                let mut b = DVector::zeros(outputs);
+                if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
+                    let ct = self.consts.get(cname).cloned().ok_or_else(|| {
+                        err(
+                            OnnxErrorKind::Unsupported,
+                            format!(
+                                "{} has a non-constant bias '{}'",
+                                node_label(n),
+                                sanitize(cname)
+                            ),
+                            "biases must be initializers",
+                        )
+                    })?;
+                    self.width = Some(outputs);
+                    b = self.broadcast(n, &ct)? * beta;
+                }
+                self.push_affine(w, b);
+            }
+            "MatMul" => {
+                let (t, const_first) = self.const_operand(n)?;
+                if const_first || t.dims.len() != 2 {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} must multiply the data (left) by a 2-D constant (right)",
+                            node_label(n)
+                        ),
+                        "export Linear layers as x @ W",
+                    ));
+                }
+                let &[r, c] = t.dims.as_slice() else {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} must multiply by a 2-D constant", node_label(n)),
+                        "export Linear layers as x @ W",
+                    ));
+                };
+                Self::check_width(n, r.max(c))?;
+                let w = DMatrix::from_row_slice(r, c, &t.data).transpose();
+                self.expect_width(n, w.ncols())?;
+                let outputs = w.nrows();
+                self.push_affine(w, DVector::zeros(outputs));
+            }
+            "Add" | "Sub" | "Mul" | "Div" => {
+                let (t, const_first) = self.const_operand(n)?;
+                let v = self.broadcast(n, &t)?;
+                Self::check_width(n, v.len())?;
+                let w = v.len();
+                match (op.as_str(), const_first) {
+                    ("Add", _) => self.add_bias(v),
+                    ("Sub", false) => self.add_bias(-v),
+                    ("Sub", true) => self.push_affine(-DMatrix::<f64>::identity(w, w), v),
+                    ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
+                    (_, false) => {
+                        if v.iter().any(|x| *x == 0.0) {
+                            return Err(err(
+                                OnnxErrorKind::NonFinite,
+                                format!("{} divides by zero", node_label(n)),
+                                "fix the normalisation constants",
+                            ));
+                        }
+                        self.push_affine(
+                            DMatrix::from_diagonal(&v.map(|x| 1.0 / x)),
+                            DVector::zeros(w),
+                        );
+                    }
+                    (_, true) => {
+                        return Err(err(
+                            OnnxErrorKind::Unsupported,
+                            format!(
+                                "{} divides a constant by the data, which is not affine",
+                                node_label(n)
+                            ),
+                            "only division by constants is supported",
+                        ));
+                    }
+                }
+            }
+            "Relu" => self.layers.push(Layer::Act(Activation::Relu)),
+            "Tanh" => self.layers.push(Layer::Act(Activation::Tanh)),
+            "Sigmoid" => self.layers.push(Layer::Act(Activation::Sigmoid)),
+            "Clip" => {
+                let w = self.width()?;
+                // opset ≥ 11: optional constant inputs; before: attributes
+                let bound = |k: usize, name: &str| -> Result<Option<Vec<f64>>, OnnxError> {
+                    match n.input.get(k).filter(|s| !s.is_empty()) {
+                        Some(c) => {
+                            let t = self.consts.get(c).ok_or_else(|| {
+                                err(
+                                    OnnxErrorKind::Unsupported,
+                                    format!("{} has a computed {name}", node_label(n)),
+                                    "clip bounds must be constants",
+                                )
+                            })?;
+                            Ok(Some(self.broadcast(n, t)?.iter().copied().collect()))
+                        }
+                        None => Ok(attr(n, name).and_then(|a| a.f).map(|f| vec![f as f64; w])),
+                    }
+                };
+                // ±FLT_MAX (the old opsets' defaults, written out by some
+                // exporters) means no bound on that side
+                let unbounded = |v: Option<Vec<f64>>| {
+                    v.filter(|v| !v.iter().all(|x| x.abs() >= f32::MAX as f64))
+                };
+                let (lo, hi) = (unbounded(bound(1, "min")?), unbounded(bound(2, "max")?));
+                if let (Some(l), Some(h)) = (&lo, &hi) {
+                    if l.iter().zip(h).any(|(l, h)| l > h) {
+                        return Err(err(
+                            OnnxErrorKind::Malformed,
+                            format!("{} has min above max", node_label(n)),
+                            "check the clamp bounds of the exported policy",
+                        ));
+                    }
+                }
+                if lo
+                    .iter()
+                    .chain(&hi)
+                    .flatten()
+                    .any(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
+                {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!("{} has a non-finite or huge bound", node_label(n)),
+                        "clamp to finite bounds within ±1e15",
+                    ));
+                }
+                let shown = |v: &Option<Vec<f64>>| {
+                    v.as_ref()
+                        .and_then(|v| v.first())
+                        .map_or("·".to_string(), |x| ravel_syntax::diag::compact(*x))
+                };
+                self.notes
+                    .push(format!("clip [{}, {}]", shown(&lo), shown(&hi)));
+                self.layers.extend(ravel_base::nn::clamp_layers(
+                    w,
+                    lo.as_deref(),
+                    hi.as_deref(),
+                ));
+            }
+            "LeakyRelu" => {
+                let w = self.width()?;
+                let alpha = attr_f(n, "alpha", 0.01);
+                if !alpha.is_finite() || alpha.abs() > MAX_MAGNITUDE {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!("{} has a non-finite slope", node_label(n)),
+                        "re-export the model",
+                    ));
+                }
+                Self::check_width(n, 2 * w)?;
+                self.notes.push(format!(
+                    "leaky_relu {} as relu pairs",
+                    ravel_syntax::diag::compact(alpha)
+                ));
+                self.layers
+                    .extend(ravel_base::nn::leaky_relu_layers(w, alpha));
+            }
+            "BatchNormalization" => {
+                let training = attr_i(n, "training_mode", 0) != 0
+                    || n.output.iter().skip(1).any(|o| !o.is_empty());
+                if training {
+                    return Err(training_mode(n));
+                }
+                let w = self.width()?;
+                let param = |k: usize| -> Result<Vec<f64>, OnnxError> {
+                    let name = n.input.get(k).cloned().unwrap_or_default();
+                    let t = self.consts.get(&name).ok_or_else(|| {
+                        err(
+                            OnnxErrorKind::Unsupported,
+                            format!(
+                                "{} has a non-constant parameter '{}'",
+                                node_label(n),
+                                sanitize(&name)
+                            ),
+                            "export in eval mode with constant folding on",
+                        )
+                    })?;
+                    Ok(self.broadcast(n, t)?.iter().copied().collect())
+                };
+                let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);
+                let eps = attr_f(n, "epsilon", 1e-5);
+                let mut diag = Vec::with_capacity(w);
+                let mut shift = Vec::with_capacity(w);
+                for (((s, b), m), v) in scale.iter().zip(&bias).zip(&mean).zip(&var) {
+                    let d = s / (v + eps).sqrt();
+                    let denominator = v + eps;
+                    if denominator.is_nan() || denominator <= 0.0 || !d.is_finite() {
+                        return Err(err(
+                            OnnxErrorKind::NonFinite,
+                            format!("{} has a non-positive variance", node_label(n)),
+                            "re-export the model",
+                        ));
+                    }
+                    diag.push(d);
+                    shift.push(b - m * d);
+                }
+                self.notes.push("batch normalisation".to_string());
+                self.push_affine(
+                    DMatrix::from_diagonal(&DVector::from_vec(diag)),
+                    DVector::from_vec(shift),
+                );
+            }
+            "Dropout" => {
+                if first != self.current {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} drops out a constant", node_label(n)),
+                        "export with constant folding on",
+                    ));
+                }
+                // opset ≥ 12: a third input `training_mode`; before 7: `is_test`
+                let training = n.input.get(2).filter(|s| !s.is_empty()).is_some_and(|t| {
+                    self.consts
+                        .get(t)
+                        .is_none_or(|c| c.data.iter().any(|v| *v != 0.0))
+                }) || attr(n, "is_test").and_then(|a| a.i) == Some(0);
+                if training {
+                    return Err(training_mode(n));
+                }
+            }
+            "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" => {
+                if first != self.current {
+                    return Err(err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} reshapes a constant", node_label(n)),
+                        "export with constant folding on",
+                    ));
+                }
+            }
+            other => {
+                return Err(err(
+                    OnnxErrorKind::Unsupported,
+                    format!(
+                        "{} uses operator '{}', which ravel does not support",
+                        node_label(n),
+                        sanitize(other)
+                    ),
+                    format!("supported operators: {SUPPORTED_OPS}"),
+                ))
+            }
+        }
+        self.current = out;
+        Ok(())
+    }
+
+    fn expect_width(&mut self, n: &NodeProto, k: usize) -> Result<(), OnnxError> {
+        match self.width {
+            Some(w) if w != k => Err(err(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "{} expects {k} inputs but receives a value of width {w}",
+                    node_label(n)
+                ),
+                "the model's shapes are inconsistent: re-export it",
+            )),
+            _ => {
+                self.width = Some(k);
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A node exported in training mode (Dropout or BatchNormalization).
+fn training_mode(n: &NodeProto) -> OnnxError {
+    err(
+        OnnxErrorKind::Unsupported,
+        format!("{} was exported in training mode", node_label(n)),
+        "call model.eval() before torch.onnx.export (training-mode dropout and batch statistics are random or data-dependent)",
+    )
+}
+
+fn check_finite(what: &str, t: &Tensor) -> Result<(), OnnxError> {
+    if let Some((i, v)) = t.data.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(err(
+            OnnxErrorKind::NonFinite,
+            format!("{what} holds a non-finite value ({v}) at flat index {i}"),
+            "the training diverged or the export is corrupt; retrain or re-export",
+        ));
+    }
+    if let Some((i, v)) = t
+        .data
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.abs() > MAX_MAGNITUDE)
+    {
+        return Err(err(
+            OnnxErrorKind::NonFinite,
+            format!(
+                "{what} holds {} at flat index {i}, beyond the magnitudes ravel analyses (±1e15)",
+                ravel_syntax::diag::compact(*v)
+            ),
+            "the training diverged or the export is corrupt; retrain or re-export",
+        ));
+    }
+    Ok(())
+}
+
+/// A prost decode error, cut to its first and last frames: a deeply nested
+/// message otherwise names every enclosing field.
+fn decode_message(e: &prost::DecodeError) -> String {
+    let full = e.to_string();
+    let parts: Vec<&str> = full.split(": ").collect();
+    let short = if parts.len() > 4 {
+        match (parts.first(), parts.get(1), parts.last()) {
+            (Some(a), Some(b), Some(z)) => format!("{a}: {b}: …: {z}"),
+            _ => full,
+        }
+    } else {
+        full
+    };
+    sanitize(&short)
+}
+
+/// Decode an ONNX model and lower it to a network.
+pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxError> {
+    let model = ModelProto::decode(bytes).map_err(|e| {
+        err(
+            OnnxErrorKind::Decode,
+            format!("the file is not a valid ONNX model ({})", decode_message(&e)),
+            "check that the path points to an .onnx file exported by PyTorch, Keras or similar, and that it is complete",
+        )
+    })?;
+    if model.opset_import.is_empty() {
+        return Err(err(
+            OnnxErrorKind::Decode,
+            "the file has no opset_import: it is truncated or not an ONNX model",
+            "every ONNX exporter writes the operator set version; re-export or re-copy the file",
+        ));
+    }
+    let graph = model.graph.as_ref().ok_or_else(|| {
+        err(
+            OnnxErrorKind::Decode,
+            "the file is not an ONNX model (it has no graph)",
+            "check that the path points to an .onnx file",
+        )
+    })?;
+    if graph.node.len() > MAX_NODES {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph has {} nodes, more than ravel's limit of {MAX_NODES}",
+                graph.node.len()
+            ),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
+    let mut parameters = 0u64;
+    for t in &graph.initializer {
+        parameters = parameters.saturating_add(tensor_size(t)?.0);
+    }
+    if parameters > MAX_PARAMETERS {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the controller has {parameters} weights, more than ravel's limit of {MAX_PARAMETERS}"),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
+    let mut consts = HashMap::new();
+    for t in &graph.initializer {
+        let name = tensor_name(t);
+        let v = tensor_values(t, external)?;
+        check_finite(&format!("initializer '{name}'"), &v)?;
+        consts.insert(name, v);
+    }
+    let data_inputs: Vec<_> = graph
+        .input
+        .iter()
+        .filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or("")))
+        .collect();
+    if data_inputs.len() != 1 {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph has {} data inputs; ravel needs exactly one (the observation vector)",
+                data_inputs.len()
+            ),
+            "export the controller with a single input tensor",
+        ));
+    }
+    let [input] = data_inputs.as_slice() else {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            "the graph needs exactly one data input",
+            "export the controller with a single input tensor",
+        ));
+    };
+    let declared = input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.shape.as_ref())
+        .map(|s| {
+            // the product of the fixed dimensions; symbolic ones (batch) count as 1
+            s.dim
+                .iter()
+                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as u64)
+                .try_fold(1u64, |a, d| a.checked_mul(d).filter(|p| *p <= MAX_WIDTH))
+        });
+    let declared = match declared {
+        Some(None) => {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("the graph input is wider than ravel's limit of {MAX_WIDTH}"),
+                "ravel verifies controllers with at most 4096 inputs",
+            ))
+        }
+        Some(Some(w)) => Some(w as usize),
+        None => None,
+    };
+    let mut low = Lowering {
+        consts,
+        current: input.name.clone().unwrap_or_default(),
+        width: declared,
+        layers: Vec::new(),
+        notes: Vec::new(),
+    };
+    for n in &graph.node {
+        low.node(n)?;
+    }
+    let output = graph
+        .output
+        .first()
+        .and_then(|o| o.name.clone())
+        .unwrap_or_default();
+    if graph.output.len() != 1 || output != low.current {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph output '{}' is not the end of the layer chain ('{}')",
+                sanitize(&output),
+                sanitize(&low.current)
+            ),
+            "export the controller with a single output",
+        ));
+    }
+    let inputs = declared.or(match low.layers.first() {
+        Some(Layer::Affine { w, .. }) => Some(w.ncols()),
+        _ => None,
+    });
+    let Some(inputs) = inputs else {
+        return Err(err(
+            OnnxErrorKind::Malformed,
+            "cannot determine the input size",
+            "give the graph input a static shape",
+        ));
+    };
+    // alpha, beta and Div by small constants can scale weights past the
+    // checked initializers: the network itself must be within the limits
+    for l in &low.layers {
+        if let Layer::Affine { w, b } = l {
+            if let Some(v) = w
+                .iter()
+                .chain(b.iter())
+                .find(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
+            {
+                return Err(err(
+                    OnnxErrorKind::NonFinite,
+                    format!(
+                        "a weight of the network is {} after its scaling (Gemm alpha/beta, Mul, Div), beyond the magnitudes ravel analyses (±1e15)",
+                        ravel_syntax::diag::compact(*v)
+                    ),
+                    "check the normalisation constants and Gemm attributes; re-export the model",
+                ));
+            }
+        }
+    }
+    // the input's element type is the stored model's precision: float64
+    // for `double`, float32 otherwise (the stricter rule: every float32 value
+    // is a float64 one, and float32's rounding errors bound float64's)
+    let input_type = match input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.elem_type)
+    {
+        Some(dtype::DOUBLE) => InputType::F64,
+        _ => InputType::F32,
+    };
+    let net = Network::new(inputs, low.layers).with_input_type(input_type);
+    let outputs = net.outputs();
+    Ok(Controller {
+        net,
+        inputs,
+        outputs,
+        notes: low.notes,
+    })
+}

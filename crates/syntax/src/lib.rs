@@ -1,0 +1,740 @@
+//! Parsing: spec text → [`ast::Spec`], with the pest grammar in `grammar/ravel.pest`.
+//!
+//! A syntax error stops parsing and yields one diagnostic (`E0001`) at the
+//! first position the grammar cannot continue from, naming what was expected
+//! there; everything after the grammar (names, shapes, files) is checked by
+//! `ravel::check`, which reports every problem at once.
+
+#![forbid(unsafe_code)]
+pub mod ast;
+pub mod diag;
+pub mod fmt;
+
+use pest::iterators::Pair;
+use pest::Parser;
+
+use crate::diag::{Code, Diagnostic};
+use ast::*;
+
+/// The pest parser generated from the grammar (its generated items carry no docs).
+#[allow(missing_docs)]
+mod generated {
+    #[derive(pest_derive::Parser)]
+    #[grammar = "../grammar/ravel.pest"]
+    pub struct Grammar;
+}
+use generated::{Grammar, Rule};
+
+type P<'a> = Pair<'a, Rule>;
+
+fn span(p: &P) -> Span {
+    Span::new(p.as_span().start(), p.as_span().end())
+}
+
+fn rule_name(r: &Rule) -> Option<&'static str> {
+    Some(match r {
+        Rule::EOI => "end of file",
+        Rule::item => {
+            "a top-level item (system, controller, initial, goal, avoid, horizon, analysis; or network, model, input, require, robust, radius)"
+        }
+        Rule::system_stmt => "a system statement (state, control, NAME = value, NAME in box(…))",
+        Rule::state_decl => "`state`",
+        Rule::control_decl => "`control`",
+        Rule::bound_decl => "`NAME in box(…)`",
+        Rule::assign => "`NAME = value`",
+        Rule::analysis_stmt => {
+            "an analysis statement (propagator, partitioner, boundary, shape, samples, seed)"
+        }
+        Rule::network_stmt => "a network statement (input x[n], output y[m])",
+        Rule::select_stmt => "a select statement (epsilon, norm, observations)",
+        Rule::input_decl => "`input`",
+        Rule::output_decl => "`output`",
+        Rule::value | Rule::matrix | Rule::vector => "a number, vector or matrix",
+        Rule::set_expr | Rule::set_atom | Rule::box_set | Rule::polytope => {
+            "a set: box(…), { … } or ball(…)"
+        }
+        Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
+        Rule::interval => "an interval `[lo, hi]`",
+        Rule::constraint | Rule::lin_expr | Rule::first_term | Rule::term => "a linear inequality",
+        Rule::cmp => "`<=` or `>=`",
+        Rule::component => "a component such as `x[0]`",
+        Rule::ident => "a name",
+        Rule::integer => "an integer",
+        Rule::number | Rule::unsigned => "a number",
+        Rule::string => "a quoted path",
+        Rule::steps | Rule::steps_range | Rule::step_single => "`at steps [a, b]` or `at step k`",
+        Rule::uniform => "`uniform [k, …]`",
+        Rule::ball => "`ball(center […], radius …, norm p)`",
+        Rule::norm => "`1`, `2` or `inf`",
+        Rule::guided | Rule::guide => "`sg`, `gsg` or `property`",
+        Rule::budget | Rule::budget_item => "a budget item such as `calls 100`",
+        Rule::boundary_polytope => "`polytope K` or `polytope [[…], …]`",
+        Rule::per_step => "`per_step(value, …)`",
+        Rule::time_decl | Rule::time_kw => "`time continuous dt …` or `time discrete`",
+        Rule::add_op => "`+` or `-`",
+        Rule::close => "`]`",
+        _ => return None,
+    })
+}
+
+/// Parse a spec. Fails with one diagnostic on a syntax error, or with one per
+/// oversized integer literal.
+pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
+    let mut pairs =
+        Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
+    let spec = pairs
+        .next()
+        .expect("the grammar's `spec` rule always yields one pair");
+    let mut b = Builder { errors: Vec::new() };
+    let items = spec
+        .into_inner()
+        .filter(|p| p.as_rule() != Rule::EOI)
+        .map(|p| b.item(p))
+        .collect();
+    if b.errors.is_empty() {
+        Ok(Spec { items })
+    } else {
+        Err(b.errors)
+    }
+}
+
+fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
+    let pos = match e.location {
+        pest::error::InputLocation::Pos(p) => p,
+        pest::error::InputLocation::Span((s, _)) => s,
+    };
+    let end = source[pos..]
+        .chars()
+        .next()
+        .map_or(pos, |c| pos + c.len_utf8());
+    let (expected, unexpected) = match &e.variant {
+        pest::error::ErrorVariant::ParsingError {
+            positives,
+            negatives,
+        } => (positives.clone(), negatives.clone()),
+        pest::error::ErrorVariant::CustomError { .. } => (vec![], vec![]),
+    };
+    let mut names: Vec<&str> = expected.iter().filter_map(rule_name).collect();
+    names.dedup();
+    // a character that can never start or continue a token (a non-ASCII
+    // letter in a name, a stray control character): point at it alone
+    // (pest reports the start of the statement that failed, so the rest of
+    // its line is searched, up to a comment or a string)
+    let rest = &source[pos..];
+    let line_end = rest.find(['\n', '\r', '"']).unwrap_or(rest.len());
+    let line = &rest[..line_end];
+    let line = &line[..line.find("//").unwrap_or(line.len())];
+    let line = &line[..line.find("/*").unwrap_or(line.len())];
+    let bad = line
+        .char_indices()
+        .find(|(_, c)| !c.is_ascii() || (c.is_control() && *c != '\t'));
+    if let Some((off, c)) = bad {
+        let at = pos + off;
+        let shown = crate::diag::sanitize(&c.to_string());
+        let (message, hint) = if c.is_alphanumeric() {
+            (
+                format!("`{shown}` cannot appear in a name"),
+                "names are ASCII: letters, digits and `_`, starting with a letter or `_`",
+            )
+        } else {
+            (
+                format!("unexpected character `{shown}` (U+{:04X})", c as u32),
+                "outside comments and strings, specs use ASCII characters only",
+            )
+        };
+        return Diagnostic::new(Code::Syntax, Span::new(at, at + c.len_utf8()), message)
+            .label("not allowed here")
+            .hint(hint);
+    }
+    let found = source[pos..]
+        .split_whitespace()
+        .next()
+        .map(|t| crate::diag::sanitize(&t.chars().take(20).collect::<String>()));
+    let message = match &found {
+        Some(t) => format!("unexpected `{t}`"),
+        None => "unexpected end of file".to_string(),
+    };
+    let label = if names.is_empty() {
+        if unexpected.is_empty() {
+            "the grammar cannot continue here".to_string()
+        } else {
+            "not allowed here".to_string()
+        }
+    } else {
+        format!("expected {}", names.join(" or "))
+    };
+    Diagnostic::new(Code::Syntax, Span::new(pos, end), message)
+        .label(label)
+        .hint("see docs/language.md for the syntax of each item")
+}
+
+struct Builder {
+    errors: Vec<Diagnostic>,
+}
+
+impl Builder {
+    fn integer(&mut self, p: P) -> Spanned<u64> {
+        let s = span(&p);
+        let node = p.as_str().parse::<u64>().unwrap_or_else(|_| {
+            self.errors.push(
+                Diagnostic::new(
+                    Code::IntegerTooLarge,
+                    s,
+                    format!("integer `{}` is too large", p.as_str()),
+                )
+                .label("does not fit in 64 bits")
+                .hint("use a smaller value"),
+            );
+            0
+        });
+        Spanned { node, span: s }
+    }
+
+    fn number(&mut self, p: P) -> Spanned<f64> {
+        let s = span(&p);
+        // The grammar only admits valid float syntax; overflow parses to ±inf and is
+        // reported by `check` (E0205).
+        let node = p.as_str().parse::<f64>().unwrap_or(f64::NAN);
+        Spanned { node, span: s }
+    }
+
+    fn ident(&mut self, p: P) -> Spanned<String> {
+        Spanned {
+            node: p.as_str().to_string(),
+            span: span(&p),
+        }
+    }
+
+    fn item(&mut self, p: P) -> Item {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let mut inner = p.into_inner();
+        match rule {
+            Rule::system => {
+                let name = self.ident(inner.next().expect("system name"));
+                let stmts = inner.map(|st| self.system_stmt(st)).collect();
+                Item::System(System {
+                    name,
+                    stmts,
+                    span: s,
+                })
+            }
+            Rule::controller => {
+                let lit = inner.next().expect("controller path");
+                let text = lit.as_str();
+                Item::Controller(Spanned {
+                    node: text[1..text.len() - 1].to_string(),
+                    span: span(&lit),
+                })
+            }
+            Rule::initial | Rule::goal => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let def = SetDef { name, set, span: s };
+                if rule == Rule::initial {
+                    Item::Initial(def)
+                } else {
+                    Item::Goal(def)
+                }
+            }
+            Rule::avoid => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let steps = inner.next().map(|st| {
+                    let ss = span(&st);
+                    let which = st.into_inner().next().expect("steps form");
+                    let is_range = which.as_rule() == Rule::steps_range;
+                    let mut nums = which.into_inner();
+                    let a = self.integer(nums.next().expect("step")).node;
+                    let b = if is_range {
+                        self.integer(nums.next().expect("step")).node
+                    } else {
+                        a
+                    };
+                    Spanned {
+                        node: (a, b),
+                        span: ss,
+                    }
+                });
+                Item::Avoid(AvoidDef {
+                    name,
+                    set,
+                    steps,
+                    span: s,
+                })
+            }
+            Rule::horizon => Item::Horizon(self.integer(inner.next().expect("horizon value"))),
+            Rule::network => {
+                let name = self.ident(inner.next().expect("network name"));
+                let (mut input, mut output) = (Vec::new(), Vec::new());
+                for st in inner {
+                    let is_input = st.as_rule() == Rule::input_decl;
+                    let mut parts = st.into_inner();
+                    let n = self.ident(parts.next().expect("vector name"));
+                    let d = self.integer(parts.next().expect("dimension"));
+                    if is_input {
+                        input.push((n, d));
+                    } else {
+                        output.push((n, d));
+                    }
+                }
+                Item::Network(NetworkDecl {
+                    name,
+                    input,
+                    output,
+                    span: s,
+                })
+            }
+            Rule::model => {
+                let lit = inner.next().expect("model path");
+                let text = lit.as_str();
+                Item::Model(Spanned {
+                    node: text[1..text.len() - 1].to_string(),
+                    span: span(&lit),
+                })
+            }
+            Rule::input_set | Rule::require => {
+                let name = self.ident(inner.next().expect("set name"));
+                let set = self.set_expr(inner.next().expect("set"));
+                let def = SetDef { name, set, span: s };
+                if rule == Rule::input_set {
+                    Item::Input(def)
+                } else {
+                    Item::Require(def)
+                }
+            }
+            Rule::robust => {
+                let name = self.ident(inner.next().expect("property name"));
+                let label = inner.next().map(|l| self.integer(l));
+                Item::Robust(RobustDef {
+                    name,
+                    label,
+                    span: s,
+                })
+            }
+            Rule::select => {
+                let name = self.ident(inner.next().expect("select name"));
+                let stmts = inner
+                    .map(|st| {
+                        let ss = span(&st);
+                        let rule = st.as_rule();
+                        let arg = st.into_inner().next().expect("select argument");
+                        let asp = span(&arg);
+                        let node = match (rule, arg.as_rule()) {
+                            (Rule::norm_stmt, _) => SelectStmt::Norm(Spanned {
+                                node: arg.as_str().to_string(),
+                                span: asp,
+                            }),
+                            (_, Rule::string) => {
+                                let text = arg.as_str();
+                                SelectStmt::File(Spanned {
+                                    node: text[1..text.len() - 1].to_string(),
+                                    span: asp,
+                                })
+                            }
+                            (Rule::epsilon_stmt, Rule::number) => SelectStmt::Epsilon(Spanned {
+                                node: Value::Scalar(self.number(arg).node),
+                                span: asp,
+                            }),
+                            (Rule::epsilon_stmt, _) => SelectStmt::Epsilon(Spanned {
+                                node: Value::Vector(self.numbers(arg)),
+                                span: asp,
+                            }),
+                            _ => SelectStmt::Inline(Spanned {
+                                node: self.value_of(arg),
+                                span: asp,
+                            }),
+                        };
+                        Spanned { node, span: ss }
+                    })
+                    .collect();
+                Item::Select(SelectDef {
+                    name,
+                    stmts,
+                    span: s,
+                })
+            }
+            Rule::radius => {
+                let name = self.ident(inner.next().expect("radius name"));
+                let property = self.ident(inner.next().expect("property name"));
+                let budget = inner.next().map(|b| self.budget(b)).unwrap_or_default();
+                Item::Radius(RadiusDef {
+                    name,
+                    property,
+                    budget,
+                    span: s,
+                })
+            }
+            Rule::analysis => {
+                let stmts = inner.map(|st| self.analysis_stmt(st)).collect();
+                Item::Analysis(Analysis { stmts, span: s })
+            }
+            other => unreachable!("grammar item rule {other:?}"),
+        }
+    }
+
+    fn system_stmt(&mut self, p: P) -> SystemStmt {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let mut inner = p.into_inner();
+        if rule == Rule::time_decl {
+            let _keyword = inner.next();
+            let kind = self.ident(inner.next().expect("time kind"));
+            let dt = inner.next().map(|d| self.number(d));
+            return SystemStmt::Time { kind, dt, span: s };
+        }
+        let name = self.ident(inner.next().expect("statement name"));
+        match rule {
+            Rule::state_decl => SystemStmt::State {
+                name,
+                dim: self.integer(inner.next().expect("dim")),
+                span: s,
+            },
+            Rule::control_decl => SystemStmt::Control {
+                name,
+                dim: self.integer(inner.next().expect("dim")),
+                span: s,
+            },
+            Rule::bound_decl => {
+                let b = inner.next().expect("box");
+                let bs = span(&b);
+                SystemStmt::Bound {
+                    name,
+                    set: Spanned {
+                        node: self.box_set(b),
+                        span: bs,
+                    },
+                    span: s,
+                }
+            }
+            Rule::assign => {
+                let v = inner.next().expect("value");
+                let vs = span(&v);
+                let node = if v.as_rule() == Rule::per_step {
+                    Value::PerStep(
+                        v.into_inner()
+                            .map(|x| {
+                                let xs = span(&x);
+                                Spanned {
+                                    node: self.value(x),
+                                    span: xs,
+                                }
+                            })
+                            .collect(),
+                    )
+                } else {
+                    self.value(v)
+                };
+                SystemStmt::Assign {
+                    name,
+                    value: Spanned { node, span: vs },
+                    span: s,
+                }
+            }
+            other => unreachable!("grammar system rule {other:?}"),
+        }
+    }
+
+    fn numbers(&mut self, p: P) -> Vec<Spanned<f64>> {
+        p.into_inner()
+            .filter(|n| n.as_rule() == Rule::number)
+            .map(|n| self.number(n))
+            .collect()
+    }
+
+    fn value(&mut self, p: P) -> Value {
+        let v = p.into_inner().next().expect("value kind");
+        self.value_of(v)
+    }
+
+    /// A value from its inner pair (a matrix, vector, constructor or number).
+    fn value_of(&mut self, v: P) -> Value {
+        match v.as_rule() {
+            Rule::matrix => Value::Matrix(
+                v.into_inner()
+                    .filter(|row| row.as_rule() == Rule::vector)
+                    .map(|row| {
+                        let rs = span(&row);
+                        Spanned {
+                            node: self.numbers(row),
+                            span: rs,
+                        }
+                    })
+                    .collect(),
+            ),
+            Rule::vector => Value::Vector(self.numbers(v)),
+            Rule::eye => Value::Eye(self.integer(v.into_inner().next().expect("eye size"))),
+            Rule::zeros => {
+                let mut it = v.into_inner();
+                let n = self.integer(it.next().expect("zeros size"));
+                let m = it.next().map(|m| self.integer(m));
+                Value::Zeros(n, m)
+            }
+            Rule::number => Value::Scalar(self.number(v).node),
+            other => unreachable!("grammar value rule {other:?}"),
+        }
+    }
+
+    fn set_expr(&mut self, p: P) -> Spanned<SetExpr> {
+        let s = span(&p);
+        let members = p
+            .into_inner()
+            .map(|a| {
+                let sa = span(&a);
+                let node = match a.as_rule() {
+                    Rule::box_set => SetAtom::Box(self.box_set(a)),
+                    Rule::polytope => {
+                        SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect())
+                    }
+                    Rule::ball => {
+                        let mut it = a.into_inner();
+                        let c = it.next().expect("centre");
+                        let cs = span(&c);
+                        let center = Spanned {
+                            node: self.numbers(c),
+                            span: cs,
+                        };
+                        let r = it.next().expect("radius");
+                        let rs = span(&r);
+                        let radius = Spanned {
+                            node: match r.as_rule() {
+                                Rule::vector => Value::Vector(self.numbers(r)),
+                                _ => Value::Scalar(self.number(r).node),
+                            },
+                            span: rs,
+                        };
+                        let norm = it.next().map(|n| Spanned {
+                            node: n.as_str().to_string(),
+                            span: span(&n),
+                        });
+                        SetAtom::Ball(BallSet {
+                            center,
+                            radius,
+                            norm,
+                        })
+                    }
+                    other => unreachable!("grammar set rule {other:?}"),
+                };
+                Spanned { node, span: sa }
+            })
+            .collect();
+        Spanned {
+            node: SetExpr { members },
+            span: s,
+        }
+    }
+
+    fn box_set(&mut self, p: P) -> BoxSet {
+        let body = p.into_inner().next().expect("box body");
+        match body.as_rule() {
+            Rule::named_intervals => BoxSet::Named(
+                body.into_inner()
+                    .map(|ni| {
+                        let mut it = ni.into_inner();
+                        let c = self.component(it.next().expect("component"));
+                        let i = self.interval(it.next().expect("interval"));
+                        (c, i)
+                    })
+                    .collect(),
+            ),
+            _ => BoxSet::Positional(body.into_inner().map(|i| self.interval(i)).collect()),
+        }
+    }
+
+    fn interval(&mut self, p: P) -> Interval {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let lo = self.number(it.next().expect("lo"));
+        let hi = self.number(it.next().expect("hi"));
+        Interval { lo, hi, span: s }
+    }
+
+    fn component(&mut self, p: P) -> Component {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let name = self.ident(it.next().expect("name"));
+        let index = self.integer(it.next().expect("index"));
+        Component {
+            name,
+            index,
+            span: s,
+        }
+    }
+
+    fn term(&mut self, p: P, sign: f64) -> (f64, Component) {
+        let mut coef = sign;
+        let mut comp = None;
+        for part in p.into_inner() {
+            match part.as_rule() {
+                Rule::unsigned => coef *= part.as_str().parse::<f64>().unwrap_or(f64::NAN),
+                Rule::component => comp = Some(self.component(part)),
+                other => unreachable!("grammar term rule {other:?}"),
+            }
+        }
+        (coef, comp.expect("a term has a component"))
+    }
+
+    fn constraint(&mut self, p: P) -> Constraint {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let expr = it.next().expect("expression");
+        let cmp = match it.next().expect("comparison").as_str() {
+            "<=" => Cmp::Le,
+            _ => Cmp::Ge,
+        };
+        let rhs = self.number(it.next().expect("rhs"));
+        let mut terms = Vec::new();
+        let mut sign = 1.0;
+        for part in expr.into_inner() {
+            match part.as_rule() {
+                Rule::first_term => {
+                    let mut sub = part.into_inner().peekable();
+                    let mut first_sign = 1.0;
+                    if sub.peek().is_some_and(|q| q.as_rule() == Rule::add_op) {
+                        first_sign = if sub.next().expect("op").as_str() == "-" {
+                            -1.0
+                        } else {
+                            1.0
+                        };
+                    }
+                    let t = sub.next().expect("term");
+                    terms.push(self.term(t, first_sign));
+                }
+                Rule::add_op => sign = if part.as_str() == "-" { -1.0 } else { 1.0 },
+                Rule::term => terms.push(self.term(part, sign)),
+                other => unreachable!("grammar expression rule {other:?}"),
+            }
+        }
+        Constraint {
+            terms,
+            cmp,
+            rhs,
+            span: s,
+        }
+    }
+
+    /// `(name value, …)` budget items.
+    fn budget(&mut self, b: P) -> Vec<(Spanned<String>, Spanned<f64>)> {
+        b.into_inner()
+            .map(|item| {
+                let mut kv = item.into_inner();
+                let k = self.ident(kv.next().expect("budget name"));
+                let v = self.number(kv.next().expect("budget value"));
+                (k, v)
+            })
+            .collect()
+    }
+
+    fn analysis_stmt(&mut self, p: P) -> Spanned<AnalysisStmt> {
+        let s = span(&p);
+        let rule = p.as_rule();
+        let arg = p.into_inner().next().expect("analysis argument");
+        let node = match rule {
+            Rule::propagator => AnalysisStmt::Propagator(self.ident(arg)),
+            Rule::partitioner => match arg.as_rule() {
+                Rule::uniform => {
+                    AnalysisStmt::Uniform(arg.into_inner().map(|i| self.integer(i)).collect())
+                }
+                Rule::guided => {
+                    let mut it = arg.into_inner();
+                    let g = it.next().expect("guide");
+                    let guide = Spanned {
+                        node: g.as_str().to_string(),
+                        span: span(&g),
+                    };
+                    let budget = it.next().map(|b| self.budget(b)).unwrap_or_default();
+                    AnalysisStmt::Guided { guide, budget }
+                }
+                _ => AnalysisStmt::Partitioner(self.ident(arg)),
+            },
+            Rule::boundary | Rule::shape => match arg.as_rule() {
+                Rule::boundary_polytope => {
+                    let d = arg.into_inner().next().expect("directions");
+                    let ds = span(&d);
+                    let node = match d.as_rule() {
+                        Rule::integer => Value::Scalar(self.integer(d).node as f64),
+                        _ => Value::Matrix(
+                            d.into_inner()
+                                .filter(|row| row.as_rule() == Rule::vector)
+                                .map(|row| {
+                                    let rs = span(&row);
+                                    Spanned {
+                                        node: self.numbers(row),
+                                        span: rs,
+                                    }
+                                })
+                                .collect(),
+                        ),
+                    };
+                    let node = Spanned { node, span: ds };
+                    if rule == Rule::shape {
+                        AnalysisStmt::ShapePolytope(node)
+                    } else {
+                        AnalysisStmt::BoundaryPolytope(node)
+                    }
+                }
+                _ if rule == Rule::shape => AnalysisStmt::Shape(self.ident(arg)),
+                _ => AnalysisStmt::Boundary(self.ident(arg)),
+            },
+            Rule::samples => AnalysisStmt::Samples(self.integer(arg)),
+            Rule::seed => AnalysisStmt::Seed(self.integer(arg)),
+            Rule::optimise_slopes => AnalysisStmt::OptimiseSlopes(self.integer(arg)),
+            other => unreachable!("grammar analysis rule {other:?}"),
+        };
+        Spanned { node, span: s }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn avoid_set(src: &str) -> SetExpr {
+        let spec = parse(src).unwrap_or_else(|d| panic!("{d:?}"));
+        match &spec.items[0] {
+            Item::Avoid(a) => a.set.node.clone(),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn linear_terms_keep_their_signs_and_coefficients() {
+        let set = avoid_set(
+            "avoid A = { -x[0] + 2 x[1] - 0.5*x[0] >= -1e-1 } | box([0, 1]) /* block */ // line\n",
+        );
+        assert_eq!(set.members.len(), 2);
+        let SetAtom::Polytope(cs) = &set.members[0].node else {
+            panic!("polytope expected")
+        };
+        let coefs: Vec<(f64, u64)> = cs[0]
+            .terms
+            .iter()
+            .map(|(c, comp)| (*c, comp.index.node))
+            .collect();
+        assert_eq!(coefs, vec![(-1.0, 0), (2.0, 1), (-0.5, 0)]);
+        assert_eq!(cs[0].cmp, Cmp::Ge);
+        assert_eq!(cs[0].rhs.node, -0.1);
+    }
+
+    #[test]
+    fn values_and_steps() {
+        let spec = parse("system s { state x[2] control u[1] A = eye(2) B = zeros(2, 1) c = zeros(2) C = [[1e0], [.5]] }\navoid A = box(x[1] in [-1, 1]) at step 3\n").expect("parses");
+        let Item::System(sys) = &spec.items[0] else {
+            panic!("system expected")
+        };
+        assert_eq!(sys.stmts.len(), 6);
+        let Item::Avoid(a) = &spec.items[1] else {
+            panic!("avoid expected")
+        };
+        assert_eq!(a.steps.as_ref().map(|s| s.node), Some((3, 3)));
+    }
+
+    #[test]
+    fn syntax_errors_point_at_the_problem() {
+        let d = parse("horizon 5\nhorizon").expect_err("incomplete");
+        assert_eq!(d[0].code, Code::Syntax);
+        assert_eq!(d[0].span.map(|s| s.start), Some(17));
+        let d = parse("horizon 99999999999999999999").expect_err("too large");
+        assert_eq!(d[0].code, Code::IntegerTooLarge);
+    }
+}

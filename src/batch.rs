@@ -1,0 +1,945 @@
+//! `ravel verify` over many (spec, controller) pairs: parallel jobs with
+//! output in a fixed order, deterministic shards, the output formats (text,
+//! JSON, JSON lines, JUnit XML), the exit-code gate, and `ravel merge`.
+//!
+//! Every argument that names nothing and every (spec, controller) pair is
+//! one *item* with a fixed index (argument errors first, then the pairs in
+//! argument order, folders expanded in sorted order). Items run on `--jobs`
+//! worker threads, but their output is written strictly in index order, so
+//! it is byte-for-byte the same for every number of jobs. `--shard K/N`
+//! keeps the items whose index is `K − 1` modulo `N`; `ravel merge` puts the
+//! shards' JSON documents back together in index order.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use serde_json::{json, Value};
+
+use super::{err, exit, load_with, out, Format, ProgressLine};
+use ravel::execute::Status;
+use ravel_syntax::diag::render;
+
+/// Which verdicts fail the run (exit code and JUnit).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FailOn {
+    /// FALSIFIED fails (exit 1); UNSURE passes (exit 0; JUnit: skipped).
+    Falsified,
+    /// FALSIFIED fails (exit 1) and so does UNSURE (exit 3; JUnit: failure).
+    Unsure,
+}
+
+/// A shard `K/N`: the items whose index is `K − 1` modulo `N`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// 1-based shard number.
+    pub k: usize,
+    /// Number of shards.
+    pub n: usize,
+}
+
+/// Parse `K/N` with `1 ≤ K ≤ N`.
+pub fn parse_shard(s: &str) -> Result<Shard, String> {
+    let (k, n) = s
+        .split_once('/')
+        .ok_or_else(|| format!("`{s}` is not K/N (for example 1/4)"))?;
+    let k: usize = k
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{k}` is not a shard number"))?;
+    let n: usize = n
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{n}` is not a shard count"))?;
+    if n == 0 {
+        return Err("the shard count must be at least 1".into());
+    }
+    if k == 0 || k > n {
+        return Err(format!(
+            "shard {k} of {n} does not exist: shards are numbered 1 to {n}"
+        ));
+    }
+    Ok(Shard { k, n })
+}
+
+/// Parse `I,J`: two different state coordinates.
+pub fn parse_dims(s: &str) -> Result<(usize, usize), String> {
+    let (i, j) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}` is not I,J (for example 0,1)"))?;
+    let i: usize = i
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{i}` is not a coordinate"))?;
+    let j: usize = j
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{j}` is not a coordinate"))?;
+    if i == j {
+        return Err("the two plotted coordinates must differ".into());
+    }
+    Ok((i, j))
+}
+
+/// Parse a positive number of jobs.
+pub fn parse_jobs(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("--jobs must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("`{s}` is not a number of jobs")),
+    }
+}
+
+/// How a batch runs and reports.
+pub struct Options {
+    /// Output format.
+    pub format: Format,
+    /// Leave timing out of text output.
+    pub no_timing: bool,
+    /// Add timing to JSON output.
+    pub timing: bool,
+    /// Per-item analysis time limit.
+    pub time_limit: Option<f64>,
+    /// Certificate file or folder.
+    pub certificate: Option<PathBuf>,
+    /// The gate.
+    pub fail_on: FailOn,
+    /// Worker threads.
+    pub jobs: usize,
+    /// A slice of the items.
+    pub shard: Option<Shard>,
+    /// Progress on standard error.
+    pub progress: bool,
+    /// Colour in diagnostics.
+    pub color: bool,
+    /// A folder for one SVG per result.
+    pub plot: Option<PathBuf>,
+    /// The coordinates plotted.
+    pub plot_dims: (usize, usize),
+}
+
+/// What one item is.
+enum Work {
+    /// An argument that named nothing usable.
+    Argument(String),
+    /// A (spec, controller) pair and the name of its files (certificate,
+    /// plot) without extension, unique in the batch.
+    Pair(PathBuf, Option<PathBuf>, String),
+}
+
+/// The verdict class of one item.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Class {
+    Verdict(Status),
+    Error,
+}
+
+/// What one item produced, in every format.
+struct Item {
+    class: Class,
+    /// Text for standard output (text format).
+    stdout: String,
+    /// Text for standard error (diagnostics, errors).
+    stderr: String,
+    /// The JSON result.
+    json: Value,
+    /// The JUnit `<testsuite>` element.
+    junit: String,
+    /// CSV rows of robust action selections (no header).
+    csv: String,
+}
+
+/// XML text with the five special characters escaped and control
+/// characters (not allowed in XML 1.0) written as `\u{…}`.
+fn xml(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&apos;"),
+            '\n' | '\t' => o.push(c),
+            c if c.is_control() => o.push_str(&format!("\\u{{{:x}}}", c as u32)),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+/// A `<testsuite>` holding one erroring test case.
+fn junit_error(suite: &str, message: &str, detail: &str) -> String {
+    format!(
+        "  <testsuite name=\"{s}\" tests=\"1\" failures=\"0\" errors=\"1\" skipped=\"0\">\n    <testcase classname=\"{s}\" name=\"check\">\n      <error message=\"{m}\" type=\"ERROR\">{d}</error>\n    </testcase>\n  </testsuite>\n",
+        s = xml(suite),
+        m = xml(message),
+        d = xml(detail)
+    )
+}
+
+fn error_item(
+    index: usize,
+    spec: Option<&Path>,
+    controller: Option<&Path>,
+    message: &str,
+    stderr: String,
+    json: Value,
+) -> Item {
+    let mut json = json;
+    json["index"] = json!(index);
+    if let Some(c) = controller {
+        json["controller"] = json!(c.display().to_string());
+    }
+    let suite = match spec {
+        Some(p) => ravel_syntax::diag::sanitize(&p.display().to_string()),
+        None => "arguments".to_string(),
+    };
+    Item {
+        class: Class::Error,
+        stdout: String::new(),
+        stderr,
+        json,
+        junit: junit_error(&suite, message, message),
+        csv: String::new(),
+    }
+}
+
+/// Run one item (no output; everything is returned).
+fn run(
+    index: usize,
+    work: &Work,
+    opts: &Options,
+    cert_dir: Option<&Path>,
+    show: bool,
+    cell_threads: usize,
+    position: Option<(usize, usize)>,
+) -> Item {
+    let (path, controller, file_name) = match work {
+        Work::Argument(e) => {
+            return error_item(
+                index,
+                None,
+                None,
+                e,
+                format!("error: {e}\n"),
+                json!({ "spec": null, "verdict": "ERROR", "errors": [{ "code": null, "message": e }] }),
+            )
+        }
+        Work::Pair(p, c, n) => (p, c.as_deref(), n.as_str()),
+    };
+    let l = match load_with(path, controller) {
+        Ok(l) => l,
+        Err(msg) => {
+            return error_item(
+                index,
+                Some(path),
+                None,
+                &msg,
+                format!("error: {msg}\n"),
+                json!({ "spec": path.display().to_string(), "verdict": "ERROR", "errors": [{ "code": null, "message": msg }] }),
+            )
+        }
+    };
+    let checked = match &l.result {
+        Ok(ravel::check::Task::System(c)) => (**c).clone(),
+        Ok(ravel::check::Task::Network(c)) => {
+            return run_network(
+                index,
+                (path, controller, file_name),
+                &l,
+                c,
+                opts,
+                cert_dir,
+                cell_threads,
+            );
+        }
+        Err(d) => {
+            let text = render(d, &l.display, &l.source, 100, opts.color);
+            let plain = render(d, &l.display, &l.source, 100, false);
+            let message = format!("{}: {} error(s)", l.display, d.len());
+            return error_item(
+                index,
+                Some(path),
+                controller,
+                &message,
+                format!("{text}{message}\n"),
+                super::diag_json(&l.name, &l.source, d),
+            )
+            .with_junit_detail(&plain);
+        }
+    };
+    let started = Instant::now();
+    let plan = ravel::lower::lower(&checked);
+    let shown = match position {
+        Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
+        _ => l.display.clone(),
+    };
+    let line = ProgressLine {
+        name: &shown,
+        started,
+        last: std::sync::atomic::AtomicU64::new(0),
+    };
+    let outcome = ravel::execute::execute_with(
+        &plan,
+        &ravel::execute::Control {
+            elapsed: &|| started.elapsed().as_secs_f64(),
+            time_limit: opts.time_limit,
+            progress: &|p| {
+                if show {
+                    line.show(p);
+                }
+            },
+            threads: cell_threads,
+        },
+    );
+    line.clear();
+    let ms = started.elapsed().as_secs_f64() * 1e3;
+    let mut stderr = String::new();
+    let mut class = Class::Verdict(outcome.verdict);
+    let mut json = ravel::report::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
+    json["index"] = json!(index);
+    if let Some(target) = &opts.certificate {
+        let file = certificate_file(target, cert_dir, file_name);
+        let id = identity(&file, path, &l.source);
+        let mut cert = ravel::certificate::build(&plan, &outcome, &id);
+        record_controller(&mut cert, &file, &plan.controller_resolved);
+        if let Err(msg) = write_certificate(&file, &cert) {
+            fail_item(
+                (&mut json, &mut stderr, &mut class),
+                "certificate_error",
+                &msg,
+            );
+        }
+    }
+    if let Some(dir) = &opts.plot {
+        let (i, j) = opts.plot_dims;
+        let n = plan.closed_loop.states();
+        let file = dir.join(format!("{file_name}.svg"));
+        let result = if i >= n || j >= n {
+            Err(format!(
+                "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
+                n - 1
+            ))
+        } else {
+            let samples: Vec<_> = (0..plan.samples.min(100))
+                .filter_map(|k| ravel::execute::simulate(&plan, k))
+                .collect();
+            let svg = ravel::plot::svg(&l.display, &plan, &outcome, (i, j), &samples);
+            super::write_atomically(&file, svg.as_bytes()).map_err(|e| {
+                format!(
+                    "cannot write plot `{}`: {e}",
+                    ravel_syntax::diag::sanitize(&file.display().to_string())
+                )
+            })
+        };
+        if let Err(msg) = result {
+            fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
+        }
+    }
+    let stdout = match opts.format {
+        Format::Text => {
+            ravel::report::text(&l.display, &plan, &outcome, (!opts.no_timing).then_some(ms))
+        }
+        _ => String::new(),
+    };
+    let junit = junit_suite(
+        &l.display,
+        &outcome,
+        opts,
+        ms,
+        &stdout_plain(&l.display, &plan, &outcome),
+    );
+    Item {
+        class,
+        stdout,
+        stderr,
+        json,
+        junit,
+        csv: String::new(),
+    }
+}
+
+impl Item {
+    /// Put the plain diagnostics into the JUnit error's body.
+    fn with_junit_detail(mut self, detail: &str) -> Item {
+        if let Some(start) = self.junit.find("type=\"ERROR\">") {
+            let from = start + "type=\"ERROR\">".len();
+            if let Some(len) = self.junit[from..].find("</error>") {
+                self.junit.replace_range(from..from + len, &xml(detail));
+            }
+        }
+        self
+    }
+}
+
+/// The text report without timing, for JUnit bodies (deterministic).
+fn stdout_plain(
+    name: &str,
+    plan: &ravel::lower::Plan,
+    outcome: &ravel::execute::Outcome,
+) -> String {
+    ravel::report::text(name, plan, outcome, None)
+}
+
+/// Turn an item into an ERROR: the message on standard error and in the
+/// JSON result under `key`.
+fn fail_item((json, stderr, class): (&mut Value, &mut String, &mut Class), key: &str, msg: &str) {
+    *stderr += &format!("error: {msg}\n");
+    json[key] = json!(msg);
+    json["verdict"] = json!("ERROR");
+    *class = Class::Error;
+}
+
+/// The folder a certificate file is written into.
+fn folder_of(file: &Path) -> &Path {
+    match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
+/// Who a certificate written to `file` is about: the spec's path, relative
+/// to the certificate's folder (so that `certify` works from any working
+/// folder, and after the folder is moved with the spec), and its hash.
+fn identity(file: &Path, spec: &Path, source: &str) -> ravel::certificate::Identity {
+    ravel::certificate::Identity {
+        spec_path: super::relative_to(folder_of(file), spec)
+            .display()
+            .to_string(),
+        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
+    }
+}
+
+/// Record the controller's path (as read) relative to the folder of the
+/// certificate `file`, as the spec's.
+fn record_controller(cert: &mut Value, file: &Path, resolved: &str) {
+    cert["controller"]["path"] = json!(super::relative_to(folder_of(file), Path::new(resolved))
+        .display()
+        .to_string());
+}
+
+/// Where a pair's certificate goes: the `--certificate` file, or the pair's
+/// file in the certificate folder.
+fn certificate_file(target: &Path, cert_dir: Option<&Path>, file_name: &str) -> PathBuf {
+    match cert_dir {
+        Some(d) => d.join(format!("{file_name}.cert.json")),
+        None => target.to_path_buf(),
+    }
+}
+
+/// Write a certificate (atomically); the error message for people.
+fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
+    let text = serde_json::to_string(cert).unwrap_or_default();
+    super::write_atomically(file, (text + "\n").as_bytes()).map_err(|e| {
+        format!(
+            "cannot write certificate `{}`: {e}",
+            ravel_syntax::diag::sanitize(&file.display().to_string())
+        )
+    })
+}
+
+/// Run one network spec (no output; everything is returned).
+fn run_network(
+    index: usize,
+    (path, controller, file_name): (&Path, Option<&Path>, &str),
+    l: &super::Loaded,
+    checked: &ravel::check::NetworkChecked,
+    opts: &Options,
+    cert_dir: Option<&Path>,
+    cell_threads: usize,
+) -> Item {
+    let started = Instant::now();
+    let plan = ravel::lower::lower_network(checked);
+    let outcome = ravel::execute::network::execute_network(
+        &plan,
+        &ravel::execute::network::NetControl {
+            elapsed: &|| started.elapsed().as_secs_f64(),
+            time_limit: opts.time_limit,
+            threads: cell_threads,
+        },
+    );
+    let ms = started.elapsed().as_secs_f64() * 1e3;
+    let mut stderr = String::new();
+    let mut class = Class::Verdict(outcome.verdict);
+    let mut json =
+        ravel::report::network::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
+    json["index"] = json!(index);
+    if let Some(c) = controller {
+        json["controller"] = json!(c.display().to_string());
+    }
+    if let Some(target) = &opts.certificate {
+        let file = certificate_file(target, cert_dir, file_name);
+        let id = identity(&file, path, &l.source);
+        let mut cert = ravel::certificate::build_network(&plan, &outcome, &id);
+        record_controller(&mut cert, &file, &plan.model_resolved);
+        if let Err(msg) = write_certificate(&file, &cert) {
+            fail_item(
+                (&mut json, &mut stderr, &mut class),
+                "certificate_error",
+                &msg,
+            );
+        }
+    }
+    // not built yet for network specs: said, never silently skipped
+    if opts.plot.is_some() {
+        let msg = format!(
+            "plots of network specs are not supported yet (`{}`)",
+            l.display
+        );
+        fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
+    }
+    let stdout = match opts.format {
+        Format::Text => ravel::report::network::text(
+            &l.display,
+            &plan,
+            &outcome,
+            (!opts.no_timing).then_some(ms),
+        ),
+        _ => String::new(),
+    };
+    let cases: Vec<Case> = outcome
+        .properties
+        .iter()
+        .map(|p| Case {
+            name: format!("{} {}", p.kind.as_str(), p.name),
+            status: p.status,
+            margin: p.margin,
+            place: "on the input set".to_string(),
+        })
+        .collect();
+    let report = ravel::report::network::text(&l.display, &plan, &outcome, None);
+    let junit = junit_cases(&l.display, &cases, opts, ms, &report);
+    Item {
+        class,
+        stdout,
+        stderr,
+        json,
+        junit,
+        csv: ravel::report::network::csv_rows(&l.name, &outcome),
+    }
+}
+
+/// One JUnit test case: a property's result.
+struct Case {
+    name: String,
+    status: Status,
+    margin: f64,
+    /// Where the margin applies, e.g. `at step 5`.
+    place: String,
+}
+
+/// One `<testsuite>` per pair, one `<testcase>` per property.
+fn junit_suite(
+    suite: &str,
+    outcome: &ravel::execute::Outcome,
+    opts: &Options,
+    ms: f64,
+    report: &str,
+) -> String {
+    let cases: Vec<Case> = outcome
+        .properties
+        .iter()
+        .map(|p| Case {
+            name: format!("{} {}", p.kind.as_str(), p.name),
+            status: p.status,
+            margin: p.margin,
+            place: format!("at step {}", p.step),
+        })
+        .collect();
+    junit_cases(suite, &cases, opts, ms, report)
+}
+
+/// A `<testsuite>` of cases.
+fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str) -> String {
+    let mut cases = String::new();
+    let (mut failures, mut skipped) = (0, 0);
+    let time = if opts.timing {
+        format!(" time=\"{:.3}\"", ms / 1e3)
+    } else {
+        String::new()
+    };
+    for p in list {
+        let name = &p.name;
+        let margin = ravel_syntax::diag::compact(p.margin);
+        let body = match p.status {
+            Status::Verified => String::new(),
+            Status::Falsified => {
+                failures += 1;
+                format!(
+                    "\n      <failure message=\"FALSIFIED {} (violated by {})\" type=\"FALSIFIED\">{}</failure>\n    ",
+                    p.place,
+                    ravel_syntax::diag::compact(-p.margin),
+                    xml(report)
+                )
+            }
+            Status::Unsure => match opts.fail_on {
+                FailOn::Unsure => {
+                    failures += 1;
+                    format!(
+                        "\n      <failure message=\"UNSURE {} (margin {margin})\" type=\"UNSURE\">{}</failure>\n    ",
+                        p.place,
+                        xml(report)
+                    )
+                }
+                FailOn::Falsified => {
+                    skipped += 1;
+                    format!(
+                        "\n      <skipped message=\"UNSURE {} (margin {margin})\"/>\n    ",
+                        p.place
+                    )
+                }
+            },
+        };
+        cases += &format!(
+            "    <testcase classname=\"{s}\" name=\"{n}\"{time}>{body}</testcase>\n",
+            s = xml(suite),
+            n = xml(name)
+        );
+    }
+    format!(
+        "  <testsuite name=\"{s}\" tests=\"{t}\" failures=\"{failures}\" errors=\"0\" skipped=\"{skipped}\"{time}>\n{cases}  </testsuite>\n",
+        s = xml(suite),
+        t = list.len()
+    )
+}
+
+/// (VERIFIED, FALSIFIED, UNSURE, ERROR) counts.
+type Counts = [usize; 4];
+
+fn count(c: &mut Counts, class: Class) {
+    c[match class {
+        Class::Verdict(Status::Verified) => 0,
+        Class::Verdict(Status::Falsified) => 1,
+        Class::Verdict(Status::Unsure) => 2,
+        Class::Error => 3,
+    }] += 1;
+}
+
+/// The exit code of a run with these counts.
+fn gate(c: &Counts, fail_on: FailOn) -> u8 {
+    if c[3] > 0 {
+        exit::INPUT_ERROR
+    } else if c[1] > 0 {
+        exit::FALSIFIED
+    } else if c[2] > 0 && fail_on == FailOn::Unsure {
+        exit::UNSURE
+    } else {
+        exit::VERIFIED
+    }
+}
+
+/// The overall verdict of a JSON document.
+fn overall(c: &Counts) -> &'static str {
+    if c[3] > 0 {
+        "ERROR"
+    } else if c[1] > 0 {
+        "FALSIFIED"
+    } else if c[2] > 0 {
+        "UNSURE"
+    } else {
+        "VERIFIED"
+    }
+}
+
+fn summary(c: &Counts) -> String {
+    let names = ["VERIFIED", "FALSIFIED", "UNSURE", "ERROR"];
+    c.iter()
+        .zip(names)
+        .filter(|(n, _)| **n > 0)
+        .map(|(n, name)| format!("{n} {name}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The JUnit document around the suites.
+fn junit_document(suites: &str, c: &Counts, skipped: usize) -> String {
+    let tests = suites.matches("<testcase ").count();
+    let failures = suites.matches("<failure ").count();
+    format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<testsuites name=\"ravel\" tests=\"{tests}\" failures=\"{failures}\" errors=\"{}\" skipped=\"{skipped}\">\n{suites}</testsuites>",
+        c[3]
+    )
+}
+
+/// `ravel verify`: run every item of the batch and report.
+/// A batch's items on their way out in index order (see [`verify`]).
+struct InOrder<E> {
+    /// Writes one item; false when the output is gone.
+    emit: E,
+    counts: Counts,
+    /// Items done, waiting for an earlier one.
+    waiting: BTreeMap<usize, Item>,
+    /// Items written so far.
+    written: usize,
+    /// The output is gone.
+    broken: bool,
+}
+
+pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> ExitCode {
+    let run_started = Instant::now();
+    let (pairs, errors) = super::pairs(specs, controllers);
+    // file names from the whole batch, so every shard names a pair alike
+    let names = super::output_names(&pairs);
+    let mut work: Vec<Work> = errors.into_iter().map(Work::Argument).collect();
+    let total = work.len() + pairs.len();
+    let mine: Vec<usize> = (0..total)
+        .filter(|i| opts.shard.is_none_or(|s| i % s.n == s.k - 1))
+        .collect();
+    // one file for a single result, else a folder of them
+    let cert_dir = opts
+        .certificate
+        .as_deref()
+        .filter(|c| total > 1 || c.is_dir());
+    let names = match names {
+        Ok(n) => n,
+        // only files in a folder need names; a collision there is refused
+        // before anything runs
+        Err(e) if cert_dir.is_some() || opts.plot.is_some() => {
+            err(&format!("error: {e}\n"));
+            return ExitCode::from(exit::INPUT_ERROR);
+        }
+        Err(_) => vec![String::new(); pairs.len()],
+    };
+    work.extend(
+        pairs
+            .into_iter()
+            .zip(names)
+            .map(|((s, c), n)| Work::Pair(s, c, n)),
+    );
+    for d in cert_dir.into_iter().chain(opts.plot.as_deref()) {
+        if let Err(e) = std::fs::create_dir_all(d) {
+            err(&format!(
+                "error: cannot create folder `{}`: {e}\n",
+                ravel_syntax::diag::sanitize(&d.display().to_string())
+            ));
+            return ExitCode::from(exit::INPUT_ERROR);
+        }
+    }
+    let jobs = opts.jobs.min(mine.len()).max(1);
+    if jobs == 1 {
+        // one pair at a time, each on `opts.jobs` threads: the workers start
+        // while the first spec is read and checked
+        ravel_analysis::pool::warm(opts.jobs);
+    }
+    let mut counts: Counts = [0; 4];
+    let mut results = Vec::new();
+    let mut suites = String::new();
+    let mut skipped = 0usize;
+    let mut broken = false;
+    let mut header = false;
+    let mut emit = |item: Item, counts: &mut Counts| -> bool {
+        count(counts, item.class);
+        skipped += item.junit.matches("<skipped ").count();
+        match opts.format {
+            Format::Text => {
+                if !item.stderr.is_empty() {
+                    err(&item.stderr);
+                }
+                if !item.stdout.is_empty() && out(&item.stdout).is_err() {
+                    return false;
+                }
+            }
+            Format::Json => results.push(item.json),
+            Format::Jsonl => {
+                if out(&serde_json::to_string(&item.json).unwrap_or_default()).is_err() {
+                    return false;
+                }
+            }
+            Format::Junit => suites += &item.junit,
+            Format::Csv => {
+                if !item.stderr.is_empty() {
+                    err(&item.stderr);
+                }
+                if !header {
+                    header = true;
+                    if out(ravel::report::network::CSV_HEADER).is_err() {
+                        return false;
+                    }
+                }
+                if !item.csv.is_empty() && out(item.csv.trim_end()).is_err() {
+                    return false;
+                }
+            }
+        }
+        true
+    };
+    if jobs == 1 {
+        for (k, &i) in mine.iter().enumerate() {
+            // a single pair gets the jobs for its cells
+            let position = Some((k + 1, mine.len()));
+            let item = run(
+                i,
+                &work[i],
+                opts,
+                cert_dir,
+                opts.progress,
+                opts.jobs,
+                position,
+            );
+            if !emit(item, &mut counts) {
+                broken = true;
+                break;
+            }
+        }
+    } else {
+        // threads take the next index; whichever finishes the pair due
+        // next writes it, and every later one already done, in index
+        // order. No thread only writes: one did, and woke for every pair,
+        // taking a core from a worker each time (740–790 context switches
+        // per 256 pairs on two jobs).
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let order = std::sync::Mutex::new(InOrder {
+            emit: &mut emit,
+            counts,
+            waiting: BTreeMap::new(),
+            written: 0,
+            broken: false,
+        });
+        let pairs = || loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(&i) = mine.get(k) else { break };
+            let item = run(i, &work[i], opts, cert_dir, false, 1, None);
+            let mut o = order.lock().unwrap_or_else(|e| e.into_inner());
+            let InOrder {
+                emit,
+                counts,
+                waiting,
+                written,
+                broken,
+            } = &mut *o;
+            waiting.insert(k, item);
+            while let Some(item) = waiting.remove(written) {
+                *written += 1;
+                if !*broken && !emit(item, counts) {
+                    *broken = true;
+                    // stop handing out work; running items finish
+                    next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
+                }
+                if opts.progress && !*broken {
+                    err(&format!(
+                        "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
+                        mine.len(),
+                        run_started.elapsed().as_secs_f64()
+                    ));
+                }
+            }
+        };
+        // the calling thread runs pairs too
+        std::thread::scope(|scope| {
+            for _ in 1..jobs {
+                scope.spawn(pairs);
+            }
+            pairs();
+        });
+        let o = order.into_inner().unwrap_or_else(|e| e.into_inner());
+        (counts, broken) = (o.counts, o.broken);
+        if opts.progress {
+            err("\r\x1b[2K");
+        }
+    }
+    if broken {
+        return ExitCode::from(exit::BROKEN_PIPE);
+    }
+    let shard_fields = |doc: &mut Value| {
+        if let Some(s) = opts.shard {
+            doc["shard"] = json!(format!("{}/{}", s.k, s.n));
+            doc["total"] = json!(total);
+        }
+    };
+    let written = match opts.format {
+        Format::Text if counts.iter().sum::<usize>() > 1 => {
+            let time = if opts.no_timing {
+                String::new()
+            } else {
+                format!(" in {:.1} s", run_started.elapsed().as_secs_f64())
+            };
+            out(&format!("summary: {}{time}", summary(&counts)))
+        }
+        Format::Text | Format::Csv => Ok(()),
+        Format::Json => {
+            let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(&counts), "results": results });
+            shard_fields(&mut doc);
+            out(&serde_json::to_string_pretty(&doc).unwrap_or_default())
+        }
+        Format::Jsonl => {
+            let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(&counts), "summary": summary(&counts) });
+            shard_fields(&mut doc);
+            out(&serde_json::to_string(&doc).unwrap_or_default())
+        }
+        Format::Junit => out(&junit_document(&suites, &counts, skipped)),
+    };
+    if written.is_err() {
+        return ExitCode::from(exit::BROKEN_PIPE);
+    }
+    ExitCode::from(gate(&counts, opts.fail_on))
+}
+
+/// `ravel merge`: the shards' JSON documents as one, identical to the
+/// unsharded run's; every item must be present exactly once.
+pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
+    let fail = |msg: String| {
+        err(&format!("error: {msg}\n"));
+        ExitCode::from(exit::INPUT_ERROR)
+    };
+    let mut total: Option<u64> = None;
+    let mut version: Option<Value> = None;
+    let mut seen: BTreeMap<u64, Value> = BTreeMap::new();
+    for f in files {
+        let name = ravel_syntax::diag::sanitize(&f.display().to_string());
+        let doc = match super::read_json(f) {
+            Ok(v) => v,
+            Err(e) => return fail(format!("`{name}`: {e}")),
+        };
+        if doc["schema"] != ravel::report::SCHEMA {
+            return fail(format!(
+                "`{name}` is not a {} document",
+                ravel::report::SCHEMA
+            ));
+        }
+        let t = match doc["total"].as_u64() {
+            Some(t) => t,
+            None => return fail(format!("`{name}` is not a shard (written without --shard)")),
+        };
+        if total.is_some_and(|x| x != t) || version.as_ref().is_some_and(|v| *v != doc["version"]) {
+            return fail(format!(
+                "`{name}` comes from a different batch (item count or version differs)"
+            ));
+        }
+        total = Some(t);
+        version = Some(doc["version"].clone());
+        for r in doc["results"].as_array().into_iter().flatten() {
+            let Some(i) = r["index"].as_u64() else {
+                return fail(format!("`{name}`: a result has no index"));
+            };
+            if i >= t || seen.insert(i, r.clone()).is_some() {
+                return fail(format!(
+                    "`{name}`: item {i} is out of range or appears twice"
+                ));
+            }
+        }
+    }
+    let total = total.unwrap_or(0);
+    if let Some(missing) = (0..total).find(|i| !seen.contains_key(i)) {
+        return fail(format!(
+            "item {missing} of {total} is in no shard: a shard is missing"
+        ));
+    }
+    let mut counts: Counts = [0; 4];
+    for r in seen.values() {
+        let class = match r["verdict"].as_str() {
+            Some("VERIFIED") => Class::Verdict(Status::Verified),
+            Some("FALSIFIED") => Class::Verdict(Status::Falsified),
+            Some("UNSURE") => Class::Verdict(Status::Unsure),
+            _ => Class::Error,
+        };
+        count(&mut counts, class);
+    }
+    let results: Vec<Value> = seen.into_values().collect();
+    let doc = json!({ "schema": ravel::report::SCHEMA, "version": version.unwrap_or(Value::Null), "verdict": overall(&counts), "results": results });
+    if out(&serde_json::to_string_pretty(&doc).unwrap_or_default()).is_err() {
+        return ExitCode::from(exit::BROKEN_PIPE);
+    }
+    ExitCode::from(gate(&counts, fail_on))
+}

@@ -55,9 +55,14 @@ fn main() {
         let Ok(checked) = ravel::front_end(&source, dir, &ravel_cli::read_request) else {
             continue;
         };
-        let plan = ravel::lower::lower(&checked);
+        let plan = ravel::lower::lower_system(&checked);
         let mut outcome = None;
-        let analysis = median(|| outcome = Some(ravel::execute::execute(&plan, &|| 0.0)));
+        let analysis = median(|| {
+            outcome = Some(ravel::execute::execute_system(
+                &plan,
+                &ravel::execute::Control::unlimited(),
+            ))
+        });
         let outcome = outcome.expect("ran");
         let id = ravel::certificate::Identity {
             spec_path: path.display().to_string(),
@@ -65,7 +70,7 @@ fn main() {
         };
         let mut text = String::new();
         let write = median(|| {
-            let cert = ravel::certificate::build(&plan, &outcome, &id);
+            let cert = ravel::certificate::build_system(&plan, &outcome, &id);
             text = serde_json::to_string(&cert).unwrap_or_default();
         });
         let mut report = None;

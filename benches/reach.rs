@@ -26,8 +26,8 @@ mod common;
 use std::path::Path;
 use std::time::Instant;
 
-use ravel::execute::execute;
-use ravel::lower::{lower, Partitioner};
+use ravel::execute::{execute_system, Control};
+use ravel::lower::{lower_system, Partitioner};
 use ravel_analysis::closed_loop::{Boundary, Propagator};
 
 /// One row of the table: a name, a propagator, a partitioner and the samples
@@ -131,7 +131,7 @@ fn main() {
         checked.samples = 10_000;
         checked.propagator = Propagator::IbpSeparate;
         checked.partitioner = uniform(&vec![1; grid.len()]);
-        let reference = execute(&lower(&checked), &|| 0.0);
+        let reference = execute_system(&lower_system(&checked), &Control::unlimited());
         let hull = reference
             .sampled
             .last()
@@ -162,13 +162,13 @@ fn main() {
             checked.partitioner = m.partitioner.clone();
             checked.samples = m.samples;
             checked.boundary = m.boundary.clone();
-            let plan = lower(&checked);
+            let plan = lower_system(&checked);
             let mut times = Vec::new();
             let start = Instant::now();
             let mut outcome;
             loop {
                 let t = Instant::now();
-                outcome = execute(&plan, &|| t.elapsed().as_secs_f64());
+                outcome = execute_system(&plan, &Control::new(&|| t.elapsed().as_secs_f64()));
                 times.push(t.elapsed().as_secs_f64());
                 let spent = start.elapsed().as_secs_f64();
                 if (times.len() >= 3 && spent >= 1.0) || spent >= 10.0 {

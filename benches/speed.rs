@@ -28,8 +28,8 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 use ravel::check::Checked;
-use ravel::execute::{execute_with, propagate_cell, Control};
-use ravel::lower::{lower, Partitioner, Plan};
+use ravel::execute::{execute_system, propagate_cell, Control};
+use ravel::lower::{lower_system, Partitioner, SystemPlan};
 use ravel_analysis::closed_loop::{ClosedLoop, Plant, Propagator};
 use ravel_analysis::crown::{Analysis, Mode};
 use ravel_analysis::sets::{IBox, Region};
@@ -92,12 +92,12 @@ fn checked(spec: &str) -> Checked {
     .expect("valid spec")
 }
 
-fn plan_of(c: &Checked, prop: Propagator, part: Partitioner, samples: usize) -> Plan {
+fn plan_of(c: &Checked, prop: Propagator, part: Partitioner, samples: usize) -> SystemPlan {
     let mut c = c.clone();
     c.propagator = prop;
     c.partitioner = part;
     c.samples = samples;
-    lower(&c)
+    lower_system(&c)
 }
 
 fn grid(k: usize, dims: usize) -> Partitioner {
@@ -113,8 +113,8 @@ fn whole(dims: usize) -> Partitioner {
     Partitioner::Uniform(vec![1; dims])
 }
 
-fn run(plan: &Plan, threads: usize) {
-    std::hint::black_box(execute_with(
+fn run(plan: &SystemPlan, threads: usize) {
+    std::hint::black_box(execute_system(
         plan,
         &Control {
             elapsed: &|| 0.0,
@@ -573,7 +573,7 @@ fn tightness() {
         for &st in steps {
             let mut plan = plan_of(&c, prop, grid(k, dims), 1000);
             plan.closed_loop.slope_steps = st;
-            let err = ravel::report::final_error(&execute_with(
+            let err = ravel::report::system::final_error(&execute_system(
                 &plan,
                 &Control {
                     elapsed: &|| 0.0,

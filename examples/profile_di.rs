@@ -20,7 +20,7 @@ fn main() {
         }
     }
     let repeats: usize = args.get(2).map_or(2000, |r| r.parse().unwrap());
-    let mut plan = ravel::lower::lower(&c);
+    let mut plan = ravel::lower::lower_system(&c);
     // SLOPES=k: k slope-optimisation steps per back-substitution
     if let Some(k) = std::env::var("SLOPES").ok().and_then(|k| k.parse().ok()) {
         plan.closed_loop.slope_steps = k;
@@ -42,7 +42,10 @@ fn main() {
         let t = std::time::Instant::now();
         for _ in 0..repeats.div_ceil(5) {
             if whole {
-                std::hint::black_box(ravel::execute::execute(&plan, &|| 0.0));
+                std::hint::black_box(ravel::execute::execute_system(
+                    &plan,
+                    &ravel::execute::Control::unlimited(),
+                ));
             } else {
                 std::hint::black_box(ravel::execute::propagate_cell(&plan, &plan.initial, None));
             }
@@ -51,8 +54,11 @@ fn main() {
     }
     eprintln!("{:.2} µs per cell (best of 5 batches)", best * 1e6);
     if whole {
-        let out = ravel::execute::execute(&plan, &|| 0.0);
-        eprintln!("final-step error {:?}", ravel::report::final_error(&out));
+        let out = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+        eprintln!(
+            "final-step error {:?}",
+            ravel::report::system::final_error(&out)
+        );
         if std::env::var_os("SHOW_SETS").is_some() {
             for (r, s) in out.reach.iter().zip(&out.sampled) {
                 eprintln!(

@@ -18,7 +18,7 @@ use std::time::Instant;
 use serde_json::{json, Value};
 
 use super::{err, exit, load_with, out, Format, ProgressLine};
-use ravel::execute::Status;
+use ravel::execute::{Run, Verdict};
 use ravel_syntax::diag::render;
 
 /// Which verdicts fail the run (exit code and JUnit).
@@ -131,7 +131,7 @@ enum Work {
 /// The verdict class of one item.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Class {
-    Verdict(Status),
+    Verdict(Verdict),
     Error,
 }
 
@@ -242,19 +242,8 @@ fn run(
             )
         }
     };
-    let checked = match &l.result {
-        Ok(ravel::check::Task::System(c)) => (**c).clone(),
-        Ok(ravel::check::Task::Network(c)) => {
-            return run_network(
-                index,
-                (path, controller, file_name),
-                &l,
-                c,
-                opts,
-                cert_dir,
-                cell_threads,
-            );
-        }
+    let task = match &l.result {
+        Ok(task) => task,
         Err(d) => {
             let text = render(d, &l.display, &l.source, 100, opts.color);
             let plain = render(d, &l.display, &l.source, 100, false);
@@ -271,7 +260,6 @@ fn run(
         }
     };
     let started = Instant::now();
-    let plan = ravel::lower::lower(&checked);
     let shown = match position {
         Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
         _ => l.display.clone(),
@@ -281,8 +269,8 @@ fn run(
         started,
         last: std::sync::atomic::AtomicU64::new(0),
     };
-    let outcome = ravel::execute::execute_with(
-        &plan,
+    let run = ravel::run(
+        task,
         &ravel::execute::Control {
             elapsed: &|| started.elapsed().as_secs_f64(),
             time_limit: opts.time_limit,
@@ -297,14 +285,17 @@ fn run(
     line.clear();
     let ms = started.elapsed().as_secs_f64() * 1e3;
     let mut stderr = String::new();
-    let mut class = Class::Verdict(outcome.verdict);
-    let mut json = ravel::report::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
+    let mut class = Class::Verdict(run.verdict());
+    let mut json = ravel::report::json(&l.name, &run, opts.timing.then_some(ms));
     json["index"] = json!(index);
+    if let (Run::Network { .. }, Some(c)) = (&run, controller) {
+        json["controller"] = json!(c.display().to_string());
+    }
     if let Some(target) = &opts.certificate {
         let file = certificate_file(target, cert_dir, file_name);
         let id = identity(&file, path, &l.source);
-        let mut cert = ravel::certificate::build(&plan, &outcome, &id);
-        record_controller(&mut cert, &file, &plan.controller_resolved);
+        let mut cert = ravel::certificate::build(&run, &id);
+        record_controller(&mut cert, &file, run.controller_resolved());
         if let Err(msg) = write_certificate(&file, &cert) {
             fail_item(
                 (&mut json, &mut stderr, &mut class),
@@ -314,50 +305,89 @@ fn run(
         }
     }
     if let Some(dir) = &opts.plot {
-        let (i, j) = opts.plot_dims;
-        let n = plan.closed_loop.states();
-        let file = dir.join(format!("{file_name}.svg"));
-        let result = if i >= n || j >= n {
-            Err(format!(
-                "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
-                n - 1
-            ))
-        } else {
-            let samples: Vec<_> = (0..plan.samples.min(100))
-                .filter_map(|k| ravel::execute::simulate(&plan, k))
-                .collect();
-            let svg = ravel::plot::svg(&l.display, &plan, &outcome, (i, j), &samples);
-            super::write_atomically(&file, svg.as_bytes()).map_err(|e| {
-                format!(
-                    "cannot write plot `{}`: {e}",
-                    ravel_syntax::diag::sanitize(&file.display().to_string())
-                )
-            })
-        };
-        if let Err(msg) = result {
+        if let Err(msg) = plot(&run, &l.display, dir, file_name, opts.plot_dims) {
             fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
         }
     }
     let stdout = match opts.format {
-        Format::Text => {
-            ravel::report::text(&l.display, &plan, &outcome, (!opts.no_timing).then_some(ms))
-        }
+        Format::Text => ravel::report::text(&l.display, &run, (!opts.no_timing).then_some(ms)),
         _ => String::new(),
     };
-    let junit = junit_suite(
-        &l.display,
-        &outcome,
-        opts,
-        ms,
-        &stdout_plain(&l.display, &plan, &outcome),
-    );
+    // the text report without timing, for JUnit bodies (deterministic)
+    let report = ravel::report::text(&l.display, &run, None);
+    let junit = junit_cases(&l.display, &junit_list(&run), opts, ms, &report);
+    let csv = match &run {
+        Run::System { .. } => String::new(),
+        Run::Network { outcome, .. } => ravel::report::network::csv_rows(&l.name, outcome),
+    };
     Item {
         class,
         stdout,
         stderr,
         json,
         junit,
-        csv: String::new(),
+        csv,
+    }
+}
+
+/// Draw a run's reachable sets into `dir` (closed loops only: a network
+/// spec's plot is an error that says so, never silently skipped).
+fn plot(
+    run: &Run,
+    display: &str,
+    dir: &Path,
+    file_name: &str,
+    (i, j): (usize, usize),
+) -> Result<(), String> {
+    let Run::System { plan, outcome } = run else {
+        return Err(format!(
+            "plots of network specs are not supported yet (`{display}`)"
+        ));
+    };
+    let n = plan.closed_loop.states();
+    let file = dir.join(format!("{file_name}.svg"));
+    if i >= n || j >= n {
+        return Err(format!(
+            "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
+            n - 1
+        ));
+    }
+    let samples: Vec<_> = (0..plan.samples.min(100))
+        .filter_map(|k| ravel::execute::simulate(plan, k))
+        .collect();
+    let svg = ravel::plot::svg(display, plan, outcome, (i, j), &samples);
+    super::write_atomically(&file, svg.as_bytes()).map_err(|e| {
+        format!(
+            "cannot write plot `{}`: {e}",
+            ravel_syntax::diag::sanitize(&file.display().to_string())
+        )
+    })
+}
+
+/// The JUnit test cases of a run: one per property, with the step (closed
+/// loop) or the set (network) its margin applies to.
+fn junit_list(run: &Run) -> Vec<Case> {
+    match run {
+        Run::System { outcome, .. } => outcome
+            .properties
+            .iter()
+            .map(|p| Case {
+                name: format!("{} {}", p.kind.as_str(), p.name),
+                status: p.status,
+                margin: p.margin,
+                place: format!("at step {}", p.step),
+            })
+            .collect(),
+        Run::Network { outcome, .. } => outcome
+            .properties
+            .iter()
+            .map(|p| Case {
+                name: format!("{} {}", p.kind.as_str(), p.name),
+                status: p.status,
+                margin: p.margin,
+                place: "on the input set".to_string(),
+            })
+            .collect(),
     }
 }
 
@@ -372,15 +402,6 @@ impl Item {
         }
         self
     }
-}
-
-/// The text report without timing, for JUnit bodies (deterministic).
-fn stdout_plain(
-    name: &str,
-    plan: &ravel::lower::Plan,
-    outcome: &ravel::execute::Outcome,
-) -> String {
-    ravel::report::text(name, plan, outcome, None)
 }
 
 /// Turn an item into an ERROR: the message on standard error and in the
@@ -440,115 +461,13 @@ fn write_certificate(file: &Path, cert: &Value) -> Result<(), String> {
     })
 }
 
-/// Run one network spec (no output; everything is returned).
-fn run_network(
-    index: usize,
-    (path, controller, file_name): (&Path, Option<&Path>, &str),
-    l: &super::Loaded,
-    checked: &ravel::check::NetworkChecked,
-    opts: &Options,
-    cert_dir: Option<&Path>,
-    cell_threads: usize,
-) -> Item {
-    let started = Instant::now();
-    let plan = ravel::lower::lower_network(checked);
-    let outcome = ravel::execute::network::execute_network(
-        &plan,
-        &ravel::execute::network::NetControl {
-            elapsed: &|| started.elapsed().as_secs_f64(),
-            time_limit: opts.time_limit,
-            threads: cell_threads,
-        },
-    );
-    let ms = started.elapsed().as_secs_f64() * 1e3;
-    let mut stderr = String::new();
-    let mut class = Class::Verdict(outcome.verdict);
-    let mut json =
-        ravel::report::network::json(&l.name, &plan, &outcome, opts.timing.then_some(ms));
-    json["index"] = json!(index);
-    if let Some(c) = controller {
-        json["controller"] = json!(c.display().to_string());
-    }
-    if let Some(target) = &opts.certificate {
-        let file = certificate_file(target, cert_dir, file_name);
-        let id = identity(&file, path, &l.source);
-        let mut cert = ravel::certificate::build_network(&plan, &outcome, &id);
-        record_controller(&mut cert, &file, &plan.model_resolved);
-        if let Err(msg) = write_certificate(&file, &cert) {
-            fail_item(
-                (&mut json, &mut stderr, &mut class),
-                "certificate_error",
-                &msg,
-            );
-        }
-    }
-    // not built yet for network specs: said, never silently skipped
-    if opts.plot.is_some() {
-        let msg = format!(
-            "plots of network specs are not supported yet (`{}`)",
-            l.display
-        );
-        fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
-    }
-    let stdout = match opts.format {
-        Format::Text => ravel::report::network::text(
-            &l.display,
-            &plan,
-            &outcome,
-            (!opts.no_timing).then_some(ms),
-        ),
-        _ => String::new(),
-    };
-    let cases: Vec<Case> = outcome
-        .properties
-        .iter()
-        .map(|p| Case {
-            name: format!("{} {}", p.kind.as_str(), p.name),
-            status: p.status,
-            margin: p.margin,
-            place: "on the input set".to_string(),
-        })
-        .collect();
-    let report = ravel::report::network::text(&l.display, &plan, &outcome, None);
-    let junit = junit_cases(&l.display, &cases, opts, ms, &report);
-    Item {
-        class,
-        stdout,
-        stderr,
-        json,
-        junit,
-        csv: ravel::report::network::csv_rows(&l.name, &outcome),
-    }
-}
-
 /// One JUnit test case: a property's result.
 struct Case {
     name: String,
-    status: Status,
+    status: Verdict,
     margin: f64,
     /// Where the margin applies, e.g. `at step 5`.
     place: String,
-}
-
-/// One `<testsuite>` per pair, one `<testcase>` per property.
-fn junit_suite(
-    suite: &str,
-    outcome: &ravel::execute::Outcome,
-    opts: &Options,
-    ms: f64,
-    report: &str,
-) -> String {
-    let cases: Vec<Case> = outcome
-        .properties
-        .iter()
-        .map(|p| Case {
-            name: format!("{} {}", p.kind.as_str(), p.name),
-            status: p.status,
-            margin: p.margin,
-            place: format!("at step {}", p.step),
-        })
-        .collect();
-    junit_cases(suite, &cases, opts, ms, report)
 }
 
 /// A `<testsuite>` of cases.
@@ -564,8 +483,8 @@ fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str
         let name = &p.name;
         let margin = ravel_syntax::diag::compact(p.margin);
         let body = match p.status {
-            Status::Verified => String::new(),
-            Status::Falsified => {
+            Verdict::Verified => String::new(),
+            Verdict::Falsified => {
                 failures += 1;
                 format!(
                     "\n      <failure message=\"FALSIFIED {} (violated by {})\" type=\"FALSIFIED\">{}</failure>\n    ",
@@ -574,7 +493,7 @@ fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str
                     xml(report)
                 )
             }
-            Status::Unsure => match opts.fail_on {
+            Verdict::Unsure => match opts.fail_on {
                 FailOn::Unsure => {
                     failures += 1;
                     format!(
@@ -610,9 +529,9 @@ type Counts = [usize; 4];
 
 fn count(c: &mut Counts, class: Class) {
     c[match class {
-        Class::Verdict(Status::Verified) => 0,
-        Class::Verdict(Status::Falsified) => 1,
-        Class::Verdict(Status::Unsure) => 2,
+        Class::Verdict(Verdict::Verified) => 0,
+        Class::Verdict(Verdict::Falsified) => 1,
+        Class::Verdict(Verdict::Unsure) => 2,
         Class::Error => 3,
     }] += 1;
 }
@@ -929,9 +848,9 @@ pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
     let mut counts: Counts = [0; 4];
     for r in seen.values() {
         let class = match r["verdict"].as_str() {
-            Some("VERIFIED") => Class::Verdict(Status::Verified),
-            Some("FALSIFIED") => Class::Verdict(Status::Falsified),
-            Some("UNSURE") => Class::Verdict(Status::Unsure),
+            Some("VERIFIED") => Class::Verdict(Verdict::Verified),
+            Some("FALSIFIED") => Class::Verdict(Verdict::Falsified),
+            Some("UNSURE") => Class::Verdict(Verdict::Unsure),
             _ => Class::Error,
         };
         count(&mut counts, class);

@@ -749,21 +749,15 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
         }
     };
     // the model, its hashes and the problem as the spec states it
-    let (net, sha, problem) = match &task {
-        ravel::check::Task::System(c) => {
-            let plan = ravel::lower::lower(c);
-            let problem = ravel::certificate::problem_json(&plan);
-            (plan.closed_loop.net, plan.controller_sha256, problem)
-        }
-        ravel::check::Task::Network(c) => {
-            let plan = ravel::lower::lower_network(c);
-            let problem = ravel::certificate::network_problem_json(&plan);
-            (plan.net, plan.model_sha256, problem)
-        }
-    };
+    let plan = ravel::lower::lower(&task);
+    let (net, sha, problem) = (
+        plan.network(),
+        plan.controller_sha256(),
+        ravel::certificate::problem_json(&plan),
+    );
     files.push(format!(
         "controller  {ctrl_name} (SHA-256 {})",
-        short_hash(&sha)
+        short_hash(sha)
     ));
     if sha != hash("controller", "sha256") {
         return invalid(
@@ -772,7 +766,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
             &notes,
         );
     }
-    if ravel::certificate::network_sha256(&net) != hash("controller", "network_sha256") {
+    if ravel::certificate::network_sha256(net) != hash("controller", "network_sha256") {
         return invalid(
             "the controller's network (external data included) is not the one certified".into(),
             &files,
@@ -804,7 +798,7 @@ fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (
     if text_differs {
         notes.push(format!("{text_note}; its problem is identical"));
     }
-    let report = ravel_certify::check(&cert, &net);
+    let report = ravel_certify::check(&cert, net);
     let (code, head) = match &report.answer {
         Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
         Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),

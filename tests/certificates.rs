@@ -13,25 +13,25 @@ use ravel_base::nn::Layer;
 use ravel_certify::{check, Answer};
 use serde_json::Value;
 
-fn run(spec: &str) -> (ravel::lower::Plan, Value) {
+fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
     let source = std::fs::read_to_string(spec).expect("spec readable");
     let dir = Path::new(spec).parent().expect("folder");
     let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
-    let plan = ravel::lower::lower(&checked);
-    let outcome = ravel::execute::execute(&plan, &|| 0.0);
+    let plan = ravel::lower::lower_system(&checked);
+    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
     let id = ravel::certificate::Identity {
         spec_path: spec.to_string(),
         spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
     };
-    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
     (plan, cert)
 }
 
-fn answer(cert: &Value, plan: &ravel::lower::Plan) -> Answer {
+fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
     check(cert, &plan.closed_loop.net).answer
 }
 
-fn expect_invalid(cert: &Value, plan: &ravel::lower::Plan, words: &str, what: &str) {
+fn expect_invalid(cert: &Value, plan: &ravel::lower::SystemPlan, words: &str, what: &str) {
     match answer(cert, plan) {
         Answer::Invalid(m) => assert!(m.contains(words), "{what}: message `{m}` lacks `{words}`"),
         other => panic!("{what}: expected INVALID, got {other:?}"),
@@ -478,19 +478,19 @@ fn a_wrong_verified_verdict_never_gets_a_valid_certificate() {
     let source = std::fs::read_to_string("specs/double_integrator_falsified.ravel").expect("spec");
     let checked =
         ravel::front_end(&source, Path::new("specs"), &ravel_cli::read_request).expect("valid");
-    let plan = ravel::lower::lower(&checked);
-    let mut outcome = ravel::execute::execute(&plan, &|| 0.0);
+    let plan = ravel::lower::lower_system(&checked);
+    let mut outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
     assert_eq!(
         outcome.properties[0].status,
-        ravel::execute::Status::Falsified
+        ravel::execute::Verdict::Falsified
     );
-    outcome.properties[0].status = ravel::execute::Status::Verified;
+    outcome.properties[0].status = ravel::execute::Verdict::Verified;
     outcome.properties[0].counterexample = None;
     let id = ravel::certificate::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     match answer(&cert, &plan) {
         Answer::Unsupported(m) => assert!(m.contains("or its verdict is wrong"), "{m}"),
@@ -589,7 +589,7 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
         let source = std::fs::read_to_string(spec).expect("spec readable");
         let dir = Path::new(spec).parent().expect("folder");
         let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid");
-        let mut plan = ravel::lower::lower(&checked);
+        let mut plan = ravel::lower::lower_system(&checked);
         plan.closed_loop.slope_steps = steps;
         for q in &mut plan.properties {
             if let PropertyKind::Goal(g) = &mut q.kind {
@@ -600,13 +600,13 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
                 }
             }
         }
-        let outcome = ravel::execute::execute(&plan, &|| 0.0);
-        assert_eq!(outcome.verdict, ravel::execute::Status::Verified, "{spec}");
+        let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+        assert_eq!(outcome.verdict, ravel::execute::Verdict::Verified, "{spec}");
         let id = ravel::certificate::Identity {
             spec_path: spec.to_string(),
             spec_sha256: String::new(),
         };
-        let cert = ravel::certificate::build(&plan, &outcome, &id);
+        let cert = ravel::certificate::build_system(&plan, &outcome, &id);
         assert_eq!(cert["evidence"]["slope_steps"], steps, "{spec}");
         assert_eq!(answer(&cert, &plan), Answer::Valid, "{spec}");
         let mut off = cert.clone();

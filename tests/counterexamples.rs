@@ -15,9 +15,9 @@ use common::{net_certificate, run_net};
 use nalgebra::{DMatrix, DVector};
 use ravel::check::{NetProperty, NetPropertyKind};
 use ravel::execute::network::Witness;
-use ravel::execute::Status;
+use ravel::execute::Verdict;
 use ravel::ir::Partitioner;
-use ravel::lower::NetPlan;
+use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::nn::{Activation, InputType, Layer, Network};
 use ravel_certify::{check, Answer};
@@ -35,7 +35,7 @@ fn scale(w: f64) -> Network {
 }
 
 /// `require y <= h` over `x ∈ [lo, hi]`.
-fn plan(net: Network, lo: f64, hi: f64, h: f64) -> NetPlan {
+fn plan(net: Network, lo: f64, hi: f64, h: f64) -> NetworkPlan {
     let mut p = common::net_plan(
         net,
         Region::Box(IBox::new(vec![lo], vec![hi])),
@@ -72,7 +72,7 @@ fn a_counterexample_is_a_float32_input_inside_the_box() {
     let p = plan(scale(1.0), 0.1, hi, 0.3);
     let out = run_net(&p);
     let r = &out.properties[0];
-    assert_eq!(r.status, Status::Falsified);
+    assert_eq!(r.status, Verdict::Falsified);
     let x = r.counterexample.as_ref().expect("a counterexample").input[0];
     assert_eq!(
         x,
@@ -106,7 +106,7 @@ fn violations_only_between_float32_values_are_unsure() {
     let p = plan(scale(1.0), 0.1, 0.30000002, 0.300000012);
     let out = run_net(&p);
     let r = &out.properties[0];
-    assert_eq!(r.status, Status::Unsure);
+    assert_eq!(r.status, Verdict::Unsure);
     assert!(r.counterexample.is_none());
     let real = r
         .real_only
@@ -125,7 +125,7 @@ fn violations_only_between_float32_values_are_unsure() {
         0.30000002,
         0.300000012,
     );
-    assert_eq!(run_net(&p64).properties[0].status, Status::Falsified);
+    assert_eq!(run_net(&p64).properties[0].status, Verdict::Falsified);
 }
 
 /// `y = (1 + 2⁻³⁰)·x` over `[0.5, 1]`, `y ≤ 1`: the real network violates at
@@ -138,11 +138,11 @@ fn the_model_in_its_own_precision_must_violate() {
     let w = 1.0 + 2f64.powi(-30);
     let p = plan(scale(w), 0.5, 1.0, 1.0);
     let out = run_net(&p);
-    assert_eq!(out.properties[0].status, Status::Unsure);
+    assert_eq!(out.properties[0].status, Verdict::Unsure);
     assert_eq!(out.properties[0].real_only.as_deref(), Some(&[1.0][..]));
     let p64 = plan(scale(w).with_input_type(InputType::F64), 0.5, 1.0, 1.0);
     let out64 = run_net(&p64);
-    assert_eq!(out64.properties[0].status, Status::Falsified);
+    assert_eq!(out64.properties[0].status, Verdict::Falsified);
     assert_eq!(
         out64.properties[0]
             .counterexample
@@ -152,7 +152,7 @@ fn the_model_in_its_own_precision_must_violate() {
     );
     // forge the float32 certificate: FALSIFIED at x = 1
     let mut forged = out.clone();
-    forged.properties[0].status = Status::Falsified;
+    forged.properties[0].status = Verdict::Falsified;
     forged.properties[0].counterexample = Some(Witness {
         input: vec![1.0],
         output: p.net.forward(&[1.0]),
@@ -189,10 +189,10 @@ fn a_violation_within_the_float32_error_is_not_confirmed() {
     let mut p = plan(net, 0.0, 0.0, 0.5);
     p.input = Some(Region::Box(IBox::new(vec![1.0; 3], vec![1.0; 3])));
     p.partitioner = Partitioner::Uniform(vec![1, 1, 1]);
-    assert_eq!(run_net(&p).properties[0].status, Status::Unsure);
+    assert_eq!(run_net(&p).properties[0].status, Verdict::Unsure);
     // stored as float64 the error bound is far below the violation
     p.net = p.net.clone().with_input_type(InputType::F64);
-    assert_eq!(run_net(&p).properties[0].status, Status::Falsified);
+    assert_eq!(run_net(&p).properties[0].status, Verdict::Falsified);
 }
 
 /// A certificate with one cell more than any analysis makes (100 000) is
@@ -201,7 +201,7 @@ fn a_violation_within_the_float32_error_is_not_confirmed() {
 fn network_certificates_have_the_documented_cell_limit() {
     let p = plan(scale(1.0), 0.0, 1.0, 2.0);
     let out = run_net(&p);
-    assert_eq!(out.properties[0].status, Status::Verified);
+    assert_eq!(out.properties[0].status, Verdict::Verified);
     let cert = net_certificate(&p, &out);
     assert_eq!(check(&cert, &p.net).answer, Answer::Valid);
     let cell = serde_json::json!({ "lo": [0.0], "hi": [1.0] });
@@ -230,9 +230,9 @@ fn closed_loop_counterexamples_survive_json() {
     let source = std::fs::read_to_string(spec).expect("spec readable");
     let dir = std::path::Path::new(spec).parent().expect("folder");
     let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
-    let plan = ravel::lower::lower(&checked);
-    let out = ravel::execute::execute(&plan, &|| 0.0);
-    let json = ravel::report::json("s", &plan, &out, None);
+    let plan = ravel::lower::lower_system(&checked);
+    let out = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+    let json = ravel::report::system::json("s", &plan, &out, None);
     let text = serde_json::to_string(&json).expect("serialises");
     let back: Value = serde_json::from_str(&text).expect("parses");
     let mut falsified = 0;

@@ -19,27 +19,27 @@ mod common;
 #[path = "common/exact.rs"]
 mod exact;
 
-use ravel::execute::Status;
+use ravel::execute::Verdict;
 use ravel_certify::{check, Answer};
 use serde_json::{json, Value};
 
-/// Plan and outcome of spec text whose files resolve against `dir`.
-fn analyse(source: &str, dir: &Path) -> (ravel::lower::Plan, ravel::execute::Outcome) {
+/// SystemPlan and outcome of spec text whose files resolve against `dir`.
+fn analyse(source: &str, dir: &Path) -> (ravel::lower::SystemPlan, ravel::execute::SystemOutcome) {
     let checked = ravel::front_end(source, dir, &ravel_cli::read_request).expect("the spec checks");
-    let plan = ravel::lower::lower(&checked);
-    let outcome = ravel::execute::execute(&plan, &|| 0.0);
+    let plan = ravel::lower::lower_system(&checked);
+    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
     (plan, outcome)
 }
 
-fn certificate(plan: &ravel::lower::Plan, outcome: &ravel::execute::Outcome) -> Value {
+fn certificate(plan: &ravel::lower::SystemPlan, outcome: &ravel::execute::SystemOutcome) -> Value {
     let id = ravel::certificate::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    ravel::certificate::build(plan, outcome, &id)
+    ravel::certificate::build_system(plan, outcome, &id)
 }
 
-fn answer(cert: &Value, plan: &ravel::lower::Plan) -> Answer {
+fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
     check(cert, &plan.closed_loop.net).answer
 }
 
@@ -58,7 +58,7 @@ fn set_status(cert: &mut Value, name: &str, status: &str) {
 
 /// The quadrotor with its goal narrowed to `x[0] ∈ [3.0, 3.4]`: every
 /// trajectory ends near x[0] ≈ 3.5–3.65, so the goal is FALSIFIED.
-fn narrowed_quadrotor() -> (ravel::lower::Plan, ravel::execute::Outcome) {
+fn narrowed_quadrotor() -> (ravel::lower::SystemPlan, ravel::execute::SystemOutcome) {
     let source = std::fs::read_to_string("specs/quadrotor.ravel").expect("spec");
     let narrowed = source.replace("x[0] in [3.0, 4.5]", "x[0] in [3.0, 3.4]");
     assert_ne!(narrowed, source, "the goal line moved");
@@ -73,7 +73,7 @@ fn a_huge_goal_dual_cannot_certify_a_false_goal() {
         .iter()
         .find(|p| p.name == "G")
         .expect("G");
-    assert_eq!(goal.status, Status::Falsified);
+    assert_eq!(goal.status, Verdict::Falsified);
     let mut cert = certificate(&plan, &outcome);
     assert_eq!(
         answer(&cert, &plan),
@@ -172,7 +172,7 @@ fn states_near_the_top_of_f64_never_verify_a_false_claim() {
     let last = outcome.reach.last().expect("sets");
     assert!(last.hi[4] > 1.6e308 && last.hi[4].is_finite());
     for p in &outcome.properties {
-        assert_ne!(p.status, Status::Verified, "{} verified", p.name);
+        assert_ne!(p.status, Verdict::Verified, "{} verified", p.name);
         assert!(!p.margin.is_nan(), "{}", p.name);
     }
     // certificates forced to VERIFIED are never VALID
@@ -182,7 +182,7 @@ fn states_near_the_top_of_f64_never_verify_a_false_claim() {
     }
     let mut forced = outcome.clone();
     for p in &mut forced.properties {
-        p.status = Status::Verified;
+        p.status = Verdict::Verified;
         p.counterexample = None;
     }
     let written = certificate(&plan, &forced);
@@ -197,7 +197,7 @@ fn states_near_the_top_of_f64_never_verify_a_false_claim() {
     // range, and a true goal at this magnitude is not refused for overflow
     // of its sum: it is at worst UNSURE
     let (_, fine) = analyse(&huge(&format!("{SUM} <= 1e15"), "x[0] <= -100"), dir);
-    assert_ne!(fine.properties[1].status, Status::Falsified);
+    assert_ne!(fine.properties[1].status, Verdict::Falsified);
 }
 
 #[test]
@@ -206,7 +206,7 @@ fn a_forged_counterexample_at_the_top_of_f64_is_replayed_not_trusted() {
     // the goal holds: x₂ + … + x₆ is about +1.7e308 > −1 for every trajectory
     let src = huge("-x[2] - x[3] - x[4] - x[5] - x[6] <= 1", "x[0] <= -100");
     let (plan, outcome) = analyse(&src, dir);
-    assert_ne!(outcome.properties[0].status, Status::Falsified);
+    assert_ne!(outcome.properties[0].status, Verdict::Falsified);
     // a counterexample: a trajectory from X0's corner with no noise; the
     // checker replays it and must not find the goal violated
     let mut cert = certificate(&plan, &outcome);
@@ -273,14 +273,14 @@ fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
         let mut out = common::run_net(&plan);
         assert_ne!(
             out.properties[0].status,
-            Status::Verified,
+            Verdict::Verified,
             "{propagator:?}: a false requirement verified"
         );
         let id = ravel::certificate::Identity {
             spec_path: String::new(),
             spec_sha256: String::new(),
         };
-        out.properties[0].status = Status::Verified;
+        out.properties[0].status = Verdict::Verified;
         out.properties[0].counterexample = None;
         let mut forced = ravel::certificate::build_network(&plan, &out, &id);
         assert!(!matches!(
@@ -469,20 +469,20 @@ analysis {{
         for p in &outcome.properties {
             checked += 1;
             match (p.name.as_str(), p.status) {
-                ("G", Status::Verified) => {
+                ("G", Verdict::Verified) => {
                     verified += 1;
                     assert!(holds(&goal), "a false goal verified, {what}");
                 }
-                ("A", Status::Verified) => {
+                ("A", Verdict::Verified) => {
                     verified += 1;
                     // every corner strictly outside the half-space; linear
                     // in each state, so the whole box is outside
                     assert!(!crosses(&avoid), "an entered avoid set verified, {what}");
                 }
-                ("G", Status::Falsified) => {
+                ("G", Verdict::Falsified) => {
                     assert!(!holds(&goal), "a true goal falsified, {what}")
                 }
-                ("A", Status::Falsified) => {
+                ("A", Verdict::Falsified) => {
                     assert!(crosses(&avoid), "a missed avoid set falsified, {what}")
                 }
                 _ => {}
@@ -528,7 +528,7 @@ analysis {{
     let honest = certificate(&plan_true, &out_true);
     assert_eq!(answer(&honest, &plan_true), Answer::Valid);
     let (plan, out) = analyse(&spec("x[0] <= 7e14"), dir);
-    assert_ne!(out.properties[0].status, Status::Verified);
+    assert_ne!(out.properties[0].status, Verdict::Verified);
     let mut forged = certificate(&plan, &out);
     forged["evidence"] = honest["evidence"].clone();
     set_status(&mut forged, "G", "VERIFIED");
@@ -577,8 +577,8 @@ fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
         }],
     );
     let mut out = common::run_net(&plan);
-    assert_ne!(out.properties[0].status, Status::Verified);
-    out.properties[0].status = Status::Verified;
+    assert_ne!(out.properties[0].status, Verdict::Verified);
+    out.properties[0].status = Verdict::Verified;
     out.properties[0].counterexample = None;
     let mut cert = common::net_certificate(&plan, &out);
     cert["evidence"] =
@@ -646,11 +646,11 @@ fn an_underflowing_coefficient_times_a_huge_hidden_value_is_no_proof() {
         let out = common::run_net(&plan);
         assert_ne!(
             out.properties[0].status,
-            Status::Verified,
+            Verdict::Verified,
             "{steps} slope steps: a false requirement verified"
         );
         let cert = common::net_certificate(&plan, &out);
         let a = ravel_certify::network::check(&cert, &net).answer;
-        assert!(!matches!(a, Answer::Valid) || out.properties[0].status != Status::Verified);
+        assert!(!matches!(a, Answer::Valid) || out.properties[0].status != Verdict::Verified);
     }
 }

@@ -273,7 +273,7 @@ fn fuzz_front_end() {
             }
             match ravel::front_end_task(&source, Path::new("specs"), &reader, None) {
                 Ok(ravel::check::Task::System(c)) => {
-                    let plan = ravel::lower::lower(&c);
+                    let plan = ravel::lower::lower_system(&c);
                     assert!(plan.horizon >= 1);
                     true
                 }

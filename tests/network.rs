@@ -8,10 +8,11 @@ mod common;
 use common::{net_plan as plan, random_network, run_net as run};
 use nalgebra::{DMatrix, DVector};
 use ravel::check::{NetProperty, NetPropertyKind, RadiusSpec};
-use ravel::execute::network::{execute_network, NetControl};
-use ravel::execute::Status;
+use ravel::execute::network::execute_network;
+use ravel::execute::Control;
+use ravel::execute::Verdict;
 use ravel::ir::{Guide, NetPropagator, Partitioner};
-use ravel::lower::NetPlan;
+use ravel::lower::NetworkPlan;
 use ravel_analysis::partition::Budget;
 use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
 use ravel_analysis::shape::Shape;
@@ -117,7 +118,7 @@ fn output_bounds_contain_every_sampled_output() {
                 if pv > 1e-9 {
                     assert_ne!(
                         out.properties[0].status,
-                        Status::Verified,
+                        Verdict::Verified,
                         "case {case} {propagator:?}: VERIFIED but x = {x:?} violates it"
                     );
                 }
@@ -271,7 +272,7 @@ fn robustness_verdicts_agree_with_samples() {
         let k = res.label.expect("a label");
         let label = |y: &[f64]| (0..y.len()).filter(|&j| j != k).all(|j| y[k] > y[j]);
         match res.status {
-            Status::Verified => {
+            Verdict::Verified => {
                 seen[0] += 1;
                 for x in probe(&input, 300, case) {
                     assert!(
@@ -280,13 +281,13 @@ fn robustness_verdicts_agree_with_samples() {
                     );
                 }
             }
-            Status::Falsified => {
+            Verdict::Falsified => {
                 seen[1] += 1;
                 let w = res.counterexample.as_ref().expect("witness");
                 assert!(input.contains_point(&w.input));
                 assert!(!label(&w.output), "case {case}: witness keeps the label");
             }
-            Status::Unsure => seen[2] += 1,
+            Verdict::Unsure => seen[2] += 1,
         }
     }
     assert!(seen[0] > 0 && seen[1] > 0, "verdicts seen: {seen:?}");
@@ -387,7 +388,7 @@ fn network_certificates_catch_false_claims() {
         }],
     );
     let mut out = run(&p);
-    assert_eq!(out.properties[0].status, Status::Falsified);
+    assert_eq!(out.properties[0].status, Verdict::Falsified);
     let id = ravel::certificate::Identity {
         spec_path: "t".into(),
         spec_sha256: String::new(),
@@ -399,7 +400,7 @@ fn network_certificates_catch_false_claims() {
     moved["verdicts"][0]["input"] = serde_json::json!([3.0, 0.0]);
     assert!(matches!(check(&moved, &net).answer, Answer::Invalid(_)));
     // the verdict forced to VERIFIED
-    out.properties[0].status = Status::Verified;
+    out.properties[0].status = Verdict::Verified;
     out.properties[0].counterexample = None;
     let forced = ravel::certificate::build_network(&p, &out, &id);
     assert_eq!(forced["evidence"]["status"], "unsupported");
@@ -444,9 +445,10 @@ fn time_limit_keeps_every_bound_sound() {
     }];
     let late = execute_network(
         &p,
-        &NetControl {
+        &Control {
             elapsed: &|| 10.0,
             time_limit: Some(1.0),
+            progress: &|_| {},
             threads: 1,
         },
     );
@@ -483,12 +485,13 @@ fn threads_never_change_a_network_result() {
         norm: Norm::LInf,
         observations: (0..23).map(|k| vec![0.1 * k as f64 - 1.0, 0.5]).collect(),
     }];
-    let with_plan = |p: &NetPlan, threads| {
+    let with_plan = |p: &NetworkPlan, threads| {
         execute_network(
             p,
-            &NetControl {
+            &Control {
                 elapsed: &|| 0.0,
                 time_limit: None,
+                progress: &|_| {},
                 threads,
             },
         )
@@ -508,7 +511,7 @@ fn threads_never_change_a_network_result() {
     p.partitioner = Partitioner::Uniform(vec![7, 5]);
     // the output, partition and properties of `p` on these thread counts
     // against one thread's; the outcome on one thread
-    let same = |p: &NetPlan, counts: &[usize], what: &str| {
+    let same = |p: &NetworkPlan, counts: &[usize], what: &str| {
         let one = with_plan(p, 1);
         for &threads in counts {
             let many = with_plan(p, threads);
@@ -564,11 +567,11 @@ fn a_tied_centre_refutes_nothing() {
         tolerance: 0.01,
     }];
     let out = run(&p);
-    assert_eq!(out.properties[0].status, Status::Unsure);
+    assert_eq!(out.properties[0].status, Verdict::Unsure);
     assert!(out.radii[0].attacked.is_none());
     let mut q = plan(net, input, vec![prop(Some(0))]);
     q.partitioner = Partitioner::Uniform(vec![1]);
-    assert_eq!(run(&q).properties[0].status, Status::Falsified);
+    assert_eq!(run(&q).properties[0].status, Verdict::Falsified);
 }
 
 /// The SDP's own bound of `d·y` for a two-output merged network (not
@@ -793,7 +796,7 @@ fn network_certificates_check_optimised_slopes() {
         p.samples = 0;
         p.slope_steps = 8;
         let out = run(&p);
-        assert_eq!(out.properties[0].status, Status::Verified, "case {case}");
+        assert_eq!(out.properties[0].status, Verdict::Verified, "case {case}");
         let id = ravel::certificate::Identity {
             spec_path: "t".into(),
             spec_sha256: String::new(),

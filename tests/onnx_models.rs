@@ -411,8 +411,8 @@ fn an_onnx_clip_equals_spec_saturation() {
         .replace("\"../models/double_integrator.onnx\"", "\"clipped.onnx\"");
     let run = |src: &str, dir: &std::path::Path| {
         let c = ravel::front_end(src, dir, &ravel_cli::read_request).expect("checks");
-        let plan = ravel::lower::lower(&c);
-        ravel::execute::execute(&plan, &|| 0.0)
+        let plan = ravel::lower::lower_system(&c);
+        ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited())
     };
     let a = run(&original, &root.join("specs"));
     let b = run(&clipped, &dir);

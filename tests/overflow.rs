@@ -6,8 +6,8 @@
 
 use std::path::Path;
 
-use ravel::execute::{execute, Status};
-use ravel::lower::lower;
+use ravel::execute::{execute_system, Control, Verdict};
+use ravel::lower::lower_system;
 use ravel_analysis::closed_loop::{Cut, Propagator};
 
 /// `x⁺ = 1e9·x + B u`: from `x[0] ∈ [1, 2]` the true states pass 1e300 at
@@ -38,15 +38,15 @@ analysis {{
     )
 }
 
-fn run(src: &str) -> ravel::execute::Outcome {
+fn run(src: &str) -> ravel::execute::SystemOutcome {
     let checked = ravel::front_end(
         src,
         Path::new(env!("CARGO_MANIFEST_DIR")),
         &ravel_cli::read_request,
     )
     .unwrap_or_else(|d| panic!("spec does not check: {d:?}\n{src}"));
-    let plan = lower(&checked);
-    execute(&plan, &|| 0.0)
+    let plan = lower_system(&checked);
+    execute_system(&plan, &Control::unlimited())
 }
 
 #[test]
@@ -79,7 +79,7 @@ fn every_method_answers_unsure_with_the_overflow_step() {
                 for p in &out.properties {
                     assert_eq!(
                         p.status,
-                        Status::Unsure,
+                        Verdict::Unsure,
                         "{what}: {} is {:?}",
                         p.name,
                         p.status
@@ -105,7 +105,7 @@ fn a_goal_missed_before_the_overflow_is_still_falsified() {
     for prop in ["reach_lp", "crown_unrolled", "ibp_separate"] {
         let out = run(&spec(prop, "box", "none", 3));
         assert_eq!(out.cut, None, "{prop}");
-        assert_eq!(out.properties[0].status, Status::Falsified, "{prop}");
+        assert_eq!(out.properties[0].status, Verdict::Falsified, "{prop}");
         let tr = out.properties[0]
             .counterexample
             .as_ref()
@@ -126,8 +126,8 @@ fn properties_before_the_overflow_are_still_proven() {
     assert!(out.cut.is_some());
     let goal = &out.properties[0];
     let avoid = &out.properties[1];
-    assert_eq!(goal.status, Status::Unsure);
-    assert_eq!(avoid.status, Status::Verified, "{avoid:?}");
+    assert_eq!(goal.status, Verdict::Unsure);
+    assert_eq!(avoid.status, Verdict::Verified, "{avoid:?}");
     assert_eq!(avoid.cut, None);
 }
 
@@ -136,7 +136,7 @@ fn properties_before_the_overflow_are_still_proven() {
 /// property UNSURE naming the time limit.
 #[test]
 fn a_spent_time_limit_leaves_everything_unsure() {
-    use ravel::execute::{execute_with, Control};
+    use ravel::execute::{execute_system, Control};
     let src = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator.ravel"),
     )
@@ -161,8 +161,8 @@ fn a_spent_time_limit_leaves_everything_unsure() {
                 &ravel_cli::read_request,
             )
             .expect("valid");
-            let plan = lower(&checked);
-            let out = execute_with(
+            let plan = lower_system(&checked);
+            let out = execute_system(
                 &plan,
                 &Control {
                     elapsed: &|| 1.0,
@@ -175,10 +175,10 @@ fn a_spent_time_limit_leaves_everything_unsure() {
             assert_eq!(out.samples_drawn, 0, "{what}");
             assert_eq!(out.cut, Some((1, Cut::TimeLimit)), "{what}");
             for p in &out.properties {
-                assert_eq!(p.status, Status::Unsure, "{what}: {}", p.name);
+                assert_eq!(p.status, Verdict::Unsure, "{what}: {}", p.name);
                 assert_eq!(p.cut.map(|c| c.1), Some(Cut::TimeLimit), "{what}");
             }
-            let text = ravel::report::text("s", &plan, &out, None);
+            let text = ravel::report::system::text("s", &plan, &out, None);
             assert!(text.contains("time limit"), "{text}");
         }
     }
@@ -202,10 +202,10 @@ fn counterexamples_are_confirmed_only_when_real() {
         &ravel_cli::read_request,
     )
     .expect("valid");
-    let plan = lower(&checked);
-    let out = execute(&plan, &|| 0.0);
+    let plan = lower_system(&checked);
+    let out = execute_system(&plan, &Control::unlimited());
     let goal = &out.properties[0];
-    assert_eq!(goal.status, Status::Falsified);
+    assert_eq!(goal.status, Verdict::Falsified);
     let tr = goal.counterexample.clone().expect("trajectory");
     let prop = &plan.properties[0];
     assert!(certainly_violates(&plan, &tr, prop, goal.step));

@@ -495,8 +495,8 @@ fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
 /// simulation) lies, at every step, in the union of the cells' sets.
 #[test]
 fn every_trajectory_stays_inside_what_execute_reports() {
-    use ravel::execute::execute;
-    use ravel::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
+    use ravel::execute::{execute_system, Control};
+    use ravel::lower::{Guide, Partitioner, Property, PropertyKind, SystemPlan};
     use ravel_analysis::partition::Budget;
     use ravel_analysis::sets::Polytope;
 
@@ -565,7 +565,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
             if prop == Propagator::ReachSdp && seed % 6 != 0 {
                 continue;
             }
-            let plan = Plan {
+            let plan = SystemPlan {
                 system: "random".into(),
                 state_name: "x".into(),
                 control_name: "u".into(),
@@ -599,7 +599,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 samples: 200,
                 seed,
             };
-            let out = execute(&plan, &|| 0.0);
+            let out = execute_system(&plan, &Control::unlimited());
             let what = format!(
                 "{} {prop:?} {:?} {:?}",
                 case.label, plan.partitioner, plan.boundary
@@ -610,14 +610,14 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 spec_path: String::new(),
                 spec_sha256: String::new(),
             };
-            let cert = ravel::certificate::build(&plan, &out, &id);
+            let cert = ravel::certificate::build_system(&plan, &out, &id);
             let report = ravel_certify::check(&cert, &plan.closed_loop.net);
             match &report.answer {
                 ravel_certify::Answer::Valid => {
                     if out
                         .properties
                         .iter()
-                        .any(|p| p.status == ravel::execute::Status::Verified)
+                        .any(|p| p.status == ravel::execute::Verdict::Verified)
                     {
                         certified += 1;
                     }
@@ -823,7 +823,7 @@ fn interval_replay_encloses_simulated_trajectories() {
 /// for bound, for 1, 2 and 3 threads.
 #[test]
 fn cell_threads_give_the_same_outcome() {
-    use ravel::execute::{execute_with, Control};
+    use ravel::execute::{execute_system, Control};
     for spec in [
         "specs/double_integrator_partitioned.ravel",
         "specs/double_integrator_noisy.ravel",
@@ -841,9 +841,9 @@ fn cell_threads_give_the_same_outcome() {
             &ravel_cli::read_request,
         )
         .expect("valid");
-        let plan = ravel::lower::lower(&checked);
+        let plan = ravel::lower::lower_system(&checked);
         let run = |threads: usize| {
-            let out = execute_with(
+            let out = execute_system(
                 &plan,
                 &Control {
                     elapsed: &|| 0.0,
@@ -852,7 +852,7 @@ fn cell_threads_give_the_same_outcome() {
                     threads,
                 },
             );
-            ravel::report::json(spec, &plan, &out, None)
+            ravel::report::system::json(spec, &plan, &out, None)
         };
         let one = run(1);
         assert_eq!(one, run(2), "{spec}");
@@ -863,7 +863,7 @@ fn cell_threads_give_the_same_outcome() {
 /// Each step of a one-sample simulation, redone with nalgebra's own
 /// matrix-vector products (the order simulations have always used): the same
 /// controls and states, bit for bit.
-fn nalgebra_replays(plan: &ravel::lower::Plan, tr: &ravel::execute::Trajectory, spec: &str) {
+fn nalgebra_replays(plan: &ravel::lower::SystemPlan, tr: &ravel::execute::Trajectory, spec: &str) {
     let cl = &plan.closed_loop;
     for t in 0..tr.controls.len() {
         let x = DVector::from_column_slice(&tr.states[t]);
@@ -914,7 +914,7 @@ fn batched_simulation_matches_the_scalar_one_bit_for_bit() {
             &ravel_cli::read_request,
         )
         .expect("valid");
-        let plan = ravel::lower::lower(&checked);
+        let plan = ravel::lower::lower_system(&checked);
         let special = plan.initial.special_points();
         // a range that starts inside the special points and runs past them
         let ks = 1..(special.len() + 70).min(200);

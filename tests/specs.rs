@@ -82,8 +82,8 @@ fn valid_specs() {
                 render(&d, &name, &source, 100, false)
             ),
         };
-        let plan = ravel::lower::lower(&checked);
-        let outcome = ravel::execute::execute(&plan, &|| 0.0);
+        let plan = ravel::lower::lower_system(&checked);
+        let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
         // every simulated state lies in the reachable set's bounding box
         for (t, (reach, sampled)) in outcome.reach.iter().zip(&outcome.sampled).enumerate() {
             if let Some(s) = sampled {
@@ -99,7 +99,7 @@ fn valid_specs() {
             "{name}: verdict differs from its `// expect:` header"
         );
         insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
-        let mut report = ravel::report::text(&name, &plan, &outcome, None);
+        let mut report = ravel::report::system::text(&name, &plan, &outcome, None);
         if plan.propagator == ravel_analysis::closed_loop::Propagator::ReachSdp {
             // The SDP solver's LAPACK may round differently on another CPU:
             // its certified bounds are snapshotted at 4 decimals.
@@ -114,15 +114,15 @@ fn valid_specs() {
 /// spec's certificate is VALID), then a summary for the snapshot.
 fn certificate_summary(
     name: &str,
-    plan: &ravel::lower::Plan,
-    outcome: &ravel::execute::Outcome,
+    plan: &ravel::lower::SystemPlan,
+    outcome: &ravel::execute::SystemOutcome,
 ) -> String {
     use ravel_certify::Answer;
     let id = ravel::certificate::Identity {
         spec_path: name.to_string(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build(plan, outcome, &id);
+    let cert = ravel::certificate::build_system(plan, outcome, &id);
     // the document survives a round trip through its text exactly
     let text = serde_json::to_string(&cert).expect("serialisable");
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
@@ -148,8 +148,9 @@ fn certificate_summary(
 /// tree and of the report.
 #[test]
 fn network_specs() {
-    use ravel::execute::network::{execute_network, NetControl};
-    use ravel::execute::Status;
+    use ravel::execute::network::execute_network;
+    use ravel::execute::Control;
+    use ravel::execute::Verdict;
     insta::glob!("../specs/network", "*.ravel", |path| {
         let source = std::fs::read_to_string(path).expect("spec is readable");
         let name = display_name(path);
@@ -170,9 +171,10 @@ fn network_specs() {
         let plan = ravel::lower::lower_network(&checked);
         let out = execute_network(
             &plan,
-            &NetControl {
+            &Control {
                 elapsed: &|| 0.0,
                 time_limit: None,
+                progress: &|_| {},
                 threads: 1,
             },
         );
@@ -190,8 +192,8 @@ fn network_specs() {
         }
         for p in &out.properties {
             match p.status {
-                Status::Verified => assert!(p.margin >= 0.0 && p.counterexample.is_none()),
-                Status::Falsified => {
+                Verdict::Verified => assert!(p.margin >= 0.0 && p.counterexample.is_none()),
+                Verdict::Falsified => {
                     let w = p.counterexample.as_ref().expect("a witness");
                     assert!(
                         plan.input
@@ -201,7 +203,7 @@ fn network_specs() {
                     );
                     assert_eq!(plan.net.forward(&w.input), w.output);
                 }
-                Status::Unsure => assert!(p.counterexample.is_none()),
+                Verdict::Unsure => assert!(p.counterexample.is_none()),
             }
         }
         for r in &out.radii {

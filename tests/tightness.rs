@@ -11,12 +11,12 @@
 
 use std::path::Path;
 
-use ravel::execute::{execute, propagate_cell};
-use ravel::lower::{lower, Partitioner, Plan};
+use ravel::execute::{execute_system, propagate_cell, Control};
+use ravel::lower::{lower_system, Partitioner, SystemPlan};
 use ravel_analysis::closed_loop::{Boundary, Propagator};
 use ravel_analysis::sets::{IBox, Region};
 
-fn plan(spec: &str, prop: Propagator, partitioner: Partitioner, boundary: Boundary) -> Plan {
+fn plan(spec: &str, prop: Propagator, partitioner: Partitioner, boundary: Boundary) -> SystemPlan {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(spec);
     let src = std::fs::read_to_string(&path).expect("spec");
     let mut c = ravel::front_end(&src, path.parent().expect("dir"), &ravel_cli::read_request)
@@ -25,7 +25,7 @@ fn plan(spec: &str, prop: Propagator, partitioner: Partitioner, boundary: Bounda
     c.partitioner = partitioner;
     c.boundary = boundary;
     c.samples = 1000;
-    lower(&c)
+    lower_system(&c)
 }
 
 /// `inner ⊆ outer` for the sets ravel produces (boxes, or polytopes with the same rows).
@@ -42,7 +42,7 @@ fn within(inner: &Region, outer: &Region) -> bool {
     }
 }
 
-fn sets(plan: &Plan, cell: &Region) -> Vec<Region> {
+fn sets(plan: &SystemPlan, cell: &Region) -> Vec<Region> {
     propagate_cell(plan, cell, None)
         .into_iter()
         .map(|s| s.set)
@@ -69,7 +69,7 @@ fn partitioned_runs_are_never_looser_than_their_parent() {
                     boundary.clone(),
                 );
                 let parent = sets(&p, &p.initial);
-                let out = execute(&p, &|| 0.0);
+                let out = execute_system(&p, &Control::unlimited());
                 assert_eq!(out.cells.len(), 6);
                 for (c, cell) in out.cells.iter().enumerate() {
                     for t in 0..=p.horizon {
@@ -93,7 +93,7 @@ fn partitioned_runs_are_never_looser_than_their_parent() {
                     },
                     boundary,
                 );
-                let out = execute(&g, &|| 0.0);
+                let out = execute_system(&g, &Control::unlimited());
                 for cell in &out.cells {
                     for t in 0..=g.horizon {
                         assert!(within(&cell[t], &parent[t]), "{spec} {prop:?} gsg step {t}");
@@ -141,8 +141,8 @@ fn table_two_errors_come_in_the_tutorials_order() {
     let spec = "specs/double_integrator.ravel";
     let error = |prop, grid: Vec<usize>| {
         let p = plan(spec, prop, Partitioner::Uniform(grid), Boundary::Box);
-        let out = execute(&p, &|| 0.0);
-        ravel::report::final_error(&out).expect("samples were drawn")
+        let out = execute_system(&p, &Control::unlimited());
+        ravel::report::system::final_error(&out).expect("samples were drawn")
     };
     let ibp = error(Propagator::IbpSeparate, vec![1, 1]);
     let sg_ibp = error(Propagator::SgIbpSeparate, vec![1, 1]);
@@ -184,12 +184,12 @@ fn balls_without_partition_beat_their_bounding_box() {
             Boundary::Box,
         );
         assert!(matches!(p.initial, Region::Ball { .. }));
-        let boxed = Plan {
+        let boxed = SystemPlan {
             initial: Region::Box(p.initial.bbox()),
             ..p.clone()
         };
-        let ball = execute(&p, &|| 0.0);
-        let bbox = execute(&boxed, &|| 0.0);
+        let ball = execute_system(&p, &Control::unlimited());
+        let bbox = execute_system(&boxed, &Control::unlimited());
         for t in 1..ball.reach.len() {
             assert!(
                 bbox.reach[t].contains_box(&ball.reach[t]),
@@ -215,7 +215,7 @@ fn balls_without_partition_beat_their_bounding_box() {
 /// (error below 1e-6, against 0.53).
 #[test]
 fn optimised_slopes_tighten_the_double_integrator() {
-    use ravel::execute::Status;
+    use ravel::execute::Verdict;
     use ravel::lower::PropertyKind;
     let run = |spec, prop, steps: usize, goal_x1: Option<f64>| {
         let mut p = plan(spec, prop, Partitioner::Uniform(vec![1, 1]), Boundary::Box);
@@ -231,7 +231,7 @@ fn optimised_slopes_tighten_the_double_integrator() {
                 }
             }
         }
-        execute(&p, &|| 0.0)
+        execute_system(&p, &Control::unlimited())
     };
     let spec = "specs/double_integrator.ravel";
     let (plain, slopes) = (
@@ -249,14 +249,14 @@ fn optimised_slopes_tighten_the_double_integrator() {
         b.hi[1],
         a.hi[1]
     );
-    assert_eq!(plain.verdict, Status::Unsure);
-    assert_eq!(slopes.verdict, Status::Verified);
+    assert_eq!(plain.verdict, Verdict::Unsure);
+    assert_eq!(slopes.verdict, Verdict::Verified);
     let spec = "specs/double_integrator_unrolled.ravel";
     let (plain, slopes) = (
         run(spec, Propagator::CrownUnrolled, 0, None),
         run(spec, Propagator::CrownUnrolled, 3, None),
     );
-    let err = |o| ravel::report::final_error(o).expect("sampled");
+    let err = |o| ravel::report::system::final_error(o).expect("sampled");
     assert!(err(&plain) > 0.4, "unrolled error {}", err(&plain));
     assert!(
         err(&slopes) < 1e-6,

@@ -4,7 +4,8 @@
 //! outside the supported fragment are refused with their line.
 
 use ravel::check::{NetPropertyKind, Task};
-use ravel::execute::network::{execute_network, NetControl};
+use ravel::execute::network::execute_network;
+use ravel::execute::Control;
 use ravel_analysis::sets::Region;
 use std::path::Path;
 
@@ -16,7 +17,12 @@ fn import(name: &str) -> Result<String, ravel::vnnlib::ImportError> {
     ravel::vnnlib::import(&text, "../../../models/classifier.onnx", name, name)
 }
 
-fn run(name: &str) -> (ravel::lower::NetPlan, ravel::execute::network::NetOutcome) {
+fn run(
+    name: &str,
+) -> (
+    ravel::lower::NetworkPlan,
+    ravel::execute::network::NetworkOutcome,
+) {
     let spec = import(name).expect("imports");
     let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel_cli::read_request, None)
         .unwrap_or_else(|d| panic!("{name}: the imported spec does not check: {d:?}\n{spec}"));
@@ -26,9 +32,10 @@ fn run(name: &str) -> (ravel::lower::NetPlan, ravel::execute::network::NetOutcom
     let plan = ravel::lower::lower_network(&c);
     let out = execute_network(
         &plan,
-        &NetControl {
+        &Control {
             elapsed: &|| 0.0,
             time_limit: None,
+            progress: &|_| {},
             threads: 1,
         },
     );
@@ -36,7 +43,7 @@ fn run(name: &str) -> (ravel::lower::NetPlan, ravel::execute::network::NetOutcom
 }
 
 /// The avoid members as (row, rhs) lists.
-fn members(plan: &ravel::lower::NetPlan) -> Vec<Vec<(Vec<f64>, f64)>> {
+fn members(plan: &ravel::lower::NetworkPlan) -> Vec<Vec<(Vec<f64>, f64)>> {
     match &plan.properties[0].kind {
         NetPropertyKind::Avoid(m) => m.iter().map(|p| p.rows.clone()).collect(),
         other => panic!("not an avoid set: {other:?}"),
@@ -168,9 +175,10 @@ fn counterexamples_are_float32_inputs_of_the_box() {
             panic!("not a network spec")
         };
         let plan = ravel::lower::lower_network(&c);
-        let ctl = NetControl {
+        let ctl = Control {
             elapsed: &|| 0.0,
             time_limit: None,
+            progress: &|_| {},
             threads: 1,
         };
         execute_network(&plan, &ctl)

@@ -8,9 +8,9 @@
 mod common;
 
 use ravel::check::{NetProperty, NetPropertyKind};
-use ravel::execute::Status;
+use ravel::execute::Verdict;
 use ravel::ir::NetPropagator;
-use ravel::lower::NetPlan;
+use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
 use ravel_base::nn::{Layer, Network};
 use ravel_certify::Answer;
@@ -31,25 +31,25 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
         let checked =
             ravel::front_end(src, std::path::Path::new("specs"), &ravel_cli::read_request)
                 .expect("the spec checks");
-        let plan = ravel::lower::lower(&checked);
-        let outcome = ravel::execute::execute(&plan, &|| 0.0);
+        let plan = ravel::lower::lower_system(&checked);
+        let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
         (plan, outcome)
     };
     let (lp_plan, lp_out) = analyse(&narrowed.replace("reach_sdp", "reach_lp"));
     assert_eq!(lp_plan.propagator.name(), "reach_lp");
     assert_ne!(
         lp_out.properties[0].status,
-        Status::Verified,
+        Verdict::Verified,
         "Reach-LP proves it too"
     );
     let (plan, outcome) = analyse(&narrowed);
-    assert_eq!(outcome.properties[0].status, Status::Verified);
+    assert_eq!(outcome.properties[0].status, Verdict::Verified);
     assert_eq!(outcome.cells.len(), 1);
     let id = ravel::certificate::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
     assert_eq!(
         cert["evidence"]["status"], "checkable",
         "{}",
@@ -75,10 +75,10 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     // states reach −0.033), forced to VERIFIED: the refinement gives up
     let (plan, mut outcome) =
         analyse(&source.replace("x[1] in [-1.5, 0.5]", "x[1] in [-1.5, -0.04]"));
-    assert_ne!(outcome.properties[0].status, Status::Verified);
-    outcome.properties[0].status = Status::Verified;
+    assert_ne!(outcome.properties[0].status, Verdict::Verified);
+    outcome.properties[0].status = Verdict::Verified;
     outcome.properties[0].counterexample = None;
-    let cert = ravel::certificate::build(&plan, &outcome, &id);
+    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     assert!(matches!(
         ravel_certify::check(&cert, &plan.closed_loop.net).answer,
@@ -105,7 +105,7 @@ fn sum_network() -> Network {
     )
 }
 
-fn plan(input: Region, bound: f64) -> NetPlan {
+fn plan(input: Region, bound: f64) -> NetworkPlan {
     let mut p = common::net_plan(
         sum_network(),
         input,
@@ -121,7 +121,7 @@ fn plan(input: Region, bound: f64) -> NetPlan {
     p
 }
 
-fn answer(cert: &Value, p: &NetPlan) -> Answer {
+fn answer(cert: &Value, p: &NetworkPlan) -> Answer {
     ravel_certify::network::check(cert, &p.net).answer
 }
 
@@ -138,7 +138,7 @@ fn ball_input_proofs_certify_valid() {
         };
         let p = plan(ball.clone(), bound);
         let out = common::run_net(&p);
-        assert_eq!(out.properties[0].status, Status::Verified, "{norm:?}");
+        assert_eq!(out.properties[0].status, Verdict::Verified, "{norm:?}");
         let cert = common::net_certificate(&p, &out);
         assert_eq!(cert["evidence"]["status"], "checkable", "{norm:?}: {cert}");
         assert_eq!(answer(&cert, &p), Answer::Valid, "{norm:?}");
@@ -165,7 +165,7 @@ fn polytope_input_proofs_certify_valid_with_dual_witnesses() {
     };
     let p = plan(poly.clone(), 1.01);
     let out = common::run_net(&p);
-    assert_eq!(out.properties[0].status, Status::Verified);
+    assert_eq!(out.properties[0].status, Verdict::Verified);
     let cert = common::net_certificate(&p, &out);
     assert_eq!(cert["evidence"]["status"], "checkable", "{cert}");
     assert_eq!(answer(&cert, &p), Answer::Valid);
@@ -231,7 +231,7 @@ fn a_network_verdict_only_the_sdp_proves_certifies_valid() {
         p.net = net.clone();
         p.propagator = NetPropagator::Sdp;
         let out = common::run_net(&p);
-        assert_eq!(out.properties[0].status, Status::Verified);
+        assert_eq!(out.properties[0].status, Verdict::Verified);
         let cert = common::net_certificate(&p, &out);
         assert_eq!(
             cert["evidence"]["status"], "checkable",

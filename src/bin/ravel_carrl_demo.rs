@@ -15,9 +15,10 @@
 
 use std::process::ExitCode;
 
-use ravel::execute::network::{choose, NetControl};
+use ravel::execute::network::choose;
+use ravel::execute::Control;
 use ravel::ir::{NetPropagator, Partitioner};
-use ravel::lower::NetPlan;
+use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::Norm;
 use ravel_analysis::shape::Shape;
 use ravel_base::nn::Network;
@@ -34,7 +35,7 @@ fn argmax(y: &[f64]) -> usize {
 }
 
 struct Policy<'a> {
-    plan: &'a NetPlan,
+    plan: &'a NetworkPlan,
     /// `None`: nominal; `Some(ε_rob)`: CARRL.
     eps: Option<f64>,
 }
@@ -44,9 +45,10 @@ impl Policy<'_> {
         match self.eps {
             None => argmax(&self.plan.net.forward(obs)),
             Some(e) => {
-                let ctl = NetControl {
+                let ctl = Control {
                     elapsed: &|| 0.0,
                     time_limit: None,
+                    progress: &|_| {},
                     threads: 1,
                 };
                 choose(self.plan, obs, &[e, e], Norm::LInf, &ctl).robust
@@ -194,7 +196,7 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let plan = NetPlan {
+    let plan = NetworkPlan {
         name: "lane".into(),
         input_name: "s".into(),
         output_name: "q".into(),

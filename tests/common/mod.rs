@@ -3,9 +3,10 @@
 
 use nalgebra::{DMatrix, DVector};
 use ravel::check::NetProperty;
-use ravel::execute::network::{execute_network, NetControl, NetOutcome};
+use ravel::execute::network::{execute_network, NetworkOutcome};
+use ravel::execute::Control;
 use ravel::ir::{NetPropagator, Partitioner};
-use ravel::lower::NetPlan;
+use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::Region;
 use ravel_analysis::shape::Shape;
 use ravel_base::nn::{Activation, Layer, Network};
@@ -62,9 +63,9 @@ pub fn random_network(
 
 /// A network spec's plan without a spec: CROWN on one cell, box shape, 200
 /// samples, seed 7 (callers change what they test).
-pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> NetPlan {
+pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> NetworkPlan {
     let cells = vec![1; net.inputs];
-    NetPlan {
+    NetworkPlan {
         name: "test".into(),
         input_name: "x".into(),
         output_name: "y".into(),
@@ -88,19 +89,20 @@ pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> Ne
 }
 
 /// Execute a network plan on one thread, without a time limit.
-pub fn run_net(p: &NetPlan) -> NetOutcome {
+pub fn run_net(p: &NetworkPlan) -> NetworkOutcome {
     execute_network(
         p,
-        &NetControl {
+        &Control {
             elapsed: &|| 0.0,
             time_limit: None,
+            progress: &|_| {},
             threads: 1,
         },
     )
 }
 
 /// The certificate of a network result, with an empty identity.
-pub fn net_certificate(p: &NetPlan, out: &NetOutcome) -> Value {
+pub fn net_certificate(p: &NetworkPlan, out: &NetworkOutcome) -> Value {
     let id = ravel::certificate::Identity {
         spec_path: "t".into(),
         spec_sha256: String::new(),

@@ -22,8 +22,8 @@ use serde_json::{json, Value};
 use nalgebra::DMatrix;
 use ravel_analysis::closed_loop::{ClosedLoop, Propagator};
 
-use crate::execute::{Outcome, Status, Trajectory};
-use crate::lower::{Plan, PropertyKind};
+use crate::execute::{Run, SystemOutcome, Trajectory, Verdict};
+use crate::lower::{Plan, PropertyKind, SystemPlan};
 use ravel_analysis::lp;
 use ravel_analysis::sets::{IBox, Region};
 use ravel_base::nn::{Layer, Network};
@@ -66,7 +66,7 @@ fn ineq_json(rows: &[(Vec<f64>, f64)]) -> Value {
 
 /// The problem as a certificate records it: what the checker reads, and
 /// what `ravel certify` compares with the spec's own lowering.
-pub fn problem_json(plan: &Plan) -> Value {
+pub fn system_problem_json(plan: &SystemPlan) -> Value {
     let cl = &plan.closed_loop;
     let plants: Vec<Value> = cl
         .plants()
@@ -184,7 +184,7 @@ pub fn loop_data(cl: &ClosedLoop) -> (Vec<PlantRows>, Bx, Bx) {
 
 /// The VERIFIED evidence's settings, without cells: `steps`, `mode`,
 /// `slope_steps`.
-fn evidence_header(plan: &Plan, steps: usize) -> Value {
+fn evidence_header(plan: &SystemPlan, steps: usize) -> Value {
     // the unrolled chain costs quadratic time in the horizon: only when the
     // analysis itself unrolled
     let unrolled = plan.propagator == Propagator::CrownUnrolled;
@@ -217,8 +217,8 @@ fn refinement_cap(cells: usize) -> usize {
 /// CROWN, a parent cell's intersection), and smaller cells tighten the
 /// checker's boxes. The error says why the evidence is not checkable.
 fn derive(
-    plan: &Plan,
-    outcome: &Outcome,
+    plan: &SystemPlan,
+    outcome: &SystemOutcome,
     header: &Value,
     cert: &Value,
     refine: bool,
@@ -301,7 +301,7 @@ fn bisect(b: &IBox, whole: &IBox) -> (IBox, IBox) {
 /// witness of every step. With the analysis's `sets` for the cell, a step
 /// whose set is a polytope claims its directions too.
 fn derive_cell(
-    plan: &Plan,
+    plan: &SystemPlan,
     plants: &[PlantRows],
     (w, v): (&Bx, &Bx),
     start: &IBox,
@@ -419,7 +419,7 @@ fn derive_cell(
 }
 
 /// The certificate of one (spec, controller) result.
-pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
+pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -> Value {
     let verdicts: Vec<Value> = plan
         .properties
         .iter()
@@ -427,7 +427,7 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
         .map(|(p, r)| {
             let mut v =
                 json!({ "property": p.name, "kind": r.kind.as_str(), "status": r.status.as_str() });
-            if r.status == Status::Falsified {
+            if r.status == Verdict::Falsified {
                 v["step"] = json!(r.step);
                 v["trajectory"] = r
                     .counterexample
@@ -441,7 +441,7 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
         .properties
         .iter()
         .zip(&outcome.properties)
-        .filter(|(_, r)| r.status == Status::Verified)
+        .filter(|(_, r)| r.status == Verdict::Verified)
         .map(|(p, _)| p.last_step().min(plan.horizon))
         .max();
     let mut cert = json!({
@@ -457,7 +457,7 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
             "propagator": plan.propagator.name(),
             "cells": outcome.partition.len(),
         },
-        "problem": problem_json(plan),
+        "problem": system_problem_json(plan),
         "verdicts": verdicts,
         "evidence": json!({ "status": "none" }),
     });
@@ -509,7 +509,7 @@ pub fn build(plan: &Plan, outcome: &Outcome, id: &Identity) -> Value {
 
 /// The problem of a network spec as a certificate records it (and `ravel
 /// certify` compares it with the spec's, number for number).
-pub fn network_problem_json(plan: &crate::lower::NetPlan) -> Value {
+pub fn network_problem_json(plan: &crate::lower::NetworkPlan) -> Value {
     use crate::check::NetPropertyKind;
     use ravel_analysis::sets::Region;
     let rows = |r: &[(Vec<f64>, f64)]| -> Value {
@@ -562,8 +562,8 @@ pub fn network_problem_json(plan: &crate::lower::NetPlan) -> Value {
 /// prove the verdicts (as for closed loops), and the evidence is marked
 /// unsupported when that fails within the budget.
 pub fn build_network(
-    plan: &crate::lower::NetPlan,
-    outcome: &crate::execute::network::NetOutcome,
+    plan: &crate::lower::NetworkPlan,
+    outcome: &crate::execute::network::NetworkOutcome,
     id: &Identity,
 ) -> Value {
     let verdicts: Vec<Value> = outcome
@@ -571,7 +571,7 @@ pub fn build_network(
         .iter()
         .map(|r| {
             let mut v = json!({ "property": r.name, "kind": r.kind.as_str(), "status": r.status.as_str(), "label": r.label });
-            if let (Status::Falsified, Some(w)) = (r.status, &r.counterexample) {
+            if let (Verdict::Falsified, Some(w)) = (r.status, &r.counterexample) {
                 v["input"] = json!(w.input);
             }
             v
@@ -580,7 +580,7 @@ pub fn build_network(
     let any_verified = outcome
         .properties
         .iter()
-        .any(|r| r.status == Status::Verified);
+        .any(|r| r.status == Verdict::Verified);
     let mut cert = json!({
         "format": FORMAT,
         "tool": { "name": "ravel", "version": env!("CARGO_PKG_VERSION") },
@@ -690,4 +690,22 @@ pub fn build_network(
         });
     }
     cert
+}
+
+/// The certificate of a run: its problem, its verdicts and the evidence a
+/// checker needs (see [`build_system`] and [`build_network`]).
+pub fn build(run: &Run, id: &Identity) -> Value {
+    match run {
+        Run::System { plan, outcome } => build_system(plan, outcome, id),
+        Run::Network { plan, outcome } => build_network(plan, outcome, id),
+    }
+}
+
+/// The problem a plan states, as a certificate records it (compared number
+/// for number by `ravel certify`).
+pub fn problem_json(plan: &Plan) -> Value {
+    match plan {
+        Plan::System(p) => system_problem_json(p),
+        Plan::Network(p) => network_problem_json(p),
+    }
 }

@@ -21,6 +21,7 @@ pub mod vnnlib;
 use std::path::{Path, PathBuf};
 
 use check::{Checked, ControllerFile, Task};
+use execute::{Control, Run};
 use ravel_base::limits;
 use ravel_syntax as syntax;
 use ravel_syntax::diag::{self, Diagnostic};
@@ -149,4 +150,28 @@ pub fn front_end_task(
         })
         .collect();
     check::check_task(&spec, controller.as_ref(), &data)
+}
+
+/// The back end: lower a checked task and execute its plan under `ctl`.
+///
+/// It cannot fail: every problem a spec can have is a diagnostic of the
+/// front end, and whatever the analysis cannot decide (a solver issue, an
+/// overflow, the time limit) is an UNSURE property of the run, with its
+/// reason. Reports ([`report::text`], [`report::json`]) and certificates
+/// ([`certificate::build`]) are made from the run.
+pub fn run(task: &Task, ctl: &Control) -> Run {
+    execute::execute(lower::lower(task), ctl)
+}
+
+/// The whole pipeline for one spec: [`front_end_task`] (parse, check, read
+/// the controller through `read`), then [`run`].
+pub fn verify(
+    source: &str,
+    spec_dir: &Path,
+    read: Reader,
+    controller: Option<&Path>,
+    ctl: &Control,
+) -> Result<Run, Vec<Diagnostic>> {
+    let task = front_end_task(source, spec_dir, read, controller)?;
+    Ok(run(&task, ctl))
 }

@@ -1,12 +1,12 @@
-//! Lowering: a [`Checked`] spec → an analysis [`Plan`], a checked network
-//! spec → a [`NetPlan`]. Cannot fail.
+//! Lowering: a checked [`Task`] → its [`Plan`] (a [`SystemPlan`] for a
+//! closed loop, a [`NetworkPlan`] for a network on its own). Cannot fail.
 //!
 //! Lowering decides *what* to compute: it appends the control saturation to
 //! the network, assembles the closed loop, keeps the partitioner (the cells
 //! themselves are made by [`crate::execute`], which may refine them), and
 //! turns goal and avoid sets into properties over the steps they constrain.
 
-use crate::check::Checked;
+use crate::check::{Checked, NetworkChecked, Task};
 pub use crate::ir::{Guide, Partitioner};
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
 use ravel_analysis::sets::{IBox, Polytope, Region};
@@ -45,9 +45,54 @@ impl Property {
     }
 }
 
-/// Everything the executor needs, as plain data.
+/// Everything the executor needs to run a task, as plain data: one variant
+/// per kind of spec (a third kind of plant is a third variant).
 #[derive(Clone, Debug)]
-pub struct Plan {
+pub enum Plan {
+    /// A closed loop.
+    System(Box<SystemPlan>),
+    /// A network on its own.
+    Network(Box<NetworkPlan>),
+}
+
+/// Lower a checked task to its plan.
+pub fn lower(task: &Task) -> Plan {
+    match task {
+        Task::System(c) => Plan::System(Box::new(lower_system(c))),
+        Task::Network(c) => Plan::Network(Box::new(lower_network(c))),
+    }
+}
+
+impl Plan {
+    /// The path the controller (or the network's model) was read from.
+    pub fn controller_resolved(&self) -> &str {
+        match self {
+            Plan::System(p) => &p.controller_resolved,
+            Plan::Network(p) => &p.model_resolved,
+        }
+    }
+
+    /// SHA-256 of the controller (or model) file, in hex.
+    pub fn controller_sha256(&self) -> &str {
+        match self {
+            Plan::System(p) => &p.controller_sha256,
+            Plan::Network(p) => &p.model_sha256,
+        }
+    }
+
+    /// The network the plan analyses (for a closed loop, with the control
+    /// saturation appended).
+    pub fn network(&self) -> &ravel_base::nn::Network {
+        match self {
+            Plan::System(p) => &p.closed_loop.net,
+            Plan::Network(p) => &p.net,
+        }
+    }
+}
+
+/// Everything the executor needs for a closed loop, as plain data.
+#[derive(Clone, Debug)]
+pub struct SystemPlan {
     /// The system's name.
     pub system: String,
     /// The state vector's name.
@@ -110,8 +155,8 @@ fn describe(c: &crate::onnx::Controller) -> String {
     }
 }
 
-/// Lower a checked spec to a plan.
-pub fn lower(c: &Checked) -> Plan {
+/// Lower a checked closed-loop spec to its plan.
+pub fn lower_system(c: &Checked) -> SystemPlan {
     let net = match &c.limits {
         Some(l) => c.controller.net.with_saturation(&l.lo, &l.hi),
         None => c.controller.net.clone(),
@@ -132,7 +177,7 @@ pub fn lower(c: &Checked) -> Plan {
             },
         });
     }
-    Plan {
+    SystemPlan {
         system: c.system.clone(),
         state_name: c.state.0.clone(),
         control_name: c.control.0.clone(),
@@ -158,7 +203,7 @@ pub fn lower(c: &Checked) -> Plan {
 
 /// Everything the executor needs for a network spec, as plain data.
 #[derive(Clone, Debug)]
-pub struct NetPlan {
+pub struct NetworkPlan {
     /// The network's name.
     pub name: String,
     /// The input vector's name.
@@ -199,9 +244,9 @@ pub struct NetPlan {
     pub slope_steps: usize,
 }
 
-/// Lower a checked network spec to a plan.
-pub fn lower_network(c: &crate::check::NetworkChecked) -> NetPlan {
-    NetPlan {
+/// Lower a checked network spec to its plan.
+pub fn lower_network(c: &NetworkChecked) -> NetworkPlan {
+    NetworkPlan {
         name: c.name.clone(),
         input_name: c.input.0.clone(),
         output_name: c.output.0.clone(),

@@ -10,8 +10,8 @@
 //! the drawing (the caption says so). Plain SVG written by hand: no
 //! plotting library, no system dependency, the same bytes every run.
 
-use crate::execute::{Outcome, Trajectory};
-use crate::lower::{Plan, PropertyKind};
+use crate::execute::{SystemOutcome, Trajectory};
+use crate::lower::{PropertyKind, SystemPlan};
 use ravel_analysis::sets::{IBox, Region};
 
 /// Width and height of the drawing area in pixels.
@@ -146,8 +146,8 @@ fn path(v: &View, tr: &Trajectory, i: usize, j: usize, style: &str) -> String {
 /// simulated trajectories `samples` (drawn thin).
 pub fn svg(
     title: &str,
-    plan: &Plan,
-    outcome: &Outcome,
+    plan: &SystemPlan,
+    outcome: &SystemOutcome,
     dims: (usize, usize),
     samples: &[Trajectory],
 ) -> String {

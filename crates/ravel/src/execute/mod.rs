@@ -1,4 +1,4 @@
-//! Execution: a [`Plan`] → an [`Outcome`]: reachable sets, Monte Carlo
+//! Execution: a [`SystemPlan`] → an [`SystemOutcome`]: reachable sets, Monte Carlo
 //! trajectories, and a verdict per property.
 //!
 //! * Every partition cell of the initial set is carried through the horizon
@@ -16,7 +16,7 @@ use nalgebra::DMatrix;
 
 pub mod network;
 
-use crate::lower::{Guide, Partitioner, Plan, Property, PropertyKind};
+use crate::lower::{Guide, NetworkPlan, Partitioner, Plan, Property, PropertyKind, SystemPlan};
 use ravel_analysis::closed_loop::{Boundary, Cut, Propagator, Step};
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
@@ -29,7 +29,7 @@ use ravel_base::rng::Rng;
 
 /// A verdict.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Status {
+pub enum Verdict {
     /// Proven for every trajectory.
     Verified,
     /// Neither proven nor refuted.
@@ -38,13 +38,13 @@ pub enum Status {
     Falsified,
 }
 
-impl Status {
+impl Verdict {
     /// The upper-case name used in reports.
     pub fn as_str(self) -> &'static str {
         match self {
-            Status::Verified => "VERIFIED",
-            Status::Unsure => "UNSURE",
-            Status::Falsified => "FALSIFIED",
+            Verdict::Verified => "VERIFIED",
+            Verdict::Unsure => "UNSURE",
+            Verdict::Falsified => "FALSIFIED",
         }
     }
 }
@@ -89,7 +89,7 @@ pub struct PropertyResult {
     /// Goal or avoid.
     pub kind: Kind,
     /// The verdict.
-    pub status: Status,
+    pub status: Verdict,
     /// VERIFIED/UNSURE: the certified margin (containment margin for a goal,
     /// separation for an avoid set; negative when the proof failed). FALSIFIED:
     /// how far the counterexample violates the property (negative).
@@ -105,7 +105,7 @@ pub struct PropertyResult {
 
 /// Everything execution found.
 #[derive(Clone, Debug)]
-pub struct Outcome {
+pub struct SystemOutcome {
     /// The partition cells of the initial set (as boxes: the cell's bounding box).
     pub partition: Vec<IBox>,
     /// How the partitioner stopped.
@@ -121,7 +121,7 @@ pub struct Outcome {
     /// Per-property results, in plan order.
     pub properties: Vec<PropertyResult>,
     /// The overall verdict: FALSIFIED if any property is, VERIFIED if all are, else UNSURE.
-    pub verdict: Status,
+    pub verdict: Verdict,
     /// Number of closed-loop propagator calls.
     pub propagator_calls: usize,
     /// The first step at which some cell's set is not a computed bound
@@ -143,14 +143,14 @@ fn tolerance(x: &[f64], rhs_scale: f64) -> f64 {
 /// Reachable sets of one cell over the horizon. With `parent` (the sets of a
 /// cell containing this one), every set is intersected with the parent's, so
 /// a partition is never looser than the cell it refines.
-pub fn propagate_cell(plan: &Plan, cell: &Region, parent: Option<&[Step]>) -> Vec<Step> {
+pub fn propagate_cell(plan: &SystemPlan, cell: &Region, parent: Option<&[Step]>) -> Vec<Step> {
     propagate_cell_until(plan, cell, parent, &|| false)
 }
 
 /// [`propagate_cell`], asking `stop` before each step whether the time is
 /// up; the steps left are then [`Step::timed_out`] (the whole space).
 pub fn propagate_cell_until(
-    plan: &Plan,
+    plan: &SystemPlan,
     cell: &Region,
     parent: Option<&[Step]>,
     stop: &dyn Fn() -> bool,
@@ -322,7 +322,7 @@ fn pick_noise_into(rng: &mut Rng, b: &IBox, out: &mut [f64], stride: usize) {
 /// `tests/soundness.rs` compares them), at a fraction of the cost: the
 /// samples' arithmetic vectorises and nothing is allocated per step.
 pub fn simulate_states(
-    plan: &Plan,
+    plan: &SystemPlan,
     ks: std::ops::Range<usize>,
     special: &[Vec<f64>],
 ) -> Vec<Option<Vec<f64>>> {
@@ -380,12 +380,12 @@ pub fn simulate_states(
 /// points (box corners, up to 2^12 of them; ball extremes), the rest random;
 /// noise is extreme half of the time. `None` when no initial state could be
 /// drawn (rejection sampling of a thin polytope).
-pub fn simulate(plan: &Plan, k: usize) -> Option<Trajectory> {
+pub fn simulate(plan: &SystemPlan, k: usize) -> Option<Trajectory> {
     simulate_from(plan, k, &plan.initial.special_points())
 }
 
 /// [`simulate`] with the initial set's special points computed once by the caller.
-fn simulate_from(plan: &Plan, k: usize, special: &[Vec<f64>]) -> Option<Trajectory> {
+fn simulate_from(plan: &SystemPlan, k: usize, special: &[Vec<f64>]) -> Option<Trajectory> {
     let cl = &plan.closed_loop;
     let mut rng = sample_rng(plan.seed, k);
     let start = match special.get(k) {
@@ -435,7 +435,7 @@ struct MonteCarlo {
 /// minima; the deepest violation keeps the earliest sample on ties). A 2-D
 /// hull boundary keeps its samples' points in one pass, sequentially (its
 /// point set is pruned as it grows, which depends on the order).
-fn monte_carlo(plan: &Plan, ctl: &Control) -> MonteCarlo {
+fn monte_carlo(plan: &SystemPlan, ctl: &Control) -> MonteCarlo {
     let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
     let special = plan.initial.special_points();
     let counter = std::sync::atomic::AtomicUsize::new(0);
@@ -495,7 +495,7 @@ impl MonteCarlo {
 /// Samples `range` of the Monte Carlo pass; `counter` counts samples drawn
 /// by every thread (for progress).
 fn sample_range(
-    plan: &Plan,
+    plan: &SystemPlan,
     ctl: &Control,
     range: std::ops::Range<usize>,
     special: &[Vec<f64>],
@@ -648,7 +648,12 @@ fn offsets(r: &Region) -> Vec<f64> {
 /// enclosure) or inside the avoid set at that step. The f64 simulation
 /// alone could be off by more than any fixed tolerance in an unstable or
 /// high-gain loop; this check makes FALSIFIED independent of it.
-pub fn certainly_violates(plan: &Plan, tr: &Trajectory, prop: &Property, step: usize) -> bool {
+pub fn certainly_violates(
+    plan: &SystemPlan,
+    tr: &Trajectory,
+    prop: &Property,
+    step: usize,
+) -> bool {
     let cl = &plan.closed_loop;
     let Some(x0) = tr.states.first() else {
         return false;
@@ -680,7 +685,7 @@ pub fn certainly_violates(plan: &Plan, tr: &Trajectory, prop: &Property, step: u
 /// Keep only the sampled violations that [`certainly_violates`] confirms
 /// (before any partitioning, so a property-guided partitioner still works on
 /// a property whose violation was not confirmed).
-fn confirm(plan: &Plan, mc: &mut MonteCarlo) {
+fn confirm(plan: &SystemPlan, mc: &mut MonteCarlo) {
     for (prop, worst) in plan.properties.iter().zip(mc.worst.iter_mut()) {
         if let Some((_, k, t)) = *worst {
             let real = simulate(plan, k).is_some_and(|tr| certainly_violates(plan, &tr, prop, t));
@@ -733,8 +738,31 @@ pub struct Control<'a> {
     pub threads: usize,
 }
 
-impl Control<'_> {
-    fn out_of_time(&self) -> bool {
+/// The clock of [`Control::new`]: always 0 s.
+fn no_time() -> f64 {
+    0.0
+}
+
+impl<'a> Control<'a> {
+    /// No time limit, no progress reports, one thread; `elapsed` is
+    /// consulted only by a partitioner with a time budget.
+    pub fn new(elapsed: &'a (dyn Fn() -> f64 + Sync)) -> Control<'a> {
+        Control {
+            elapsed,
+            time_limit: None,
+            progress: &|_| {},
+            threads: 1,
+        }
+    }
+
+    /// [`Control::new`] with a clock that always says 0 s: nothing ever
+    /// runs out of time.
+    pub fn unlimited() -> Control<'static> {
+        Control::new(&no_time)
+    }
+
+    /// Whether the time limit has passed.
+    pub(crate) fn out_of_time(&self) -> bool {
         self.time_limit.is_some_and(|l| (self.elapsed)() >= l)
     }
 }
@@ -759,19 +787,63 @@ pub struct Progress {
     pub total: Option<usize>,
 }
 
-/// Execute a plan with no time limit and no progress reports. `elapsed`
-/// returns the seconds since the run started; it is consulted only by a
-/// partitioner with a time budget.
-pub fn execute(plan: &Plan, elapsed: &(dyn Fn() -> f64 + Sync)) -> Outcome {
-    execute_with(
-        plan,
-        &Control {
-            elapsed,
-            time_limit: None,
-            progress: &|_| {},
-            threads: 1,
-        },
-    )
+/// Execute a plan: its kind's executor under `ctl`, and the plan with what
+/// it found.
+pub fn execute(plan: Plan, ctl: &Control) -> Run {
+    match plan {
+        Plan::System(plan) => {
+            let outcome = execute_system(&plan, ctl);
+            Run::System {
+                plan,
+                outcome: Box::new(outcome),
+            }
+        }
+        Plan::Network(plan) => {
+            let outcome = network::execute_network(&plan, ctl);
+            Run::Network {
+                plan,
+                outcome: Box::new(outcome),
+            }
+        }
+    }
+}
+
+/// An executed plan: the plan and what its execution found, one variant per
+/// kind of spec. This is what reports and certificates are made from.
+#[derive(Clone, Debug)]
+pub enum Run {
+    /// A closed loop.
+    System {
+        /// The plan executed.
+        plan: Box<SystemPlan>,
+        /// What it found.
+        outcome: Box<SystemOutcome>,
+    },
+    /// A network on its own.
+    Network {
+        /// The plan executed.
+        plan: Box<NetworkPlan>,
+        /// What it found.
+        outcome: Box<network::NetworkOutcome>,
+    },
+}
+
+impl Run {
+    /// The verdict over every property.
+    pub fn verdict(&self) -> Verdict {
+        match self {
+            Run::System { outcome, .. } => outcome.verdict,
+            Run::Network { outcome, .. } => outcome.verdict,
+        }
+    }
+
+    /// The path the controller (or the network's model) was read from.
+    pub fn controller_resolved(&self) -> &str {
+        match self {
+            Run::System { plan, .. } => &plan.controller_resolved,
+            Run::Network { plan, .. } => &plan.model_resolved,
+        }
+    }
 }
 
 /// The cells of a partition and their sets over the horizon.
@@ -874,7 +946,7 @@ impl Least {
 
 impl Gathered {
     /// No cell yet.
-    fn new(plan: &Plan) -> Gathered {
+    fn new(plan: &SystemPlan) -> Gathered {
         Gathered {
             cells: 0,
             reach: Vec::new(),
@@ -885,7 +957,7 @@ impl Gathered {
     }
 
     /// Adds cell `cell`'s sets.
-    fn add(&mut self, plan: &Plan, cell: usize, sets: &[Step]) {
+    fn add(&mut self, plan: &SystemPlan, cell: usize, sets: &[Step]) {
         self.cells += 1;
         if self.reach.is_empty() {
             self.reach = sets.iter().map(|s| s.set.bbox()).collect();
@@ -939,11 +1011,11 @@ impl Gathered {
 
 /// A hull boundary takes its directions from the samples of each step;
 /// every other boundary is used as it is.
-fn resolve_boundary<'p>(plan: &'p Plan, mc: &MonteCarlo) -> std::borrow::Cow<'p, Plan> {
+fn resolve_boundary<'p>(plan: &'p SystemPlan, mc: &MonteCarlo) -> std::borrow::Cow<'p, SystemPlan> {
     if plan.boundary != Boundary::Hull {
         return std::borrow::Cow::Borrowed(plan);
     }
-    std::borrow::Cow::Owned(Plan {
+    std::borrow::Cow::Owned(SystemPlan {
         boundary: Boundary::PerStep(
             mc.points
                 .iter()
@@ -956,7 +1028,7 @@ fn resolve_boundary<'p>(plan: &'p Plan, mc: &MonteCarlo) -> std::borrow::Cow<'p,
 
 /// SG/GSG scores' reference: per step, the facets, how far the sampled
 /// states reach along each (box rows first) and their extent.
-fn sampled_shapes(plan: &Plan, mc: &MonteCarlo) -> Vec<Option<Sampled>> {
+fn sampled_shapes(plan: &SystemPlan, mc: &MonteCarlo) -> Vec<Option<Sampled>> {
     (0..=plan.horizon)
         .map(|t| {
             let sampled = mc.sampled[t].as_ref()?;
@@ -984,7 +1056,7 @@ fn sampled_shapes(plan: &Plan, mc: &MonteCarlo) -> Vec<Option<Sampled>> {
 
 /// A uniform grid over the initial set, each cell propagated (inside the
 /// whole set's sets when there are several).
-fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned {
+fn partition_uniform(plan: &SystemPlan, grid: &[usize], ctl: &Control) -> Partitioned {
     let stop = || ctl.out_of_time();
     // one cell is the initial set itself (a ball keeps its
     // closed-form support function instead of its bounding box)
@@ -1071,7 +1143,7 @@ fn partition_uniform(plan: &Plan, grid: &[usize], ctl: &Control) -> Partitioned 
 
 /// Guided refinement of the initial set (SG, GSG or property-guided).
 fn partition_guided(
-    plan: &Plan,
+    plan: &SystemPlan,
     guide: Guide,
     budget: Budget,
     shaped: &[Option<Sampled>],
@@ -1177,7 +1249,7 @@ fn partition_guided(
 /// The verdict of every property: FALSIFIED by a sampled counterexample,
 /// VERIFIED by certified margins on every cell (no solver issue, no cut
 /// step), UNSURE otherwise.
-fn verdicts(plan: &Plan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyResult> {
+fn verdicts(plan: &SystemPlan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyResult> {
     plan.properties
         .iter()
         .zip(&mc.worst)
@@ -1203,7 +1275,7 @@ fn verdicts(plan: &Plan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyRe
                     PropertyResult {
                         name: prop.name.clone(),
                         kind,
-                        status: Status::Falsified,
+                        status: Verdict::Falsified,
                         margin: -depth,
                         step: t,
                         counterexample: Some(tr),
@@ -1214,9 +1286,9 @@ fn verdicts(plan: &Plan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyRe
                     name: prop.name.clone(),
                     kind,
                     status: if proven {
-                        Status::Verified
+                        Verdict::Verified
                     } else {
-                        Status::Unsure
+                        Verdict::Unsure
                     },
                     margin,
                     step,
@@ -1230,7 +1302,7 @@ fn verdicts(plan: &Plan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<PropertyRe
 
 /// Execute a plan under a [`Control`]: Monte Carlo, then the partition and
 /// propagation, then the verdicts.
-pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
+pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
     let mut mc = monte_carlo(plan, ctl);
     confirm(plan, &mut mc);
     let plan = &*resolve_boundary(plan, &mc);
@@ -1255,8 +1327,8 @@ pub fn execute_with(plan: &Plan, ctl: &Control) -> Outcome {
         .iter()
         .map(|p| p.status)
         .max()
-        .unwrap_or(Status::Verified);
-    Outcome {
+        .unwrap_or(Verdict::Verified);
+    SystemOutcome {
         partition: part.cells,
         partition_stop: part.stop,
         cells: cells

@@ -1,4 +1,4 @@
-//! Execution of a network spec: a [`NetPlan`] → a [`NetOutcome`]: the output
+//! Execution of a network spec: a [`NetworkPlan`] → a [`NetworkOutcome`]: the output
 //! set in the chosen shape, a verdict per property, and the bracket of every
 //! radius search.
 //!
@@ -28,9 +28,9 @@
 use nalgebra::DMatrix;
 
 use crate::check::{NetPropertyKind, RadiusSpec};
-use crate::execute::Status;
+use crate::execute::{Control, Verdict};
 use crate::ir::{Guide, NetPropagator, Partitioner};
-use crate::lower::NetPlan;
+use crate::lower::NetworkPlan;
 use ravel_analysis::batch;
 use ravel_analysis::crown::{Analysis, Mode};
 use ravel_analysis::issue::Issue;
@@ -97,7 +97,7 @@ pub struct NetPropertyResult {
     /// Which kind.
     pub kind: NetKind,
     /// The verdict.
-    pub status: Status,
+    pub status: Verdict,
     /// VERIFIED/UNSURE: the certified margin (negative when the proof
     /// failed, `−∞` without a finite bound). FALSIFIED: minus the violation.
     pub margin: f64,
@@ -141,7 +141,7 @@ pub struct RadiusResult {
 
 /// Everything the execution of a network spec found.
 #[derive(Clone, Debug)]
-pub struct NetOutcome {
+pub struct NetworkOutcome {
     /// The output set.
     pub output: OutputBounds,
     /// Per-property results, in plan order.
@@ -150,7 +150,7 @@ pub struct NetOutcome {
     pub radii: Vec<RadiusResult>,
     /// FALSIFIED if any property is, VERIFIED if all are (vacuously with
     /// none), else UNSURE.
-    pub verdict: Status,
+    pub verdict: Verdict,
     /// The final cells of the input set's partition (bounding boxes).
     pub partition: Vec<IBox>,
     /// Why partitioning stopped.
@@ -197,25 +197,6 @@ pub struct Selection {
     pub observations: Vec<Vec<f64>>,
     /// One choice per observation.
     pub choices: Vec<ActionChoice>,
-}
-
-/// Progress and limits for [`execute_network`].
-pub struct NetControl<'a> {
-    /// Seconds since the start.
-    pub elapsed: &'a (dyn Fn() -> f64 + Sync),
-    /// Stop refining (and searching) after this many seconds; what is
-    /// unfinished stays unproven.
-    pub time_limit: Option<f64>,
-    /// Threads for uniform-grid cells, CARRL observations and the two
-    /// children of each guided split (results are put back in index order:
-    /// the same for every count).
-    pub threads: usize,
-}
-
-impl NetControl<'_> {
-    fn late(&self) -> bool {
-        self.time_limit.is_some_and(|t| (self.elapsed)() > t)
-    }
 }
 
 /// `f` applied to every item, on up to `threads` threads (contiguous
@@ -451,12 +432,12 @@ struct Bounded {
 /// Bound every row of `dirs` over `region` with the plan's propagator and
 /// partitioner; `sampled`/`extent` guide SG and GSG.
 fn bound_all(
-    plan: &NetPlan,
+    plan: &NetworkPlan,
     region: &Region,
     dirs: &DMatrix<f64>,
     sampled: &[f64],
     extent: &[f64],
-    ctl: &NetControl,
+    ctl: &Control,
 ) -> Bounded {
     let mut issues = Vec::new();
     let within = |b: Vec<f64>, parent: Option<&Vec<f64>>| -> Vec<f64> {
@@ -494,7 +475,7 @@ fn bound_all(
                         let group = parts.len().div_ceil(8).clamp(4, 256);
                         let groups: Vec<&[Region]> = parts.chunks(group).collect();
                         map_ordered(&groups, ctl.threads, &|g: &&[Region]| {
-                            if ctl.late() {
+                            if ctl.out_of_time() {
                                 return vec![None; g.len()];
                             }
                             let boxes: Vec<IBox> = g.iter().map(Region::bbox).collect();
@@ -514,7 +495,7 @@ fn bound_all(
                         .collect()
                     } else {
                         map_ordered(&parts, ctl.threads, &|c: &Region| {
-                            if ctl.late() {
+                            if ctl.out_of_time() {
                                 return None;
                             }
                             Some(one(c))
@@ -1071,11 +1052,11 @@ fn sample_region(region: &Region, n: usize, seed: u64) -> Vec<Vec<f64>> {
 /// action's value over the ball around `o` (the plan's propagator and
 /// partitioner), the nominal and the robust action.
 pub fn choose(
-    plan: &NetPlan,
+    plan: &NetworkPlan,
     o: &[f64],
     epsilon: &[f64],
     norm: Norm,
-    ctl: &NetControl,
+    ctl: &Control,
 ) -> ActionChoice {
     let m = plan.net.outputs();
     let region = Region::Ball {
@@ -1115,7 +1096,7 @@ pub fn choose(
 }
 
 /// Execute a network plan.
-pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
+pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
     let m = plan.net.outputs();
     let selections: Vec<Selection> = plan
         .selects
@@ -1125,7 +1106,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             epsilon: s.epsilon.clone(),
             observations: s.observations.clone(),
             choices: map_ordered(&s.observations, ctl.threads, &|o: &Vec<f64>| {
-                if ctl.late() {
+                if ctl.out_of_time() {
                     // past the time limit: no bound, no claim
                     let m = plan.net.outputs();
                     let nominal = argmax(&plan.net.forward(o));
@@ -1144,7 +1125,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         .collect();
     let Some(input) = &plan.input else {
         // a spec that only selects actions: no input set, no properties
-        return NetOutcome {
+        return NetworkOutcome {
             output: OutputBounds {
                 directions: DMatrix::zeros(0, m),
                 offsets: Vec::new(),
@@ -1154,7 +1135,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             },
             properties: Vec::new(),
             radii: Vec::new(),
-            verdict: Status::Verified,
+            verdict: Verdict::Verified,
             partition: Vec::new(),
             partition_stop: Stop::Grid,
             calls: 0,
@@ -1216,7 +1197,7 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         let mut result = NetPropertyResult {
             name: p.name.clone(),
             kind,
-            status: Status::Unsure,
+            status: Verdict::Unsure,
             margin,
             label,
             label_margins,
@@ -1224,11 +1205,11 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
             real_only: None,
         };
         if proves(&p.kind, margin) && b.issues.is_empty() {
-            result.status = Status::Verified;
+            result.status = Verdict::Verified;
         } else if may_falsify[k] {
             let found = attack(&plan.net, input, &p.kind, label, &inputs, 2000);
             if let Some(w) = found.witness {
-                result.status = Status::Falsified;
+                result.status = Verdict::Falsified;
                 result.margin = -violation(&p.kind, label, &w.output).max(0.0);
                 result.counterexample = Some(w);
             } else {
@@ -1243,19 +1224,19 @@ pub fn execute_network(plan: &NetPlan, ctl: &NetControl) -> NetOutcome {
         .iter()
         .map(|r| radius_search(plan, input, r, &labels, may_falsify[r.property], ctl))
         .collect();
-    let verdict = if properties.iter().any(|p| p.status == Status::Falsified) {
-        Status::Falsified
-    } else if properties.iter().all(|p| p.status == Status::Verified) {
-        Status::Verified
+    let verdict = if properties.iter().any(|p| p.status == Verdict::Falsified) {
+        Verdict::Falsified
+    } else if properties.iter().all(|p| p.status == Verdict::Verified) {
+        Verdict::Verified
     } else {
-        Status::Unsure
+        Verdict::Unsure
     };
     let shape_rows = 0..rows.shape_rows;
     let offsets: Vec<f64> = b.union[shape_rows.clone()].to_vec();
     let sampled_shape: Vec<f64> = sampled[shape_rows].to_vec();
     let bbox = bbox_of(&shape_dirs, &offsets);
     let sampled_bbox = bbox_of(&shape_dirs, &sampled_shape).filter(|_| !outputs.is_empty());
-    NetOutcome {
+    NetworkOutcome {
         output: OutputBounds {
             directions: shape_dirs,
             offsets,
@@ -1323,12 +1304,12 @@ fn bbox_of(dirs: &DMatrix<f64>, offsets: &[f64]) -> Option<IBox> {
 
 /// The certified/attacked bracket of one radius search.
 fn radius_search(
-    plan: &NetPlan,
+    plan: &NetworkPlan,
     input: &Region,
     r: &RadiusSpec,
     labels: &[Option<usize>],
     may_falsify: bool,
-    ctl: &NetControl,
+    ctl: &Control,
 ) -> RadiusResult {
     let m = plan.net.outputs();
     let p = &plan.properties[r.property];
@@ -1339,7 +1320,7 @@ fn radius_search(
         m,
     );
     let mut analyses = 0;
-    let out_of_time = || ctl.late();
+    let out_of_time = || ctl.out_of_time();
     let mut certifies = |s: f64| -> bool {
         analyses += 1;
         let region = scaled(input, s);

@@ -1,4 +1,7 @@
-//! Reports: an [`Outcome`] as text for people or as JSON for machines.
+//! Reports: a [`Run`] as text for people or as JSON for machines; the
+//! report of each kind of spec is in its own module ([`system`],
+//! [`network`]), the number formats and partition descriptions they share
+//! are here.
 //!
 //! The JSON schema is documented in `docs/json-schema.md`; its identifier is
 //! [`SCHEMA`]. Output is deterministic: timing appears only when the caller
@@ -6,16 +9,33 @@
 
 use serde_json::{json, Value};
 
-use crate::execute::{Kind, Outcome, Status, Trajectory};
-use crate::lower::{Partitioner, Plan};
-use ravel_analysis::closed_loop::{Boundary, Cut, ModelError};
+use crate::execute::Run;
+use crate::lower::Partitioner;
 use ravel_analysis::partition::Stop;
-use ravel_analysis::sets::{IBox, Region};
 
 /// The identifier of the JSON result schema.
 pub const SCHEMA: &str = "ravel-report/1";
 
 pub mod network;
+pub mod system;
+
+/// The report of a run for people: the spec's name first, `timing_ms` adds
+/// a timing line.
+pub fn text(spec_name: &str, run: &Run, timing_ms: Option<f64>) -> String {
+    match run {
+        Run::System { plan, outcome } => system::text(spec_name, plan, outcome, timing_ms),
+        Run::Network { plan, outcome } => network::text(spec_name, plan, outcome, timing_ms),
+    }
+}
+
+/// The report of a run for machines (schema [`SCHEMA`]); `timing_ms` adds
+/// the timing.
+pub fn json(spec_name: &str, run: &Run, timing_ms: Option<f64>) -> Value {
+    match run {
+        Run::System { plan, outcome } => system::json(spec_name, plan, outcome, timing_ms),
+        Run::Network { plan, outcome } => network::json(spec_name, plan, outcome, timing_ms),
+    }
+}
 
 /// Format a number in ravel's one float format: fixed with 6 decimals for
 /// ordinary magnitudes, scientific otherwise.
@@ -67,222 +87,6 @@ pub(crate) fn partition_text(partitioner: &Partitioner, cells: usize, stop: Stop
     }
 }
 
-fn boundary_text(b: &Boundary) -> String {
-    match b {
-        Boundary::Box => "box boundary".into(),
-        Boundary::Polytope(d) => format!("polytope boundary ({} directions + box)", d.nrows()),
-        Boundary::Hull => "hull boundary (edge normals of the sampled convex hull + box)".into(),
-        Boundary::PerStep(_) => "polytope boundary (directions per step + box)".into(),
-    }
-}
-
-/// A human-readable report. `timing_ms` adds a timing line.
-pub fn text(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>) -> String {
-    let mut s = String::new();
-    let x = &plan.state_name;
-    let n = plan.closed_loop.states();
-    let m = plan.closed_loop.plant.b.ncols();
-    s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
-    let mut timing = String::new();
-    if let Some(dt) = plan.dt {
-        let err = plan
-            .closed_loop
-            .plant
-            .err
-            .as_ref()
-            .map_or(0.0, ModelError::max);
-        timing += &format!(
-            ", continuous time, dt {} (zero-order hold, entries enclosed to ±{})",
-            num(dt),
-            num(err)
-        );
-    }
-    if plan.closed_loop.is_time_varying() {
-        timing += ", time-varying";
-    }
-    s += &format!(
-        "  system      {} (state {x}[{n}], control {}[{m}], horizon {}{timing})\n",
-        plan.system, plan.control_name, plan.horizon
-    );
-    let sat = match &plan.limits {
-        Some(l) => format!(
-            ", saturated to {} ∈ {}",
-            plan.control_name,
-            (0..l.dim())
-                .map(|i| format!("[{}, {}]", num(l.lo[i]), num(l.hi[i])))
-                .collect::<Vec<_>>()
-                .join(" × ")
-        ),
-        None => String::new(),
-    };
-    s += &format!(
-        "  controller  {} ({}{sat})\n",
-        ravel_syntax::diag::sanitize(&plan.controller_path),
-        plan.network_summary
-    );
-    s += &format!(
-        "  analysis    {}{}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
-        plan.propagator.name(),
-        slopes_text(plan.closed_loop.slope_steps),
-        partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
-        boundary_text(&plan.boundary),
-        plan.samples,
-        plan.seed
-    );
-    s += "  reachable sets (bounding box of all cells, then the hull of the sampled states)\n";
-    for (t, b) in out.reach.iter().enumerate() {
-        for i in 0..n {
-            let lead = if i == 0 {
-                format!("  step {t:>3}")
-            } else {
-                " ".repeat(10)
-            };
-            let sampled = match &out.sampled[t] {
-                Some(sb) => format!("   sampled {}", interval(sb.lo[i], sb.hi[i])),
-                None => String::new(),
-            };
-            s += &format!(
-                "{lead}  {x}[{i}] ∈ {}{sampled}\n",
-                interval(b.lo[i], b.hi[i])
-            );
-        }
-    }
-    if let Some(err) = final_error(out) {
-        s += &format!(
-            "  final-step error (box volume / sampled-hull volume − 1): {}\n",
-            num(err)
-        );
-    }
-    if !out.solver_issues.is_empty() {
-        let list: Vec<String> = out
-            .solver_issues
-            .iter()
-            .map(|(t, i)| format!("{i} at step {t}"))
-            .collect();
-        s += &format!(
-            "  LP solver: {}; those bounds fell back to bounding boxes and no property is reported VERIFIED\n",
-            list.join(", ")
-        );
-    }
-    match out.cut {
-        Some((t, Cut::Overflow)) => {
-            s += &format!(
-                "  bounds overflowed at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
-            );
-        }
-        Some((t, Cut::TimeLimit)) => {
-            s += &format!(
-                "  the time limit stopped the analysis at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
-            );
-        }
-        None => {}
-    }
-    if out.samples_drawn < plan.samples {
-        s += &format!(
-            "  the time limit stopped Monte Carlo after {} of {} samples\n",
-            out.samples_drawn, plan.samples
-        );
-    }
-    s += "\n  properties\n";
-    let no_witness = |what: &str| {
-        if plan.samples == 0 {
-            "no Monte Carlo samples were drawn".to_string()
-        } else {
-            format!("no sampled trajectory {what}")
-        }
-    };
-    let width = out
-        .properties
-        .iter()
-        .map(|p| p.name.len() + p.kind.as_str().len() + 1)
-        .max()
-        .unwrap_or(0);
-    for p in &out.properties {
-        let label = format!("{} {}", p.kind.as_str(), p.name);
-        let why = match (p.status, p.kind) {
-            (Status::Verified, Kind::Goal) => format!(
-                "every reachable box at step {} is inside, margin {}",
-                p.step,
-                num(p.margin)
-            ),
-            (Status::Verified, _) => format!(
-                "reachable boxes stay clear, smallest separation {} at step {}",
-                num(p.margin),
-                p.step
-            ),
-            (Status::Unsure, _) if p.cut.is_some() => {
-                let (t, cut) = p.cut.unwrap_or((0, Cut::Overflow));
-                let what = match cut {
-                    Cut::Overflow => format!("bounds overflowed at step {t}: the reachable set no longer fits in f64 numbers"),
-                    Cut::TimeLimit => format!("the time limit stopped the analysis at step {t}"),
-                };
-                format!(
-                    "{what}, so nothing is proven from there on; {}",
-                    no_witness(if p.kind == Kind::Goal {
-                        "misses"
-                    } else {
-                        "enters"
-                    })
-                )
-            }
-            (Status::Unsure, Kind::Goal) => format!(
-                "the reachable box at step {} sticks out by {}; {}",
-                p.step,
-                num(-p.margin),
-                no_witness("misses")
-            ),
-            (Status::Unsure, _) => format!(
-                "a reachable box at step {} may touch it (separation {}); {}",
-                p.step,
-                num(p.margin),
-                no_witness("enters")
-            ),
-            (Status::Falsified, Kind::Goal) => format!(
-                "a trajectory ends {} outside at step {}",
-                num(-p.margin),
-                p.step
-            ),
-            (Status::Falsified, _) => format!(
-                "a trajectory is {} inside at step {}",
-                num(-p.margin),
-                p.step
-            ),
-        };
-        s += &format!("  {label:<width$}  {:<9}  {why}\n", p.status.as_str());
-        if let Some(tr) = &p.counterexample {
-            s += &counterexample_text(plan, tr);
-        }
-    }
-    s += &format!("\n  verdict: {}\n", out.verdict.as_str());
-    if let Some(ms) = timing_ms {
-        s += &format!(
-            "  time: {ms:.3} ms ({} propagator calls, {} samples)\n",
-            out.propagator_calls, plan.samples
-        );
-    }
-    s
-}
-
-fn counterexample_text(plan: &Plan, tr: &Trajectory) -> String {
-    let mut s = format!(
-        "      counterexample (x = {}, u = {}, w = process noise, v = sensor noise):\n",
-        plan.state_name, plan.control_name
-    );
-    for (t, x) in tr.states.iter().enumerate() {
-        s += &format!("        t={t:<3} x = {}", vector(x));
-        if t < tr.controls.len() {
-            s += &format!(
-                "  u = {}  w = {}  v = {}",
-                vector(&tr.controls[t]),
-                vector(&tr.process_noise[t]),
-                vector(&tr.sensor_noise[t])
-            );
-        }
-        s += "\n";
-    }
-    s
-}
-
 /// ` (slopes optimised, N steps)` after the propagator's name, when they are.
 pub fn slopes_text(steps: usize) -> String {
     match steps {
@@ -290,16 +94,6 @@ pub fn slopes_text(steps: usize) -> String {
         1 => " (slopes optimised, 1 step)".to_string(),
         k => format!(" (slopes optimised, {k} steps)"),
     }
-}
-
-/// The tutorial's error measure at the final step: the volume of the reachable
-/// bounding box over the volume of the sampled states' bounding box, minus 1
-/// (`None` without samples or when the sampled hull is flat).
-pub fn final_error(out: &Outcome) -> Option<f64> {
-    let last = out.reach.last()?;
-    let sb = out.sampled.last()?.as_ref()?;
-    let v = sb.volume();
-    (v > 0.0).then(|| last.volume() / v - 1.0)
 }
 
 /// The partitioner's name in JSON reports.
@@ -324,102 +118,4 @@ pub(crate) fn f(x: f64) -> Value {
     } else {
         Value::Null
     }
-}
-
-fn region_json(r: &Region) -> Value {
-    let mut v = box_json(&r.bbox());
-    if let Region::Polytope { rows, .. } = r {
-        v["rows"] = rows
-            .iter()
-            .map(|(a, b)| json!({ "a": a.iter().map(|x| f(*x)).collect::<Vec<_>>(), "b": f(*b) }))
-            .collect();
-    }
-    v
-}
-
-fn box_json(b: &IBox) -> Value {
-    json!({ "lo": b.lo.iter().map(|v| f(*v)).collect::<Vec<_>>(), "hi": b.hi.iter().map(|v| f(*v)).collect::<Vec<_>>() })
-}
-
-fn cut_json((step, cut): (usize, Cut)) -> Value {
-    json!({ "step": step, "cause": cut.as_str() })
-}
-
-fn traj_json(t: &Trajectory) -> Value {
-    json!({
-        "states": t.states,
-        "controls": t.controls,
-        "process_noise": t.process_noise,
-        "sensor_noise": t.sensor_noise,
-    })
-}
-
-/// The JSON result for one spec (see `docs/json-schema.md`).
-pub fn json(spec_name: &str, plan: &Plan, out: &Outcome, timing_ms: Option<f64>) -> Value {
-    let steps: Vec<Value> = out
-        .reach
-        .iter()
-        .enumerate()
-        .map(|(t, b)| {
-            json!({
-                "step": t,
-                "box": box_json(b),
-                "sampled": out.sampled[t].as_ref().map(box_json),
-                "cells": out.cells.iter().map(|c| region_json(&c[t])).collect::<Vec<_>>(),
-            })
-        })
-        .collect();
-    let props: Vec<Value> = out
-        .properties
-        .iter()
-        .map(|p| {
-            json!({
-                "name": p.name,
-                "kind": p.kind.as_str(),
-                "status": p.status.as_str(),
-                "margin": f(p.margin),
-                "step": p.step,
-                "counterexample": p.counterexample.as_ref().map(traj_json),
-                "unfinished": p.cut.map(cut_json),
-            })
-        })
-        .collect();
-    let mut v = json!({
-        "spec": spec_name,
-        "verdict": out.verdict.as_str(),
-        "system": plan.system,
-        "state": { "name": plan.state_name, "dim": plan.closed_loop.states() },
-        "control": { "name": plan.control_name, "dim": plan.closed_loop.plant.b.ncols() },
-        "controller": { "path": plan.controller_path, "resolved": plan.controller_resolved, "sha256": plan.controller_sha256, "network": plan.network_summary },
-        "horizon": plan.horizon,
-        "dt": plan.dt.map(f),
-        "model_error": plan.closed_loop.plant.err.as_ref().map(|e| f(e.max())),
-        "analysis": {
-            "propagator": plan.propagator.name(),
-            "partitioner": partitioner_name(&plan.partitioner),
-            "partition": partition_grid(&plan.partitioner),
-            "partition_stop": out.partition_stop.as_str(),
-            "cells": out.partition.len(),
-            "boundary": match &plan.boundary {
-                Boundary::Box => "box",
-                Boundary::Polytope(_) => "polytope",
-                Boundary::Hull => "hull",
-                Boundary::PerStep(_) => "per_step",
-            },
-            "samples": plan.samples,
-            "seed": plan.seed,
-            "slope_steps": plan.closed_loop.slope_steps,
-        },
-        "reachable": steps,
-        "final_error": final_error(out).map(f),
-        "properties": props,
-        "propagator_calls": out.propagator_calls,
-        "solver_issues": out.solver_issues.iter().map(|(t, i)| json!({ "step": t, "status": i.as_str() })).collect::<Vec<_>>(),
-        "unfinished": out.cut.map(cut_json),
-        "samples_drawn": out.samples_drawn,
-    });
-    if let Some(ms) = timing_ms {
-        v["time_ms"] = json!(ms);
-    }
-    v
 }

@@ -1,13 +1,13 @@
-//! Reports of network specs: a [`NetOutcome`] as text or JSON (the same
+//! Reports of network specs: a [`NetworkOutcome`] as text or JSON (the same
 //! schema family as closed-loop results: `spec`, `verdict`, `properties`
 //! with `name`, `kind`, `status`, `margin`; see `docs/json-schema.md`).
 
 use serde_json::{json, Value};
 
 use super::{f, interval, num, partition_grid, partition_text, partitioner_name, vector};
-use crate::execute::network::{NetOutcome, Witness};
-use crate::execute::Status;
-use crate::lower::NetPlan;
+use crate::execute::network::{NetworkOutcome, Witness};
+use crate::execute::Verdict;
+use crate::lower::NetworkPlan;
 use ravel_analysis::sets::{IBox, Norm, Region};
 use ravel_analysis::shape::Shape;
 
@@ -64,13 +64,13 @@ fn box_text(name: &str, b: &IBox) -> String {
 /// The tutorial's error figure for an output set: the bounding box's volume
 /// over the sampled outputs' bounding box volume, minus 1 (`None` without a
 /// box or when the samples are flat).
-pub fn output_error(out: &NetOutcome) -> Option<f64> {
+pub fn output_error(out: &NetworkOutcome) -> Option<f64> {
     let (b, s) = (out.output.bbox.as_ref()?, out.output.sampled_bbox.as_ref()?);
     let v = s.volume();
     (v > 0.0 && b.is_finite()).then(|| b.volume() / v - 1.0)
 }
 
-fn output_text(plan: &NetPlan, out: &NetOutcome) -> String {
+fn output_text(plan: &NetworkPlan, out: &NetworkOutcome) -> String {
     let mut s = String::new();
     s += "  output set (certified, then the sampled outputs)\n";
     let m = plan.net.outputs();
@@ -130,7 +130,7 @@ fn output_text(plan: &NetPlan, out: &NetOutcome) -> String {
 /// The robust action selections: per observation, the nominal and CARRL
 /// actions and every action's certified value interval (text shows at most
 /// 20 observations per block; JSON and CSV have all).
-fn selections_text(plan: &NetPlan, out: &NetOutcome) -> String {
+fn selections_text(plan: &NetworkPlan, out: &NetworkOutcome) -> String {
     let mut s = String::new();
     for sel in &out.selections {
         let certified = sel.choices.iter().filter(|c| c.robust_optimal).count();
@@ -190,7 +190,7 @@ fn selections_text(plan: &NetPlan, out: &NetOutcome) -> String {
 
 /// The robust action selections as CSV rows (no header): one row per
 /// observation and action.
-pub fn csv_rows(spec_name: &str, out: &NetOutcome) -> String {
+pub fn csv_rows(spec_name: &str, out: &NetworkOutcome) -> String {
     let mut s = String::new();
     let name = spec_name.replace([',', '"', '\n', '\r'], "_");
     for sel in &out.selections {
@@ -215,7 +215,7 @@ pub fn csv_rows(spec_name: &str, out: &NetOutcome) -> String {
 pub const CSV_HEADER: &str =
     "spec,select,observation,action,lower,upper,nominal,robust,robust_optimal";
 
-fn witness_text(plan: &NetPlan, w: &Witness) -> String {
+fn witness_text(plan: &NetworkPlan, w: &Witness) -> String {
     format!(
         "{} = {} gives {} = {}",
         plan.input_name,
@@ -226,7 +226,12 @@ fn witness_text(plan: &NetPlan, w: &Witness) -> String {
 }
 
 /// A human-readable report of a network spec. `timing_ms` adds a timing line.
-pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option<f64>) -> String {
+pub fn text(
+    spec_name: &str,
+    plan: &NetworkPlan,
+    out: &NetworkOutcome,
+    timing_ms: Option<f64>,
+) -> String {
     let mut s = format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
     s += &format!(
         "  network     {} (input {}[{}], output {}[{}])\n",
@@ -271,13 +276,13 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
         for p in &out.properties {
             let head = format!("{} {}", p.kind.as_str(), p.name);
             let what = match (p.status, &p.counterexample) {
-                (Status::Falsified, Some(w)) => format!(
+                (Verdict::Falsified, Some(w)) => format!(
                     "{}violated by {}: {}",
                     p.label.map(|k| format!("label {k} ")).unwrap_or_default(),
                     num(-p.margin),
                     witness_text(plan, w)
                 ),
-                (Status::Verified, _) => match p.label {
+                (Verdict::Verified, _) => match p.label {
                     Some(k) => {
                         format!("label {k} on the whole input set, margin {}", num(p.margin))
                     }
@@ -289,7 +294,7 @@ pub fn text(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option
                 },
             };
             s += &format!("  {head:<width$}  {:<9}  {what}\n", p.status.as_str());
-            if p.status != Status::Falsified && !p.label_margins.is_empty() {
+            if p.status != Verdict::Falsified && !p.label_margins.is_empty() {
                 let list: Vec<String> = p
                     .label_margins
                     .iter()
@@ -362,7 +367,12 @@ fn witness_json(w: &Witness) -> Value {
 }
 
 /// The JSON result of a network spec (see `docs/json-schema.md`).
-pub fn json(spec_name: &str, plan: &NetPlan, out: &NetOutcome, timing_ms: Option<f64>) -> Value {
+pub fn json(
+    spec_name: &str,
+    plan: &NetworkPlan,
+    out: &NetworkOutcome,
+    timing_ms: Option<f64>,
+) -> Value {
     let props: Vec<Value> = out
         .properties
         .iter()

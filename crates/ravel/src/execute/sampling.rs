@@ -1,0 +1,473 @@
+//! Monte Carlo for closed loops: seeded samples of the initial set and the
+//! noise simulated side by side, the worst trajectory per property, its
+//! rigorous confirmation, and the sampled shapes the guided partitioner
+//! and the hull boundary use.
+
+use nalgebra::DMatrix;
+
+use crate::lower::{Property, PropertyKind, SystemPlan};
+use ravel_analysis::closed_loop::Boundary;
+use ravel_analysis::sets::{IBox, Region};
+use ravel_analysis::shape::{
+    convex_hull, extent_of_points, hull_directions, support_of_points, HULL_MIN_ANGLE,
+};
+use ravel_base::rng::Rng;
+
+use super::*;
+
+/// Per-sample random stream: sample `k` of seed `s` is reproducible on its own.
+pub(super) fn sample_rng(seed: u64, k: usize) -> Rng {
+    let mut r = Rng::new(seed);
+    let base = r.next_u64();
+    Rng::new(base ^ (k as u64).wrapping_mul(0xD134_2543_DE82_EF95))
+}
+
+pub(super) fn pick_noise(rng: &mut Rng, b: &IBox) -> Vec<f64> {
+    let mut out = vec![0.0; b.dim()];
+    pick_noise_into(rng, b, &mut out, 1);
+    out
+}
+
+/// [`pick_noise`] into every `stride`-th entry of `out` (the same draws in the same order).
+pub(super) fn pick_noise_into(rng: &mut Rng, b: &IBox, out: &mut [f64], stride: usize) {
+    for i in 0..b.dim() {
+        out[i * stride] = match rng.below(4) {
+            0 => b.lo[i],
+            1 => b.hi[i],
+            _ => rng.uniform(b.lo[i], b.hi[i]),
+        };
+    }
+}
+
+/// The states of samples `ks`, simulated side by side: entry `s` holds
+/// sample `ks.start + s`'s states `x_0 … x_N` one after another (`None`
+/// when no initial state could be drawn). Bit for bit the states of
+/// [`simulate`] (the same random draws, the same sums in the same order;
+/// `tests/soundness.rs` compares them), at a fraction of the cost: the
+/// samples' arithmetic vectorises and nothing is allocated per step.
+pub fn simulate_states(
+    plan: &SystemPlan,
+    ks: std::ops::Range<usize>,
+    special: &[Vec<f64>],
+) -> Vec<Option<Vec<f64>>> {
+    let cl = &plan.closed_loop;
+    let n = cl.states();
+    let h = plan.horizon;
+    let mut rngs = Vec::with_capacity(ks.len());
+    let mut out: Vec<Option<Vec<f64>>> = Vec::with_capacity(ks.len());
+    for k in ks {
+        let mut rng = sample_rng(plan.seed, k);
+        let start = match special.get(k) {
+            Some(p) => Some(p.clone()),
+            None => plan.initial.sample(&mut || rng.uniform(0.0, 1.0)),
+        };
+        out.push(start.map(|x0| {
+            let mut states = Vec::with_capacity((h + 1) * n);
+            states.extend_from_slice(&x0);
+            states
+        }));
+        rngs.push(rng);
+    }
+    // the samples that have an initial state, side by side
+    let live: Vec<usize> = (0..out.len()).filter(|&s| out[s].is_some()).collect();
+    let count = live.len();
+    if count == 0 {
+        return out;
+    }
+    let p = cl.plant.v.dim();
+    let mut x = vec![0.0; n * count];
+    for (c, &s) in live.iter().enumerate() {
+        if let Some(states) = &out[s] {
+            for j in 0..n {
+                x[j * count + c] = states[j];
+            }
+        }
+    }
+    let (mut w, mut v) = (vec![0.0; n * count], vec![0.0; p * count]);
+    for t in 0..h {
+        for (c, &s) in live.iter().enumerate() {
+            pick_noise_into(&mut rngs[s], &cl.plant.w, &mut w[c..], count);
+            pick_noise_into(&mut rngs[s], &cl.plant.v, &mut v[c..], count);
+        }
+        let (_, next) = cl.simulate_batch(t, &x, &w, &v, count);
+        x = next;
+        for (c, &s) in live.iter().enumerate() {
+            if let Some(states) = &mut out[s] {
+                states.extend((0..n).map(|j| x[j * count + c]));
+            }
+        }
+    }
+    out
+}
+
+/// Simulate sample `k`: the first samples are the initial set's special
+/// points (box corners, up to 2^12 of them; ball extremes), the rest random;
+/// noise is extreme half of the time. `None` when no initial state could be
+/// drawn (rejection sampling of a thin polytope).
+pub fn simulate(plan: &SystemPlan, k: usize) -> Option<Trajectory> {
+    simulate_from(plan, k, &plan.initial.special_points())
+}
+
+/// [`simulate`] with the initial set's special points computed once by the caller.
+pub(super) fn simulate_from(
+    plan: &SystemPlan,
+    k: usize,
+    special: &[Vec<f64>],
+) -> Option<Trajectory> {
+    let cl = &plan.closed_loop;
+    let mut rng = sample_rng(plan.seed, k);
+    let start = match special.get(k) {
+        Some(p) => p.clone(),
+        None => plan.initial.sample(&mut || rng.uniform(0.0, 1.0))?,
+    };
+    let h = plan.horizon;
+    let mut states = Vec::with_capacity(h + 1);
+    states.push(start);
+    let mut tr = Trajectory {
+        states,
+        controls: Vec::with_capacity(h),
+        process_noise: Vec::with_capacity(h),
+        sensor_noise: Vec::with_capacity(h),
+    };
+    for t in 0..plan.horizon {
+        let w = pick_noise(&mut rng, &cl.plant.w);
+        let v = pick_noise(&mut rng, &cl.plant.v);
+        let (u, next) = cl.simulate(t, &tr.states[t], &w, &v);
+        tr.controls.push(u);
+        tr.process_noise.push(w);
+        tr.sensor_noise.push(v);
+        tr.states.push(next);
+    }
+    Some(tr)
+}
+
+/// What the Monte Carlo pass found.
+pub(super) struct MonteCarlo {
+    pub(super) sampled: Vec<Option<IBox>>,
+    /// (depth of violation, sample index, step) per property
+    pub(super) worst: Vec<Option<(f64, usize, usize)>>,
+    /// the simulated 2-D states per step (only their convex hull once there
+    /// are many), kept for a hull boundary
+    pub(super) points: Vec<Vec<[f64; 2]>>,
+    /// for a polytope boundary: per step, the largest and smallest value of
+    /// each facet direction (box rows first) over the simulated states
+    pub(super) facet_range: Vec<(Vec<f64>, Vec<f64>)>,
+    /// samples drawn (fewer than planned when the time limit stopped sampling)
+    pub(super) drawn: usize,
+}
+
+/// The Monte Carlo pass. Samples are independent (each has its own random
+/// stream), so with several threads each takes a contiguous range of sample
+/// indices and the partial results are merged in index order: the outcome is
+/// the one thread's, bit for bit (boxes and facet ranges are maxima and
+/// minima; the deepest violation keeps the earliest sample on ties). A 2-D
+/// hull boundary keeps its samples' points in one pass, sequentially (its
+/// point set is pruned as it grows, which depends on the order).
+pub(super) fn monte_carlo(plan: &SystemPlan, ctl: &Control) -> MonteCarlo {
+    let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
+    let special = plan.initial.special_points();
+    let counter = std::sync::atomic::AtomicUsize::new(0);
+    // below a few hundred samples a thread costs more than it saves
+    let threads = if keep {
+        1
+    } else {
+        ravel_analysis::pool::available(ctl.threads).clamp(1, (plan.samples / 256).max(1))
+    };
+    if threads == 1 {
+        return sample_range(plan, ctl, 0..plan.samples, &special, &counter);
+    }
+    let chunk = plan.samples.div_ceil(threads);
+    let range = |i: usize| (i * chunk).min(plan.samples)..((i + 1) * chunk).min(plan.samples);
+    // the calling thread samples the first range
+    let parts = ravel_analysis::pool::on_threads(threads, &|i| {
+        sample_range(plan, ctl, range(i), &special, &counter)
+    });
+    let mut parts = parts.into_iter();
+    let mut all = parts.next().expect("at least one part");
+    for part in parts {
+        all.absorb(part);
+    }
+    all
+}
+
+impl MonteCarlo {
+    /// Merge the results of later samples into these (see [`monte_carlo`]).
+    pub(super) fn absorb(&mut self, later: MonteCarlo) {
+        // a hull boundary's points are order-dependent: sampled on one thread only
+        debug_assert!(later.points.iter().all(Vec::is_empty));
+        for (mine, theirs) in self.sampled.iter_mut().zip(later.sampled) {
+            *mine = match (mine.take(), theirs) {
+                (Some(a), Some(b)) => Some(a.hull(&b)),
+                (a, b) => a.or(b),
+            };
+        }
+        for (mine, theirs) in self.worst.iter_mut().zip(later.worst) {
+            if let Some(t) = theirs {
+                if mine.is_none_or(|m| t.0 > m.0) {
+                    *mine = Some(t);
+                }
+            }
+        }
+        for ((hi, lo), (thi, tlo)) in self.facet_range.iter_mut().zip(later.facet_range) {
+            for (h, t) in hi.iter_mut().zip(thi) {
+                *h = h.max(t);
+            }
+            for (l, t) in lo.iter_mut().zip(tlo) {
+                *l = l.min(t);
+            }
+        }
+        self.drawn += later.drawn;
+    }
+}
+
+/// Samples `range` of the Monte Carlo pass; `counter` counts samples drawn
+/// by every thread (for progress).
+pub(super) fn sample_range(
+    plan: &SystemPlan,
+    ctl: &Control,
+    range: std::ops::Range<usize>,
+    special: &[Vec<f64>],
+    counter: &std::sync::atomic::AtomicUsize,
+) -> MonteCarlo {
+    let mut sampled: Vec<Option<IBox>> = vec![None; plan.horizon + 1];
+    let mut worst: Vec<Option<(f64, usize, usize)>> = vec![None; plan.properties.len()];
+    let keep = plan.boundary == Boundary::Hull && plan.closed_loop.states() == 2;
+    let fixed = matches!(plan.boundary, Boundary::Polytope(_))
+        .then(|| plan.closed_loop.facets(&plan.boundary, 0));
+    let mut facet_range: Vec<(Vec<f64>, Vec<f64>)> = match &fixed {
+        Some(f) => vec![
+            (
+                vec![f64::NEG_INFINITY; f.nrows()],
+                vec![f64::INFINITY; f.nrows()]
+            );
+            plan.horizon + 1
+        ],
+        None => Vec::new(),
+    };
+    let mut points: Vec<Vec<[f64; 2]>> = vec![Vec::new(); if keep { plan.horizon + 1 } else { 0 }];
+    let mut drawn = 0;
+    let n = plan.closed_loop.states();
+    let first = range.start;
+    let mut batch: Vec<Option<Vec<f64>>> = Vec::new();
+    for k in range.clone() {
+        // every 64 samples from the range's start, the first one included:
+        // the time limit, progress, and the next 64 samples simulated together
+        if (k - first) % 64 == 0 {
+            if ctl.out_of_time() {
+                break;
+            }
+            (ctl.progress)(Progress {
+                phase: Phase::Sampling,
+                done: counter.load(std::sync::atomic::Ordering::Relaxed),
+                total: Some(plan.samples),
+            });
+            batch = simulate_states(plan, k..(k + 64).min(range.end), special);
+        }
+        counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        drawn += 1;
+        let Some(flat) = batch[(k - first) % 64].take() else {
+            continue;
+        };
+        let states: Vec<&[f64]> = flat.chunks_exact(n.max(1)).collect();
+        // states from the first non-finite one on are not real states (the
+        // simulation overflowed): they neither shape sets nor falsify anything
+        let valid = states
+            .iter()
+            .position(|x| !x.iter().all(|v| v.is_finite()))
+            .unwrap_or(states.len());
+        for (t, x) in states.iter().enumerate().take(valid) {
+            let x: &[f64] = x;
+            if keep {
+                points[t].push([x[0], x[1]]);
+                // supports of a point set are those of its hull: memory stays
+                // within 512 points per step (8 KB; 80 MB over 10000 steps)
+                if points[t].len() > 512 {
+                    points[t] = convex_hull(&points[t]);
+                }
+            }
+            if let Some(f) = &fixed {
+                let (hi, lo) = &mut facet_range[t];
+                for k in 0..f.nrows() {
+                    let v: f64 = f.row(k).iter().zip(x).map(|(a, b)| a * b).sum();
+                    hi[k] = hi[k].max(v);
+                    lo[k] = lo[k].min(v);
+                }
+            }
+            match &mut sampled[t] {
+                Some(b) => {
+                    for ((lo, hi), v) in b.lo.iter_mut().zip(b.hi.iter_mut()).zip(x) {
+                        *lo = lo.min(*v);
+                        *hi = hi.max(*v);
+                    }
+                }
+                None => sampled[t] = Some(IBox::point(x)),
+            }
+        }
+        for (i, prop) in plan.properties.iter().enumerate() {
+            let found = match &prop.kind {
+                PropertyKind::Goal(_) if valid <= plan.horizon => None,
+                PropertyKind::Goal(g) => {
+                    let x = states[plan.horizon];
+                    let rhs = g.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
+                    let outside = -g.depth(x);
+                    (outside.is_finite() && outside > tolerance(x, rhs))
+                        .then_some((outside, plan.horizon))
+                }
+                PropertyKind::Avoid { members, steps } => {
+                    let mut best: Option<(f64, usize)> = None;
+                    let window = states
+                        .iter()
+                        .enumerate()
+                        .take(valid)
+                        .take(steps.1 + 1)
+                        .skip(steps.0);
+                    for (t, &x) in window {
+                        for m in members {
+                            let rhs = m.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
+                            let inside = m.depth(x);
+                            if inside.is_finite()
+                                && inside > tolerance(x, rhs)
+                                && best.is_none_or(|b| inside > b.0)
+                            {
+                                best = Some((inside, t));
+                            }
+                        }
+                    }
+                    best
+                }
+            };
+            if let Some((d, t)) = found {
+                if worst[i].is_none_or(|w| d > w.0) {
+                    worst[i] = Some((d, k, t));
+                }
+            }
+        }
+    }
+    MonteCarlo {
+        sampled,
+        worst,
+        points,
+        facet_range,
+        drawn,
+    }
+}
+
+/// The facets of one step (rows), the sampled states' largest value along
+/// each, and the samples' extent along each.
+pub(super) type Sampled = (DMatrix<f64>, Vec<f64>, Vec<f64>);
+
+/// The offsets of a set along its facets: `[hi, −lo]` of the bounding box,
+/// then a polytope's rows.
+pub(super) fn offsets(r: &Region) -> Vec<f64> {
+    let b = r.bbox();
+    let mut v = b.hi.clone();
+    v.extend(b.lo.iter().map(|l| -l));
+    if let Region::Polytope { rows, .. } = r {
+        v.extend(rows.iter().map(|(_, h)| *h));
+    }
+    v
+}
+
+/// Whether a simulated trajectory certainly violates `prop` at `step`: its
+/// initial state and noise values lie in their sets, and the rigorous
+/// enclosure of the true trajectory from them (outward-rounded interval
+/// arithmetic, [`ravel_analysis::closed_loop::ClosedLoop::enclose_step`])
+/// lies outside the goal (some goal row is violated by every point of the
+/// enclosure) or inside the avoid set at that step. The f64 simulation
+/// alone could be off by more than any fixed tolerance in an unstable or
+/// high-gain loop; this check makes FALSIFIED independent of it.
+pub fn certainly_violates(
+    plan: &SystemPlan,
+    tr: &Trajectory,
+    prop: &Property,
+    step: usize,
+) -> bool {
+    let cl = &plan.closed_loop;
+    let Some(x0) = tr.states.first() else {
+        return false;
+    };
+    if !plan.initial.contains_point(x0) {
+        return false;
+    }
+    let mut x = IBox::point(x0);
+    for t in 0..step {
+        let (Some(w), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+            return false;
+        };
+        if !(cl.plant.w.contains_point(w) && cl.plant.v.contains_point(v)) {
+            return false;
+        }
+        match cl.enclose_step(t, &x, w, v) {
+            Some(next) => x = next,
+            None => return false,
+        }
+    }
+    match &prop.kind {
+        PropertyKind::Goal(g) => g.separation_margin(&x) > 0.0,
+        PropertyKind::Avoid { members, .. } => {
+            members.iter().any(|m| m.containment_margin(&x) >= 0.0)
+        }
+    }
+}
+
+/// Keep only the sampled violations that [`certainly_violates`] confirms
+/// (before any partitioning, so a property-guided partitioner still works on
+/// a property whose violation was not confirmed).
+pub(super) fn confirm(plan: &SystemPlan, mc: &mut MonteCarlo) {
+    for (prop, worst) in plan.properties.iter().zip(mc.worst.iter_mut()) {
+        if let Some((_, k, t)) = *worst {
+            let real = simulate(plan, k).is_some_and(|tr| certainly_violates(plan, &tr, prop, t));
+            if !real {
+                *worst = None;
+            }
+        }
+    }
+}
+
+/// A hull boundary takes its directions from the samples of each step;
+/// every other boundary is used as it is.
+pub(super) fn resolve_boundary<'p>(
+    plan: &'p SystemPlan,
+    mc: &MonteCarlo,
+) -> std::borrow::Cow<'p, SystemPlan> {
+    if plan.boundary != Boundary::Hull {
+        return std::borrow::Cow::Borrowed(plan);
+    }
+    std::borrow::Cow::Owned(SystemPlan {
+        boundary: Boundary::PerStep(
+            mc.points
+                .iter()
+                .map(|p| hull_directions(p, HULL_MIN_ANGLE))
+                .collect(),
+        ),
+        ..plan.clone()
+    })
+}
+
+/// SG/GSG scores' reference: per step, the facets, how far the sampled
+/// states reach along each (box rows first) and their extent.
+pub(super) fn sampled_shapes(plan: &SystemPlan, mc: &MonteCarlo) -> Vec<Option<Sampled>> {
+    (0..=plan.horizon)
+        .map(|t| {
+            let sampled = mc.sampled[t].as_ref()?;
+            let f = plan.closed_loop.facets(&plan.boundary, t);
+            let (s, w) = if let Some(p) = mc.points.get(t) {
+                let pts: Vec<Vec<f64>> = p.iter().map(|q| q.to_vec()).collect();
+                (support_of_points(&f, &pts), extent_of_points(&f, &pts))
+            } else if let Some((hi, lo)) = mc.facet_range.get(t) {
+                (hi.clone(), hi.iter().zip(lo).map(|(h, l)| h - l).collect())
+            } else {
+                let width: Vec<f64> = sampled
+                    .hi
+                    .iter()
+                    .zip(&sampled.lo)
+                    .map(|(h, l)| h - l)
+                    .collect();
+                let mut s = sampled.hi.clone();
+                s.extend(sampled.lo.iter().map(|l| -l));
+                (s, [width.clone(), width].concat())
+            };
+            Some((f, s, w))
+        })
+        .collect()
+}

@@ -101,17 +101,25 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
         PropertyKind::Goal(g) => {
             let t = sets.len() - 1;
             if sets[t].cut().is_some() {
-                return (f64::NEG_INFINITY, t, false);
+                return Margin::cut(t, false);
             }
             let (m, issue) = containment_margin(g, &sets[t].set);
-            (sane(m), t, issue || !sets[t].issues.is_empty())
+            Margin {
+                value: sane(m),
+                step: t,
+                issue: issue || !sets[t].issues.is_empty(),
+            }
         }
         PropertyKind::Avoid { members, steps } => {
-            let mut best = (f64::INFINITY, steps.0, false);
+            let mut best = Margin {
+                value: f64::INFINITY,
+                step: steps.0,
+                issue: false,
+            };
             for (t, step) in sets.iter().enumerate().take(steps.1 + 1).skip(steps.0) {
                 if step.cut().is_some() {
-                    if best.0 > f64::NEG_INFINITY {
-                        best = (f64::NEG_INFINITY, t, best.2);
+                    if best.value > f64::NEG_INFINITY {
+                        best = Margin::cut(t, best.issue);
                     }
                     break;
                 }
@@ -119,10 +127,14 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
                     let (s, issue) = separation_margin(m, &step.set);
                     let s = sane(s);
                     let issue = issue || !step.issues.is_empty();
-                    if s < best.0 || (issue && !best.2 && s <= best.0) {
-                        best = (s, t, issue || best.2);
+                    if s < best.value || (issue && !best.issue && s <= best.value) {
+                        best = Margin {
+                            value: s,
+                            step: t,
+                            issue: issue || best.issue,
+                        };
                     } else if issue {
-                        best.2 = true;
+                        best.issue = true;
                     }
                 }
             }
@@ -196,9 +208,27 @@ pub(super) struct Partitioned {
     pub(super) gathered: Gathered,
 }
 
-/// A property's margin on one cell, the step it refers to, and whether an
-/// LP solver issue weakened it (see [`cell_margin`]).
-pub(super) type Margin = (f64, usize, bool);
+/// A property's certified margin on one cell (see [`cell_margin`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Margin {
+    /// The margin: non-negative proves the property on the cell.
+    pub(super) value: f64,
+    /// The step it refers to.
+    pub(super) step: usize,
+    /// Whether an LP solver issue weakened it.
+    pub(super) issue: bool,
+}
+
+impl Margin {
+    /// The margin of a set cut at `step` (the whole space): `−∞`, never a proof.
+    fn cut(step: usize, issue: bool) -> Margin {
+        Margin {
+            value: f64::NEG_INFINITY,
+            step,
+            issue,
+        }
+    }
+}
 
 /// What the outcome needs of the cells: the reach hull, the solver issues,
 /// the first cut and each property's least margin. Cells are added in any
@@ -307,7 +337,11 @@ impl Gathered {
         let cut = first_cut(sets).map(|(t, c)| (t, cell, c));
         self.cut = earlier(self.cut, cut);
         for (l, prop) in self.least.iter_mut().zip(&plan.properties) {
-            let (m, t, issue) = cell_margin(prop, sets);
+            let Margin {
+                value: m,
+                step: t,
+                issue,
+            } = cell_margin(prop, sets);
             let mine = Least {
                 min: (m < f64::INFINITY).then_some((m, cell, t)),
                 nan: m.is_nan().then_some((cell, t)),
@@ -477,7 +511,11 @@ pub(super) fn partition_guided(
             let score = match guide {
                 Guide::Sg | Guide::Gsg => (0..=plan.horizon)
                     .map(|t| match &shaped[t] {
-                        Some((f, s, w)) => {
+                        Some(Sampled {
+                            facets: f,
+                            support: s,
+                            extent: w,
+                        }) => {
                             let b = offsets(&sets[t].set);
                             // step 0 is the cell itself, not a boundary shape
                             if t > 0 && b.len() == f.nrows() {
@@ -496,7 +534,9 @@ pub(super) fn partition_guided(
                     .zip(undecided)
                     .filter(|(_, u)| **u)
                     .map(|(p, _)| {
-                        let (m, _, issue) = cell_margin(p, &sets);
+                        let Margin {
+                            value: m, issue, ..
+                        } = cell_margin(p, &sets);
                         if proves(p, m) && !issue {
                             -1.0
                         } else {

@@ -352,9 +352,16 @@ pub(super) fn sample_range(
     }
 }
 
-/// The facets of one step (rows), the sampled states' largest value along
-/// each, and the samples' extent along each.
-pub(super) type Sampled = (DMatrix<f64>, Vec<f64>, Vec<f64>);
+/// One step's sampled shape, the reference of the SG/GSG scores.
+#[derive(Clone, Debug)]
+pub(super) struct Sampled {
+    /// The step's facets (rows).
+    pub(super) facets: DMatrix<f64>,
+    /// The sampled states' largest value along each facet.
+    pub(super) support: Vec<f64>,
+    /// The samples' extent along each facet.
+    pub(super) extent: Vec<f64>,
+}
 
 /// The offsets of a set along its facets: `[hi, −lo]` of the bounding box,
 /// then a polytope's rows.
@@ -467,7 +474,11 @@ pub(super) fn sampled_shapes(plan: &SystemPlan, mc: &MonteCarlo) -> Vec<Option<S
                 s.extend(sampled.lo.iter().map(|l| -l));
                 (s, [width.clone(), width].concat())
             };
-            Some((f, s, w))
+            Some(Sampled {
+                facets: f,
+                support: s,
+                extent: w,
+            })
         })
         .collect()
 }

@@ -6,7 +6,7 @@ use serde_json::{json, Value};
 use super::{
     f, interval, num, partition_grid, partition_text, partitioner_name, slopes_text, vector,
 };
-use crate::execute::{Kind, SystemOutcome, Trajectory, Verdict};
+use crate::execute::{Kind, PropertyResult, SystemOutcome, Trajectory, Verdict};
 use crate::lower::SystemPlan;
 use ravel_analysis::closed_loop::{Boundary, Cut, ModelError};
 use ravel_analysis::sets::{IBox, Region};
@@ -27,11 +27,27 @@ pub fn text(
     out: &SystemOutcome,
     timing_ms: Option<f64>,
 ) -> String {
+    let mut s = format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
+    s += &header_text(plan, out);
+    s += &reach_text(plan, out);
+    s += &notes_text(plan, out);
+    s += &properties_text(plan, out);
+    s += &format!("\n  verdict: {}\n", out.verdict.as_str());
+    if let Some(ms) = timing_ms {
+        s += &format!(
+            "  time: {ms:.3} ms ({} propagator calls, {} samples)\n",
+            out.propagator_calls, plan.samples
+        );
+    }
+    s
+}
+
+/// The system, controller and analysis lines.
+fn header_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
     let mut s = String::new();
     let x = &plan.state_name;
     let n = plan.closed_loop.states();
     let m = plan.closed_loop.plant.b.ncols();
-    s += &format!("ravel {}: {spec_name}\n", env!("CARGO_PKG_VERSION"));
     let mut timing = String::new();
     if let Some(dt) = plan.dt {
         let err = plan
@@ -78,6 +94,15 @@ pub fn text(
         plan.samples,
         plan.seed
     );
+    s
+}
+
+/// The reachable sets per step (the cells' bounding box, the samples'
+/// hull) and the final step's error.
+fn reach_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
+    let mut s = String::new();
+    let x = &plan.state_name;
+    let n = plan.closed_loop.states();
     s += "  reachable sets (bounding box of all cells, then the hull of the sampled states)\n";
     for (t, b) in out.reach.iter().enumerate() {
         for i in 0..n {
@@ -102,6 +127,12 @@ pub fn text(
             num(err)
         );
     }
+    s
+}
+
+/// Solver issues, cuts and a Monte Carlo stopped by the time limit.
+fn notes_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
+    let mut s = String::new();
     if !out.solver_issues.is_empty() {
         let list: Vec<String> = out
             .solver_issues
@@ -132,14 +163,13 @@ pub fn text(
             out.samples_drawn, plan.samples
         );
     }
+    s
+}
+
+/// One line per property, each with its counterexample.
+fn properties_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
+    let mut s = String::new();
     s += "\n  properties\n";
-    let no_witness = |what: &str| {
-        if plan.samples == 0 {
-            "no Monte Carlo samples were drawn".to_string()
-        } else {
-            format!("no sampled trajectory {what}")
-        }
-    };
     let width = out
         .properties
         .iter()
@@ -148,68 +178,73 @@ pub fn text(
         .unwrap_or(0);
     for p in &out.properties {
         let label = format!("{} {}", p.kind.as_str(), p.name);
-        let why = match (p.status, p.kind) {
-            (Verdict::Verified, Kind::Goal) => format!(
-                "every reachable box at step {} is inside, margin {}",
-                p.step,
-                num(p.margin)
-            ),
-            (Verdict::Verified, _) => format!(
-                "reachable boxes stay clear, smallest separation {} at step {}",
-                num(p.margin),
-                p.step
-            ),
-            (Verdict::Unsure, _) if p.cut.is_some() => {
-                let (t, cut) = p.cut.unwrap_or((0, Cut::Overflow));
-                let what = match cut {
-                    Cut::Overflow => format!("bounds overflowed at step {t}: the reachable set no longer fits in f64 numbers"),
-                    Cut::TimeLimit => format!("the time limit stopped the analysis at step {t}"),
-                };
-                format!(
-                    "{what}, so nothing is proven from there on; {}",
-                    no_witness(if p.kind == Kind::Goal {
-                        "misses"
-                    } else {
-                        "enters"
-                    })
-                )
-            }
-            (Verdict::Unsure, Kind::Goal) => format!(
-                "the reachable box at step {} sticks out by {}; {}",
-                p.step,
-                num(-p.margin),
-                no_witness("misses")
-            ),
-            (Verdict::Unsure, _) => format!(
-                "a reachable box at step {} may touch it (separation {}); {}",
-                p.step,
-                num(p.margin),
-                no_witness("enters")
-            ),
-            (Verdict::Falsified, Kind::Goal) => format!(
-                "a trajectory ends {} outside at step {}",
-                num(-p.margin),
-                p.step
-            ),
-            (Verdict::Falsified, _) => format!(
-                "a trajectory is {} inside at step {}",
-                num(-p.margin),
-                p.step
-            ),
-        };
+        let why = property_why(plan, p);
         s += &format!("  {label:<width$}  {:<9}  {why}\n", p.status.as_str());
         if let Some(tr) = &p.counterexample {
             s += &counterexample_text(plan, tr);
         }
     }
-    s += &format!("\n  verdict: {}\n", out.verdict.as_str());
-    if let Some(ms) = timing_ms {
-        s += &format!(
-            "  time: {ms:.3} ms ({} propagator calls, {} samples)\n",
-            out.propagator_calls, plan.samples
-        );
-    }
     s
+}
+
+/// Why a property has its verdict, for people.
+fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
+    let no_witness = |what: &str| {
+        if plan.samples == 0 {
+            "no Monte Carlo samples were drawn".to_string()
+        } else {
+            format!("no sampled trajectory {what}")
+        }
+    };
+    match (p.status, p.kind) {
+        (Verdict::Verified, Kind::Goal) => format!(
+            "every reachable box at step {} is inside, margin {}",
+            p.step,
+            num(p.margin)
+        ),
+        (Verdict::Verified, _) => format!(
+            "reachable boxes stay clear, smallest separation {} at step {}",
+            num(p.margin),
+            p.step
+        ),
+        (Verdict::Unsure, _) if p.cut.is_some() => {
+            let (t, cut) = p.cut.unwrap_or((0, Cut::Overflow));
+            let what = match cut {
+                    Cut::Overflow => format!("bounds overflowed at step {t}: the reachable set no longer fits in f64 numbers"),
+                    Cut::TimeLimit => format!("the time limit stopped the analysis at step {t}"),
+                };
+            format!(
+                "{what}, so nothing is proven from there on; {}",
+                no_witness(if p.kind == Kind::Goal {
+                    "misses"
+                } else {
+                    "enters"
+                })
+            )
+        }
+        (Verdict::Unsure, Kind::Goal) => format!(
+            "the reachable box at step {} sticks out by {}; {}",
+            p.step,
+            num(-p.margin),
+            no_witness("misses")
+        ),
+        (Verdict::Unsure, _) => format!(
+            "a reachable box at step {} may touch it (separation {}); {}",
+            p.step,
+            num(p.margin),
+            no_witness("enters")
+        ),
+        (Verdict::Falsified, Kind::Goal) => format!(
+            "a trajectory ends {} outside at step {}",
+            num(-p.margin),
+            p.step
+        ),
+        (Verdict::Falsified, _) => format!(
+            "a trajectory is {} inside at step {}",
+            num(-p.margin),
+            p.step
+        ),
+    }
 }
 
 fn counterexample_text(plan: &SystemPlan, tr: &Trajectory) -> String {

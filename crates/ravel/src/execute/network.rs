@@ -1095,34 +1095,12 @@ pub fn choose(
     }
 }
 
-/// Execute a network plan.
+/// Execute a network plan: the robust action selections, then (with an
+/// input set) Monte Carlo, the bounds of every shape and property row, the
+/// verdicts and the radius searches.
 pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
     let m = plan.net.outputs();
-    let selections: Vec<Selection> = plan
-        .selects
-        .iter()
-        .map(|s| Selection {
-            name: s.name.clone(),
-            epsilon: s.epsilon.clone(),
-            observations: s.observations.clone(),
-            choices: map_ordered(&s.observations, ctl.threads, &|o: &Vec<f64>| {
-                if ctl.out_of_time() {
-                    // past the time limit: no bound, no claim
-                    let m = plan.net.outputs();
-                    let nominal = argmax(&plan.net.forward(o));
-                    ActionChoice {
-                        lower: vec![f64::NEG_INFINITY; m],
-                        upper: vec![f64::INFINITY; m],
-                        nominal,
-                        robust: nominal,
-                        robust_optimal: false,
-                    }
-                } else {
-                    choose(plan, o, &s.epsilon, s.norm, ctl)
-                }
-            }),
-        })
-        .collect();
+    let selections = select_actions(plan, ctl);
     let Some(input) = &plan.input else {
         // a spec that only selects actions: no input set, no properties
         return NetworkOutcome {
@@ -1145,7 +1123,101 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
             selections,
         };
     };
-    // ---- Monte Carlo ----
+    let mc = monte_carlo(plan, input);
+    let shape_dirs = plan.shape.directions(m, &mc.outputs);
+    let prop_rows: Vec<Vec<Vec<f64>>> = plan
+        .properties
+        .iter()
+        .zip(&mc.labels)
+        .map(|(p, l)| property_rows(&p.kind, *l, m))
+        .collect();
+    let rows = stack(&shape_dirs, &prop_rows, m);
+    let sampled = support_of_points(&rows.dirs, &mc.outputs);
+    let extent = extent_of_points(&rows.dirs, &mc.outputs);
+    let b = bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl);
+    let overflow = b.union.iter().any(|v| !v.is_finite());
+    let properties = property_verdicts(plan, input, &mc, &b, &rows);
+    let radii = plan
+        .radii
+        .iter()
+        .map(|r| radius_search(plan, input, r, &mc.labels, mc.may_falsify[r.property], ctl))
+        .collect();
+    let verdict = if properties.iter().any(|p| p.status == Verdict::Falsified) {
+        Verdict::Falsified
+    } else if properties.iter().all(|p| p.status == Verdict::Verified) {
+        Verdict::Verified
+    } else {
+        Verdict::Unsure
+    };
+    let shape_rows = 0..rows.shape_rows;
+    let offsets: Vec<f64> = b.union[shape_rows.clone()].to_vec();
+    let sampled_shape: Vec<f64> = sampled[shape_rows].to_vec();
+    let bbox = bbox_of(&shape_dirs, &offsets);
+    let sampled_bbox = bbox_of(&shape_dirs, &sampled_shape).filter(|_| !mc.outputs.is_empty());
+    NetworkOutcome {
+        output: OutputBounds {
+            directions: shape_dirs,
+            offsets,
+            sampled: sampled_shape,
+            bbox,
+            sampled_bbox,
+        },
+        properties,
+        radii,
+        verdict,
+        partition: b.cells.iter().map(|c| c.0.clone()).collect(),
+        partition_stop: b.stop,
+        calls: b.calls,
+        solver_issues: b.issues,
+        overflow,
+        samples_drawn: mc.inputs.len(),
+        selections,
+    }
+}
+
+/// Every select block's robust action choice per observation (past the
+/// time limit: no bound, no claim).
+fn select_actions(plan: &NetworkPlan, ctl: &Control) -> Vec<Selection> {
+    plan.selects
+        .iter()
+        .map(|s| Selection {
+            name: s.name.clone(),
+            epsilon: s.epsilon.clone(),
+            observations: s.observations.clone(),
+            choices: map_ordered(&s.observations, ctl.threads, &|o: &Vec<f64>| {
+                if ctl.out_of_time() {
+                    let m = plan.net.outputs();
+                    let nominal = argmax(&plan.net.forward(o));
+                    ActionChoice {
+                        lower: vec![f64::NEG_INFINITY; m],
+                        upper: vec![f64::INFINITY; m],
+                        nominal,
+                        robust: nominal,
+                        robust_optimal: false,
+                    }
+                } else {
+                    choose(plan, o, &s.epsilon, s.norm, ctl)
+                }
+            }),
+        })
+        .collect()
+}
+
+/// What Monte Carlo of the input set gives the rest of the execution.
+struct MonteCarlo {
+    /// The sampled inputs.
+    inputs: Vec<Vec<f64>>,
+    /// Their outputs.
+    outputs: Vec<Vec<f64>>,
+    /// Per property: the robustness label (given, or the centre's).
+    labels: Vec<Option<usize>>,
+    /// Per property: whether a violation can be a counterexample (a
+    /// violation of "the centre's label" only when that label is certain).
+    may_falsify: Vec<bool>,
+}
+
+/// Sample the input set; the properties' labels and which may be falsified.
+fn monte_carlo(plan: &NetworkPlan, input: &Region) -> MonteCarlo {
     let inputs = sample_region(input, plan.samples, plan.seed);
     let outputs: Vec<Vec<f64>> = inputs.iter().map(|x| plan.net.forward(x)).collect();
     // robustness labels: the centre's when not given
@@ -1171,20 +1243,25 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
             _ => None,
         })
         .collect();
-    // ---- the bounds ----
-    let shape_dirs = plan.shape.directions(m, &outputs);
-    let prop_rows: Vec<Vec<Vec<f64>>> = plan
-        .properties
-        .iter()
-        .zip(&labels)
-        .map(|(p, l)| property_rows(&p.kind, *l, m))
-        .collect();
-    let rows = stack(&shape_dirs, &prop_rows, m);
-    let sampled = support_of_points(&rows.dirs, &outputs);
-    let extent = extent_of_points(&rows.dirs, &outputs);
-    let b = bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl);
-    let overflow = b.union.iter().any(|v| !v.is_finite());
-    // ---- verdicts ----
+    MonteCarlo {
+        inputs,
+        outputs,
+        labels,
+        may_falsify,
+    }
+}
+
+/// Each property's verdict: VERIFIED from the certified margin (no solver
+/// issue), FALSIFIED from a confirmed counterexample of the attack, UNSURE
+/// otherwise.
+fn property_verdicts(
+    plan: &NetworkPlan,
+    input: &Region,
+    mc: &MonteCarlo,
+    b: &Bounded,
+    rows: &Rows,
+) -> Vec<NetPropertyResult> {
+    let m = plan.net.outputs();
     let mut properties = Vec::new();
     for (k, p) in plan.properties.iter().enumerate() {
         let kind = match p.kind {
@@ -1192,8 +1269,8 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
             NetPropertyKind::Avoid(_) => NetKind::Avoid,
             NetPropertyKind::Robust(_) => NetKind::Robust,
         };
-        let label = labels[k];
-        let (margin, label_margins) = certified_margin(&p.kind, label, m, &b, &rows.ranges[k]);
+        let label = mc.labels[k];
+        let (margin, label_margins) = certified_margin(&p.kind, label, m, b, &rows.ranges[k]);
         let mut result = NetPropertyResult {
             name: p.name.clone(),
             kind,
@@ -1206,8 +1283,8 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
         };
         if proves(&p.kind, margin) && b.issues.is_empty() {
             result.status = Verdict::Verified;
-        } else if may_falsify[k] {
-            let found = attack(&plan.net, input, &p.kind, label, &inputs, 2000);
+        } else if mc.may_falsify[k] {
+            let found = attack(&plan.net, input, &p.kind, label, &mc.inputs, 2000);
             if let Some(w) = found.witness {
                 result.status = Verdict::Falsified;
                 result.margin = -violation(&p.kind, label, &w.output).max(0.0);
@@ -1218,43 +1295,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
         }
         properties.push(result);
     }
-    // ---- radius searches ----
-    let radii = plan
-        .radii
-        .iter()
-        .map(|r| radius_search(plan, input, r, &labels, may_falsify[r.property], ctl))
-        .collect();
-    let verdict = if properties.iter().any(|p| p.status == Verdict::Falsified) {
-        Verdict::Falsified
-    } else if properties.iter().all(|p| p.status == Verdict::Verified) {
-        Verdict::Verified
-    } else {
-        Verdict::Unsure
-    };
-    let shape_rows = 0..rows.shape_rows;
-    let offsets: Vec<f64> = b.union[shape_rows.clone()].to_vec();
-    let sampled_shape: Vec<f64> = sampled[shape_rows].to_vec();
-    let bbox = bbox_of(&shape_dirs, &offsets);
-    let sampled_bbox = bbox_of(&shape_dirs, &sampled_shape).filter(|_| !outputs.is_empty());
-    NetworkOutcome {
-        output: OutputBounds {
-            directions: shape_dirs,
-            offsets,
-            sampled: sampled_shape,
-            bbox,
-            sampled_bbox,
-        },
-        properties,
-        radii,
-        verdict,
-        partition: b.cells.iter().map(|c| c.0.clone()).collect(),
-        partition_stop: b.stop,
-        calls: b.calls,
-        solver_issues: b.issues,
-        overflow,
-        samples_drawn: inputs.len(),
-        selections,
-    }
+    properties
 }
 
 /// Whether an outward-rounded enclosure of `f(x)` has output `k` strictly

@@ -16,6 +16,7 @@ use std::time::Instant;
 use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
 
+use ravel::ReadError;
 use ravel_syntax::diag::{render, Diagnostic};
 
 /// ravel — verify reach-avoid properties of neural feedback loops.
@@ -240,7 +241,7 @@ pub mod exit {
 /// opened non-blocking and inspected before any read), at most
 /// `max_bytes` bytes, and, for external data, only if its real path (symbolic
 /// links resolved) lies inside the requested folder.
-pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, String> {
+pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, ReadError> {
     use std::io::Read;
     let mut opts = std::fs::OpenOptions::new();
     opts.read(true);
@@ -249,37 +250,29 @@ pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, String> {
         use std::os::unix::fs::OpenOptionsExt;
         opts.custom_flags(libc::O_NONBLOCK);
     }
-    let file = opts.open(&req.path).map_err(|e| e.to_string())?;
-    let meta = file.metadata().map_err(|e| e.to_string())?;
+    let file = opts.open(&req.path)?;
+    let meta = file.metadata()?;
+    if meta.is_dir() {
+        return Err(ReadError::Folder);
+    }
     if !meta.is_file() {
-        let kind = if meta.is_dir() {
-            "a folder"
-        } else {
-            "a special file (FIFO, device or socket)"
-        };
-        return Err(format!("it is {kind}, not a regular file"));
+        return Err(ReadError::Special);
     }
     if let Some(dir) = &req.inside {
-        let real = std::fs::canonicalize(&req.path).map_err(|e| e.to_string())?;
-        let root = std::fs::canonicalize(dir).map_err(|e| e.to_string())?;
+        let real = std::fs::canonicalize(&req.path)?;
+        let root = std::fs::canonicalize(dir)?;
         if !real.starts_with(&root) {
-            return Err(
-                "it resolves (through a symbolic link) to a file outside the controller's folder"
-                    .into(),
-            );
+            return Err(ReadError::Outside);
         }
     }
     if req.whole && meta.len() > req.max_bytes {
-        return Err(format!(
-            "it has {} bytes, more than the limit of {}",
-            meta.len(),
-            req.max_bytes
-        ));
+        return Err(ReadError::TooLarge {
+            bytes: meta.len(),
+            limit: req.max_bytes,
+        });
     }
     let mut buf = Vec::with_capacity(meta.len().min(req.max_bytes).min(1 << 26) as usize);
-    file.take(req.max_bytes)
-        .read_to_end(&mut buf)
-        .map_err(|e| e.to_string())?;
+    file.take(req.max_bytes).read_to_end(&mut buf)?;
     Ok(buf)
 }
 

@@ -231,7 +231,7 @@ fn fuzz_front_end() {
     let data =
         std::fs::read(root().join("models/double_integrator_external.onnx.data")).expect("data");
     // every controller path resolves, by file name, to a committed model
-    let reader = |r: &ReadRequest| -> Result<Vec<u8>, String> {
+    let reader = |r: &ReadRequest| -> Result<Vec<u8>, ravel::ReadError> {
         let name = r.path.file_name().and_then(|n| n.to_str()).unwrap_or("");
         if name.ends_with(".data") {
             return Ok(data.iter().copied().take(r.max_bytes as usize).collect());
@@ -243,7 +243,7 @@ fn fuzz_front_end() {
             .get(name)
             .or_else(|| models.get("double_integrator.onnx"))
             .cloned()
-            .ok_or_else(|| "no such model".to_string())
+            .ok_or_else(|| ravel::ReadError::Io("no such model".to_string()))
     };
     let deadline = Instant::now() + budget();
     let watchdog = Watchdog::start("spec");

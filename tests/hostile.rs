@@ -362,7 +362,7 @@ fn observation_files_stay_in_the_spec_folder() {
     use std::cell::RefCell;
     let asked: RefCell<Vec<ravel::ReadRequest>> = RefCell::new(Vec::new());
     let model = std::fs::read("models/lane_q.onnx").expect("model");
-    let reader = |r: &ravel::ReadRequest| -> Result<Vec<u8>, String> {
+    let reader = |r: &ravel::ReadRequest| -> Result<Vec<u8>, ravel::ReadError> {
         asked.borrow_mut().push(r.clone());
         if r.path.extension().is_some_and(|e| e == "onnx") {
             Ok(model.clone())

@@ -46,7 +46,56 @@ pub struct ReadRequest {
 /// How the front end reads files; the library does no IO of its own. The CLI
 /// passes `ravel_cli::read_request`, which reads regular files only; tests may
 /// pass anything.
-pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, String>;
+pub type Reader<'a> = &'a dyn Fn(&ReadRequest) -> Result<Vec<u8>, ReadError>;
+
+/// Why a file the front end asked for was not read. Its `Display` is the
+/// reason a diagnostic gives after the file's name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ReadError {
+    /// The operating system refused (not found, permission denied, …), in
+    /// its own words.
+    Io(String),
+    /// The path is a folder.
+    Folder,
+    /// The path is a FIFO, device or socket (refused before any read).
+    Special,
+    /// The path resolves, through a symbolic link, to a file outside the
+    /// folder the request confines it to.
+    Outside,
+    /// The file is longer than the request allows.
+    TooLarge {
+        /// Its length.
+        bytes: u64,
+        /// The request's limit.
+        limit: u64,
+    },
+}
+
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadError::Io(e) => f.write_str(e),
+            ReadError::Folder => f.write_str("it is a folder, not a regular file"),
+            ReadError::Special => {
+                f.write_str("it is a special file (FIFO, device or socket), not a regular file")
+            }
+            ReadError::Outside => f.write_str(
+                "it resolves (through a symbolic link) to a file outside the controller's folder",
+            ),
+            ReadError::TooLarge { bytes, limit } => {
+                write!(f, "it has {bytes} bytes, more than the limit of {limit}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for ReadError {}
+
+impl From<std::io::Error> for ReadError {
+    fn from(e: std::io::Error) -> ReadError {
+        ReadError::Io(e.to_string())
+    }
+}
 
 /// The front end: parse and check a spec, reading its controller (and any
 /// external-data files) through `read`, relative to `spec_dir`.
@@ -102,7 +151,8 @@ pub fn front_end_task(
             inside: None,
             max_bytes: limits::MAX_CONTROLLER_BYTES,
             whole: true,
-        });
+        })
+        .map_err(|e| e.to_string());
         let mut external = onnx::ExternalFiles::new();
         if let Ok(b) = &bytes {
             let dir = match path.parent() {
@@ -121,6 +171,7 @@ pub fn front_end_task(
                         max_bytes: req.bytes,
                         whole: false,
                     })
+                    .map_err(|e| e.to_string())
                 };
                 external.insert(req.location, data);
             }
@@ -144,7 +195,8 @@ pub fn front_end_task(
                     inside: Some(spec_dir.to_path_buf()),
                     max_bytes: limits::MAX_SPEC_BYTES,
                     whole: true,
-                }),
+                })
+                .map_err(|e| e.to_string()),
             };
             (p, bytes)
         })

@@ -582,76 +582,28 @@ fn junit_document(suites: &str, c: &Counts, skipped: usize) -> String {
     )
 }
 
-/// `ravel verify`: run every item of the batch and report.
-/// A batch's items on their way out in index order (see [`verify`]).
-struct InOrder<E> {
-    /// Writes one item; false when the output is gone.
-    emit: E,
+/// Where finished items go, in index order: standard output in the chosen
+/// format (text and CSV as they come; JSON, JUnit gathered for the closing
+/// document) and the verdict counts.
+struct Sink<'o> {
+    opts: &'o Options,
     counts: Counts,
-    /// Items done, waiting for an earlier one.
-    waiting: BTreeMap<usize, Item>,
-    /// Items written so far.
-    written: usize,
-    /// The output is gone.
-    broken: bool,
+    /// JSON results, for the closing document.
+    results: Vec<Value>,
+    /// JUnit suites, for the closing document.
+    suites: String,
+    /// JUnit test cases skipped (UNSURE).
+    skipped: usize,
+    /// Whether the CSV header was written.
+    header: bool,
 }
 
-pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> ExitCode {
-    let run_started = Instant::now();
-    let (pairs, errors) = super::pairs(specs, controllers);
-    // file names from the whole batch, so every shard names a pair alike
-    let names = super::output_names(&pairs);
-    let mut work: Vec<Work> = errors.into_iter().map(Work::Argument).collect();
-    let total = work.len() + pairs.len();
-    let mine: Vec<usize> = (0..total)
-        .filter(|i| opts.shard.is_none_or(|s| i % s.n == s.k - 1))
-        .collect();
-    // one file for a single result, else a folder of them
-    let cert_dir = opts
-        .certificate
-        .as_deref()
-        .filter(|c| total > 1 || c.is_dir());
-    let names = match names {
-        Ok(n) => n,
-        // only files in a folder need names; a collision there is refused
-        // before anything runs
-        Err(e) if cert_dir.is_some() || opts.plot.is_some() => {
-            err(&format!("error: {e}\n"));
-            return ExitCode::from(exit::INPUT_ERROR);
-        }
-        Err(_) => vec![String::new(); pairs.len()],
-    };
-    work.extend(
-        pairs
-            .into_iter()
-            .zip(names)
-            .map(|((s, c), n)| Work::Pair(s, c, n)),
-    );
-    for d in cert_dir.into_iter().chain(opts.plot.as_deref()) {
-        if let Err(e) = std::fs::create_dir_all(d) {
-            err(&format!(
-                "error: cannot create folder `{}`: {e}\n",
-                ravel_syntax::diag::sanitize(&d.display().to_string())
-            ));
-            return ExitCode::from(exit::INPUT_ERROR);
-        }
-    }
-    let jobs = opts.jobs.min(mine.len()).max(1);
-    if jobs == 1 {
-        // one pair at a time, each on `opts.jobs` threads: the workers start
-        // while the first spec is read and checked
-        ravel_analysis::pool::warm(opts.jobs);
-    }
-    let mut counts: Counts = [0; 4];
-    let mut results = Vec::new();
-    let mut suites = String::new();
-    let mut skipped = 0usize;
-    let mut broken = false;
-    let mut header = false;
-    let mut emit = |item: Item, counts: &mut Counts| -> bool {
-        count(counts, item.class);
-        skipped += item.junit.matches("<skipped ").count();
-        match opts.format {
+impl Sink<'_> {
+    /// Write (or keep) one item; false when standard output is gone.
+    fn emit(&mut self, item: Item) -> bool {
+        count(&mut self.counts, item.class);
+        self.skipped += item.junit.matches("<skipped ").count();
+        match self.opts.format {
             Format::Text => {
                 if !item.stderr.is_empty() {
                     err(&item.stderr);
@@ -660,19 +612,19 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
                     return false;
                 }
             }
-            Format::Json => results.push(item.json),
+            Format::Json => self.results.push(item.json),
             Format::Jsonl => {
                 if out(&serde_json::to_string(&item.json).unwrap_or_default()).is_err() {
                     return false;
                 }
             }
-            Format::Junit => suites += &item.junit,
+            Format::Junit => self.suites += &item.junit,
             Format::Csv => {
                 if !item.stderr.is_empty() {
                     err(&item.stderr);
                 }
-                if !header {
-                    header = true;
+                if !self.header {
+                    self.header = true;
                     if out(ravel::report::network::CSV_HEADER).is_err() {
                         return false;
                     }
@@ -683,116 +635,230 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
             }
         }
         true
-    };
-    if jobs == 1 {
-        for (k, &i) in mine.iter().enumerate() {
-            // a single pair gets the jobs for its cells
-            let position = Some((k + 1, mine.len()));
-            let item = run(
-                i,
-                &work[i],
-                opts,
-                cert_dir,
-                opts.progress,
-                opts.jobs,
-                position,
-            );
-            if !emit(item, &mut counts) {
-                broken = true;
-                break;
-            }
-        }
-    } else {
-        // threads take the next index; whichever finishes the pair due
-        // next writes it, and every later one already done, in index
-        // order. No thread only writes: one did, and woke for every pair,
-        // taking a core from a worker each time (740–790 context switches
-        // per 256 pairs on two jobs).
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let order = std::sync::Mutex::new(InOrder {
-            emit: &mut emit,
-            counts,
-            waiting: BTreeMap::new(),
-            written: 0,
-            broken: false,
-        });
-        let pairs = || loop {
-            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some(&i) = mine.get(k) else { break };
-            let item = run(i, &work[i], opts, cert_dir, false, 1, None);
-            let mut o = order.lock().unwrap_or_else(|e| e.into_inner());
-            let InOrder {
-                emit,
-                counts,
-                waiting,
-                written,
-                broken,
-            } = &mut *o;
-            waiting.insert(k, item);
-            while let Some(item) = waiting.remove(written) {
-                *written += 1;
-                if !*broken && !emit(item, counts) {
-                    *broken = true;
-                    // stop handing out work; running items finish
-                    next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
-                }
-                if opts.progress && !*broken {
-                    err(&format!(
-                        "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
-                        mine.len(),
-                        run_started.elapsed().as_secs_f64()
-                    ));
-                }
+    }
+
+    /// Write the closing document (a summary line, the JSON or JUnit
+    /// document); false when standard output is gone.
+    fn close(self, total: usize, run_started: Instant) -> bool {
+        let opts = self.opts;
+        let counts = &self.counts;
+        let shard_fields = |doc: &mut Value| {
+            if let Some(s) = opts.shard {
+                doc["shard"] = json!(format!("{}/{}", s.k, s.n));
+                doc["total"] = json!(total);
             }
         };
-        // the calling thread runs pairs too
-        std::thread::scope(|scope| {
-            for _ in 1..jobs {
-                scope.spawn(pairs);
+        let written = match opts.format {
+            Format::Text if counts.iter().sum::<usize>() > 1 => {
+                let time = if opts.no_timing {
+                    String::new()
+                } else {
+                    format!(" in {:.1} s", run_started.elapsed().as_secs_f64())
+                };
+                out(&format!("summary: {}{time}", summary(counts)))
             }
-            pairs();
-        });
-        let o = order.into_inner().unwrap_or_else(|e| e.into_inner());
-        (counts, broken) = (o.counts, o.broken);
-        if opts.progress {
-            err("\r\x1b[2K");
+            Format::Text | Format::Csv => Ok(()),
+            Format::Json => {
+                let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(counts), "results": self.results });
+                shard_fields(&mut doc);
+                out(&serde_json::to_string_pretty(&doc).unwrap_or_default())
+            }
+            Format::Jsonl => {
+                let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(counts), "summary": summary(counts) });
+                shard_fields(&mut doc);
+                out(&serde_json::to_string(&doc).unwrap_or_default())
+            }
+            Format::Junit => out(&junit_document(&self.suites, counts, self.skipped)),
+        };
+        written.is_ok()
+    }
+}
+
+/// The work of a batch: every argument error and (spec, controller) pair,
+/// the indices this shard runs, and the folder per-pair files go into.
+struct Batch {
+    work: Vec<Work>,
+    /// The indices of `work` this shard runs.
+    mine: Vec<usize>,
+    /// The folder of per-pair certificates (one file for a single result).
+    cert_dir: Option<PathBuf>,
+}
+
+/// Expand the arguments into the batch's work and create its output
+/// folders; an exit code when that fails (before anything runs).
+fn batch(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Result<Batch, ExitCode> {
+    let (pairs, errors) = super::pairs(specs, controllers);
+    // file names from the whole batch, so every shard names a pair alike
+    let names = super::output_names(&pairs);
+    let mut work: Vec<Work> = errors.into_iter().map(Work::Argument).collect();
+    let total = work.len() + pairs.len();
+    let mine: Vec<usize> = (0..total)
+        .filter(|i| opts.shard.is_none_or(|s| i % s.n == s.k - 1))
+        .collect();
+    // one file for a single result, else a folder of them
+    let cert_dir = opts.certificate.clone().filter(|c| total > 1 || c.is_dir());
+    let names = match names {
+        Ok(n) => n,
+        // only files in a folder need names; a collision there is refused
+        // before anything runs
+        Err(e) if cert_dir.is_some() || opts.plot.is_some() => {
+            err(&format!("error: {e}\n"));
+            return Err(ExitCode::from(exit::INPUT_ERROR));
+        }
+        Err(_) => vec![String::new(); pairs.len()],
+    };
+    work.extend(
+        pairs
+            .into_iter()
+            .zip(names)
+            .map(|((s, c), n)| Work::Pair(s, c, n)),
+    );
+    for d in cert_dir.iter().chain(opts.plot.as_ref()) {
+        if let Err(e) = std::fs::create_dir_all(d) {
+            err(&format!(
+                "error: cannot create folder `{}`: {e}\n",
+                ravel_syntax::diag::sanitize(&d.display().to_string())
+            ));
+            return Err(ExitCode::from(exit::INPUT_ERROR));
         }
     }
+    Ok(Batch {
+        work,
+        mine,
+        cert_dir,
+    })
+}
+
+/// `ravel verify`: run the batch's pairs (one at a time on `--jobs`
+/// threads each, or `--jobs` pairs at once), write them in index order,
+/// then the closing document; the exit code of the `--fail-on` gate.
+pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> ExitCode {
+    let run_started = Instant::now();
+    let b = match batch(specs, controllers, opts) {
+        Ok(b) => b,
+        Err(code) => return code,
+    };
+    let mut sink = Sink {
+        opts,
+        counts: [0; 4],
+        results: Vec::new(),
+        suites: String::new(),
+        skipped: 0,
+        header: false,
+    };
+    let jobs = opts.jobs.min(b.mine.len()).max(1);
+    let broken = if jobs == 1 {
+        // one pair at a time, each on `opts.jobs` threads: the workers start
+        // while the first spec is read and checked
+        ravel_analysis::pool::warm(opts.jobs);
+        run_serially(&b, opts, &mut sink)
+    } else {
+        run_in_parallel(&b, opts, jobs, &mut sink, run_started)
+    };
     if broken {
         return ExitCode::from(exit::BROKEN_PIPE);
     }
-    let shard_fields = |doc: &mut Value| {
-        if let Some(s) = opts.shard {
-            doc["shard"] = json!(format!("{}/{}", s.k, s.n));
-            doc["total"] = json!(total);
-        }
-    };
-    let written = match opts.format {
-        Format::Text if counts.iter().sum::<usize>() > 1 => {
-            let time = if opts.no_timing {
-                String::new()
-            } else {
-                format!(" in {:.1} s", run_started.elapsed().as_secs_f64())
-            };
-            out(&format!("summary: {}{time}", summary(&counts)))
-        }
-        Format::Text | Format::Csv => Ok(()),
-        Format::Json => {
-            let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(&counts), "results": results });
-            shard_fields(&mut doc);
-            out(&serde_json::to_string_pretty(&doc).unwrap_or_default())
-        }
-        Format::Jsonl => {
-            let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(&counts), "summary": summary(&counts) });
-            shard_fields(&mut doc);
-            out(&serde_json::to_string(&doc).unwrap_or_default())
-        }
-        Format::Junit => out(&junit_document(&suites, &counts, skipped)),
-    };
-    if written.is_err() {
+    let counts = sink.counts;
+    if !sink.close(b.work.len(), run_started) {
         return ExitCode::from(exit::BROKEN_PIPE);
     }
     ExitCode::from(gate(&counts, opts.fail_on))
+}
+
+/// Run the batch's pairs one after another, each on `opts.jobs` threads;
+/// true when standard output went away.
+fn run_serially(b: &Batch, opts: &Options, sink: &mut Sink) -> bool {
+    for (k, &i) in b.mine.iter().enumerate() {
+        // a single pair gets the jobs for its cells
+        let position = Some((k + 1, b.mine.len()));
+        let item = run(
+            i,
+            &b.work[i],
+            opts,
+            b.cert_dir.as_deref(),
+            opts.progress,
+            opts.jobs,
+            position,
+        );
+        if !sink.emit(item) {
+            return true;
+        }
+    }
+    false
+}
+
+/// Run `jobs` pairs at a time; true when standard output went away.
+///
+/// Threads take the next index; whichever finishes the pair due next
+/// writes it, and every later one already done, in index order. No thread
+/// only writes: one did, and woke for every pair, taking a core from a
+/// worker each time (740–790 context switches per 256 pairs on two jobs).
+fn run_in_parallel(
+    b: &Batch,
+    opts: &Options,
+    jobs: usize,
+    sink: &mut Sink,
+    run_started: Instant,
+) -> bool {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let order = std::sync::Mutex::new(InOrder {
+        sink,
+        waiting: BTreeMap::new(),
+        written: 0,
+        broken: false,
+    });
+    let pairs = || loop {
+        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let Some(&i) = b.mine.get(k) else { break };
+        let item = run(i, &b.work[i], opts, b.cert_dir.as_deref(), false, 1, None);
+        let mut o = order.lock().unwrap_or_else(|e| e.into_inner());
+        let InOrder {
+            sink,
+            waiting,
+            written,
+            broken,
+        } = &mut *o;
+        waiting.insert(k, item);
+        while let Some(item) = waiting.remove(written) {
+            *written += 1;
+            if !*broken && !sink.emit(item) {
+                *broken = true;
+                // stop handing out work; running items finish
+                next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
+            }
+            if opts.progress && !*broken {
+                err(&format!(
+                    "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
+                    b.mine.len(),
+                    run_started.elapsed().as_secs_f64()
+                ));
+            }
+        }
+    };
+    // the calling thread runs pairs too
+    std::thread::scope(|scope| {
+        for _ in 1..jobs {
+            scope.spawn(pairs);
+        }
+        pairs();
+    });
+    let o = order.into_inner().unwrap_or_else(|e| e.into_inner());
+    if opts.progress {
+        err("\r\x1b[2K");
+    }
+    o.broken
+}
+
+/// The pairs finished out of order, until their turn to be written.
+struct InOrder<'s, 'o> {
+    /// Writes items; false when the output is gone.
+    sink: &'s mut Sink<'o>,
+    /// Items done, waiting for an earlier one.
+    waiting: BTreeMap<usize, Item>,
+    /// Items written so far.
+    written: usize,
+    /// The output is gone.
+    broken: bool,
 }
 
 /// `ravel merge`: the shards' JSON documents as one, identical to the

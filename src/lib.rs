@@ -632,187 +632,234 @@ fn short_hash(h: &str) -> String {
     ravel_syntax::diag::sanitize(&h.chars().take(12).collect::<String>())
 }
 
-/// Check one certificate file: the exit code it earns and the text to print.
-/// Every answer that got that far names the spec and the controller it
-/// checked (path and SHA-256 prefix).
-fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> (u8, String) {
-    use ravel_certify::Answer;
-    let name = ravel_syntax::diag::sanitize(&file.display().to_string());
-    // after the answer's line: the files checked, then notes
-    let mut files: Vec<String> = Vec::new();
-    let mut notes: Vec<String> = Vec::new();
-    let with = |head: String, files: &[String], notes: &[String]| {
+/// One certificate being checked: its name, then the files checked and the
+/// notes, printed after the answer's line.
+struct Certifying {
+    /// The certificate file's name, sanitised.
+    name: String,
+    files: Vec<String>,
+    notes: Vec<String>,
+}
+
+/// An answer of `certify`: the exit code and the text to print.
+type Answered = (u8, String);
+
+impl Certifying {
+    /// `head`, then the files and notes, one per line.
+    fn with(&self, head: String) -> String {
         let mut text = head;
-        for l in files.iter().chain(notes) {
+        for l in self.files.iter().chain(&self.notes) {
             text += &format!("\n  {l}");
         }
         text
-    };
-    let unreadable = |why: String, files: &[String], notes: &[String]| {
+    }
+
+    /// UNREADABLE, and why.
+    fn unreadable(&self, why: String) -> Answered {
         (
             exit::INPUT_ERROR,
-            with(format!("UNREADABLE  {name}: {why}"), files, notes),
+            self.with(format!("UNREADABLE  {}: {why}", self.name)),
         )
-    };
-    let invalid = |why: String, files: &[String], notes: &[String]| {
+    }
+
+    /// INVALID, and why.
+    fn invalid(&self, why: String) -> Answered {
         (
             exit::FALSIFIED,
-            with(format!("INVALID     {name}: {why}"), files, notes),
+            self.with(format!("INVALID     {}: {why}", self.name)),
         )
+    }
+
+    /// The spec and controller paths: as given (relative to the working
+    /// folder), else as recorded (relative to the certificate's folder).
+    fn paths(
+        &mut self,
+        cert: &Value,
+        file: &Path,
+        spec: Option<&Path>,
+        controller: Option<&Path>,
+    ) -> Result<(PathBuf, PathBuf), Answered> {
+        // empty for a certificate in the working folder: paths stay as recorded
+        let cert_dir = file.parent().unwrap_or(Path::new(""));
+        let mut recorded = |key: &str| {
+            let (path, note) = recorded_path(
+                cert_dir,
+                cert.get(key)
+                    .and_then(|v| v.get("path"))
+                    .and_then(Value::as_str)?,
+            );
+            self.notes.extend(note);
+            Some(path)
+        };
+        let spec_path = match spec {
+            Some(s) => Some(s.to_path_buf()),
+            None => recorded("spec"),
+        };
+        let ctrl_path = match controller {
+            Some(c) => Some(c.to_path_buf()),
+            None => recorded("controller"),
+        };
+        let Some(spec_path) = spec_path else {
+            return Err(self.unreadable("no spec path recorded; pass --spec".into()));
+        };
+        let Some(ctrl_path) = ctrl_path else {
+            return Err(self.unreadable("no controller path recorded; pass --controller".into()));
+        };
+        Ok((spec_path, ctrl_path))
+    }
+
+    /// Read the spec and run the front end with the controller; the task
+    /// and the spec's SHA-256.
+    fn front_end(
+        &mut self,
+        spec_path: &Path,
+        ctrl_path: &Path,
+    ) -> Result<(ravel::check::Task, String), Answered> {
+        let spec_name = ravel_syntax::diag::sanitize(&spec_path.display().to_string());
+        let ctrl_name = ravel_syntax::diag::sanitize(&ctrl_path.display().to_string());
+        let source = match read_request(&ravel::ReadRequest {
+            path: spec_path.to_path_buf(),
+            inside: None,
+            max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+            whole: true,
+        }) {
+            Ok(b) => b,
+            Err(e) => return Err(self.unreadable(format!("cannot read spec `{spec_name}`: {e}"))),
+        };
+        let spec_sha = ravel::check::sha256_hex(&source);
+        self.files.push(format!(
+            "spec        {spec_name} (SHA-256 {})",
+            short_hash(&spec_sha)
+        ));
+        let Ok(source) = String::from_utf8(source) else {
+            return Err(self.unreadable(format!("spec `{spec_name}` is not UTF-8 text")));
+        };
+        let dir = spec_path.parent().unwrap_or(Path::new("."));
+        match ravel::front_end_task(&source, dir, &read_request, Some(ctrl_path)) {
+            Ok(t) => Ok((t, spec_sha)),
+            Err(d) => Err(self.unreadable(format!(
+                "spec `{spec_name}` with controller `{ctrl_name}` does not check ({} error(s); run `ravel check`)",
+                d.len()
+            ))),
+        }
+    }
+
+    /// The controller and its network are the certified ones, and the
+    /// spec's problem is the recorded one, number for number (the text may
+    /// differ: comments, layout; a note says so).
+    fn same_problem(
+        &mut self,
+        cert: &Value,
+        plan: &ravel::lower::Plan,
+        ctrl_path: &Path,
+        spec_sha: &str,
+    ) -> Result<(), Answered> {
+        let hash = |key: &str, field: &str| {
+            cert.get(key)
+                .and_then(|v| v.get(field))
+                .and_then(Value::as_str)
+                .unwrap_or("")
+                .to_string()
+        };
+        let ctrl_name = ravel_syntax::diag::sanitize(&ctrl_path.display().to_string());
+        let sha = plan.controller_sha256();
+        self.files.push(format!(
+            "controller  {ctrl_name} (SHA-256 {})",
+            short_hash(sha)
+        ));
+        if sha != hash("controller", "sha256") {
+            return Err(self
+                .invalid("the controller file is not the one certified (SHA-256 differs)".into()));
+        }
+        if ravel::certificate::network_sha256(plan.network())
+            != hash("controller", "network_sha256")
+        {
+            return Err(self.invalid(
+                "the controller's network (external data included) is not the one certified".into(),
+            ));
+        }
+        let text_differs = spec_sha != hash("spec", "sha256");
+        let text_note = format!(
+            "note: the spec's text differs from the certified one (SHA-256 {}, certified {})",
+            short_hash(spec_sha),
+            short_hash(&hash("spec", "sha256"))
+        );
+        let problem = ravel::certificate::problem_json(plan);
+        if let Some(d) = first_difference(
+            &problem,
+            cert.get("problem").unwrap_or(&Value::Null),
+            "problem",
+        ) {
+            if text_differs {
+                self.notes.push(text_note);
+            }
+            return Err(self.invalid(format!(
+                "the recorded problem is not the spec's: `{}` differs",
+                ravel_syntax::diag::sanitize(&d)
+            )));
+        }
+        if text_differs {
+            self.notes
+                .push(format!("{text_note}; its problem is identical"));
+        }
+        Ok(())
+    }
+
+    /// The checker's answer on the certificate.
+    fn check(mut self, cert: &Value, plan: &ravel::lower::Plan, spec_path: &Path) -> Answered {
+        use ravel_certify::Answer;
+        let spec_name = ravel_syntax::diag::sanitize(&spec_path.display().to_string());
+        let report = ravel_certify::check(cert, plan.network());
+        let (code, head) = match &report.answer {
+            Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
+            Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),
+            Answer::Unsupported(_) => (exit::INPUT_ERROR, "UNSUPPORTED".to_string()),
+            Answer::Unreadable(_) => (exit::INPUT_ERROR, "UNREADABLE ".to_string()),
+        };
+        let mut text = format!("{head} {} ({spec_name}", self.name);
+        if report.cells > 0 && report.steps > 0 {
+            text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
+        } else if report.cells > 0 {
+            text += &format!(", {} cell(s)", report.cells);
+        }
+        text += ")";
+        match &report.answer {
+            Answer::Valid => {}
+            Answer::Invalid(m) | Answer::Unsupported(m) | Answer::Unreadable(m) => {
+                text += &format!("\n  {}", ravel_syntax::diag::sanitize_to(m, 600));
+            }
+        }
+        self.notes.extend(report.properties.iter().cloned());
+        (code, self.with(text))
+    }
+}
+
+/// Check one certificate file: the exit code it earns and the text to print.
+/// Every answer that got that far names the spec and the controller it
+/// checked (path and SHA-256 prefix).
+fn certify_one(file: &Path, spec: Option<&Path>, controller: Option<&Path>) -> Answered {
+    let mut c = Certifying {
+        name: ravel_syntax::diag::sanitize(&file.display().to_string()),
+        files: Vec::new(),
+        notes: Vec::new(),
     };
     let cert = match read_json(file) {
         Ok(v) => v,
-        Err(e) => return unreadable(e, &[], &[]),
+        Err(e) => return c.unreadable(e),
     };
-    // empty for a certificate in the working folder: paths stay as recorded
-    let cert_dir = file.parent().unwrap_or(Path::new(""));
-    let mut recorded = |key: &str| {
-        let (path, note) = recorded_path(
-            cert_dir,
-            cert.get(key)
-                .and_then(|v| v.get("path"))
-                .and_then(Value::as_str)?,
-        );
-        notes.extend(note);
-        Some(path)
+    let (spec_path, ctrl_path) = match c.paths(&cert, file, spec, controller) {
+        Ok(p) => p,
+        Err(answer) => return answer,
     };
-    // an explicit --spec / --controller is relative to the working folder
-    let spec_path = match spec {
-        Some(s) => Some(s.to_path_buf()),
-        None => recorded("spec"),
-    };
-    let ctrl_path = match controller {
-        Some(c) => Some(c.to_path_buf()),
-        None => recorded("controller"),
-    };
-    let Some(spec_path) = spec_path else {
-        return unreadable("no spec path recorded; pass --spec".into(), &[], &notes);
-    };
-    let Some(ctrl_path) = ctrl_path else {
-        return unreadable(
-            "no controller path recorded; pass --controller".into(),
-            &[],
-            &notes,
-        );
-    };
-    let spec_name = ravel_syntax::diag::sanitize(&spec_path.display().to_string());
-    let ctrl_name = ravel_syntax::diag::sanitize(&ctrl_path.display().to_string());
-    let source = match read_request(&ravel::ReadRequest {
-        path: spec_path.clone(),
-        inside: None,
-        max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
-        whole: true,
-    }) {
-        Ok(b) => b,
-        Err(e) => return unreadable(format!("cannot read spec `{spec_name}`: {e}"), &[], &notes),
-    };
-    let hash = |key: &str, field: &str| {
-        cert.get(key)
-            .and_then(|v| v.get(field))
-            .and_then(Value::as_str)
-            .unwrap_or("")
-            .to_string()
-    };
-    let spec_sha = ravel::check::sha256_hex(&source);
-    files.push(format!(
-        "spec        {spec_name} (SHA-256 {})",
-        short_hash(&spec_sha)
-    ));
-    // the text may differ (comments, layout): the problem decides
-    let text_differs = spec_sha != hash("spec", "sha256");
-    let Ok(source) = String::from_utf8(source) else {
-        return unreadable(
-            format!("spec `{spec_name}` is not UTF-8 text"),
-            &files,
-            &notes,
-        );
-    };
-    let dir = spec_path.parent().unwrap_or(Path::new("."));
-    let task = match ravel::front_end_task(&source, dir, &read_request, Some(&ctrl_path)) {
+    let (task, spec_sha) = match c.front_end(&spec_path, &ctrl_path) {
         Ok(t) => t,
-        Err(d) => {
-            return unreadable(
-                format!(
-                    "spec `{spec_name}` with controller `{ctrl_name}` does not check ({} error(s); run `ravel check`)",
-                    d.len()
-                ),
-                &files,
-                &notes,
-            );
-        }
+        Err(answer) => return answer,
     };
-    // the model, its hashes and the problem as the spec states it
     let plan = ravel::lower::lower(&task);
-    let (net, sha, problem) = (
-        plan.network(),
-        plan.controller_sha256(),
-        ravel::certificate::problem_json(&plan),
-    );
-    files.push(format!(
-        "controller  {ctrl_name} (SHA-256 {})",
-        short_hash(sha)
-    ));
-    if sha != hash("controller", "sha256") {
-        return invalid(
-            "the controller file is not the one certified (SHA-256 differs)".into(),
-            &files,
-            &notes,
-        );
+    if let Err(answer) = c.same_problem(&cert, &plan, &ctrl_path, &spec_sha) {
+        return answer;
     }
-    if ravel::certificate::network_sha256(net) != hash("controller", "network_sha256") {
-        return invalid(
-            "the controller's network (external data included) is not the one certified".into(),
-            &files,
-            &notes,
-        );
-    }
-    let text_note = format!(
-        "note: the spec's text differs from the certified one (SHA-256 {}, certified {})",
-        short_hash(&spec_sha),
-        short_hash(&hash("spec", "sha256"))
-    );
-    if let Some(d) = first_difference(
-        &problem,
-        cert.get("problem").unwrap_or(&Value::Null),
-        "problem",
-    ) {
-        if text_differs {
-            notes.push(text_note);
-        }
-        return invalid(
-            format!(
-                "the recorded problem is not the spec's: `{}` differs",
-                ravel_syntax::diag::sanitize(&d)
-            ),
-            &files,
-            &notes,
-        );
-    }
-    if text_differs {
-        notes.push(format!("{text_note}; its problem is identical"));
-    }
-    let report = ravel_certify::check(&cert, net);
-    let (code, head) = match &report.answer {
-        Answer::Valid => (exit::VERIFIED, "VALID      ".to_string()),
-        Answer::Invalid(_) => (exit::FALSIFIED, "INVALID    ".to_string()),
-        Answer::Unsupported(_) => (exit::INPUT_ERROR, "UNSUPPORTED".to_string()),
-        Answer::Unreadable(_) => (exit::INPUT_ERROR, "UNREADABLE ".to_string()),
-    };
-    let mut text = format!("{head} {name} ({spec_name}");
-    if report.cells > 0 && report.steps > 0 {
-        text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
-    } else if report.cells > 0 {
-        text += &format!(", {} cell(s)", report.cells);
-    }
-    text += ")";
-    match &report.answer {
-        Answer::Valid => {}
-        Answer::Invalid(m) | Answer::Unsupported(m) | Answer::Unreadable(m) => {
-            text += &format!("\n  {}", ravel_syntax::diag::sanitize_to(m, 600));
-        }
-    }
-    notes.extend(report.properties.iter().cloned());
-    (code, with(text, &files, &notes))
+    c.check(&cert, &plan, &spec_path)
 }
 
 /// A line diff of `a` and `b` (longest common subsequence), `-`/`+` lines

@@ -264,3 +264,64 @@ fn only_the_analysis_crate_may_hold_unsafe_code_and_only_the_cli_does_io() {
     }
     assert!(allowed_unsafe >= 1);
 }
+
+/// The phases of the `ravel` crate, in pipeline order: a module may use
+/// only modules before it (the library's root, the driver, uses them all).
+const PHASES: [&str; 9] = [
+    "ir",
+    "onnx",
+    "vnnlib",
+    "check",
+    "lower",
+    "execute",
+    "report",
+    "certificate",
+    "plot",
+];
+
+/// Inside the `ravel` crate the phases import forward only: no module
+/// names a later phase outside comments.
+#[test]
+fn the_phases_import_forward_only() {
+    let src = root().join("crates/ravel/src");
+    for (k, phase) in PHASES.iter().enumerate() {
+        let mut files = Vec::new();
+        let dir = src.join(phase);
+        if dir.is_dir() {
+            rust_files(&dir, &mut files);
+        } else {
+            files.push(src.join(format!("{phase}.rs")));
+        }
+        for f in files {
+            let text = std::fs::read_to_string(&f).expect("readable");
+            for line in text.lines() {
+                let code = line.split("//").next().unwrap_or("");
+                for (i, _) in code.match_indices("crate::") {
+                    let name: String = code[i + "crate::".len()..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect();
+                    if let Some(j) = PHASES.iter().position(|p| *p == name) {
+                        assert!(
+                            j <= k,
+                            "{} ({phase}) uses crate::{name}, a later phase",
+                            f.display()
+                        );
+                    }
+                }
+            }
+        }
+    }
+    let mut on_disk: Vec<String> = std::fs::read_dir(&src)
+        .expect("src")
+        .map(|e| {
+            let name = e.expect("entry").file_name().to_string_lossy().to_string();
+            name.trim_end_matches(".rs").to_string()
+        })
+        .filter(|n| n != "lib")
+        .collect();
+    on_disk.sort();
+    let mut listed: Vec<String> = PHASES.iter().map(|p| p.to_string()).collect();
+    listed.sort();
+    assert_eq!(on_disk, listed, "a module of the ravel crate outside PHASES");
+}

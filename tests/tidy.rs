@@ -323,5 +323,8 @@ fn the_phases_import_forward_only() {
     on_disk.sort();
     let mut listed: Vec<String> = PHASES.iter().map(|p| p.to_string()).collect();
     listed.sort();
-    assert_eq!(on_disk, listed, "a module of the ravel crate outside PHASES");
+    assert_eq!(
+        on_disk, listed,
+        "a module of the ravel crate outside PHASES"
+    );
 }

@@ -1,0 +1,64 @@
+//! The library on its own: a front end other than the command line runs a
+//! spec end to end through `ravel::verify` (its own reader, its own clock)
+//! and gets the report the command line prints, byte for byte.
+
+use std::path::Path;
+use std::process::Command;
+
+use ravel::execute::{Control, Run, Verdict};
+use ravel::{ReadError, ReadRequest};
+
+/// A reader of whole files, as a front end other than the CLI would write
+/// it (no FIFO or confinement checks: the test's files are known).
+fn read(req: &ReadRequest) -> Result<Vec<u8>, ReadError> {
+    let bytes = std::fs::read(&req.path)?;
+    if req.whole && bytes.len() as u64 > req.max_bytes {
+        return Err(ReadError::TooLarge {
+            bytes: bytes.len() as u64,
+            limit: req.max_bytes,
+        });
+    }
+    Ok(bytes.into_iter().take(req.max_bytes as usize).collect())
+}
+
+/// `ravel::verify` on a spec, with no time limit.
+fn verify(spec: &str) -> Run {
+    let source = std::fs::read_to_string(spec).expect("spec");
+    let dir = Path::new(spec).parent().expect("folder");
+    ravel::verify(&source, dir, &read, None, &Control::unlimited()).expect("the spec checks")
+}
+
+/// What the command line prints for a spec, without timing.
+fn cli_text(spec: &str) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .args(["verify", "--no-timing", spec])
+        .output()
+        .expect("runs");
+    String::from_utf8(out.stdout).expect("UTF-8")
+}
+
+#[test]
+fn the_library_driver_gives_the_command_lines_report() {
+    for (spec, verdict) in [
+        ("specs/double_integrator.ravel", Verdict::Verified),
+        (
+            "specs/double_integrator_falsified.ravel",
+            Verdict::Falsified,
+        ),
+        ("specs/network/classifier_robust.ravel", Verdict::Verified),
+    ] {
+        let run = verify(spec);
+        assert_eq!(run.verdict(), verdict, "{spec}");
+        // the command line ends each report with a line break of its own
+        let report = ravel::report::text(spec, &run, None) + "\n";
+        assert_eq!(report, cli_text(spec), "{spec}");
+    }
+}
+
+#[test]
+fn front_end_diagnostics_reach_the_caller() {
+    let source = "system s { horizn 5 }";
+    let err = ravel::verify(source, Path::new("."), &read, None, &Control::unlimited())
+        .expect_err("does not check");
+    assert!(!err.is_empty());
+}

@@ -121,6 +121,7 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
 #[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+    use ravel_analysis::sets::IBox;
 
     #[test]
     fn zero_order_hold_of_a_double_integrator() {

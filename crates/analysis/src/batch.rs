@@ -4,7 +4,7 @@
 //! matrix–matrix products that share the network's weights. One cell goes
 //! the same way: the products stay blocked matrix multiplies.
 //!
-//! [`Analysis`](super::crown::Analysis) bounds one cell: its
+//! [`Relaxation`](super::crown::Relaxation) bounds one cell: its
 //! back-substitutions multiply that cell's coefficient rows by each weight
 //! matrix, row by row, and through a wide network most of its time goes to
 //! per-entry work on those rows. Here the cells of a partition go through
@@ -160,8 +160,8 @@ struct Cell {
 /// smaller of the support of the output box (the mode's bounds of `±f`,
 /// intersected with interval arithmetic's) and the mode's bound of `d·f`,
 /// as the single-cell analysis gives them
-/// ([`Analysis::output_box`](super::crown::Analysis::output_box), then
-/// [`Analysis::upper`](super::crown::Analysis::upper) of `dirs`), equal up
+/// ([`Relaxation::output_box`](super::crown::Relaxation::output_box), then
+/// [`Relaxation::upper`](super::crown::Relaxation::upper) of `dirs`), equal up
 /// to rounding terms (see the module documentation). `None` when `net` is
 /// not a chain of affine layers and activations (at least two affine
 /// layers), or a number on the way is not finite: the caller bounds the
@@ -743,13 +743,13 @@ fn stacked(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::crown::Analysis;
     use crate::crown::Mode;
+    use crate::crown::Relaxation;
 
     /// The single-cell bounds: the support of the mode's output box, and
     /// the mode's bound of each row.
     fn cell_offsets(net: &Network, cell: &IBox, dirs: &DMatrix<f64>, mode: Mode) -> Vec<f64> {
-        let a = Analysis::new(net, cell, mode);
+        let a = Relaxation::new(net, cell, mode);
         let out = a.output_box(mode);
         let mut b = support_of_box(dirs, &out.lo, &out.hi);
         for (v, c) in b.iter_mut().zip(a.upper(dirs.clone()).concretize(cell)) {
@@ -952,7 +952,7 @@ mod tests {
             let cells = IBox::new(lo, hi).grid(&counts);
             let got = crown_offsets(&net, &cells, &pm, Mode::Crown).expect("a ReLU chain");
             for (cell, g) in cells.iter().zip(&got) {
-                let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
+                let ibp = Relaxation::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
                 for j in 0..m {
                     assert!(g[j] <= ibp.hi[j] && -g[m + j] >= ibp.lo[j], "case {t}");
                     sides += 2;
@@ -1049,7 +1049,7 @@ mod tests {
                     );
                     bounds += 1;
                 }
-                let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
+                let ibp = Relaxation::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
                 for j in 0..m {
                     assert!(
                         g[j] <= ibp.hi[j] && -g[m + j] >= ibp.lo[j],

@@ -637,13 +637,13 @@ pub(crate) fn identity_image_into(
     }
 }
 
-/// What [`Analysis::upper_optimised`] minimises for row `r`, given that
+/// What [`Relaxation::upper_optimised`] minimises for row `r`, given that
 /// row's one-row bound over the network input: its value (the smaller the
 /// better; any measure, every candidate is sound) and the network input at
 /// which it is attained (where the slope gradient is taken).
 pub type Objective<'o> = dyn Fn(usize, &LinearUpper) -> (f64, Vec<f64>) + 'o;
 
-/// Other certified upper bounds of a linear bound's rows (see [`Analysis::with_hook`]).
+/// Other certified upper bounds of a linear bound's rows (see [`Relaxation::with_hook`]).
 pub type BoundHook<'h> = dyn Fn(&LinearUpper) -> Vec<f64> + 'h;
 
 /// How hidden-layer bounds are computed.
@@ -658,10 +658,11 @@ pub enum Mode {
     FastLin,
 }
 
-/// A network analysed over one input box: the bounds of every intermediate
-/// value and the relaxation of every activation.
+/// A network relaxed over one input box: the bounds of every intermediate
+/// value (interval arithmetic's, or CROWN's or Fast-Lin's: [`Mode`]) and
+/// the relaxation of every activation.
 #[derive(Clone, Debug)]
-pub struct Analysis<'a> {
+pub struct Relaxation<'a> {
     net: &'a Network,
     /// `boxes[i]` bounds the value before layer `i` (`boxes[0]` is the input box).
     boxes: Vec<IBox>,
@@ -684,22 +685,22 @@ pub struct Analysis<'a> {
     /// For an affine layer whose outputs' bounds were back-substituted:
     /// those outputs `z_j` (ascending) and the bounds of `z_j` and `−z_j`
     /// over the input (CROWN's own relaxations; the `2k` rows of
-    /// [`Analysis::backward_select`]) when the next affine layer keeps its
+    /// [`Relaxation::backward_select`]) when the next affine layer keeps its
     /// rows apart (one nonzero per row) or there is none; `None` otherwise
     /// (a later pass reaches them only through that layer). A later
     /// back-substitution with CROWN's relaxations whose every row has
     /// reached one of these outputs alone finishes from them (see
-    /// [`Analysis::scaled`]).
+    /// [`Relaxation::scaled`]).
     stored: Vec<Option<(Vec<usize>, LinearUpper)>>,
 }
 
-impl<'a> Analysis<'a> {
+impl<'a> Relaxation<'a> {
     /// Bound every layer of `net` over `input`.
-    pub fn new(net: &'a Network, input: &IBox, mode: Mode) -> Analysis<'a> {
-        Analysis::with_hook(net, input, mode, None)
+    pub fn new(net: &'a Network, input: &IBox, mode: Mode) -> Relaxation<'a> {
+        Relaxation::with_hook(net, input, mode, None)
     }
 
-    /// [`Analysis::new`], where in CROWN mode the linear bound of every
+    /// [`Relaxation::new`], where in CROWN mode the linear bound of every
     /// pre-activation (a [`LinearUpper`] over the network input) is also
     /// handed to `hook`, which returns other certified upper bounds of its
     /// rows; the tighter of the two is kept. The unrolled closed-loop
@@ -709,9 +710,9 @@ impl<'a> Analysis<'a> {
         input: &IBox,
         mode: Mode,
         hook: Option<&BoundHook>,
-    ) -> Analysis<'a> {
+    ) -> Relaxation<'a> {
         let layers = net.layers.len();
-        let mut a = Analysis {
+        let mut a = Relaxation {
             net,
             boxes: Vec::with_capacity(layers + 1),
             keep: Vec::with_capacity(layers),
@@ -972,8 +973,8 @@ impl<'a> Analysis<'a> {
         IBox::new(lo, hi)
     }
 
-    /// [`Analysis::upper_optimised`] of `spec` and the CROWN
-    /// [`Analysis::output_box`] together. With CROWN's own slopes both come
+    /// [`Relaxation::upper_optimised`] of `spec` and the CROWN
+    /// [`Relaxation::output_box`] together. With CROWN's own slopes both come
     /// from one back-substitution of the stacked rows `[I; −I; spec]`, at
     /// one pass's per-layer cost instead of two. Every row is
     /// back-substituted on its own, so each bound is the one the two calls
@@ -1127,8 +1128,8 @@ impl<'a> Analysis<'a> {
         LinearUpper { coef: out, offset }
     }
 
-    /// [`Analysis::backward`] with the given relaxations (any sound ones:
-    /// the optimised slopes of [`Analysis::upper_optimised`]); with `trace`,
+    /// [`Relaxation::backward`] with the given relaxations (any sound ones:
+    /// the optimised slopes of [`Relaxation::upper_optimised`]); with `trace`,
     /// the first row's coefficients on each activation's output are
     /// recorded (`trace[i]` for activation layer `i`).
     fn backward_with(
@@ -1243,17 +1244,17 @@ impl<'a> Analysis<'a> {
         }
     }
 
-    /// [`Analysis::upper`] with the lower slopes of unstable ReLUs optimised
+    /// [`Relaxation::upper`] with the lower slopes of unstable ReLUs optimised
     /// per row (α-CROWN-style, Xu et al. 2021): `steps` steps of projected
     /// gradient descent on the row's `objective` (by default its bound over
     /// the input box; a caller that composes the bound further passes the
     /// measure it cares about), each slope
     /// kept in `[0, 1]`. Any slope in `[0, 1]` gives a sound lower line
     /// (`a·z ≤ relu(z)`, intercept 0), and every iterate is evaluated with
-    /// the same certified arithmetic as [`Analysis::upper`]; each row keeps
+    /// the same certified arithmetic as [`Relaxation::upper`]; each row keeps
     /// the iterate with the smallest objective, starting from CROWN's own
     /// slopes, so by that measure the result is never looser than
-    /// [`Analysis::upper`]'s. Intermediate bounds are not re-optimised.
+    /// [`Relaxation::upper`]'s. Intermediate bounds are not re-optimised.
     ///
     /// The gradient: CROWN's bound is the maximum of the objective over the
     /// relaxed network (every `h` between its two lines); at the maximiser
@@ -1434,9 +1435,9 @@ mod tests {
     fn crown_is_no_looser_than_ibp_and_contains_samples() {
         let n = net();
         let input = IBox::new(vec![-1.0, -0.5], vec![0.5, 1.0]);
-        let a = Analysis::new(&n, &input, Mode::Crown);
+        let a = Relaxation::new(&n, &input, Mode::Crown);
         let crown = a.output_box(Mode::Crown);
-        let ibp = Analysis::new(&n, &input, Mode::Ibp).output_box(Mode::Ibp);
+        let ibp = Relaxation::new(&n, &input, Mode::Ibp).output_box(Mode::Ibp);
         assert!(ibp.contains_box(&crown));
         for i in 0..=20 {
             for j in 0..=20 {

@@ -39,7 +39,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-use super::crown::{Analysis, Mode};
+use super::crown::{Mode, Relaxation};
 use super::sdp_ipm::{self, Con, Ipm};
 use crate::issue::{Backend, Issue, Status};
 use crate::sets::IBox;
@@ -286,8 +286,8 @@ impl StepSdp {
     /// Prepare the SDPs of one step: `xi` bounds ξ, `rows` are extra input rows on ξ.
     pub fn new(net: &MergedNet, xi: &IBox, rows: &[(Vec<f64>, f64)]) -> StepSdp {
         let d0 = xi.dim();
-        let analysis = Analysis::new(&net.net, xi, Mode::Crown);
-        let boxes = analysis_boxes(&analysis);
+        let analysis = Relaxation::new(&net.net, xi, Mode::Crown);
+        let boxes = relaxation_boxes(&analysis);
         let hidden = net.layers.len() - 1;
         let total: usize = net.layers[..hidden].iter().map(|(w, _)| w.nrows()).sum();
         // slots: 0 the constant, 1..=d0 ξ, then kept neurons in order
@@ -855,7 +855,7 @@ fn none(issue: Issue) -> SdpBound {
     }
 }
 
-/// The boxes of an analysis (before every layer).
-fn analysis_boxes(a: &Analysis) -> Vec<IBox> {
+/// The boxes of a relaxation (before every layer).
+fn relaxation_boxes(a: &Relaxation) -> Vec<IBox> {
     a.boxes().to_vec()
 }

@@ -4,7 +4,7 @@
 //! allocation per step but the answer (the facets' bounds and the control
 //! box) and, for a plant with model error, its error vectors.
 //!
-//! The general path composes [`Analysis`](super::Analysis) and
+//! The general path composes [`Relaxation`](super::Relaxation) and
 //! [`LinearUpper`](super::LinearUpper) values, each a few vectors: on a
 //! small controller (the double integrator's `2 → 5 → 5 → 1`) a step is a
 //! few thousand floating-point operations, and the allocations, packing
@@ -316,7 +316,7 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
                     Some(Layer::Act(act)) => Some(*act),
                     _ => None,
                 };
-                // CROWN where the general path bounds (`Analysis::with_hook`
+                // CROWN where the general path bounds (`Relaxation::with_hook`
                 // without a hook): a layer that feeds an activation, not
                 // the first, nor one whose rows each read one neuron of an
                 // activation through layers with one nonzero per row

@@ -31,7 +31,7 @@ use ravel::check::Checked;
 use ravel::execute::{execute_system, propagate_cell, Control};
 use ravel::lower::{lower_system, Partitioner, SystemPlan};
 use ravel_analysis::closed_loop::{ClosedLoop, Plant, Propagator};
-use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::crown::{Mode, Relaxation};
 use ravel_analysis::sets::{IBox, Region};
 use ravel_base::rng::Rng;
 
@@ -152,7 +152,7 @@ fn crown_madds(widths: &[usize], live: &[usize]) -> f64 {
 
 /// The neurons not proved inactive of each ReLU layer of an analysis
 /// (`live[0]`: the inputs, `live[hidden + 1]`: the outputs).
-fn live_widths(net: &ravel_base::nn::Network, a: &Analysis, widths: &[usize]) -> Vec<usize> {
+fn live_widths(net: &ravel_base::nn::Network, a: &Relaxation, widths: &[usize]) -> Vec<usize> {
     let mut live = vec![widths[0]];
     for (i, layer) in net.layers.iter().enumerate() {
         if matches!(layer, ravel_base::nn::Layer::Act(_)) {
@@ -409,10 +409,10 @@ fn width_and_depth() {
         let net = common::random_relu(&mut rng, &widths);
         let input = IBox::new(vec![-0.5; 6], vec![0.5; 6]);
         let t = time(|| {
-            let a = Analysis::new(&net, &input, Mode::Crown);
+            let a = Relaxation::new(&net, &input, Mode::Crown);
             std::hint::black_box(a.output_box(Mode::Crown));
         });
-        let a = Analysis::new(&net, &input, Mode::Crown);
+        let a = Relaxation::new(&net, &input, Mode::Crown);
         let live = live_widths(&net, &a, &widths);
         let dense = crown_madds(&widths, &widths);
         let madds = crown_madds(&widths, &live);
@@ -434,7 +434,7 @@ fn width_and_depth() {
 
 /// CROWN output boxes of 256 cells of one input box through one network,
 /// batched (`analysis::batch`: the cells' back-substitutions as shared
-/// matrix products) against one cell at a time (`Analysis`, measured on 16
+/// matrix products) against one cell at a time (`Relaxation`, measured on 16
 /// cells and scaled to 256).
 fn batched_cells() {
     let rate = gemm_rate();

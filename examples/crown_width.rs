@@ -4,7 +4,7 @@
 #[path = "../benches/common/mod.rs"]
 mod common;
 
-use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::crown::{Mode, Relaxation};
 use ravel_analysis::sets::IBox;
 use ravel_base::rng::Rng;
 
@@ -57,7 +57,7 @@ fn main() {
     let reps = (2_000_000 / (w * w)).max(10);
     let t = std::time::Instant::now();
     for _ in 0..reps {
-        let a = Analysis::new(&net, &input, Mode::Crown);
+        let a = Relaxation::new(&net, &input, Mode::Crown);
         std::hint::black_box(a.output_box(Mode::Crown));
     }
     eprintln!(

@@ -15,7 +15,7 @@
 //! inside both.
 
 use nalgebra::{DMatrix, DVector};
-use ravel_analysis::crown::{plus_minus_identity, Analysis, Mode, Rows};
+use ravel_analysis::crown::{plus_minus_identity, Mode, Relaxation, Rows};
 use ravel_analysis::relax::{image, relax, Relax};
 use ravel_analysis::sets::IBox;
 use ravel_base::nn::{Activation, Layer, Network};
@@ -216,7 +216,7 @@ fn fast_kernels_match_the_reference_bound_for_bound() {
             centre.iter().map(|c| c - radius).collect(),
             centre.iter().map(|c| c + radius).collect(),
         );
-        let fast = Analysis::new(&net, &input, Mode::Crown);
+        let fast = Relaxation::new(&net, &input, Mode::Crown);
         let slow = reference::Reference::new(&net, &input);
         for (i, (f, s)) in fast.boxes().iter().zip(&slow.boxes).enumerate() {
             // the value before layer i; a ReLU's input that interval
@@ -286,7 +286,7 @@ fn stacked_rows_give_the_separate_passes() {
         let outs = 1 + case % 3;
         let net = random_network(&mut rng, &[2, width, width, outs], act);
         let input = IBox::new(vec![-0.6, -0.1], vec![0.3, 0.8]);
-        let a = Analysis::new(&net, &input, Mode::Crown);
+        let a = Relaxation::new(&net, &input, Mode::Crown);
         // dense rows, rows with one nonzero (either sign), a zero row
         let mut data: Vec<f64> = (0..4 * outs).map(|_| rng.normal()).collect();
         let one = case % outs;

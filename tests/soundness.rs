@@ -9,7 +9,7 @@ mod common;
 use common::random_network;
 use nalgebra::{DMatrix, DVector};
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, ModelError, Plant, Propagator};
-use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::crown::{Mode, Relaxation};
 use ravel_analysis::sets::{IBox, Norm, Region};
 use ravel_base::nn::{Activation, Layer};
 use ravel_base::rng::Rng;
@@ -344,8 +344,8 @@ fn network_bounds_contain_network_outputs() {
             c.iter().map(|v| v - r).collect(),
             c.iter().map(|v| v + r).collect(),
         );
-        let crown = Analysis::new(&net, &input, Mode::Crown).output_box(Mode::Crown);
-        let ibp = Analysis::new(&net, &input, Mode::Ibp).output_box(Mode::Ibp);
+        let crown = Relaxation::new(&net, &input, Mode::Crown).output_box(Mode::Crown);
+        let ibp = Relaxation::new(&net, &input, Mode::Ibp).output_box(Mode::Ibp);
         assert!(
             ibp.contains_box(&crown),
             "CROWN (intersected with IBP) must lie within IBP"
@@ -369,7 +369,7 @@ fn linear_bounds_hold_pointwise() {
         let act = [Activation::Relu, Activation::Tanh, Activation::Sigmoid][seed as usize % 3];
         let net = random_network(&mut rng, 2, 2, act, (3, 7));
         let input = IBox::new(vec![-0.7, -0.2], vec![0.4, 0.9]);
-        let a = Analysis::new(&net, &input, Mode::Crown);
+        let a = Relaxation::new(&net, &input, Mode::Crown);
         let spec = DMatrix::from_row_slice(2, 2, &[1.0, -0.5, -1.0, 0.25]);
         let bound = a.upper(spec.clone());
         for _ in 0..500 {
@@ -1029,7 +1029,7 @@ fn optimised_linear_bounds_hold_pointwise() {
         let mut rng = Rng::new(7000 + seed);
         let net = random_network(&mut rng, 2, 2, Activation::Relu, (3, 7));
         let input = IBox::new(vec![-0.7, -0.2], vec![0.4, 0.9]);
-        let a = Analysis::new(&net, &input, Mode::Crown);
+        let a = Relaxation::new(&net, &input, Mode::Crown);
         let spec = DMatrix::from_row_slice(2, 2, &[1.0, -0.5, -1.0, 0.25]);
         let plain = a.upper(spec.clone()).concretize(&input);
         let bound = a.upper_optimised(spec.clone(), 8, None);

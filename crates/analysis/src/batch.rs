@@ -4,7 +4,7 @@
 //! matrix–matrix products that share the network's weights. One cell goes
 //! the same way: the products stay blocked matrix multiplies.
 //!
-//! [`Analysis`](super::crown::Analysis) bounds one cell: its
+//! [`Relaxation`](super::crown::Relaxation) bounds one cell: its
 //! back-substitutions multiply that cell's coefficient rows by each weight
 //! matrix, row by row, and through a wide network most of its time goes to
 //! per-entry work on those rows. Here the cells of a partition go through
@@ -35,11 +35,12 @@
 //!   the output's interval image is the single-cell analysis's.
 //!
 //! # Soundness
-//! The relaxations are [`relax`]'s, as in the single-cell analysis, and
-//! every bound is an upper bound of exact arithmetic on the numbers used:
-//! a product of `n`-term sums has error at most `γₙ·|A|·|B|` in any order
-//! of summation, with or without fused multiply-adds (Higham, §3.5), plus
-//! `TINY` for underflow. The error terms are:
+//! The relaxations are [`relax`](super::relax::relax)'s, as in the
+//! single-cell analysis, and every bound is an upper bound of exact
+//! arithmetic on the numbers used: a product of `n`-term sums has error at
+//! most `γₙ·|A|·|B|` in any order of summation, with or without fused
+//! multiply-adds (Higham, §3.5), plus `TINY` for underflow. The error
+//! terms are:
 //! * a stacked product `Λ·W` of rows on a layer's output, with the offsets
 //!   `Λ·b`: `γ` times `|Λ|·s`, with `s = |W|·|h|max + |b|` the layer's
 //!   scale per cell (as the single-cell analysis);
@@ -59,7 +60,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::crown::{affine_image, affine_image_of, affine_image_row, weight_scale, Mode};
-use super::relax::{image, relax, Relax};
+use super::relax::{image, relax_in_mode, Relax};
 use super::shape::support_of_box;
 use crate::sets::IBox;
 use ravel_base::nn::{Activation, Layer, Network};
@@ -160,8 +161,8 @@ struct Cell {
 /// smaller of the support of the output box (the mode's bounds of `±f`,
 /// intersected with interval arithmetic's) and the mode's bound of `d·f`,
 /// as the single-cell analysis gives them
-/// ([`Analysis::output_box`](super::crown::Analysis::output_box), then
-/// [`Analysis::upper`](super::crown::Analysis::upper) of `dirs`), equal up
+/// ([`Relaxation::output_box`](super::crown::Relaxation::output_box), then
+/// [`Relaxation::upper`](super::crown::Relaxation::upper) of `dirs`), equal up
 /// to rounding terms (see the module documentation). `None` when `net` is
 /// not a chain of affine layers and activations (at least two affine
 /// layers), or a number on the way is not finite: the caller bounds the
@@ -236,6 +237,34 @@ fn chunk_offsets(
     own: &[usize],
 ) -> Option<Vec<Vec<f64>>> {
     let last = chain.len() - 1;
+    let mut cs = first_cells(chain, cells)?;
+    for g in 1..=last {
+        act_step(chain, &mut cs, g - 1);
+        if g == last {
+            output_interval(chain, &mut cs, g);
+            break;
+        }
+        interval_step(chain, &mut cs, g)?;
+        let bounds = hidden_bounds(chain, &cs, g);
+        let relu = chain.act[g - 1] == Activation::Relu;
+        for (c, up) in cs.iter_mut().zip(bounds) {
+            if !tighten_hidden(chain, c, g, &up, relu) {
+                return None;
+            }
+        }
+    }
+    let bounds = output_bounds(chain, &cs, dirs);
+    let out_m = chain.w[last].nrows();
+    let mut out = Vec::with_capacity(cs.len());
+    for (c, up) in cs.iter().zip(bounds) {
+        out.push(offsets_of(&c.z[last], &up, out_m, given, own)?);
+    }
+    Some(out)
+}
+
+/// Each cell of `cells` with its first layer's interval image and scale;
+/// `None` when a cell does not fit the chain's input or is not finite.
+fn first_cells(chain: &Chain, cells: &[IBox]) -> Option<Vec<Cell>> {
     let mut cs: Vec<Cell> = Vec::with_capacity(cells.len());
     for x in cells {
         if x.dim() != chain.w[0].ncols() || !x.is_finite() {
@@ -256,84 +285,89 @@ fn chunk_offsets(
             gap: Vec::new(),
         });
     }
-    for g in 1..=last {
-        act_step(chain, &mut cs, g - 1);
-        if g == last {
-            // the output's interval image as the single-cell analysis
-            // computes it (directed rounding, over the neurons a ReLU does
-            // not prove inactive): few rows, and the box every CROWN row
-            // is intersected with
-            let relu = chain.act[g - 1] == Activation::Relu;
-            for c in cs.iter_mut() {
-                let z = &c.z[g - 1];
-                let kept: Vec<usize> = (0..z.dim()).filter(|&i| z.hi[i] > 0.0).collect();
-                let cols = (relu && kept.len() < z.dim()).then_some(kept.as_slice());
-                let out = affine_image_of(chain.w[g], chain.b[g], &c.h[g - 1], cols);
-                c.z.push(out);
-            }
-            break;
-        }
-        interval_step(chain, &mut cs, g)?;
-        if g < last {
-            let m = chain.w[g].nrows();
-            let bounds = if g == 1 {
-                right_associated(
-                    chain,
-                    &cs,
-                    chain.w[1],
-                    &chain.abs_w[1],
-                    chain.b[1],
-                    None,
-                    true,
-                )
-            } else {
-                // the rows [W | b; −W | −b] on h_{g−1}
-                let inp = chain.w[g].ncols();
-                let rows = DMatrix::from_fn(2 * m, inp + 1, |r, i| {
-                    let (j, sign) = if r < m { (r, 1.0) } else { (r - m, -1.0) };
-                    sign * if i < inp {
-                        chain.w[g][(j, i)]
-                    } else {
-                        chain.b[g][j]
-                    }
-                });
-                stacked(chain, &cs, &rows, None, g - 1)
-            };
-            let relu = chain.act[g - 1] == Activation::Relu;
-            for (c, up) in cs.iter_mut().zip(bounds) {
-                // Where CROWN's bound does not certainly beat the exact
-                // interval image (the computed one from midpoints and
-                // radii can exceed it by `gap`), the interval bound is
-                // computed as the single-cell analysis does (directed
-                // rounding): so no bound is looser than interval
-                // arithmetic's from the same boxes.
-                let mut kept: Option<Vec<usize>> = None;
-                for j in 0..m {
-                    let (hi, lo, gap) = (c.z[g].hi[j], c.z[g].lo[j], c.gap[j]);
-                    let (u, l) = (up[j], -up[m + j]);
-                    let (mut new_hi, mut new_lo) = (hi.min(u), lo.max(l));
-                    if u > hi - gap || l < lo + gap {
-                        let z = &c.z[g - 1];
-                        let cols = kept.get_or_insert_with(|| {
-                            (0..z.dim()).filter(|&i| !relu || z.hi[i] > 0.0).collect()
-                        });
-                        let cols = (cols.len() < z.dim()).then_some(cols.as_slice());
-                        let (dl, dh) =
-                            affine_image_row(chain.w[g], chain.b[g], &c.h[g - 1], cols, j);
-                        new_hi = new_hi.min(dh);
-                        new_lo = new_lo.max(dl);
-                    }
-                    c.z[g].hi[j] = new_hi;
-                    c.z[g].lo[j] = new_lo;
-                }
-                if !c.z[g].is_finite() {
-                    return None;
-                }
-            }
-        }
+    Some(cs)
+}
+
+/// The output's (layer `g`'s) interval image as the single-cell analysis
+/// computes it (directed rounding, over the neurons a ReLU does not prove
+/// inactive): few rows, and the box every CROWN row is intersected with.
+fn output_interval(chain: &Chain, cs: &mut [Cell], g: usize) {
+    let relu = chain.act[g - 1] == Activation::Relu;
+    for c in cs.iter_mut() {
+        let z = &c.z[g - 1];
+        let kept: Vec<usize> = (0..z.dim()).filter(|&i| z.hi[i] > 0.0).collect();
+        let cols = (relu && kept.len() < z.dim()).then_some(kept.as_slice());
+        let out = affine_image_of(chain.w[g], chain.b[g], &c.h[g - 1], cols);
+        c.z.push(out);
     }
-    // the output rows `dirs · z_last`, as rows on h_{last−1}: `dirs·[W | b]`
-    // with its rounding error bounded entry by entry
+}
+
+/// CROWN's upper bounds, per cell, of hidden layer `g`'s outputs and of
+/// their negations (`2m` each): right-associated for the second layer,
+/// stacked deeper.
+fn hidden_bounds(chain: &Chain, cs: &[Cell], g: usize) -> Vec<Vec<f64>> {
+    if g == 1 {
+        return right_associated(
+            chain,
+            cs,
+            chain.w[1],
+            &chain.abs_w[1],
+            chain.b[1],
+            None,
+            true,
+        );
+    }
+    // the rows [W | b; −W | −b] on h_{g−1}
+    let m = chain.w[g].nrows();
+    let inp = chain.w[g].ncols();
+    let rows = DMatrix::from_fn(2 * m, inp + 1, |r, i| {
+        let (j, sign) = if r < m { (r, 1.0) } else { (r - m, -1.0) };
+        sign * if i < inp {
+            chain.w[g][(j, i)]
+        } else {
+            chain.b[g][j]
+        }
+    });
+    stacked(chain, cs, &rows, None, g - 1)
+}
+
+/// Cell `c`'s bounds of hidden layer `g` intersected with CROWN's `up`
+/// ([`hidden_bounds`]; `relu`: the activation before the layer is a
+/// ReLU); `false` when they are not finite.
+///
+/// Where CROWN's bound does not certainly beat the exact interval image
+/// (the computed one from midpoints and radii can exceed it by `gap`),
+/// the interval bound is computed as the single-cell analysis does
+/// (directed rounding): so no bound is looser than interval arithmetic's
+/// from the same boxes.
+#[inline]
+fn tighten_hidden(chain: &Chain, c: &mut Cell, g: usize, up: &[f64], relu: bool) -> bool {
+    let m = chain.w[g].nrows();
+    let mut kept: Option<Vec<usize>> = None;
+    for j in 0..m {
+        let (hi, lo, gap) = (c.z[g].hi[j], c.z[g].lo[j], c.gap[j]);
+        let (u, l) = (up[j], -up[m + j]);
+        let (mut new_hi, mut new_lo) = (hi.min(u), lo.max(l));
+        if u > hi - gap || l < lo + gap {
+            let z = &c.z[g - 1];
+            let cols = kept
+                .get_or_insert_with(|| (0..z.dim()).filter(|&i| !relu || z.hi[i] > 0.0).collect());
+            let cols = (cols.len() < z.dim()).then_some(cols.as_slice());
+            let (dl, dh) = affine_image_row(chain.w[g], chain.b[g], &c.h[g - 1], cols, j);
+            new_hi = new_hi.min(dh);
+            new_lo = new_lo.max(dl);
+        }
+        c.z[g].hi[j] = new_hi;
+        c.z[g].lo[j] = new_lo;
+    }
+    c.z[g].is_finite()
+}
+
+/// CROWN's upper bounds, per cell, of the output rows `dirs · z_last`, as
+/// rows on h_{last−1}: `dirs·[W | b]` with its rounding error bounded
+/// entry by entry.
+fn output_bounds(chain: &Chain, cs: &[Cell], dirs: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    let last = chain.len() - 1;
     let (w, b) = (chain.w[last], chain.b[last]);
     let (k, m) = (dirs.nrows(), w.ncols());
     let wb = DMatrix::from_fn(
@@ -345,38 +379,45 @@ fn chunk_offsets(
     let abs_wb = wb.abs();
     let terms = w.nrows() + 2;
     let err = (dirs.abs() * abs_wb).map(|v| (gamma(terms) * v * 1.0625 + TINY).next_up());
-    let bounds = if last == 1 {
+    if last == 1 {
         let r = rows.columns(0, m).into_owned();
         let off: Vec<f64> = (0..k).map(|j| rows[(j, m)]).collect();
         let off = DVector::from_vec(off);
-        right_associated(chain, &cs, &r, &r.abs(), &off, Some(&err), false)
+        right_associated(chain, cs, &r, &r.abs(), &off, Some(&err), false)
     } else {
-        stacked(chain, &cs, &rows, Some(&err), last - 1)
-    };
-    // the output box: interval arithmetic's and CROWN's bounds of ±f
-    let out_m = w.nrows();
-    let mut out = Vec::with_capacity(cs.len());
-    for (c, up) in cs.iter().zip(bounds) {
-        let z = &c.z[last];
-        if !z.is_finite() || !up.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        let hi: Vec<f64> = (0..out_m).map(|j| z.hi[j].min(up[j])).collect();
-        let lo: Vec<f64> = (0..out_m).map(|j| z.lo[j].max(-up[out_m + j])).collect();
-        let mut s = support_of_box(given, &lo, &hi);
-        for (&r, u) in own.iter().zip(&up[2 * out_m..]) {
-            s[r] = s[r].min(*u);
-        }
-        // every value is finite here (a unit row's is a finite side of the
-        // box, another's is at most its finite CROWN bound); kept as the
-        // guard of this function's promise, never to return a non-finite
-        // number
-        if !s.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        out.push(s);
+        stacked(chain, cs, &rows, Some(&err), last - 1)
     }
-    Some(out)
+}
+
+/// One cell's answer from its output's interval box `z` (`out_m`
+/// outputs) and CROWN's bounds `up` of `[I; −I]` and of the rows `own`:
+/// the support of the output box (interval arithmetic's and CROWN's
+/// bounds of ±f) in every row of `given`, an own row's the smaller of
+/// that and its CROWN bound; `None` when a number is not finite.
+fn offsets_of(
+    z: &IBox,
+    up: &[f64],
+    out_m: usize,
+    given: &DMatrix<f64>,
+    own: &[usize],
+) -> Option<Vec<f64>> {
+    if !z.is_finite() || !up.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let hi: Vec<f64> = (0..out_m).map(|j| z.hi[j].min(up[j])).collect();
+    let lo: Vec<f64> = (0..out_m).map(|j| z.lo[j].max(-up[out_m + j])).collect();
+    let mut s = support_of_box(given, &lo, &hi);
+    for (&r, u) in own.iter().zip(&up[2 * out_m..]) {
+        s[r] = s[r].min(*u);
+    }
+    // every value is finite here (a unit row's is a finite side of the
+    // box, another's is at most its finite CROWN bound); kept as the
+    // guard of this function's promise, never to return a non-finite
+    // number
+    if !s.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    Some(s)
 }
 
 /// `s + |b|`, rounded up.
@@ -388,8 +429,8 @@ fn with_bias(mut s: Vec<f64>, b: &DVector<f64>) -> Vec<f64> {
 }
 
 /// The activation after affine layer `g`: each cell's relaxation (as the
-/// single-cell analysis takes it: [`relax`], with Fast-Lin's lower ReLU
-/// slope), output bounds and sizes.
+/// single-cell analysis takes it: [`relax_in_mode`], with Fast-Lin's
+/// lower ReLU slope), output bounds and sizes.
 fn act_step(chain: &Chain, cs: &mut [Cell], g: usize) {
     let act = chain.act[g];
     let fast_lin = chain.fast_lin && act == Activation::Relu;
@@ -405,17 +446,7 @@ fn act_step(chain: &Chain, cs: &mut [Cell], g: usize) {
         );
         for j in 0..n {
             let (l, h) = (z.lo[j], z.hi[j]);
-            let r = relax(act, l, h);
-            rel.push(if fast_lin {
-                // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
-                Relax {
-                    al: r.au,
-                    bl: 0.0,
-                    ..r
-                }
-            } else {
-                r
-            });
+            rel.push(relax_in_mode(act, l, h, fast_lin));
             za.push(l.abs().max(h.abs()));
             let (il, ih) = image(act, l, h);
             lo.push(il);
@@ -616,6 +647,30 @@ fn stacked(
     g: usize,
 ) -> Vec<Vec<f64>> {
     let k = rows.nrows();
+    let (mut lam, mut acc) = stacked_start(cs, rows, err, g);
+    // per row: Σᵢ |λᵢ|·mᵢ for the current error term
+    let mut abs_sum = vec![0.0f64; acc.len()];
+    let mut layer = g;
+    loop {
+        stacked_activation(cs, layer, k, &mut lam, &mut acc, &mut abs_sum);
+        let next = stacked_affine(chain, cs, layer, k, &lam, &mut acc, &mut abs_sum);
+        if layer == 0 {
+            return stacked_finish(cs, k, &next, &acc);
+        }
+        lam = next;
+        layer -= 1;
+    }
+}
+
+/// The start of [`stacked`]: the coefficients of every cell's rows, one
+/// row each, and their offsets with the rows' rounding error over `h_g`.
+fn stacked_start(
+    cs: &[Cell],
+    rows: &DMatrix<f64>,
+    err: Option<&DMatrix<f64>>,
+    g: usize,
+) -> (DMatrix<f64>, Vec<Acc>) {
+    let k = rows.nrows();
     let width = rows.ncols() - 1;
     let cells = cs.len();
     let total = k * cells;
@@ -644,112 +699,136 @@ fn stacked(
             }
         }
     }
-    // per row: Σᵢ |λᵢ|·mᵢ for the current error term
-    let mut abs_sum = vec![0.0f64; total];
-    let mut layer = g;
-    loop {
-        // the activation h_layer = σ(z_layer): coefficients onto z_layer,
-        // the intercepts into the offsets, column by column
-        let m = lam.ncols();
-        abs_sum.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..m {
-            let column = &mut lam.as_mut_slice()[i * total..(i + 1) * total];
-            for (c, cell) in cs.iter().enumerate() {
-                let r = cell.relax[layer][i];
-                let za = cell.z_abs[layer][i];
-                for (j, l) in column[c * k..(c + 1) * k].iter_mut().enumerate() {
-                    let idx = c * k + j;
-                    let (slope, icpt) = if *l >= 0.0 {
-                        (r.au, r.bu)
-                    } else {
-                        (r.al, r.bl)
-                    };
-                    let t = mul0(*l, icpt);
-                    *l = mul0(*l, slope);
-                    if t != 0.0 {
-                        acc[idx].add(t);
-                    }
-                    abs_sum[idx] += mul0(l.abs(), za);
-                }
-            }
-        }
-        // the products λ·a: at most 2u·Σ|λ'ᵢ|·|zᵢ|max (as `slack`)
-        for (a, v) in acc.iter_mut().zip(&abs_sum) {
-            a.add((2.0 * U * v * 1.0625 + TINY).next_up());
-        }
-        // the affine layer z_layer = W h_{layer−1} + b (x for layer 0):
-        // coefficients `λ W` for all rows at once, offsets `λ·b`; error
-        // at most γ·Σ|λᵢ|·scaleᵢ (scale = |W|·|h|max + |b|)
-        let (w, b) = (chain.w[layer], chain.b[layer]);
-        abs_sum.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..m {
-            let column = &lam.as_slice()[i * total..(i + 1) * total];
-            let bi = b[i];
-            for (c, cell) in cs.iter().enumerate() {
-                let si = cell.scale[layer][i];
-                for (j, &l) in column[c * k..(c + 1) * k].iter().enumerate() {
-                    let idx = c * k + j;
-                    let t = mul0(l, bi);
-                    if t != 0.0 {
-                        acc[idx].add(t);
-                    }
-                    abs_sum[idx] += mul0(l.abs(), si);
-                }
-            }
-        }
-        let next = &lam * w;
-        let terms = m + 2;
+    (lam, acc)
+}
+
+/// A step of [`stacked`] through the activation `h_layer = σ(z_layer)`:
+/// each cell's `k` rows `lam` onto `z_layer` (the line each coefficient's
+/// sign selects), the intercepts into the offsets `acc`, column by column,
+/// and the products' error `2u·Σ|λ'ᵢ|·|zᵢ|max` (`abs_sum` the scratch).
+fn stacked_activation(
+    cs: &[Cell],
+    layer: usize,
+    k: usize,
+    lam: &mut DMatrix<f64>,
+    acc: &mut [Acc],
+    abs_sum: &mut [f64],
+) {
+    let (total, m) = lam.shape();
+    abs_sum.iter_mut().for_each(|v| *v = 0.0);
+    for i in 0..m {
+        let column = &mut lam.as_mut_slice()[i * total..(i + 1) * total];
         for (c, cell) in cs.iter().enumerate() {
-            // underflow: at most `m·η ≤ TINY` per entry of the product,
-            // each times its input's `|h|max`
-            let h_abs = if layer == 0 {
-                &cell.x_abs
-            } else {
-                &cell.h_abs[layer - 1]
-            };
-            let under = (TINY * h_abs.iter().fold(1.0, |a, v| a + v) * 1.0625).next_up();
-            for r in 0..k {
-                let idx = c * k + r;
-                let a = &mut acc[idx];
-                a.add((gamma(terms) * abs_sum[idx] * 1.0625 + TINY).next_up());
-                a.add(under);
+            let r = cell.relax[layer][i];
+            let za = cell.z_abs[layer][i];
+            for (j, l) in column[c * k..(c + 1) * k].iter_mut().enumerate() {
+                let idx = c * k + j;
+                let (slope, icpt) = if *l >= 0.0 {
+                    (r.au, r.bu)
+                } else {
+                    (r.al, r.bl)
+                };
+                let t = mul0(*l, icpt);
+                *l = mul0(*l, slope);
+                if t != 0.0 {
+                    acc[idx].add(t);
+                }
+                abs_sum[idx] += mul0(l.abs(), za);
             }
         }
-        if layer == 0 {
-            let inner = next.ncols();
-            let mut coef = vec![0.0; inner];
-            let mut out = Vec::with_capacity(cells);
-            for (c, cell) in cs.iter().enumerate() {
-                let ups = (0..k)
-                    .map(|r| {
-                        let idx = c * k + r;
-                        for (q, v) in coef.iter_mut().enumerate() {
-                            *v = next[(idx, q)];
-                        }
-                        let mut a = acc[idx];
-                        a.add(dot_box_upper(&coef, &cell.x.lo, &cell.x.hi));
-                        a.upper()
-                    })
-                    .collect();
-                out.push(ups);
-            }
-            return out;
-        }
-        lam = next;
-        layer -= 1;
     }
+    // the products λ·a: at most 2u·Σ|λ'ᵢ|·|zᵢ|max (as `slack`)
+    for (a, v) in acc.iter_mut().zip(abs_sum.iter()) {
+        a.add((2.0 * U * v * 1.0625 + TINY).next_up());
+    }
+}
+
+/// A step of [`stacked`] through the affine layer
+/// `z_layer = W h_{layer−1} + b` (`x` for layer 0): the coefficients `λ W`
+/// for all rows at once (returned), the offsets `λ·b` into `acc`, and the
+/// error, at most `γ·Σ|λᵢ|·scaleᵢ` (scale = `|W|·|h|max + |b|`), and the
+/// product's underflow (`abs_sum` the scratch).
+fn stacked_affine(
+    chain: &Chain,
+    cs: &[Cell],
+    layer: usize,
+    k: usize,
+    lam: &DMatrix<f64>,
+    acc: &mut [Acc],
+    abs_sum: &mut [f64],
+) -> DMatrix<f64> {
+    let (total, m) = lam.shape();
+    let (w, b) = (chain.w[layer], chain.b[layer]);
+    abs_sum.iter_mut().for_each(|v| *v = 0.0);
+    for i in 0..m {
+        let column = &lam.as_slice()[i * total..(i + 1) * total];
+        let bi = b[i];
+        for (c, cell) in cs.iter().enumerate() {
+            let si = cell.scale[layer][i];
+            for (j, &l) in column[c * k..(c + 1) * k].iter().enumerate() {
+                let idx = c * k + j;
+                let t = mul0(l, bi);
+                if t != 0.0 {
+                    acc[idx].add(t);
+                }
+                abs_sum[idx] += mul0(l.abs(), si);
+            }
+        }
+    }
+    let next = lam * w;
+    let terms = m + 2;
+    for (c, cell) in cs.iter().enumerate() {
+        // underflow: at most `m·η ≤ TINY` per entry of the product,
+        // each times its input's `|h|max`
+        let h_abs = if layer == 0 {
+            &cell.x_abs
+        } else {
+            &cell.h_abs[layer - 1]
+        };
+        let under = (TINY * h_abs.iter().fold(1.0, |a, v| a + v) * 1.0625).next_up();
+        for r in 0..k {
+            let idx = c * k + r;
+            let a = &mut acc[idx];
+            a.add((gamma(terms) * abs_sum[idx] * 1.0625 + TINY).next_up());
+            a.add(under);
+        }
+    }
+    next
+}
+
+/// The end of [`stacked`]: each cell's `k` rows `coef` on the input, with
+/// offsets `acc`, bounded over the cell's box.
+fn stacked_finish(cs: &[Cell], k: usize, coef_all: &DMatrix<f64>, acc: &[Acc]) -> Vec<Vec<f64>> {
+    let inner = coef_all.ncols();
+    let mut coef = vec![0.0; inner];
+    let mut out = Vec::with_capacity(cs.len());
+    for (c, cell) in cs.iter().enumerate() {
+        let ups = (0..k)
+            .map(|r| {
+                let idx = c * k + r;
+                for (q, v) in coef.iter_mut().enumerate() {
+                    *v = coef_all[(idx, q)];
+                }
+                let mut a = acc[idx];
+                a.add(dot_box_upper(&coef, &cell.x.lo, &cell.x.hi));
+                a.upper()
+            })
+            .collect();
+        out.push(ups);
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::crown::Analysis;
     use crate::crown::Mode;
+    use crate::crown::Relaxation;
 
     /// The single-cell bounds: the support of the mode's output box, and
     /// the mode's bound of each row.
     fn cell_offsets(net: &Network, cell: &IBox, dirs: &DMatrix<f64>, mode: Mode) -> Vec<f64> {
-        let a = Analysis::new(net, cell, mode);
+        let a = Relaxation::new(net, cell, mode);
         let out = a.output_box(mode);
         let mut b = support_of_box(dirs, &out.lo, &out.hi);
         for (v, c) in b.iter_mut().zip(a.upper(dirs.clone()).concretize(cell)) {
@@ -952,7 +1031,7 @@ mod tests {
             let cells = IBox::new(lo, hi).grid(&counts);
             let got = crown_offsets(&net, &cells, &pm, Mode::Crown).expect("a ReLU chain");
             for (cell, g) in cells.iter().zip(&got) {
-                let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
+                let ibp = Relaxation::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
                 for j in 0..m {
                     assert!(g[j] <= ibp.hi[j] && -g[m + j] >= ibp.lo[j], "case {t}");
                     sides += 2;
@@ -1049,7 +1128,7 @@ mod tests {
                     );
                     bounds += 1;
                 }
-                let ibp = Analysis::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
+                let ibp = Relaxation::new(&net, cell, Mode::Ibp).output_box(Mode::Ibp);
                 for j in 0..m {
                     assert!(
                         g[j] <= ibp.hi[j] && -g[m + j] >= ibp.lo[j],

@@ -14,7 +14,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::crown::{affine_image, Analysis, LinearUpper, Mode, Rows};
+use super::crown::{affine_image, LinearUpper, Mode, Relaxation, Rows};
 use super::open_loop;
 use super::partition::{Budget, Strategy};
 use super::sdp;
@@ -282,7 +282,7 @@ pub struct ClosedLoop {
     dynamics: Vec<Dynamics>,
     /// Projected-gradient steps on the lower ReLU slopes of each
     /// back-substitution through the controller (0: CROWN's own slopes;
-    /// see [`Analysis::upper_optimised`]).
+    /// see [`Relaxation::upper_optimised`]).
     pub slope_steps: usize,
     /// Whether box states under CROWN's own slopes take the allocation-free
     /// kernel (`kernel`); off only to compare it with the general path.
@@ -461,7 +461,7 @@ impl ClosedLoop {
     /// simulated counterexample is a real one.
     pub fn enclose_step(&self, t: usize, x: &IBox, w: &[f64], v: &[f64]) -> Option<IBox> {
         let y = affine_image(&self.obs_xv, &self.obs_zero, &x.product(&IBox::point(v)));
-        let a = Analysis::new(&self.net, &y, Mode::Ibp);
+        let a = Relaxation::new(&self.net, &y, Mode::Ibp);
         if !(y.is_finite() && a.is_finite()) {
             return None;
         }
@@ -610,7 +610,7 @@ impl ClosedLoop {
                 // Reach-LP, intersected with CL-CROWN from the same analysis:
                 // never looser than CL-CROWN (CL-CROWN's control box is also
                 // intersected with IBP, which Reach-LP's per-facet bound is not)
-                let analysis = Analysis::new(&self.net, y, Mode::Crown);
+                let analysis = Relaxation::new(&self.net, y, Mode::Crown);
                 if !analysis.is_finite() {
                     return Err(Vec::new());
                 }
@@ -632,14 +632,14 @@ impl ClosedLoop {
             Propagator::IbpSeparate | Propagator::CrownSeparate | Propagator::SgIbpSeparate => {
                 let u = match (prop, x) {
                     (Propagator::IbpSeparate, _) => {
-                        let a = Analysis::new(&self.net, y, Mode::Ibp);
+                        let a = Relaxation::new(&self.net, y, Mode::Ibp);
                         a.is_finite().then(|| a.output_box(Mode::Ibp))
                     }
                     (Propagator::CrownSeparate, Region::Box(b)) if self.kernel_applies() => {
                         kernel::control_box(self, b).flatten()
                     }
                     (Propagator::CrownSeparate, _) => {
-                        let a = Analysis::new(&self.net, y, Mode::Crown);
+                        let a = Relaxation::new(&self.net, y, Mode::Crown);
                         a.is_finite().then(|| a.output_box(Mode::Crown))
                     }
                     _ => self.sg_ibp_control(y),
@@ -708,7 +708,7 @@ impl ClosedLoop {
         let x_max = bbox.abs_max();
         let h_off = prog.last_hidden();
         let model_delta = self.plant_at(t).err.as_ref().and_then(|_| {
-            let u = Analysis::new(&self.net, &self.observation_box(&bbox), Mode::Ibp)
+            let u = Relaxation::new(&self.net, &self.observation_box(&bbox), Mode::Ibp)
                 .output_box(Mode::Ibp);
             self.model_delta(t, &bbox, &u.abs_max())
         });
@@ -796,7 +796,7 @@ impl ClosedLoop {
         match out.bbox() {
             Some(b) => Some(b),
             None => {
-                let a = Analysis::new(&self.net, y, Mode::Ibp);
+                let a = Relaxation::new(&self.net, y, Mode::Ibp);
                 a.is_finite().then(|| a.output_box(Mode::Ibp))
             }
         }
@@ -828,7 +828,7 @@ impl ClosedLoop {
         &self,
         t: usize,
         bound: &LinearUpper,
-        analysis: &Analysis,
+        analysis: &Relaxation,
         x: &IBox,
     ) -> LinearUpper {
         self.back_step_with(t, bound, analysis, x, false).0
@@ -837,12 +837,12 @@ impl ClosedLoop {
     /// [`ClosedLoop::back_step`], and with `control_box` also the CROWN
     /// control box (`analysis.output_box(Mode::Crown)`), from the same
     /// back-substitution through the controller (see
-    /// [`Analysis::upper_and_output_box`]).
+    /// [`Relaxation::upper_and_output_box`]).
     fn back_step_with(
         &self,
         t: usize,
         bound: &LinearUpper,
-        analysis: &Analysis,
+        analysis: &Relaxation,
         x: &IBox,
         control_box: bool,
     ) -> (LinearUpper, Option<IBox>) {
@@ -905,7 +905,7 @@ impl ClosedLoop {
     /// `x0`, each bounded through all earlier copies of the loop back to `x0`
     /// and intersected with the one-step Reach-LP bound from the previous set.
     /// Hidden-neuron bounds of copy `t` are themselves unrolled (the
-    /// [`Analysis::with_hook`] hook), and kept for later steps, so the cost is
+    /// [`Relaxation::with_hook`] hook), and kept for later steps, so the cost is
     /// quadratic in the horizon, not exponential.
     /// With `parent` (the sets of a cell containing `x0`, same boundary), each
     /// set is also intersected with the parent's set of the same step.
@@ -941,7 +941,7 @@ impl ClosedLoop {
         let n = self.states();
         let mut steps = vec![Step::new(x0.clone(), Vec::new())];
         let mut boxes = vec![x0.bbox()];
-        let mut analyses: Vec<Analysis> = Vec::with_capacity(horizon);
+        let mut analyses: Vec<Relaxation> = Vec::with_capacity(horizon);
         for t in 0..horizon {
             if stop() {
                 while steps.len() <= horizon {
@@ -965,7 +965,7 @@ impl ClosedLoop {
                     hook_issues.borrow_mut().extend(issues);
                     ub
                 };
-                Analysis::with_hook(&self.net, &y, Mode::Crown, Some(&hook))
+                Relaxation::with_hook(&self.net, &y, Mode::Crown, Some(&hook))
             };
             if !(y.is_finite() && analysis.is_finite()) {
                 break;
@@ -1013,7 +1013,7 @@ impl ClosedLoop {
     fn back_to_start(
         &self,
         mut bound: LinearUpper,
-        analyses: &[Analysis],
+        analyses: &[Relaxation],
         boxes: &[IBox],
         s: usize,
     ) -> LinearUpper {

@@ -21,7 +21,7 @@ use std::borrow::Cow;
 use nalgebra::{DMatrix, DVector};
 
 pub use super::dense::Rows;
-use super::relax::{image, relax, Relax};
+use super::relax::{image, relax_in_mode, Relax};
 use crate::issue::Issue;
 use crate::sets::{IBox, Region};
 use ravel_base::nn::{Activation, Layer, Network};
@@ -637,13 +637,13 @@ pub(crate) fn identity_image_into(
     }
 }
 
-/// What [`Analysis::upper_optimised`] minimises for row `r`, given that
+/// What [`Relaxation::upper_optimised`] minimises for row `r`, given that
 /// row's one-row bound over the network input: its value (the smaller the
 /// better; any measure, every candidate is sound) and the network input at
 /// which it is attained (where the slope gradient is taken).
 pub type Objective<'o> = dyn Fn(usize, &LinearUpper) -> (f64, Vec<f64>) + 'o;
 
-/// Other certified upper bounds of a linear bound's rows (see [`Analysis::with_hook`]).
+/// Other certified upper bounds of a linear bound's rows (see [`Relaxation::with_hook`]).
 pub type BoundHook<'h> = dyn Fn(&LinearUpper) -> Vec<f64> + 'h;
 
 /// How hidden-layer bounds are computed.
@@ -658,10 +658,82 @@ pub enum Mode {
     FastLin,
 }
 
-/// A network analysed over one input box: the bounds of every intermediate
-/// value and the relaxation of every activation.
+/// What every layer of [`Relaxation::with_hook`]'s pass reads.
+struct Pass<'p, 'h> {
+    /// The network's input box.
+    input: &'p IBox,
+    /// How hidden-layer bounds are computed.
+    mode: Mode,
+    /// Other certified upper bounds of a pre-activation's linear bound.
+    hook: Option<&'p BoundHook<'h>>,
+    /// Which affine layers have at most one nonzero per row.
+    opr: Vec<bool>,
+    /// Which affine layers are `±I` (the halves of a control clamp): the sign.
+    ident: Vec<Option<f64>>,
+}
+
+/// For each layer: whether it is affine with at most one nonzero per row
+/// (asked for several layers at each step of a pass), and the sign of one
+/// that is `±I` (the halves of a control clamp).
+fn row_shapes(layers: &[Layer]) -> (Vec<bool>, Vec<Option<f64>>) {
+    let opr: Vec<bool> = layers
+        .iter()
+        .map(|l| matches!(l, Layer::Affine { w, .. } if one_per_row(w)))
+        .collect();
+    let ident = layers
+        .iter()
+        .zip(&opr)
+        .map(|(l, &one)| match l {
+            Layer::Affine { w, .. } if one => signed_identity(w.as_slice(), w.nrows(), w.ncols()),
+            _ => None,
+        })
+        .collect();
+    (opr, ident)
+}
+
+/// Whether every row of affine layer `i` reads one neuron of an
+/// activation's output (a one-neuron activation, as the clamp of a single
+/// control; or an elementwise clamp's diagonal halves), through affine
+/// layers that keep one nonzero per row (`opr`, per layer).
+#[inline]
+pub(crate) fn after_one_neuron(layers: &[Layer], opr: &[bool], i: usize) -> bool {
+    let mut j = i + 1;
+    while j >= 1 && opr[j - 1] {
+        j -= 1;
+    }
+    j >= 2
+        && matches!(layers[j - 1], Layer::Act(_))
+        && matches!(layers[j - 2], Layer::Affine { .. })
+}
+
+/// Whether CROWN's bounds of affine layer `i`'s outputs can beat interval
+/// arithmetic's (so the pass back-substitutes them).
+fn crown_useful(layers: &[Layer], i: usize, pass: &Pass) -> bool {
+    // On the network's first layer (an affine map of the input box) CROWN's
+    // bound is interval arithmetic's with the product's rounding slack added:
+    // never tighter, so without a hook (which may bound it otherwise) the
+    // back-substitution is skipped (same bounds, bit for bit). Likewise when
+    // every row of this layer reads one neuron of an activation's output (a
+    // one-neuron activation, as the clamp of a single control; or an
+    // elementwise clamp's diagonal halves), through affine layers that keep
+    // one nonzero per row: the activation's input bounds are CROWN's already,
+    // and CROWN of `w·σ(z_k) + b` substitutes a relaxation line of σ and then
+    // the very linear bound of `z_k` (scaled; same signs, same relaxations)
+    // that gave z_k's bound, so it comes to the line at z_k's bound, which is
+    // never below σ's interval image: up to rounding, no tighter than interval
+    // arithmetic from z_k's bounds.
+    // (With a hook, unrolled CROWN's, the same holds: the rows reach z_k's own
+    // bound expression and the hook maps it as it mapped z_k's, whose bound is
+    // at least z_k's stored one; the first layer is bounded there, the hook
+    // reaching further back than the box.)
+    !after_one_neuron(layers, &pass.opr, i) && (pass.hook.is_some() || i > 0)
+}
+
+/// A network relaxed over one input box: the bounds of every intermediate
+/// value (interval arithmetic's, or CROWN's or Fast-Lin's: [`Mode`]) and
+/// the relaxation of every activation.
 #[derive(Clone, Debug)]
-pub struct Analysis<'a> {
+pub struct Relaxation<'a> {
     net: &'a Network,
     /// `boxes[i]` bounds the value before layer `i` (`boxes[0]` is the input box).
     boxes: Vec<IBox>,
@@ -684,22 +756,22 @@ pub struct Analysis<'a> {
     /// For an affine layer whose outputs' bounds were back-substituted:
     /// those outputs `z_j` (ascending) and the bounds of `z_j` and `−z_j`
     /// over the input (CROWN's own relaxations; the `2k` rows of
-    /// [`Analysis::backward_select`]) when the next affine layer keeps its
+    /// [`Relaxation::backward_select`]) when the next affine layer keeps its
     /// rows apart (one nonzero per row) or there is none; `None` otherwise
     /// (a later pass reaches them only through that layer). A later
     /// back-substitution with CROWN's relaxations whose every row has
     /// reached one of these outputs alone finishes from them (see
-    /// [`Analysis::scaled`]).
+    /// [`Relaxation::scaled`]).
     stored: Vec<Option<(Vec<usize>, LinearUpper)>>,
 }
 
-impl<'a> Analysis<'a> {
+impl<'a> Relaxation<'a> {
     /// Bound every layer of `net` over `input`.
-    pub fn new(net: &'a Network, input: &IBox, mode: Mode) -> Analysis<'a> {
-        Analysis::with_hook(net, input, mode, None)
+    pub fn new(net: &'a Network, input: &IBox, mode: Mode) -> Relaxation<'a> {
+        Relaxation::with_hook(net, input, mode, None)
     }
 
-    /// [`Analysis::new`], where in CROWN mode the linear bound of every
+    /// [`Relaxation::new`], where in CROWN mode the linear bound of every
     /// pre-activation (a [`LinearUpper`] over the network input) is also
     /// handed to `hook`, which returns other certified upper bounds of its
     /// rows; the tighter of the two is kept. The unrolled closed-loop
@@ -709,9 +781,9 @@ impl<'a> Analysis<'a> {
         input: &IBox,
         mode: Mode,
         hook: Option<&BoundHook>,
-    ) -> Analysis<'a> {
+    ) -> Relaxation<'a> {
         let layers = net.layers.len();
-        let mut a = Analysis {
+        let mut a = Relaxation {
             net,
             boxes: Vec::with_capacity(layers + 1),
             keep: Vec::with_capacity(layers),
@@ -722,208 +794,165 @@ impl<'a> Analysis<'a> {
             stored: vec![None; layers],
         };
         a.boxes.push(input.clone());
-        // which affine layers have at most one nonzero per row (asked for
-        // several layers at each step below)
-        let opr: Vec<bool> = net
-            .layers
-            .iter()
-            .map(|l| matches!(l, Layer::Affine { w, .. } if one_per_row(w)))
-            .collect();
-        // and which are ±I (the halves of a control clamp)
-        let ident: Vec<Option<f64>> = net
-            .layers
-            .iter()
-            .zip(&opr)
-            .map(|(l, &one)| match l {
-                Layer::Affine { w, .. } if one => {
-                    signed_identity(w.as_slice(), w.nrows(), w.ncols())
-                }
-                _ => None,
-            })
-            .collect();
+        let (opr, ident) = row_shapes(&net.layers);
+        let pass = Pass {
+            input,
+            mode,
+            hook,
+            opr,
+            ident,
+        };
         for (i, layer) in net.layers.iter().enumerate() {
             match layer {
-                Layer::Affine { w, b } => {
-                    let ins = a.ins(i);
-                    let current = &a.boxes[i];
-                    let m = |j: usize| ravel_base::num::abs_max(current.lo[j], current.hi[j]);
-                    let (scale, mut next) = match (ident[i], ins) {
-                        (Some(sign), None) => identity_image(sign, b, current),
-                        _ => (
-                            weight_scale_of(w, m, ins),
-                            affine_image_of(w, b, current, ins),
-                        ),
-                    };
-                    let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
-                    // On the network's first layer (an affine map of the
-                    // input box) CROWN's bound is interval arithmetic's
-                    // with the product's rounding slack added: never
-                    // tighter, so without a hook (which may bound it
-                    // otherwise) the back-substitution is skipped (same
-                    // bounds, bit for bit). Likewise when every row of this
-                    // layer reads one neuron of an activation's output
-                    // (a one-neuron activation, as the clamp of a single
-                    // control; or an elementwise clamp's diagonal halves),
-                    // through affine layers that keep one nonzero per row:
-                    // the activation's input bounds are CROWN's already,
-                    // and CROWN of `w·σ(z_k) + b` substitutes a relaxation
-                    // line of σ and then the very linear bound of `z_k`
-                    // (scaled; same signs, same relaxations) that gave
-                    // z_k's bound, so it comes to the line at z_k's bound,
-                    // which is never below σ's interval image: up to
-                    // rounding, no tighter than interval arithmetic from
-                    // z_k's bounds.
-                    let mut j = i + 1;
-                    while j >= 1 && opr[j - 1] {
-                        j -= 1;
-                    }
-                    let after_one_neuron = j >= 2
-                        && matches!(net.layers[j - 1], Layer::Act(_))
-                        && matches!(net.layers[j - 2], Layer::Affine { .. });
-                    // (With a hook, unrolled CROWN's, the same holds: the
-                    // rows reach z_k's own bound expression and the hook
-                    // maps it as it mapped z_k's, whose bound is at least
-                    // z_k's stored one; the first layer is bounded there,
-                    // the hook reaching further back than the box.)
-                    let useful = !after_one_neuron && (hook.is_some() || i > 0);
-                    if mode != Mode::Ibp && feeds_activation && useful {
-                        // A ReLU that interval arithmetic already proves
-                        // inactive (z ≤ 0) outputs exactly 0 whatever its
-                        // bounds: it is not worth a back-substitution, and
-                        // skipping it changes no bound (its relaxation is 0,
-                        // its image [0, 0], and its bounds enter no error
-                        // term: they multiply zero coefficients). Active
-                        // ones are bounded: their bounds pass on to the next
-                        // layer's interval image. Tanh and sigmoid relax by
-                        // their bounds: every neuron is bounded.
-                        let relu =
-                            matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
-                        // With a hook (unrolled CROWN, where each bound
-                        // runs back through every earlier step), a ReLU
-                        // that interval arithmetic proves active is not
-                        // bounded either when the layer after it mixes its
-                        // neurons: its relaxation is the identity whatever
-                        // its bounds, so every later CROWN bound is the
-                        // same; its interval box enters only the next
-                        // layer's interval image (intersected with that
-                        // layer's CROWN bound) and error terms. Not where
-                        // one neuron's box is read on (a clamp, whose
-                        // second half is interval arithmetic from it), nor
-                        // without a hook: there interval images win often
-                        // enough for a looser box to show (measured on the
-                        // partitioned specs; unrolled sets are unchanged
-                        // up to rounding).
-                        let mixed_next = hook.is_some()
-                            && matches!(net.layers.get(i + 2), Some(Layer::Affine { .. }))
-                            && !opr[i + 2];
-                        let rows: Vec<usize> = (0..w.nrows())
-                            .filter(|&j| {
-                                !(relu
-                                    && (inactive(next.hi[j]) || (mixed_next && next.lo[j] >= 0.0)))
-                            })
-                            .collect();
-                        let k = rows.len();
-                        if k > 0 {
-                            let bound = a.backward_select(&rows, i);
-                            let mut both = bound.concretize(input);
-                            if let Some(h) = hook {
-                                for (b, o) in both.iter_mut().zip(h(&bound)) {
-                                    *b = b.min(o);
-                                }
-                            }
-                            for (r, &j) in rows.iter().enumerate() {
-                                next.hi[j] = next.hi[j].min(both[r]);
-                                next.lo[j] = next.lo[j].max(-both[k + r]);
-                            }
-                            // kept only where a later pass can arrive with
-                            // one nonzero per row: when the next affine layer
-                            // keeps rows apart (a clamp's halves) or there is
-                            // none; after a mixing layer rows arrive dense,
-                            // and a wide network's bounds need not outlive
-                            // their use
-                            let next_affine = net.layers[i + 1..]
-                                .iter()
-                                .position(|l| matches!(l, Layer::Affine { .. }))
-                                .map(|d| i + 1 + d);
-                            if next_affine.is_none_or(|j| opr[j]) {
-                                a.stored[i] = Some((rows, bound));
-                            }
-                        }
-                    }
-                    a.boxes.push(next);
-                    a.scales.push(scale);
-                    a.keep.push(None);
-                    a.relax.push(Vec::new());
-                    a.abs.push(Vec::new());
-                    // an affine layer before a ReLU is packed once the
-                    // ReLU's inactive neurons are known
-                    let before_relu =
-                        matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
-                    let packed = (mode != Mode::Ibp && !before_relu)
-                        .then(|| Packed::new(w, b, &a.scales[i], None, a.ins(i)));
-                    a.packed.push(packed);
-                }
-                Layer::Act(act) => {
-                    let current = &a.boxes[i];
-                    let n = current.dim();
-                    let relu = *act == Activation::Relu;
-                    // one pass over the neurons: the image of each, and
-                    // the relaxation and input size of each neuron kept (a
-                    // ReLU's neurons proved inactive are left out)
-                    // (the kept ReLU neurons, listed once one is left out)
-                    let mut live: Option<Vec<usize>> = None;
-                    let mut rel = Vec::with_capacity(n);
-                    let mut abs = Vec::with_capacity(n);
-                    let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
-                    for j in 0..n {
-                        let (l, h) = (current.lo[j], current.hi[j]);
-                        let (il, ih) = image(*act, l, h);
-                        lo.push(il);
-                        hi.push(ih);
-                        if relu {
-                            if inactive(h) {
-                                live.get_or_insert_with(|| (0..j).collect());
-                                continue;
-                            }
-                            if let Some(live) = live.as_mut() {
-                                live.push(j);
-                            }
-                        }
-                        let r = relax(*act, l, h);
-                        rel.push(if mode == Mode::FastLin && relu {
-                            // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
-                            Relax {
-                                al: r.au,
-                                bl: 0.0,
-                                ..r
-                            }
-                        } else {
-                            r
-                        });
-                        abs.push(ravel_base::num::abs_max(l, h));
-                    }
-                    let keep = live;
-                    a.boxes.push(IBox::new(lo, hi));
-                    a.scales.push(Vec::new());
-                    a.keep.push(keep);
-                    a.relax.push(rel);
-                    a.abs.push(abs);
-                    a.packed.push(None);
-                    if relu && mode != Mode::Ibp && i >= 1 {
-                        if let Layer::Affine { w, b } = &net.layers[i - 1] {
-                            a.packed[i - 1] = Some(Packed::new(
-                                w,
-                                b,
-                                &a.scales[i - 1],
-                                a.keep[i].as_deref(),
-                                a.ins(i - 1),
-                            ));
-                        }
-                    }
-                }
+                Layer::Affine { w, b } => a.push_affine(i, w, b, &pass),
+                Layer::Act(act) => a.push_activation(i, *act, mode),
             }
         }
         a
+    }
+
+    /// Layer `i` of [`Relaxation::with_hook`]'s pass, the affine `w·h + b`:
+    /// the interval image of its input box, tightened by CROWN where that
+    /// can beat it ([`Relaxation::crown_tighten`]), its scale and (unless a
+    /// ReLU follows, which packs it) its packing.
+    fn push_affine(&mut self, i: usize, w: &'a DMatrix<f64>, b: &'a DVector<f64>, pass: &Pass) {
+        let net = self.net;
+        let ins = self.ins(i);
+        let current = &self.boxes[i];
+        let m = |j: usize| ravel_base::num::abs_max(current.lo[j], current.hi[j]);
+        let (scale, mut next) = match (pass.ident[i], ins) {
+            (Some(sign), None) => identity_image(sign, b, current),
+            _ => (
+                weight_scale_of(w, m, ins),
+                affine_image_of(w, b, current, ins),
+            ),
+        };
+        let feeds_activation = matches!(net.layers.get(i + 1), Some(Layer::Act(_)));
+        if pass.mode != Mode::Ibp && feeds_activation && crown_useful(&net.layers, i, pass) {
+            self.crown_tighten(i, w.nrows(), &mut next, pass);
+        }
+        self.boxes.push(next);
+        self.scales.push(scale);
+        self.keep.push(None);
+        self.relax.push(Vec::new());
+        self.abs.push(Vec::new());
+        // an affine layer before a ReLU is packed once the
+        // ReLU's inactive neurons are known
+        let before_relu = matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
+        let packed = (pass.mode != Mode::Ibp && !before_relu)
+            .then(|| Packed::new(w, b, &self.scales[i], None, self.ins(i)));
+        self.packed.push(packed);
+    }
+
+    /// The CROWN bounds of affine layer `i`'s outputs (`outputs` of them,
+    /// an activation after them), intersected into their interval image
+    /// `next`, with the hook's where there is one; the bounds are stored
+    /// where a later pass can finish from them.
+    fn crown_tighten(&mut self, i: usize, outputs: usize, next: &mut IBox, pass: &Pass) {
+        let net = self.net;
+        // A ReLU that interval arithmetic already proves inactive (z ≤ 0)
+        // outputs exactly 0 whatever its bounds: it is not worth a
+        // back-substitution, and skipping it changes no bound (its relaxation
+        // is 0, its image [0, 0], and its bounds enter no error term: they
+        // multiply zero coefficients). Active ones are bounded: their bounds
+        // pass on to the next layer's interval image. Tanh and sigmoid relax
+        // by their bounds: every neuron is bounded.
+        let relu = matches!(net.layers.get(i + 1), Some(Layer::Act(Activation::Relu)));
+        // With a hook (unrolled CROWN, where each bound runs back through
+        // every earlier step), a ReLU that interval arithmetic proves active
+        // is not bounded either when the layer after it mixes its neurons: its
+        // relaxation is the identity whatever its bounds, so every later CROWN
+        // bound is the same; its interval box enters only the next layer's
+        // interval image (intersected with that layer's CROWN bound) and error
+        // terms. Not where one neuron's box is read on (a clamp, whose second
+        // half is interval arithmetic from it), nor without a hook: there
+        // interval images win often enough for a looser box to show (measured
+        // on the partitioned specs; unrolled sets are unchanged up to
+        // rounding).
+        let mixed_next = pass.hook.is_some()
+            && matches!(net.layers.get(i + 2), Some(Layer::Affine { .. }))
+            && !pass.opr[i + 2];
+        let rows: Vec<usize> = (0..outputs)
+            .filter(|&j| !(relu && (inactive(next.hi[j]) || (mixed_next && next.lo[j] >= 0.0))))
+            .collect();
+        let k = rows.len();
+        if k == 0 {
+            return;
+        }
+        let bound = self.backward_select(&rows, i);
+        let mut both = bound.concretize(pass.input);
+        if let Some(h) = pass.hook {
+            for (b, o) in both.iter_mut().zip(h(&bound)) {
+                *b = b.min(o);
+            }
+        }
+        for (r, &j) in rows.iter().enumerate() {
+            next.hi[j] = next.hi[j].min(both[r]);
+            next.lo[j] = next.lo[j].max(-both[k + r]);
+        }
+        // kept only where a later pass can arrive with one nonzero per row:
+        // when the next affine layer keeps rows apart (a clamp's halves) or
+        // there is none; after a mixing layer rows arrive dense, and a wide
+        // network's bounds need not outlive their use
+        let next_affine = net.layers[i + 1..]
+            .iter()
+            .position(|l| matches!(l, Layer::Affine { .. }))
+            .map(|d| i + 1 + d);
+        if next_affine.is_none_or(|j| pass.opr[j]) {
+            self.stored[i] = Some((rows, bound));
+        }
+    }
+
+    /// Layer `i` of [`Relaxation::with_hook`]'s pass, the activation
+    /// `act`: in one pass over the neurons the image of each, and the
+    /// relaxation and input size of each neuron kept (a ReLU's neurons
+    /// proved inactive are left out); then, before a ReLU, the affine
+    /// layer `i − 1` is packed to the kept neurons.
+    fn push_activation(&mut self, i: usize, act: Activation, mode: Mode) {
+        let current = &self.boxes[i];
+        let n = current.dim();
+        let relu = act == Activation::Relu;
+        let fast_lin = mode == Mode::FastLin && relu;
+        // (the kept ReLU neurons, listed once one is left out)
+        let mut live: Option<Vec<usize>> = None;
+        let mut rel = Vec::with_capacity(n);
+        let mut abs = Vec::with_capacity(n);
+        let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for j in 0..n {
+            let (l, h) = (current.lo[j], current.hi[j]);
+            let (il, ih) = image(act, l, h);
+            lo.push(il);
+            hi.push(ih);
+            if relu {
+                if inactive(h) {
+                    live.get_or_insert_with(|| (0..j).collect());
+                    continue;
+                }
+                if let Some(live) = live.as_mut() {
+                    live.push(j);
+                }
+            }
+            rel.push(relax_in_mode(act, l, h, fast_lin));
+            abs.push(ravel_base::num::abs_max(l, h));
+        }
+        let keep = live;
+        self.boxes.push(IBox::new(lo, hi));
+        self.scales.push(Vec::new());
+        self.keep.push(keep);
+        self.relax.push(rel);
+        self.abs.push(abs);
+        self.packed.push(None);
+        if relu && mode != Mode::Ibp && i >= 1 {
+            if let Layer::Affine { w, b } = &self.net.layers[i - 1] {
+                self.packed[i - 1] = Some(Packed::new(
+                    w,
+                    b,
+                    &self.scales[i - 1],
+                    self.keep[i].as_deref(),
+                    self.ins(i - 1),
+                ));
+            }
+        }
     }
 
     /// The kept neurons of layer `i` (an activation's; `None` for all).
@@ -972,8 +1001,8 @@ impl<'a> Analysis<'a> {
         IBox::new(lo, hi)
     }
 
-    /// [`Analysis::upper_optimised`] of `spec` and the CROWN
-    /// [`Analysis::output_box`] together. With CROWN's own slopes both come
+    /// [`Relaxation::upper_optimised`] of `spec` and the CROWN
+    /// [`Relaxation::output_box`] together. With CROWN's own slopes both come
     /// from one back-substitution of the stacked rows `[I; −I; spec]`, at
     /// one pass's per-layer cost instead of two. Every row is
     /// back-substituted on its own, so each bound is the one the two calls
@@ -1127,8 +1156,8 @@ impl<'a> Analysis<'a> {
         LinearUpper { coef: out, offset }
     }
 
-    /// [`Analysis::backward`] with the given relaxations (any sound ones:
-    /// the optimised slopes of [`Analysis::upper_optimised`]); with `trace`,
+    /// [`Relaxation::backward`] with the given relaxations (any sound ones:
+    /// the optimised slopes of [`Relaxation::upper_optimised`]); with `trace`,
     /// the first row's coefficients on each activation's output are
     /// recorded (`trace[i]` for activation layer `i`).
     fn backward_with(
@@ -1243,17 +1272,17 @@ impl<'a> Analysis<'a> {
         }
     }
 
-    /// [`Analysis::upper`] with the lower slopes of unstable ReLUs optimised
+    /// [`Relaxation::upper`] with the lower slopes of unstable ReLUs optimised
     /// per row (α-CROWN-style, Xu et al. 2021): `steps` steps of projected
     /// gradient descent on the row's `objective` (by default its bound over
     /// the input box; a caller that composes the bound further passes the
     /// measure it cares about), each slope
     /// kept in `[0, 1]`. Any slope in `[0, 1]` gives a sound lower line
     /// (`a·z ≤ relu(z)`, intercept 0), and every iterate is evaluated with
-    /// the same certified arithmetic as [`Analysis::upper`]; each row keeps
+    /// the same certified arithmetic as [`Relaxation::upper`]; each row keeps
     /// the iterate with the smallest objective, starting from CROWN's own
     /// slopes, so by that measure the result is never looser than
-    /// [`Analysis::upper`]'s. Intermediate bounds are not re-optimised.
+    /// [`Relaxation::upper`]'s. Intermediate bounds are not re-optimised.
     ///
     /// The gradient: CROWN's bound is the maximum of the objective over the
     /// relaxed network (every `h` between its two lines); at the maximiser
@@ -1434,9 +1463,9 @@ mod tests {
     fn crown_is_no_looser_than_ibp_and_contains_samples() {
         let n = net();
         let input = IBox::new(vec![-1.0, -0.5], vec![0.5, 1.0]);
-        let a = Analysis::new(&n, &input, Mode::Crown);
+        let a = Relaxation::new(&n, &input, Mode::Crown);
         let crown = a.output_box(Mode::Crown);
-        let ibp = Analysis::new(&n, &input, Mode::Ibp).output_box(Mode::Ibp);
+        let ibp = Relaxation::new(&n, &input, Mode::Ibp).output_box(Mode::Ibp);
         assert!(ibp.contains_box(&crown));
         for i in 0..=20 {
             for j in 0..=20 {

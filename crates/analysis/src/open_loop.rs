@@ -16,7 +16,7 @@
 
 use nalgebra::DMatrix;
 
-use super::crown::{Analysis, Mode};
+use super::crown::{Mode, Relaxation};
 use super::partition::{refine, Budget, Stop, Strategy};
 use super::shape::{excess, extent_of_points, support_of_box, support_of_points, Shape};
 use crate::sets::IBox;
@@ -117,7 +117,7 @@ pub fn sample_inputs(input: &IBox, n: usize, seed: u64) -> Vec<Vec<f64>> {
 
 /// Certified offsets of `d·f(x)` over `cell` for every direction.
 pub fn cell_offsets(net: &Network, cell: &IBox, mode: Mode, dirs: &DMatrix<f64>) -> Vec<f64> {
-    let a = Analysis::new(net, cell, mode);
+    let a = Relaxation::new(net, cell, mode);
     let out = a.boxes().last().cloned().unwrap_or_else(|| cell.clone());
     let mut b = support_of_box(dirs, &out.lo, &out.hi);
     if mode != Mode::Ibp {

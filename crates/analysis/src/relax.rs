@@ -30,6 +30,23 @@ pub fn relax(act: Activation, l: f64, u: f64) -> Relax {
     }
 }
 
+/// [`relax`], with Fast-Lin's lower ReLU slope (equal to the upper one)
+/// when `fast_lin` (the caller's: Fast-Lin mode and a ReLU).
+#[inline]
+pub(crate) fn relax_in_mode(act: Activation, l: f64, u: f64, fast_lin: bool) -> Relax {
+    let r = relax(act, l, u);
+    if fast_lin {
+        // a·z ≤ relu(z) for every z when 0 ≤ a ≤ 1
+        Relax {
+            al: r.au,
+            bl: 0.0,
+            ..r
+        }
+    } else {
+        r
+    }
+}
+
 /// Interval image of `[l, u]` under a monotone activation, rounded outward.
 pub fn image(act: Activation, l: f64, u: f64) -> (f64, f64) {
     match act {

@@ -39,7 +39,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SupportedConeT};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 
-use super::crown::{Analysis, Mode};
+use super::crown::{Mode, Relaxation};
 use super::sdp_ipm::{self, Con, Ipm};
 use crate::issue::{Backend, Issue, Status};
 use crate::sets::IBox;
@@ -286,103 +286,12 @@ impl StepSdp {
     /// Prepare the SDPs of one step: `xi` bounds ξ, `rows` are extra input rows on ξ.
     pub fn new(net: &MergedNet, xi: &IBox, rows: &[(Vec<f64>, f64)]) -> StepSdp {
         let d0 = xi.dim();
-        let analysis = Analysis::new(&net.net, xi, Mode::Crown);
-        let boxes = analysis_boxes(&analysis);
-        let hidden = net.layers.len() - 1;
-        let total: usize = net.layers[..hidden].iter().map(|(w, _)| w.nrows()).sum();
-        // slots: 0 the constant, 1..=d0 ξ, then kept neurons in order
-        let slots = 1 + d0 + total;
-        let mut smax = vec![0.0; slots];
-        smax[0] = 1.0;
-        smax[1..=d0].copy_from_slice(&xi.abs_max());
-        let mut used = 1 + d0;
-        // the current layer's outputs: (dense form over slots, error vs
-        // merged); a coordinate of ξ pinned to a point is that constant
-        let mut prev: Vec<(Vec<f64>, f64)> = (0..d0)
-            .map(|i| {
-                let mut f = vec![0.0; slots];
-                if xi.lo[i] == xi.hi[i] {
-                    f[0] = xi.lo[i];
-                } else {
-                    f[1 + i] = 1.0;
-                }
-                (f, 0.0)
-            })
-            .collect();
-        let mut kept_slots: Vec<(usize, Vec<f64>, f64, f64, f64)> = Vec::new();
-        // the last hidden layer: kept slots, or stable forms (dense over
-        // slots, with their error and magnitude)
-        type Stable = (Vec<f64>, f64, f64);
-        let mut last_slots: Vec<Result<usize, Stable>> = Vec::new();
-        let mut kept_before_last = 0;
-        for (k, (w, b)) in net.layers[..hidden].iter().enumerate() {
-            let z_box = &boxes[2 * k + 1];
-            let is_last = k + 1 == hidden;
-            if is_last {
-                kept_before_last = kept_slots.len();
-            }
-            let gam = gamma(w.ncols() + 2);
-            let mut next = Vec::with_capacity(w.nrows());
-            for j in 0..w.nrows() {
-                let mut f = vec![0.0; slots];
-                let mut fabs = vec![0.0; slots];
-                f[0] = b[j];
-                fabs[0] = b[j].abs();
-                let mut prop = Vec::with_capacity(w.ncols());
-                for (c, (pf, pe)) in prev.iter().enumerate() {
-                    let wc = w[(j, c)];
-                    if wc == 0.0 {
-                        continue;
-                    }
-                    for s in 0..used {
-                        if pf[s] != 0.0 {
-                            f[s] += wc * pf[s];
-                            fabs[s] += (wc * pf[s]).abs();
-                        }
-                    }
-                    prop.push(wc.abs() * pe);
-                }
-                // |computed form − exact composition| · |v| over the box
-                let size = sum_upper((0..used).map(|s| fabs[s] * smax[s]));
-                let round = (gam * size * 1.0625 + 1e-300).next_up();
-                let err_z = sum_upper(prop.into_iter().chain([round]));
-                let (l, u) = (z_box.lo[j], z_box.hi[j]);
-                if is_last && u <= 0.0 {
-                    last_slots.push(Err((vec![0.0; slots], 0.0, 0.0)));
-                } else if is_last && l >= 0.0 {
-                    let max = (u + err_z).next_up();
-                    last_slots.push(Err((f, err_z, max)));
-                } else if u <= 0.0 {
-                    next.push((vec![0.0; slots], 0.0));
-                } else if l >= 0.0 {
-                    next.push((f, err_z));
-                } else {
-                    let (lw, uw) = ((l - err_z).next_down(), (u + err_z).next_up());
-                    let slot = used;
-                    used += 1;
-                    smax[slot] = uw.max(0.0);
-                    kept_slots.push((slot, f, lw, uw, err_z));
-                    if is_last {
-                        last_slots.push(Ok(slot));
-                    }
-                    let mut unit = vec![0.0; slots];
-                    unit[slot] = 1.0;
-                    next.push((unit, err_z));
-                }
-            }
-            prev = next;
-        }
+        let relaxation = Relaxation::new(&net.net, xi, Mode::Crown);
+        let boxes = relaxation_boxes(&relaxation);
+        let folded = Folded::of(net, xi, &boxes);
+        let used = folded.used;
         // v = (free coordinates of ξ, kept neurons, 1)
-        let mut xi_at = Vec::with_capacity(d0);
-        let mut free = 0;
-        for i in 0..d0 {
-            if xi.lo[i] == xi.hi[i] {
-                xi_at.push(Err(xi.lo[i]));
-            } else {
-                xi_at.push(Ok(free));
-                free += 1;
-            }
-        }
+        let (xi_at, free) = xi_coordinates(xi);
         let dim = free + (used - 1 - d0) + 1;
         let one = dim - 1;
         // slots of pinned coordinates never occur in a form
@@ -391,74 +300,52 @@ impl StepSdp {
             s if s <= d0 => xi_at[s - 1].unwrap_or(one),
             s => free + (s - 1 - d0),
         };
+        // a dense form over slots as a sparse one over v
+        let sparse = |f: &[f64]| -> Vec<(usize, f64)> {
+            (0..used)
+                .filter(|&s| f[s] != 0.0)
+                .map(|s| (index(s), f[s]))
+                .collect()
+        };
         let mut vmax = vec![0.0; dim];
         let mut err = vec![0.0; dim];
         vmax[one] = 1.0;
         for s in (1..used).filter(|&s| s > d0 || xi_at[s - 1].is_ok()) {
-            vmax[index(s)] = smax[s];
+            vmax[index(s)] = folded.smax[s];
         }
-        let kept: Vec<Kept> = kept_slots
+        let kept: Vec<Kept> = folded
+            .kept
             .into_iter()
             .map(|(slot, f, l, u, e)| {
                 err[index(slot)] = e;
                 Kept {
                     h: index(slot),
-                    z: (0..used)
-                        .filter(|&s| f[s] != 0.0)
-                        .map(|s| (index(s), f[s]))
-                        .collect(),
+                    z: sparse(&f),
                     l,
                     u,
                 }
             })
             .collect();
         let radius2 = sum_upper(vmax.iter().map(|m| m * m));
-        // rows over the free coordinates: a pinned coordinate's term moves
-        // to the right-hand side, rounded up (the row stays valid)
-        let mut all_rows: Vec<(Vec<f64>, f64)> = rows
-            .iter()
-            .map(|(a, g)| {
-                let mut a_free = vec![0.0; free];
-                let mut rhs = vec![*g];
-                for (&ai, at) in a.iter().zip(&xi_at) {
-                    match at {
-                        Ok(j) => a_free[*j] = ai,
-                        Err(c) => rhs.push(-(ai * c)),
-                    }
-                }
-                (a_free, sum_upper(rhs))
-            })
-            .collect();
-        for (i, at) in xi_at.iter().enumerate() {
-            if let Ok(j) = at {
-                let mut e = vec![0.0; free];
-                e[*j] = 1.0;
-                all_rows.push((e.clone(), xi.hi[i]));
-                e[*j] = -1.0;
-                all_rows.push((e, -xi.lo[i]));
-            }
-        }
         // (no hidden layer: an affine network, nothing in the last layer)
-        let last = last_slots
+        let last = folded
+            .last
             .into_iter()
             .map(|s| match s {
                 Ok(slot) => LastNeuron::Kept(index(slot)),
                 Err((f, err, max)) => LastNeuron::Affine {
-                    form: (0..used)
-                        .filter(|&s| f[s] != 0.0)
-                        .map(|s| (index(s), f[s]))
-                        .collect(),
+                    form: sparse(&f),
                     err,
                     max,
                 },
             })
             .collect();
         StepSdp {
-            rows: all_rows,
+            rows: free_rows(rows, xi, &xi_at, free),
             kept,
             xi_at,
             last,
-            kept_before_last,
+            kept_before_last: folded.kept_before_last,
             vmax,
             err,
             dim,
@@ -540,7 +427,54 @@ impl StepSdp {
     /// [`StepSdp::bound`] with the multipliers proposed by `solver` (the
     /// re-certification is the same for all).
     pub fn bound_using(&self, phi_full: &[f64], solver: Solver) -> SdpBound {
-        // φ on v: pinned coordinates of ξ move into a constant of their own
+        let (phi, pinned) = self.objective(phi_full);
+        let phi = &phi[..];
+        let n = self.dim;
+        let one = n - 1;
+        let (vecs, rank2) = self.constraints();
+        let cons: Vec<(Form, bool)> = rank2
+            .iter()
+            .map(|c| {
+                let mut f = Form::default();
+                f.outer(c.coef, &vecs[c.a], &vecs[c.b]);
+                (f, c.nonneg)
+            })
+            .collect();
+        // objective form F = sym(φ eᵀ)
+        let phi_sparse: Vec<(usize, f64)> = phi
+            .iter()
+            .enumerate()
+            .filter(|(_, x)| **x != 0.0)
+            .map(|(i, x)| (i, *x))
+            .collect();
+        let mut fobj = Form::default();
+        fobj.outer(1.0, &phi_sparse, &[(one, 1.0)]);
+        let x = match multipliers(n, &fobj, vecs, &rank2, &cons, solver) {
+            Ok(x) => x,
+            Err(issue) => return none(issue),
+        };
+        let lam_bound = match max_eigenvalue_bound(n, &fobj, &cons, &x) {
+            Ok(lam) => lam,
+            Err(issue) => return none(issue),
+        };
+        let d = x[0];
+        // the folded network's values differ from the merged one's by `err`
+        let folding = sum_upper(phi.iter().zip(&self.err).map(|(p, e)| p.abs() * e));
+        let value = sum_upper([
+            d,
+            lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12),
+            folding,
+            pinned,
+        ]);
+        SdpBound { value, issue: None }
+    }
+
+    /// `φ` on `v` from `φ` over [`StepSdp::dim`]'s coordinates, and the
+    /// constant it adds to the bound: pinned coordinates of ξ move into
+    /// that constant, and a stable neuron of the last hidden layer puts its
+    /// coefficient onto its form's coordinates (`|φ|·err` for the form's
+    /// error, and the rounding of these sums, are added to the constant).
+    fn objective(&self, phi_full: &[f64]) -> (Vec<f64>, f64) {
         let mut phi = vec![0.0; self.dim];
         let mut pinned = Vec::new();
         for (i, at) in self.xi_at.iter().enumerate() {
@@ -553,9 +487,6 @@ impl StepSdp {
         phi[free..free + kb].copy_from_slice(&phi_full[d0..d0 + kb]);
         let one = self.dim - 1;
         phi[one] = phi_full[d0 + kb + self.last.len()];
-        // the last hidden layer: a stable neuron's coefficient goes onto its
-        // form's coordinates (|φ|·err for the form's error, and the
-        // rounding of these sums, are added to the bound)
         let mut phi_abs: Vec<f64> = phi.iter().map(|x| x.abs()).collect();
         let mut substituted = Vec::new();
         for (k, neuron) in self.last.iter().enumerate() {
@@ -582,115 +513,7 @@ impl StepSdp {
                 .map(|(a, m)| (g * a * m * 1.0625).next_up()),
         );
         let pinned = sum_upper(pinned.into_iter().chain(substituted).chain([phi_round]));
-        let phi = &phi[..];
-        let n = self.dim;
-        let (vecs, rank2) = self.constraints();
-        let cons: Vec<(Form, bool)> = rank2
-            .iter()
-            .map(|c| {
-                let mut f = Form::default();
-                f.outer(c.coef, &vecs[c.a], &vecs[c.b]);
-                (f, c.nonneg)
-            })
-            .collect();
-        // objective form F = sym(φ eᵀ)
-        let phi_sparse: Vec<(usize, f64)> = phi
-            .iter()
-            .enumerate()
-            .filter(|(_, x)| **x != 0.0)
-            .map(|(i, x)| (i, *x))
-            .collect();
-        let mut fobj = Form::default();
-        fobj.outer(1.0, &phi_sparse, &[(one, 1.0)]);
-        // the Schur-complement interior-point method where it is the cheaper
-        // one (or the only one: Clarabel's PSD block outgrows memory beyond
-        // MAX_CLARABEL_SDP_DIM); Clarabel otherwise, and when it stalls
-        let m = rank2.len() + 1;
-        let clarabel_fits = n <= MAX_CLARABEL_SDP_DIM;
-        let use_schur = match solver {
-            Solver::Schur => true,
-            Solver::Clarabel => false,
-            Solver::Auto => schur_pays(m, n) || !clarabel_fits,
-        };
-        let tried_schur = use_schur && m <= MAX_SCHUR_MULTIPLIERS;
-        let schur = if tried_schur {
-            propose(n, &fobj, vecs, &rank2)
-        } else {
-            None
-        };
-        let may_clarabel = clarabel_fits && solver != Solver::Schur;
-        let x = match schur {
-            Some(y) => y,
-            None if may_clarabel => match clarabel_solve(n, &fobj, &cons) {
-                Ok(x) => x,
-                Err(issue) => return none(issue),
-            },
-            None if tried_schur => {
-                return none(Issue::Status(Backend::Sdp, Status::InsufficientProgress))
-            }
-            None => return none(Issue::SdpTooLarge),
-        };
-        // whichever solver proposed it, a non-finite multiplier is no proposal
-        if x.iter().any(|v| !v.is_finite()) {
-            return none(Issue::NonFiniteSolution);
-        }
-        // ---- re-certify: M = F − d eeᵀ + Σ μ S + Σ λ E, in f64 with |·| accounting ----
-        let d = x[0];
-        let mut m = DMatrix::<f64>::zeros(n, n);
-        let mut mabs = DMatrix::<f64>::zeros(n, n);
-        let mut terms = 0usize;
-        let add = |m: &mut DMatrix<f64>, mabs: &mut DMatrix<f64>, i: usize, j: usize, v: f64| {
-            m[(i, j)] += v;
-            mabs[(i, j)] += v.abs();
-        };
-        for (i, j, v) in &fobj.entries {
-            add(&mut m, &mut mabs, *i, *j, *v);
-        }
-        add(&mut m, &mut mabs, one, one, -d);
-        for (c, (form, nonneg)) in cons.iter().enumerate() {
-            let mult = if *nonneg { x[1 + c].max(0.0) } else { x[1 + c] };
-            if mult == 0.0 {
-                continue;
-            }
-            terms += 1;
-            for (i, j, v) in &form.entries {
-                add(&mut m, &mut mabs, *i, *j, mult * v);
-            }
-        }
-        // symmetrise (entries were stored with i ≤ j; off-diagonal ones carry half the sum each side)
-        let mut sym = DMatrix::<f64>::zeros(n, n);
-        let mut err = 0.0f64;
-        let k = gamma(terms + fobj.entries.len() + 8);
-        for j in 0..n {
-            for i in 0..=j {
-                let (v, a) = (m[(i, j)], mabs[(i, j)]);
-                sym[(i, j)] = v;
-                sym[(j, i)] = v;
-                let e = k * a * 1.0625;
-                err += if i == j { e * e } else { 2.0 * e * e };
-            }
-        }
-        let err_f = (err.sqrt() * (1.0 + 1e-10)).next_up();
-        let norm_f = sym.norm();
-        let eig = SymmetricEigen::new(sym);
-        let lam = eig
-            .eigenvalues
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        if !lam.is_finite() {
-            return none(Issue::NonFiniteEigenvalues);
-        }
-        let lam_bound = sum_upper([lam, err_f, 100.0 * n as f64 * U * norm_f]);
-        // the folded network's values differ from the merged one's by `err`
-        let folding = sum_upper(phi.iter().zip(&self.err).map(|(p, e)| p.abs() * e));
-        let value = sum_upper([
-            d,
-            lam_bound.max(0.0) * self.radius2 * (1.0 + 1e-12),
-            folding,
-            pinned,
-        ]);
-        SdpBound { value, issue: None }
+        (phi, pinned)
     }
 
     /// Dimension of ξ.
@@ -732,6 +555,299 @@ impl StepSdp {
     pub fn dim(&self) -> usize {
         self.input_dim() + self.kept_before_last + self.last.len() + 1
     }
+}
+
+/// A stable neuron of the last hidden layer: its form (dense over
+/// slots), its error and its magnitude.
+type Stable = (Vec<f64>, f64, f64);
+
+/// The folded network of a step over "slots": 0 the constant, `1..=d0`
+/// the coordinates of ξ, then the kept neurons in order (see [`StepSdp`]).
+struct Folded {
+    /// How many slots are used.
+    used: usize,
+    /// A bound of `|·|` of each slot's value.
+    smax: Vec<f64>,
+    /// The kept neurons: slot, pre-activation form (dense over slots),
+    /// bounds of the form (the merged ones widened by its error), error.
+    kept: Vec<(usize, Vec<f64>, f64, f64, f64)>,
+    /// The last hidden layer: kept slots, or stable forms.
+    last: Vec<Result<usize, Stable>>,
+    /// Kept neurons before the last hidden layer.
+    kept_before_last: usize,
+}
+
+impl Folded {
+    /// Fold the hidden layers of `net` over the box `xi`, with `boxes` the
+    /// merged network's layer bounds there: a stable neuron substituted
+    /// into the next layer, an unstable one kept as a slot.
+    fn of(net: &MergedNet, xi: &IBox, boxes: &[IBox]) -> Folded {
+        let d0 = xi.dim();
+        let hidden = net.layers.len() - 1;
+        let total: usize = net.layers[..hidden].iter().map(|(w, _)| w.nrows()).sum();
+        let slots = 1 + d0 + total;
+        let mut smax = vec![0.0; slots];
+        smax[0] = 1.0;
+        smax[1..=d0].copy_from_slice(&xi.abs_max());
+        let mut used = 1 + d0;
+        // the current layer's outputs: (dense form over slots, error vs
+        // merged); a coordinate of ξ pinned to a point is that constant
+        let mut prev: Vec<(Vec<f64>, f64)> = (0..d0)
+            .map(|i| {
+                let mut f = vec![0.0; slots];
+                if xi.lo[i] == xi.hi[i] {
+                    f[0] = xi.lo[i];
+                } else {
+                    f[1 + i] = 1.0;
+                }
+                (f, 0.0)
+            })
+            .collect();
+        let mut kept = Vec::new();
+        let mut last = Vec::new();
+        let mut kept_before_last = 0;
+        for (k, (w, b)) in net.layers[..hidden].iter().enumerate() {
+            let z_box = &boxes[2 * k + 1];
+            let is_last = k + 1 == hidden;
+            if is_last {
+                kept_before_last = kept.len();
+            }
+            let gam = gamma(w.ncols() + 2);
+            let mut next = Vec::with_capacity(w.nrows());
+            for j in 0..w.nrows() {
+                let (f, err_z) = neuron_form(w, b, j, &prev, used, &smax, gam);
+                let (l, u) = (z_box.lo[j], z_box.hi[j]);
+                if is_last && u <= 0.0 {
+                    last.push(Err((vec![0.0; slots], 0.0, 0.0)));
+                } else if is_last && l >= 0.0 {
+                    let max = (u + err_z).next_up();
+                    last.push(Err((f, err_z, max)));
+                } else if u <= 0.0 {
+                    next.push((vec![0.0; slots], 0.0));
+                } else if l >= 0.0 {
+                    next.push((f, err_z));
+                } else {
+                    let (lw, uw) = ((l - err_z).next_down(), (u + err_z).next_up());
+                    let slot = used;
+                    used += 1;
+                    smax[slot] = uw.max(0.0);
+                    kept.push((slot, f, lw, uw, err_z));
+                    if is_last {
+                        last.push(Ok(slot));
+                    }
+                    let mut unit = vec![0.0; slots];
+                    unit[slot] = 1.0;
+                    next.push((unit, err_z));
+                }
+            }
+            prev = next;
+        }
+        Folded {
+            used,
+            smax,
+            kept,
+            last,
+            kept_before_last,
+        }
+    }
+}
+
+/// Neuron `j`'s pre-activation `W_j·prev + b_j` as a form dense over the
+/// slots (`prev` the previous layer's forms and errors, over the first
+/// `used` slots, whose values are at most `smax`), and its error against
+/// the merged network: the previous errors through `|W_j|` and the
+/// rounding of the form (`gam` = `γ(columns + 2)`).
+#[inline]
+fn neuron_form(
+    w: &DMatrix<f64>,
+    b: &DVector<f64>,
+    j: usize,
+    prev: &[(Vec<f64>, f64)],
+    used: usize,
+    smax: &[f64],
+    gam: f64,
+) -> (Vec<f64>, f64) {
+    let slots = smax.len();
+    let mut f = vec![0.0; slots];
+    let mut fabs = vec![0.0; slots];
+    f[0] = b[j];
+    fabs[0] = b[j].abs();
+    let mut prop = Vec::with_capacity(w.ncols());
+    for (c, (pf, pe)) in prev.iter().enumerate() {
+        let wc = w[(j, c)];
+        if wc == 0.0 {
+            continue;
+        }
+        for s in 0..used {
+            if pf[s] != 0.0 {
+                f[s] += wc * pf[s];
+                fabs[s] += (wc * pf[s]).abs();
+            }
+        }
+        prop.push(wc.abs() * pe);
+    }
+    // |computed form − exact composition| · |v| over the box
+    let size = sum_upper((0..used).map(|s| fabs[s] * smax[s]));
+    let round = (gam * size * 1.0625 + 1e-300).next_up();
+    let err_z = sum_upper(prop.into_iter().chain([round]));
+    (f, err_z)
+}
+
+/// Where each coordinate of the box `xi` goes in `v`: its index among the
+/// free coordinates, or its value when the box pins it to a point; and
+/// how many are free.
+fn xi_coordinates(xi: &IBox) -> (Vec<Result<usize, f64>>, usize) {
+    let d0 = xi.dim();
+    let mut xi_at = Vec::with_capacity(d0);
+    let mut free = 0;
+    for i in 0..d0 {
+        if xi.lo[i] == xi.hi[i] {
+            xi_at.push(Err(xi.lo[i]));
+        } else {
+            xi_at.push(Ok(free));
+            free += 1;
+        }
+    }
+    (xi_at, free)
+}
+
+/// The input rows over the `free` coordinates of ξ (`xi_at` says where
+/// each goes): the extra `rows`, a pinned coordinate's term moved to the
+/// right-hand side, rounded up (the row stays valid); then the box's rows
+/// of each free coordinate.
+fn free_rows(
+    rows: &[(Vec<f64>, f64)],
+    xi: &IBox,
+    xi_at: &[Result<usize, f64>],
+    free: usize,
+) -> Vec<(Vec<f64>, f64)> {
+    let mut all_rows: Vec<(Vec<f64>, f64)> = rows
+        .iter()
+        .map(|(a, g)| {
+            let mut a_free = vec![0.0; free];
+            let mut rhs = vec![*g];
+            for (&ai, at) in a.iter().zip(xi_at) {
+                match at {
+                    Ok(j) => a_free[*j] = ai,
+                    Err(c) => rhs.push(-(ai * c)),
+                }
+            }
+            (a_free, sum_upper(rhs))
+        })
+        .collect();
+    for (i, at) in xi_at.iter().enumerate() {
+        if let Ok(j) = at {
+            let mut e = vec![0.0; free];
+            e[*j] = 1.0;
+            all_rows.push((e.clone(), xi.hi[i]));
+            e[*j] = -1.0;
+            all_rows.push((e, -xi.lo[i]));
+        }
+    }
+    all_rows
+}
+
+/// The multipliers `x = (d, …)` that `solver` proposes for the program of
+/// [`StepSdp::bound`] (objective form `fobj` over `n` coordinates, the
+/// constraints `rank2` over `vecs`, and as forms `cons`); finite.
+fn multipliers(
+    n: usize,
+    fobj: &Form,
+    vecs: Vec<Vec<(usize, f64)>>,
+    rank2: &[Con],
+    cons: &[(Form, bool)],
+    solver: Solver,
+) -> Result<Vec<f64>, Issue> {
+    // the Schur-complement interior-point method where it is the cheaper
+    // one (or the only one: Clarabel's PSD block outgrows memory beyond
+    // MAX_CLARABEL_SDP_DIM); Clarabel otherwise, and when it stalls
+    let m = rank2.len() + 1;
+    let clarabel_fits = n <= MAX_CLARABEL_SDP_DIM;
+    let use_schur = match solver {
+        Solver::Schur => true,
+        Solver::Clarabel => false,
+        Solver::Auto => schur_pays(m, n) || !clarabel_fits,
+    };
+    let tried_schur = use_schur && m <= MAX_SCHUR_MULTIPLIERS;
+    let schur = if tried_schur {
+        propose(n, fobj, vecs, rank2)
+    } else {
+        None
+    };
+    let may_clarabel = clarabel_fits && solver != Solver::Schur;
+    let x = match schur {
+        Some(y) => y,
+        None if may_clarabel => clarabel_solve(n, fobj, cons)?,
+        None if tried_schur => {
+            return Err(Issue::Status(Backend::Sdp, Status::InsufficientProgress))
+        }
+        None => return Err(Issue::SdpTooLarge),
+    };
+    // whichever solver proposed it, a non-finite multiplier is no proposal
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(Issue::NonFiniteSolution);
+    }
+    Ok(x)
+}
+
+/// The re-certification of the multipliers `x`: a certified upper bound
+/// of the largest eigenvalue of `M = F − d eeᵀ + Σ μ S + Σ λ E` (`F` =
+/// `fobj`, the forms `cons`, `d = x[0]`, negative `μ` clipped to 0), built
+/// in `f64` with `|·|` accounting.
+fn max_eigenvalue_bound(
+    n: usize,
+    fobj: &Form,
+    cons: &[(Form, bool)],
+    x: &[f64],
+) -> Result<f64, Issue> {
+    let one = n - 1;
+    let d = x[0];
+    let mut m = DMatrix::<f64>::zeros(n, n);
+    let mut mabs = DMatrix::<f64>::zeros(n, n);
+    let mut terms = 0usize;
+    let add = |m: &mut DMatrix<f64>, mabs: &mut DMatrix<f64>, i: usize, j: usize, v: f64| {
+        m[(i, j)] += v;
+        mabs[(i, j)] += v.abs();
+    };
+    for (i, j, v) in &fobj.entries {
+        add(&mut m, &mut mabs, *i, *j, *v);
+    }
+    add(&mut m, &mut mabs, one, one, -d);
+    for (c, (form, nonneg)) in cons.iter().enumerate() {
+        let mult = if *nonneg { x[1 + c].max(0.0) } else { x[1 + c] };
+        if mult == 0.0 {
+            continue;
+        }
+        terms += 1;
+        for (i, j, v) in &form.entries {
+            add(&mut m, &mut mabs, *i, *j, mult * v);
+        }
+    }
+    // symmetrise (entries were stored with i ≤ j; off-diagonal ones carry half the sum each side)
+    let mut sym = DMatrix::<f64>::zeros(n, n);
+    let mut err = 0.0f64;
+    let k = gamma(terms + fobj.entries.len() + 8);
+    for j in 0..n {
+        for i in 0..=j {
+            let (v, a) = (m[(i, j)], mabs[(i, j)]);
+            sym[(i, j)] = v;
+            sym[(j, i)] = v;
+            let e = k * a * 1.0625;
+            err += if i == j { e * e } else { 2.0 * e * e };
+        }
+    }
+    let err_f = (err.sqrt() * (1.0 + 1e-10)).next_up();
+    let norm_f = sym.norm();
+    let eig = SymmetricEigen::new(sym);
+    let lam = eig
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !lam.is_finite() {
+        return Err(Issue::NonFiniteEigenvalues);
+    }
+    Ok(sum_upper([lam, err_f, 100.0 * n as f64 * U * norm_f]))
 }
 
 /// Whether the Schur-complement method is the cheaper solver for `m`
@@ -855,7 +971,7 @@ fn none(issue: Issue) -> SdpBound {
     }
 }
 
-/// The boxes of an analysis (before every layer).
-fn analysis_boxes(a: &Analysis) -> Vec<IBox> {
+/// The boxes of a relaxation (before every layer).
+fn relaxation_boxes(a: &Relaxation) -> Vec<IBox> {
     a.boxes().to_vec()
 }

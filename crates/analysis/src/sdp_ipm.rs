@@ -272,10 +272,6 @@ impl State<'_> {
 
     /// One predictor–corrector step.
     fn iterate(&mut self, b_norm: f64, c_norm: f64) -> Step {
-        let p = self.p;
-        let n = p.n;
-        let m = p.cons.len();
-        let nl = self.xl.len();
         // set once this iterate's residuals are known
         self.acceptable = false;
         let Some(zc) = Cholesky::new(self.z.clone()) else {
@@ -284,8 +280,52 @@ impl State<'_> {
         let zi = zc.inverse();
         let gx = self.gram(&self.x);
         let gz = self.gram(&zi);
-        // residuals
-        let ax = inner(p, &gx);
+        let res = match self.residuals(&gx, b_norm, c_norm) {
+            Ok(res) => res,
+            Err(step) => return step,
+        };
+        let Some(chol) = factor(&self.schur(&gx, &gz)) else {
+            return Step::Stuck("Schur complement would not factor");
+        };
+        let xrd = &self.x * &res.rd;
+        let newton = Newton { zi, chol, xrd, res };
+        // predictor
+        let pred = self.direction(&newton, 0.0, None);
+        let Some((ap, ad)) = self.steps(&pred) else {
+            return Step::Stuck("step length");
+        };
+        let (ap, ad) = (ap.min(1.0), ad.min(1.0));
+        let mu = newton.res.mu;
+        let sigma = self.centering(mu, ap, ad, &pred);
+        // corrector
+        let corr = &pred.dx * &pred.dz;
+        let corr_l: Vec<f64> = pred.dxl.iter().zip(&pred.dzl).map(|(a, b)| a * b).collect();
+        let dir = self.direction(&newton, sigma * mu, Some((&corr, &corr_l)));
+        let Some((ap2, ad2)) = self.steps(&dir) else {
+            return Step::Stuck("step length");
+        };
+        let tau = 0.9 + 0.09 * ap.min(ad);
+        let (ap, ad) = ((tau * ap2).min(1.0), (tau * ad2).min(1.0));
+        if ap < 1e-10 && ad < 1e-10 {
+            return Step::Stuck("steps too short");
+        }
+        self.advance(ap, ad, dir)
+    }
+
+    /// The residuals of the current iterate (from `gx = Vᵀ X V`), and
+    /// whether it is within ACCEPT; the step's end instead when they are
+    /// not finite or within TOL.
+    fn residuals(
+        &mut self,
+        gx: &DMatrix<f64>,
+        b_norm: f64,
+        c_norm: f64,
+    ) -> Result<Residuals, Step> {
+        let p = self.p;
+        let n = p.n;
+        let m = p.cons.len();
+        let nl = self.xl.len();
+        let ax = inner(p, gx);
         let rp: Vec<f64> = (0..m)
             .map(|k| {
                 let lin = self.lp[k].map_or(0.0, |r| self.xl[r]);
@@ -307,13 +347,20 @@ impl State<'_> {
         let dinf = (rd.norm() + norm(&rdl)) / (1.0 + c_norm);
         let rel_gap = gap / (1.0 + pobj.abs() + dobj.abs());
         if ![pinf, dinf, rel_gap].iter().all(|v| v.is_finite()) {
-            return Step::Stuck("non-finite residual");
+            return Err(Step::Stuck("non-finite residual"));
         }
         if rel_gap < TOL.0 && dinf < TOL.1 && pinf < TOL.2 {
-            return Step::Converged;
+            return Err(Step::Converged);
         }
         self.acceptable = rel_gap < ACCEPT.0 && dinf < ACCEPT.1 && pinf < ACCEPT.2;
-        // Schur complement: M_ij = ⟨A_i, X A_j Z⁻¹⟩ (+ x/z on the linear block)
+        Ok(Residuals { rp, rd, rdl, mu })
+    }
+
+    /// The Schur complement `M_ij = ⟨A_i, X A_j Z⁻¹⟩` (+ x/z on the linear
+    /// block), from `gx = Vᵀ X V` and `gz = Vᵀ Z⁻¹ V`.
+    fn schur(&self, gx: &DMatrix<f64>, gz: &DMatrix<f64>) -> DMatrix<f64> {
+        let p = self.p;
+        let m = p.cons.len();
         let mut schur = DMatrix::<f64>::zeros(m, m);
         for i in 0..m {
             let ci = p.cons[i];
@@ -331,93 +378,105 @@ impl State<'_> {
                 schur[(i, i)] += self.xl[r] / self.zl[r];
             }
         }
-        let Some(chol) = factor(&schur) else {
-            return Step::Stuck("Schur complement would not factor");
-        };
-        // the direction for a target σμ and a corrector (ΔX_a ΔZ_a, Δx_a∘Δz_a)
-        let xrd = &self.x * &rd;
-        let direction = |sigma_mu: f64, corr: Option<(&DMatrix<f64>, &[f64])>| {
-            // K = σμZ⁻¹ − X − (X R_d + corr) Z⁻¹
-            let mut num = xrd.clone();
-            if let Some((c, _)) = corr {
-                num += c;
+        schur
+    }
+
+    /// The direction for a target `σμ` (`sigma_mu`) and a corrector
+    /// `(ΔX_a ΔZ_a, Δx_a∘Δz_a)`.
+    fn direction(
+        &self,
+        newton: &Newton,
+        sigma_mu: f64,
+        corr: Option<(&DMatrix<f64>, &[f64])>,
+    ) -> Direction {
+        let p = self.p;
+        let m = p.cons.len();
+        let nl = self.xl.len();
+        let (zi, res) = (&newton.zi, &newton.res);
+        // K = σμZ⁻¹ − X − (X R_d + corr) Z⁻¹
+        let mut num = newton.xrd.clone();
+        if let Some((c, _)) = corr {
+            num += c;
+        }
+        let k = zi * sigma_mu - &self.x - &num * zi;
+        let kl: Vec<f64> = (0..nl)
+            .map(|r| {
+                let c = corr.map_or(0.0, |(_, cl)| cl[r]);
+                (sigma_mu - self.xl[r] * res.rdl[r] - c) / self.zl[r] - self.xl[r]
+            })
+            .collect();
+        let ak = inner(p, &self.gram(&k));
+        let rhs: Vec<f64> = (0..m)
+            .map(|i| res.rp[i] - ak[i] + self.lp[i].map_or(0.0, |r| kl[r]))
+            .collect();
+        let dy = newton.chol.solve(&rhs);
+        let dz = &res.rd - combine(p, &dy);
+        let mut dzl = res.rdl.clone();
+        for (i, r) in self.lp.iter().enumerate() {
+            if let Some(r) = *r {
+                dzl[r] += dy[i];
             }
-            let k = &zi * sigma_mu - &self.x - &num * &zi;
-            let kl: Vec<f64> = (0..nl)
-                .map(|r| {
-                    let c = corr.map_or(0.0, |(_, cl)| cl[r]);
-                    (sigma_mu - self.xl[r] * rdl[r] - c) / self.zl[r] - self.xl[r]
-                })
-                .collect();
-            let ak = inner(p, &self.gram(&k));
-            let rhs: Vec<f64> = (0..m)
-                .map(|i| rp[i] - ak[i] + self.lp[i].map_or(0.0, |r| kl[r]))
-                .collect();
-            let dy = chol.solve(&rhs);
-            let dz = &rd - combine(p, &dy);
-            let mut dzl = rdl.clone();
-            for (i, r) in self.lp.iter().enumerate() {
-                if let Some(r) = *r {
-                    dzl[r] += dy[i];
-                }
-            }
-            let mut num = &self.x * &dz;
-            if let Some((c, _)) = corr {
-                num += c;
-            }
-            let dx = sym(&(&zi * sigma_mu - &self.x - &num * &zi));
-            let dxl: Vec<f64> = (0..nl)
-                .map(|r| {
-                    let c = corr.map_or(0.0, |(_, cl)| cl[r]);
-                    (sigma_mu - self.xl[r] * dzl[r] - c) / self.zl[r] - self.xl[r]
-                })
-                .collect();
-            (dx, dxl, dy, dz, dzl)
-        };
-        // the longest steps to the cones' boundaries (uncapped)
-        let steps = |dx: &DMatrix<f64>, dxl: &[f64], dz: &DMatrix<f64>, dzl: &[f64]| {
-            let ap = max_step(&self.x, dx, f64::INFINITY).map(|a| max_step_lp(&self.xl, dxl, a));
-            let ad = max_step(&self.z, dz, f64::INFINITY).map(|a| max_step_lp(&self.zl, dzl, a));
-            ap.zip(ad)
-        };
-        // predictor
-        let (dx, dxl, _, dz, dzl) = direction(0.0, None);
-        let Some((ap, ad)) = steps(&dx, &dxl, &dz, &dzl) else {
-            return Step::Stuck("step length");
-        };
-        let (ap, ad) = (ap.min(1.0), ad.min(1.0));
-        let gap_aff = (&self.x + &dx * ap).dot(&(&self.z + &dz * ad))
+        }
+        let mut num = &self.x * &dz;
+        if let Some((c, _)) = corr {
+            num += c;
+        }
+        let dx = sym(&(zi * sigma_mu - &self.x - &num * zi));
+        let dxl: Vec<f64> = (0..nl)
+            .map(|r| {
+                let c = corr.map_or(0.0, |(_, cl)| cl[r]);
+                (sigma_mu - self.xl[r] * dzl[r] - c) / self.zl[r] - self.xl[r]
+            })
+            .collect();
+        Direction {
+            dx,
+            dxl,
+            dy,
+            dz,
+            dzl,
+        }
+    }
+
+    /// The longest steps along `dir` to the cones' boundaries (uncapped),
+    /// primal and dual.
+    fn steps(&self, dir: &Direction) -> Option<(f64, f64)> {
+        let ap =
+            max_step(&self.x, &dir.dx, f64::INFINITY).map(|a| max_step_lp(&self.xl, &dir.dxl, a));
+        let ad =
+            max_step(&self.z, &dir.dz, f64::INFINITY).map(|a| max_step_lp(&self.zl, &dir.dzl, a));
+        ap.zip(ad)
+    }
+
+    /// Mehrotra's centering `σ` from the predictor `pred`, its step
+    /// lengths `ap`, `ad` and the current `μ`.
+    fn centering(&self, mu: f64, ap: f64, ad: f64, pred: &Direction) -> f64 {
+        let n = self.p.n;
+        let nl = self.xl.len();
+        let gap_aff = (&self.x + &pred.dx * ap).dot(&(&self.z + &pred.dz * ad))
             + (0..nl)
-                .map(|r| (self.xl[r] + ap * dxl[r]) * (self.zl[r] + ad * dzl[r]))
+                .map(|r| (self.xl[r] + ap * pred.dxl[r]) * (self.zl[r] + ad * pred.dzl[r]))
                 .sum::<f64>();
         let mu_aff = gap_aff / (n + nl) as f64;
         let expon = 1f64.max(3.0 * ap.min(ad).powi(2));
-        let sigma = if mu > 0.0 {
+        if mu > 0.0 {
             (mu_aff.max(0.0) / mu).powf(expon).min(1.0)
         } else {
             0.0
-        };
-        // corrector
-        let corr = &dx * &dz;
-        let corr_l: Vec<f64> = dxl.iter().zip(&dzl).map(|(a, b)| a * b).collect();
-        let (dx, dxl, dy, dz, dzl) = direction(sigma * mu, Some((&corr, &corr_l)));
-        let Some((ap2, ad2)) = steps(&dx, &dxl, &dz, &dzl) else {
-            return Step::Stuck("step length");
-        };
-        let tau = 0.9 + 0.09 * ap.min(ad);
-        let (ap, ad) = ((tau * ap2).min(1.0), (tau * ad2).min(1.0));
-        if ap < 1e-10 && ad < 1e-10 {
-            return Step::Stuck("steps too short");
         }
-        self.x += dx * ap;
+    }
+
+    /// Move the iterate along `dir`, by `ap` (primal) and `ad` (dual).
+    fn advance(&mut self, ap: f64, ad: f64, dir: Direction) -> Step {
+        let nl = self.xl.len();
+        self.x += dir.dx * ap;
         self.x = sym(&self.x);
         for r in 0..nl {
-            self.xl[r] += ap * dxl[r];
-            self.zl[r] += ad * dzl[r];
+            self.xl[r] += ap * dir.dxl[r];
+            self.zl[r] += ad * dir.dzl[r];
         }
-        self.z += dz * ad;
+        self.z += dir.dz * ad;
         self.z = sym(&self.z);
-        for (y, d) in self.y.iter_mut().zip(&dy) {
+        for (y, d) in self.y.iter_mut().zip(&dir.dy) {
             *y += ad * d;
         }
         let finite = |v: &f64| v.is_finite();
@@ -431,6 +490,44 @@ impl State<'_> {
         }
         Step::Continue
     }
+}
+
+/// The residuals of an iterate.
+struct Residuals {
+    /// Primal: `b − ⟨A, X⟩ + x` per multiplier.
+    rp: Vec<f64>,
+    /// Dual: `C − Z − Σ yₖ Aₖ`.
+    rd: DMatrix<f64>,
+    /// Dual, linear block: `y − z` per nonnegative multiplier.
+    rdl: Vec<f64>,
+    /// The duality gap per coordinate.
+    mu: f64,
+}
+
+/// What the predictor's and the corrector's directions share.
+struct Newton {
+    /// `Z⁻¹`.
+    zi: DMatrix<f64>,
+    /// The Schur complement's Cholesky factor.
+    chol: Factor,
+    /// `X R_d`.
+    xrd: DMatrix<f64>,
+    /// The iterate's residuals.
+    res: Residuals,
+}
+
+/// A search direction.
+struct Direction {
+    /// The step of `X`.
+    dx: DMatrix<f64>,
+    /// The step of the linear block's `x`.
+    dxl: Vec<f64>,
+    /// The step of `y`.
+    dy: Vec<f64>,
+    /// The step of `Z`.
+    dz: DMatrix<f64>,
+    /// The step of the linear block's `z`.
+    dzl: Vec<f64>,
 }
 
 /// A Cholesky factor `L` (faer's blocked factorisation, one thread).

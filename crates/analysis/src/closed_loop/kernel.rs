@@ -4,7 +4,7 @@
 //! allocation per step but the answer (the facets' bounds and the control
 //! box) and, for a plant with model error, its error vectors.
 //!
-//! The general path composes [`Analysis`](super::Analysis) and
+//! The general path composes [`Relaxation`](super::Relaxation) and
 //! [`LinearUpper`](super::LinearUpper) values, each a few vectors: on a
 //! small controller (the double integrator's `2 → 5 → 5 → 1`) a step is a
 //! few thousand floating-point operations, and the allocations, packing
@@ -39,12 +39,12 @@
 
 use std::cell::RefCell;
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
-use super::ClosedLoop;
+use super::{ClosedLoop, Dynamics};
 use crate::crown::{
-    affine_image_into, identity_image_into, one_nonzero, one_per_row, signed_identity,
-    weight_scale_into,
+    affine_image_into, after_one_neuron, identity_image_into, one_nonzero, one_per_row,
+    signed_identity, weight_scale_into,
 };
 use crate::relax::{image, relax, Relax};
 use crate::sets::IBox;
@@ -204,8 +204,44 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// `x` (position 0 is `y`): `false` when a bound or scale is not finite.
 fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
     let layers = &cl.net.layers;
-    let v = &cl.plant.v;
-    let p = v.dim();
+    layout(layers, cl.plant.v.dim(), ws);
+    if !observation_box(cl, x, ws) {
+        return false;
+    }
+    let mut cur = std::mem::take(&mut ws.cur);
+    let mut spare = std::mem::take(&mut ws.spare);
+    for (i, layer) in layers.iter().enumerate() {
+        match layer {
+            Layer::Affine { w, b } => {
+                affine_forward(i, w, b, ws);
+                let next_act = match layers.get(i + 1) {
+                    Some(Layer::Act(act)) => Some(*act),
+                    _ => None,
+                };
+                // CROWN where the general path bounds (`Relaxation::with_hook`
+                // without a hook): a layer that feeds an activation, not
+                // the first, nor one whose rows each read one neuron of an
+                // activation through layers with one nonzero per row
+                let crown = i > 0 && next_act.is_some() && !after_one_neuron(layers, &ws.opr, i);
+                if crown {
+                    let relu = next_act == Some(Activation::Relu);
+                    crown_forward(layers, i, relu, ws, &mut cur, &mut spare);
+                }
+            }
+            Layer::Act(act) => activation_forward(*act, ws.pos[i], ws.pos[i + 1], ws),
+        }
+    }
+    ws.cur = cur;
+    ws.spare = spare;
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    finite(&ws.lo) && finite(&ws.hi) && finite(&ws.wz)
+}
+
+/// Lay `ws` out for the controller `layers` on an input of `p` values:
+/// the positions, every per-position buffer sized and cleared, which
+/// layers have one nonzero per row or are `±I`, and the interval images'
+/// running sums sized for the widest layer.
+fn layout(layers: &[Layer], p: usize, ws: &mut Workspace) {
     // positions: the value before layer `i` starts at `pos[i]`
     ws.pos.clear();
     let (mut start, mut size) = (0, p);
@@ -244,14 +280,6 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
             Layer::Affine { w, .. } if one => signed_identity(w.as_slice(), w.nrows(), w.ncols()),
             _ => None,
         }));
-    // y = [Cᵀ I] (x, v)
-    ws.xv_lo.clear();
-    ws.xv_lo.extend_from_slice(&x.lo);
-    ws.xv_lo.extend_from_slice(&v.lo);
-    ws.xv_hi.clear();
-    ws.xv_hi.extend_from_slice(&x.hi);
-    ws.xv_hi.extend_from_slice(&v.hi);
-    let mut sums = std::mem::take(&mut ws.sums);
     let widest = layers
         .iter()
         .map(|l| match l {
@@ -261,116 +289,122 @@ fn forward(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
         .max()
         .unwrap_or(0)
         .max(p);
-    sums.clear();
-    sums.resize(4 * widest, 0.0);
+    ws.sums.clear();
+    ws.sums.resize(4 * widest, 0.0);
+}
+
+/// Position 0: the observation box `y = [Cᵀ I] (x, v)`, and `|y|max`;
+/// `false` when `x` or `y` is not finite.
+fn observation_box(cl: &ClosedLoop, x: &IBox, ws: &mut Workspace) -> bool {
+    let v = &cl.plant.v;
+    let p = v.dim();
+    ws.xv_lo.clear();
+    ws.xv_lo.extend_from_slice(&x.lo);
+    ws.xv_lo.extend_from_slice(&v.lo);
+    ws.xv_hi.clear();
+    ws.xv_hi.extend_from_slice(&x.hi);
+    ws.xv_hi.extend_from_slice(&v.hi);
     affine_image_into(
         &cl.obs_xv,
         cl.obs_zero.as_slice(),
         (&ws.xv_lo, &ws.xv_hi),
         None,
         (&mut ws.lo[..p], &mut ws.hi[..p]),
-        &mut sums,
+        &mut ws.sums,
     );
     if !(x.is_finite() && ws.lo[..p].iter().chain(&ws.hi[..p]).all(|v| v.is_finite())) {
-        ws.sums = sums;
         return false;
     }
     ws.abs_y.clear();
     ws.abs_y.extend((0..p).map(|j| abs_max(ws.lo[j], ws.hi[j])));
-    let mut cur = std::mem::take(&mut ws.cur);
-    let mut spare = std::mem::take(&mut ws.spare);
-    for (i, layer) in layers.iter().enumerate() {
-        let (a, z) = (ws.pos[i], ws.pos[i + 1]);
-        match layer {
-            Layer::Affine { w, b } => {
-                let rows = w.nrows();
-                let (before, after) = ws.lo.split_at_mut(z);
-                let (hbefore, hafter) = ws.hi.split_at_mut(z);
-                if let Some(sign) = ws.ident[i] {
-                    // z = ±h + b: the general path's numbers, without sums over zeros
-                    identity_image_into(
-                        sign,
-                        b.as_slice(),
-                        (&before[a..z], &hbefore[a..z]),
-                        &mut ws.wz[z..z + rows],
-                        (&mut after[..rows], &mut hafter[..rows]),
-                    );
-                } else {
-                    // |W|·|h|max, for the error terms of products with W
-                    weight_scale_into(
-                        w,
-                        |k| abs_max(before[a + k], hbefore[a + k]),
-                        None,
-                        &mut ws.wz[z..z + rows],
-                    );
-                    affine_image_into(
-                        w,
-                        b.as_slice(),
-                        (&before[a..z], &hbefore[a..z]),
-                        None,
-                        (&mut after[..rows], &mut hafter[..rows]),
-                        &mut sums,
-                    );
-                }
-                let next_act = match layers.get(i + 1) {
-                    Some(Layer::Act(act)) => Some(*act),
-                    _ => None,
-                };
-                // CROWN where the general path bounds (`Analysis::with_hook`
-                // without a hook): a layer that feeds an activation, not
-                // the first, nor one whose rows each read one neuron of an
-                // activation through layers with one nonzero per row
-                let mut j = i + 1;
-                while j >= 1 && ws.opr[j - 1] {
-                    j -= 1;
-                }
-                let after_one_neuron = j >= 2
-                    && matches!(layers[j - 1], Layer::Act(_))
-                    && matches!(layers[j - 2], Layer::Affine { .. });
-                let crown = i > 0 && next_act.is_some() && !after_one_neuron;
-                if crown {
-                    let relu = next_act == Some(Activation::Relu);
-                    for j in 0..rows {
-                        if relu && ws.hi[z + j] <= 0.0 {
-                            continue;
-                        }
-                        let mut both = [0.0; 2];
-                        for (side, sign) in [(0, 1.0), (1, -1.0)] {
-                            cur.clear();
-                            cur.extend((0..w.ncols()).map(|k| sign * w[(j, k)]));
-                            let mut acc = Acc::of(sign * b[j]);
-                            back(layers, ws, i, &mut cur, &mut spare, &mut acc);
-                            let off = acc.upper();
-                            let at = 2 * (z + j) + side;
-                            ws.st_off[at] = off;
-                            ws.st_coef[at * p..(at + 1) * p].copy_from_slice(&cur[..p]);
-                            both[side] = concretize(&cur, &ws.lo[..p], &ws.hi[..p], Acc::of(off));
-                        }
-                        ws.stored[z + j] = true;
-                        ws.layer_stored[i] = true;
-                        ws.hi[z + j] = ws.hi[z + j].min(both[0]);
-                        ws.lo[z + j] = ws.lo[z + j].max(-both[1]);
-                    }
-                }
-            }
-            Layer::Act(act) => {
-                let width = z - a;
-                for j in 0..width {
-                    let (l, h) = (ws.lo[a + j], ws.hi[a + j]);
-                    let (il, ih) = image(*act, l, h);
-                    ws.lo[z + j] = il;
-                    ws.hi[z + j] = ih;
-                    ws.rel[a + j] = relax(*act, l, h);
-                    ws.absm[a + j] = abs_max(l, h);
-                }
-            }
-        }
+    true
+}
+
+/// Affine layer `i`, `w·h + b`: the interval image of its input and the
+/// scale `|W|·|h|max` of its products (none for `±I`, whose are exact).
+fn affine_forward(i: usize, w: &DMatrix<f64>, b: &DVector<f64>, ws: &mut Workspace) {
+    let (a, z) = (ws.pos[i], ws.pos[i + 1]);
+    let rows = w.nrows();
+    let (before, after) = ws.lo.split_at_mut(z);
+    let (hbefore, hafter) = ws.hi.split_at_mut(z);
+    if let Some(sign) = ws.ident[i] {
+        // z = ±h + b: the general path's numbers, without sums over zeros
+        identity_image_into(
+            sign,
+            b.as_slice(),
+            (&before[a..z], &hbefore[a..z]),
+            &mut ws.wz[z..z + rows],
+            (&mut after[..rows], &mut hafter[..rows]),
+        );
+    } else {
+        // |W|·|h|max, for the error terms of products with W
+        weight_scale_into(
+            w,
+            |k| abs_max(before[a + k], hbefore[a + k]),
+            None,
+            &mut ws.wz[z..z + rows],
+        );
+        affine_image_into(
+            w,
+            b.as_slice(),
+            (&before[a..z], &hbefore[a..z]),
+            None,
+            (&mut after[..rows], &mut hafter[..rows]),
+            &mut ws.sums,
+        );
     }
-    ws.cur = cur;
-    ws.spare = spare;
-    ws.sums = sums;
-    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-    finite(&ws.lo) && finite(&ws.hi) && finite(&ws.wz)
+}
+
+/// The CROWN bounds of affine layer `i`'s outputs (both signs of each row,
+/// back-substituted to `y` and stored), intersected with their interval
+/// ones; before a ReLU (`relu`), not those it proves inactive.
+fn crown_forward(
+    layers: &[Layer],
+    i: usize,
+    relu: bool,
+    ws: &mut Workspace,
+    cur: &mut Vec<f64>,
+    spare: &mut Vec<f64>,
+) {
+    let Layer::Affine { w, b } = &layers[i] else {
+        unreachable!("CROWN bounds affine layers only");
+    };
+    let p = ws.abs_y.len();
+    let z = ws.pos[i + 1];
+    for j in 0..w.nrows() {
+        if relu && ws.hi[z + j] <= 0.0 {
+            continue;
+        }
+        let mut both = [0.0; 2];
+        for (side, sign) in [(0, 1.0), (1, -1.0)] {
+            cur.clear();
+            cur.extend((0..w.ncols()).map(|k| sign * w[(j, k)]));
+            let mut acc = Acc::of(sign * b[j]);
+            back(layers, ws, i, cur, spare, &mut acc);
+            let off = acc.upper();
+            let at = 2 * (z + j) + side;
+            ws.st_off[at] = off;
+            ws.st_coef[at * p..(at + 1) * p].copy_from_slice(&cur[..p]);
+            both[side] = concretize(cur, &ws.lo[..p], &ws.hi[..p], Acc::of(off));
+        }
+        ws.stored[z + j] = true;
+        ws.layer_stored[i] = true;
+        ws.hi[z + j] = ws.hi[z + j].min(both[0]);
+        ws.lo[z + j] = ws.lo[z + j].max(-both[1]);
+    }
+}
+
+/// The activation `act` from position `a` to `z`: each neuron's interval
+/// image, relaxation and input size.
+fn activation_forward(act: Activation, a: usize, z: usize, ws: &mut Workspace) {
+    for j in 0..z - a {
+        let (l, h) = (ws.lo[a + j], ws.hi[a + j]);
+        let (il, ih) = image(act, l, h);
+        ws.lo[z + j] = il;
+        ws.hi[z + j] = ih;
+        ws.rel[a + j] = relax(act, l, h);
+        ws.absm[a + j] = abs_max(l, h);
+    }
 }
 
 /// Back-substitute the row `cur` (coefficients on the value before layer
@@ -526,6 +560,25 @@ fn output_rows(cl: &ClosedLoop, ws: &mut Workspace) -> IBox {
     u
 }
 
+/// What every facet of one step reads in step 4 (after [`plant_sizes`]).
+struct StepTerms<'s> {
+    /// The step's dynamics.
+    d: &'s Dynamics,
+    /// The states' box.
+    x: &'s IBox,
+    /// The CROWN control box (intersected with interval arithmetic's).
+    u: IBox,
+    /// The plant's model error over `x` and the interval control box.
+    delta: Option<Vec<f64>>,
+    /// The plant's model error over `x` and `u` (CL-CROWN's; `None` alone).
+    delta_u: Option<Vec<f64>>,
+    /// The underflow allowance of every facet.
+    allow: f64,
+    /// `γ(n + 2)` and `γ(p + 2)`: products over states and observations.
+    k_n: f64,
+    k_p: f64,
+}
+
 /// Step 4 of the module documentation, after [`forward`].
 fn facets_bound(
     cl: &ClosedLoop,
@@ -540,143 +593,33 @@ fn facets_bound(
         return Answer::Overflow;
     }
     let d = cl.at(t);
-    let (a_mat, b_mat, c_vec) = (&d.plant.a, &d.plant.b, &d.plant.c);
-    let (w, v) = (&cl.plant.w, &cl.plant.v);
-    let (n, m, p) = (x.dim(), b_mat.ncols(), v.dim());
-    let o = ws.pos[cl.net.layers.len()];
-    // |·|max of the boxes the products read, and the plant's scales
-    let am = |b: &IBox, out: &mut Vec<f64>| {
-        out.extend(b.lo.iter().zip(&b.hi).map(|(l, h)| abs_max(*l, *h)));
-    };
-    let mut u_abs = std::mem::take(&mut ws.abs_u);
-    u_abs.clear();
-    u_abs.extend((0..m).map(|j| abs_max(ws.lo[o + j], ws.hi[o + j])));
-    ws.abs_xv.clear();
-    am(x, &mut ws.abs_xv);
-    am(v, &mut ws.abs_xv);
-    ws.abs_xw.clear();
-    am(x, &mut ws.abs_xw);
-    am(w, &mut ws.abs_xw);
-    ws.abs_xuw.clear();
-    am(x, &mut ws.abs_xuw);
-    am(&u, &mut ws.abs_xuw);
-    am(w, &mut ws.abs_xuw);
-    scale_into(&cl.obs_xv, &ws.abs_xv, &mut ws.wz_obs);
-    scale_into(&d.dyn_xw, &ws.abs_xw, &mut ws.wz_xw);
-    scale_into(&d.dyn_xuw, &ws.abs_xuw, &mut ws.wz_xuw);
-    let delta = cl.model_delta(t, x, &u_abs);
+    let (n, p) = (x.dim(), cl.plant.v.dim());
+    plant_sizes(cl, d, x, &u, ws);
+    let delta = cl.model_delta(t, x, &ws.abs_u);
     let delta_u = if alone {
         None
     } else {
         cl.model_delta(t, x, &u.abs_max())
     };
-    let (k_n, k_p) = (gamma(n + 2), gamma(p + 2));
-    // coefficient products that underflow are off by up to η/2 each,
-    // however small the coefficients: TINY times the magnitudes of every
-    // value a product stage reads (the controller's layers, twice for the
-    // affine and the relaxation stage; the plant's inputs), unscaled, for
-    // every facet (as the general path's `underflow_allowance`)
-    let allow = {
-        let mut s = 0.0;
-        for (l, h) in ws.lo.iter().zip(&ws.hi) {
-            s += 2.0 * abs_max(*l, *h);
-        }
-        for v in [&ws.abs_xv, &ws.abs_xw, &ws.abs_xuw, &u_abs] {
-            s += v.iter().sum::<f64>();
-        }
-        ravel_base::num::sat_upper((TINY * s * 1.0625).next_up())
+    let st = StepTerms {
+        d,
+        x,
+        u,
+        delta,
+        delta_u,
+        allow: underflow_allowance(ws),
+        k_n: gamma(n + 2),
+        k_p: gamma(p + 2),
     };
     let mut cur = std::mem::take(&mut ws.cur);
     let mut spare = std::mem::take(&mut ws.spare);
     let mut ub = Vec::with_capacity(facets.nrows());
     for r in 0..facets.nrows() {
-        ws.f.clear();
-        ws.f.extend((0..n).map(|i| facets[(r, i)]));
-        let f = &ws.f;
-        // f A, f B and |f|·|B| (the products' error terms are added below)
-        ws.fa.clear();
-        ws.fa
-            .extend((0..n).map(|k| dot(f, &a_mat.as_slice()[k * n..(k + 1) * n])));
-        ws.s.clear();
-        ws.s.extend((0..m).map(|j| dot(f, &b_mat.as_slice()[j * n..(j + 1) * n])));
-        ws.mb.clear();
-        ws.mb.extend((0..m).map(|j| {
-            let col = &d.b_abs.as_slice()[j * n..(j + 1) * n];
-            f.iter().zip(col).map(|(a, b)| a.abs() * b).sum::<f64>()
-        }));
-        // the control row f B over y: Λ and β
-        let mut beta = Acc::ZERO;
-        ws.lam.clear();
-        match one_nonzero(&ws.s) {
-            Some(None) => ws.lam.resize(p, 0.0),
-            Some(Some((c, val))) => {
-                let src = if val < 0.0 { m + c } else { c };
-                let scale = val.abs();
-                ws.lam.extend(
-                    ws.pm[src * p..(src + 1) * p]
-                        .iter()
-                        .map(|&l| mul0(scale, l)),
-                );
-                beta.add(mul0(scale, ws.pm_off[src]));
-                beta.add(slack(2.0 * U, &ws.lam, &ws.abs_y));
-            }
-            None => {
-                cur.clear();
-                cur.extend_from_slice(&ws.s);
-                back(
-                    &cl.net.layers,
-                    ws,
-                    cl.net.layers.len(),
-                    &mut cur,
-                    &mut spare,
-                    &mut beta,
-                );
-                ws.lam.extend_from_slice(&cur[..p]);
-            }
-        }
-        let f = &ws.f;
-        // Reach-LP: f (A x + c + w) + Λ (Cᵀ x + v) + β
-        let mut acc = Acc::of(beta.upper());
-        acc.add(allow);
-        // Λ·[Cᵀ I]: its error, then v's terms (Λ·I is Λ, exactly)
-        acc.add(slack(k_p, &ws.lam, &ws.wz_obs));
-        for (j, &l) in ws.lam.iter().enumerate() {
-            acc.add(term_upper(l, v.lo[j], v.hi[j]));
-        }
-        // the rounding of f B, times the size of u
-        acc.add(slack(k_n, &ws.mb, &u_abs));
-        // f·[A I]: its error, c's and w's terms (f·I is f, exactly)
-        acc.add_products(f, c_vec.as_slice());
-        acc.add(slack(k_n, f, &ws.wz_xw));
-        for (i, &fi) in f.iter().enumerate() {
-            acc.add(term_upper(fi, w.lo[i], w.hi[i]));
-        }
-        // x's coefficients: f A + Λ Cᵀ, their sum rounded
-        ws.tot.clear();
-        for k in 0..n {
-            let col = &cl.obs_xv.as_slice()[k * p..(k + 1) * p];
-            ws.tot.push(ws.fa[k] + dot(&ws.lam, col));
-        }
-        acc.add(slack(2.0 * U, &ws.tot, &ws.abs_xv[..n]));
-        let mut bound = concretize(&ws.tot, &x.lo, &x.hi, acc);
-        if let Some(delta) = &delta {
-            bound = with_model_error(bound, f, delta);
-        }
+        facet_products(facets, r, n, d, ws);
+        let beta = control_row(cl, ws, &mut cur, &mut spare);
+        let mut bound = reach_lp_facet(cl, &st, beta, ws);
         if !alone {
-            // CL-CROWN: f (A x + B u + c + w) over x, u and w
-            let mut acc = Acc::of(allow);
-            acc.add_products(f, c_vec.as_slice());
-            acc.add(slack(k_n, f, &ws.wz_xuw));
-            for (j, &s) in ws.s.iter().enumerate() {
-                acc.add(term_upper(s, u.lo[j], u.hi[j]));
-            }
-            for (i, &fi) in f.iter().enumerate() {
-                acc.add(term_upper(fi, w.lo[i], w.hi[i]));
-            }
-            let mut other = concretize(&ws.fa, &x.lo, &x.hi, acc);
-            if let Some(delta) = &delta_u {
-                other = with_model_error(other, f, delta);
-            }
+            let other = cl_crown_facet(cl, &st, ws);
             if !other.is_finite() {
                 bound = f64::NAN;
             } else {
@@ -687,11 +630,179 @@ fn facets_bound(
     }
     ws.cur = cur;
     ws.spare = spare;
-    ws.abs_u = u_abs;
     if ub.iter().all(|b| b.is_finite()) {
-        Answer::Bounds { ub, control: u }
+        Answer::Bounds { ub, control: st.u }
     } else {
         Answer::Overflow
+    }
+}
+
+/// The `|·|max` of the boxes step 4's products read (the interval
+/// control box's into `ws.abs_u`; `(x, v)`, `(x, w)` and `(x, u, w)` with
+/// `u` the CROWN control box), and the scales of the plant's block
+/// matrices over them.
+fn plant_sizes(cl: &ClosedLoop, d: &Dynamics, x: &IBox, u: &IBox, ws: &mut Workspace) {
+    let (w, v) = (&cl.plant.w, &cl.plant.v);
+    let m = d.plant.b.ncols();
+    let o = ws.pos[cl.net.layers.len()];
+    let am = |b: &IBox, out: &mut Vec<f64>| {
+        out.extend(b.lo.iter().zip(&b.hi).map(|(l, h)| abs_max(*l, *h)));
+    };
+    ws.abs_u.clear();
+    ws.abs_u
+        .extend((0..m).map(|j| abs_max(ws.lo[o + j], ws.hi[o + j])));
+    ws.abs_xv.clear();
+    am(x, &mut ws.abs_xv);
+    am(v, &mut ws.abs_xv);
+    ws.abs_xw.clear();
+    am(x, &mut ws.abs_xw);
+    am(w, &mut ws.abs_xw);
+    ws.abs_xuw.clear();
+    am(x, &mut ws.abs_xuw);
+    am(u, &mut ws.abs_xuw);
+    am(w, &mut ws.abs_xuw);
+    scale_into(&cl.obs_xv, &ws.abs_xv, &mut ws.wz_obs);
+    scale_into(&d.dyn_xw, &ws.abs_xw, &mut ws.wz_xw);
+    scale_into(&d.dyn_xuw, &ws.abs_xuw, &mut ws.wz_xuw);
+}
+
+/// Coefficient products that underflow are off by up to η/2 each,
+/// however small the coefficients: TINY times the magnitudes of every
+/// value a product stage reads (the controller's layers, twice for the
+/// affine and the relaxation stage; the plant's inputs), unscaled, for
+/// every facet (as the general path's `underflow_allowance`).
+fn underflow_allowance(ws: &Workspace) -> f64 {
+    let mut s = 0.0;
+    for (l, h) in ws.lo.iter().zip(&ws.hi) {
+        s += 2.0 * abs_max(*l, *h);
+    }
+    for v in [&ws.abs_xv, &ws.abs_xw, &ws.abs_xuw, &ws.abs_u] {
+        s += v.iter().sum::<f64>();
+    }
+    ravel_base::num::sat_upper((TINY * s * 1.0625).next_up())
+}
+
+/// Facet row `r` of `facets` (over `n` states) into `ws.f`, with `f A`,
+/// `f B` and `|f|·|B|` (the products' error terms are added by the bounds).
+#[inline]
+fn facet_products(facets: &DMatrix<f64>, r: usize, n: usize, d: &Dynamics, ws: &mut Workspace) {
+    let (a_mat, b_mat) = (&d.plant.a, &d.plant.b);
+    let m = b_mat.ncols();
+    ws.f.clear();
+    ws.f.extend((0..n).map(|i| facets[(r, i)]));
+    let f = &ws.f;
+    ws.fa.clear();
+    ws.fa
+        .extend((0..n).map(|k| dot(f, &a_mat.as_slice()[k * n..(k + 1) * n])));
+    ws.s.clear();
+    ws.s.extend((0..m).map(|j| dot(f, &b_mat.as_slice()[j * n..(j + 1) * n])));
+    ws.mb.clear();
+    ws.mb.extend((0..m).map(|j| {
+        let col = &d.b_abs.as_slice()[j * n..(j + 1) * n];
+        f.iter().zip(col).map(|(a, b)| a.abs() * b).sum::<f64>()
+    }));
+}
+
+/// The control row `f B` (in `ws.s`) over `y`: its coefficients `Λ` into
+/// `ws.lam` and its offset `β` (returned): scaled from the output's rows
+/// when it has one nonzero, back-substituted otherwise.
+#[inline]
+fn control_row(
+    cl: &ClosedLoop,
+    ws: &mut Workspace,
+    cur: &mut Vec<f64>,
+    spare: &mut Vec<f64>,
+) -> Acc {
+    let p = cl.plant.v.dim();
+    let m = ws.s.len();
+    let mut beta = Acc::ZERO;
+    ws.lam.clear();
+    match one_nonzero(&ws.s) {
+        Some(None) => ws.lam.resize(p, 0.0),
+        Some(Some((c, val))) => {
+            let src = if val < 0.0 { m + c } else { c };
+            let scale = val.abs();
+            ws.lam.extend(
+                ws.pm[src * p..(src + 1) * p]
+                    .iter()
+                    .map(|&l| mul0(scale, l)),
+            );
+            beta.add(mul0(scale, ws.pm_off[src]));
+            beta.add(slack(2.0 * U, &ws.lam, &ws.abs_y));
+        }
+        None => {
+            cur.clear();
+            cur.extend_from_slice(&ws.s);
+            back(
+                &cl.net.layers,
+                ws,
+                cl.net.layers.len(),
+                cur,
+                spare,
+                &mut beta,
+            );
+            ws.lam.extend_from_slice(&cur[..p]);
+        }
+    }
+    beta
+}
+
+/// Reach-LP's bound of the facet in `ws.f`: `f (A x + c + w) + Λ (Cᵀ x +
+/// v) + β` over the boxes of `x`, `v` and `w`, with the plant's model
+/// error.
+#[inline]
+fn reach_lp_facet(cl: &ClosedLoop, st: &StepTerms, beta: Acc, ws: &mut Workspace) -> f64 {
+    let (w, v) = (&cl.plant.w, &cl.plant.v);
+    let (x, n, p) = (st.x, st.x.dim(), v.dim());
+    let f = &ws.f;
+    let mut acc = Acc::of(beta.upper());
+    acc.add(st.allow);
+    // Λ·[Cᵀ I]: its error, then v's terms (Λ·I is Λ, exactly)
+    acc.add(slack(st.k_p, &ws.lam, &ws.wz_obs));
+    for (j, &l) in ws.lam.iter().enumerate() {
+        acc.add(term_upper(l, v.lo[j], v.hi[j]));
+    }
+    // the rounding of f B, times the size of u
+    acc.add(slack(st.k_n, &ws.mb, &ws.abs_u));
+    // f·[A I]: its error, c's and w's terms (f·I is f, exactly)
+    acc.add_products(f, st.d.plant.c.as_slice());
+    acc.add(slack(st.k_n, f, &ws.wz_xw));
+    for (i, &fi) in f.iter().enumerate() {
+        acc.add(term_upper(fi, w.lo[i], w.hi[i]));
+    }
+    // x's coefficients: f A + Λ Cᵀ, their sum rounded
+    ws.tot.clear();
+    for k in 0..n {
+        let col = &cl.obs_xv.as_slice()[k * p..(k + 1) * p];
+        ws.tot.push(ws.fa[k] + dot(&ws.lam, col));
+    }
+    acc.add(slack(2.0 * U, &ws.tot, &ws.abs_xv[..n]));
+    let bound = concretize(&ws.tot, &x.lo, &x.hi, acc);
+    match &st.delta {
+        Some(delta) => with_model_error(bound, f, delta),
+        None => bound,
+    }
+}
+
+/// CL-CROWN's bound of the facet in `ws.f`: `f (A x + B u + c + w)` over
+/// the boxes of `x`, the control `u` and `w`, with the plant's model error.
+#[inline]
+fn cl_crown_facet(cl: &ClosedLoop, st: &StepTerms, ws: &Workspace) -> f64 {
+    let w = &cl.plant.w;
+    let f = &ws.f;
+    let mut acc = Acc::of(st.allow);
+    acc.add_products(f, st.d.plant.c.as_slice());
+    acc.add(slack(st.k_n, f, &ws.wz_xuw));
+    for (j, &s) in ws.s.iter().enumerate() {
+        acc.add(term_upper(s, st.u.lo[j], st.u.hi[j]));
+    }
+    for (i, &fi) in f.iter().enumerate() {
+        acc.add(term_upper(fi, w.lo[i], w.hi[i]));
+    }
+    let other = concretize(&ws.fa, &st.x.lo, &st.x.hi, acc);
+    match &st.delta_u {
+        Some(delta) => with_model_error(other, f, delta),
+        None => other,
     }
 }
 

@@ -32,7 +32,7 @@ use crate::execute::{Control, Verdict};
 use crate::ir::{Guide, NetPropagator, Partitioner};
 use crate::lower::NetworkPlan;
 use ravel_analysis::batch;
-use ravel_analysis::crown::{Analysis, Mode};
+use ravel_analysis::crown::{Mode, Relaxation};
 use ravel_analysis::issue::Issue;
 use ravel_analysis::partition::{refine_parallel, Stop, Strategy};
 use ravel_analysis::sdp;
@@ -307,7 +307,7 @@ pub fn cell_bounds(
     if let (Some(_), Some(b)) = (own_slopes(prop, slope_steps), &batched) {
         return (b.clone(), Vec::new());
     }
-    let a = Analysis::new(net, &bbox, mode);
+    let a = Relaxation::new(net, &bbox, mode);
     if !a.is_finite() {
         return (none(), Vec::new());
     }
@@ -704,7 +704,7 @@ fn violates_real(
     if !region.contains_point(x) {
         return false;
     }
-    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
+    let a = Relaxation::new(net, &IBox::point(x), Mode::Ibp);
     a.is_finite() && box_violates(kind, label, &a.output_box(Mode::Ibp))
 }
 
@@ -1301,7 +1301,7 @@ fn property_verdicts(
 /// Whether an outward-rounded enclosure of `f(x)` has output `k` strictly
 /// larger than every other output.
 fn strictly_largest(net: &Network, x: &[f64], k: usize) -> bool {
-    let a = Analysis::new(net, &IBox::point(x), Mode::Ibp);
+    let a = Relaxation::new(net, &IBox::point(x), Mode::Ibp);
     if !a.is_finite() {
         return false;
     }

@@ -133,8 +133,8 @@ fn abs_dot(a: &[f64], m: &[f64]) -> f64 {
 
 /// `|M|·m` rounded up, row by row.
 fn abs_times(m: &DMatrix<f64>, v: &[f64]) -> Vec<f64> {
-    (0..m.nrows())
-        .map(|j| sum_upper((0..m.ncols()).map(|i| mul0(m[(j, i)].abs(), v[i]))))
+    m.row_iter()
+        .map(|row| sum_upper(row.iter().zip(v).map(|(a, x)| mul0(a.abs(), *x))))
         .collect()
 }
 
@@ -154,23 +154,30 @@ fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], zmax: &[f64], k: usiz
 /// certificate written on one checks on another. (A BLAS-style product
 /// picks its kernel by CPU, and kernels round differently.)
 fn mul(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
-    let (r, k) = a.shape();
-    let c = b.ncols();
-    let mut out = DMatrix::zeros(r, c);
-    for j in 0..c {
-        for p in 0..k {
-            let bpj = b[(p, j)];
+    let mut out = DMatrix::zeros(a.nrows(), b.ncols());
+    for (mut dst, b_col) in out.column_iter_mut().zip(b.column_iter()) {
+        for (col, &bpj) in a.column_iter().zip(b_col.iter()) {
             if bpj == 0.0 {
                 continue;
             }
-            let col = a.column(p);
-            let mut dst = out.column_mut(j);
-            for i in 0..r {
-                dst[i] += col[i] * bpj;
+            for (d, c) in dst.iter_mut().zip(col.iter()) {
+                *d += c * bpj;
             }
         }
     }
     out
+}
+
+/// Intersect `b` with the bounds `up` of the rows `[I; −I]` over it (`k`
+/// upper bounds, then `k` negated lower bounds, `k` the box's dimension).
+fn tighten(b: &mut Bx, up: &[f64]) {
+    let k = b.hi.len();
+    for (hi, u) in b.hi.iter_mut().zip(up) {
+        *hi = hi.min(*u);
+    }
+    for (lo, u) in b.lo.iter_mut().zip(up.iter().skip(k)) {
+        *lo = lo.max(-u);
+    }
 }
 
 /// The `2k × k` matrix `[I; −I]`.
@@ -194,12 +201,14 @@ impl Linear {
     fn through_affine(&self, w: &DMatrix<f64>, b: &DVector<f64>, zmax: &[f64]) -> Linear {
         let wz = abs_times(w, zmax);
         let coef = mul(&self.coef, w);
-        let off = (0..self.coef.nrows())
-            .map(|r| {
-                let row = self.coef.row(r);
+        let off = self
+            .coef
+            .row_iter()
+            .zip(&self.off)
+            .map(|(row, &off)| {
                 let err = product_error(row.iter().copied(), &wz, zmax, w.nrows());
                 let consts = row.iter().zip(b.iter()).map(|(c, b)| mul0(*c, *b));
-                sum_upper(consts.chain([self.off[r], err]))
+                sum_upper(consts.chain([off, err]))
             })
             .collect();
         Linear { coef, off }
@@ -212,12 +221,13 @@ impl Linear {
         let mut coef = DMatrix::zeros(rows, cols);
         let mut off = Vec::with_capacity(rows);
         let mut terms = Vec::with_capacity(cols + 2);
-        for r in 0..rows {
+        let own = self.coef.row_iter().zip(&self.off);
+        for (mut new_row, (row, &row_off)) in coef.row_iter_mut().zip(own) {
             terms.clear();
-            terms.push(self.off[r]);
+            terms.push(row_off);
             let mut err = 0.0;
-            for (j, l) in lines.iter().enumerate() {
-                let cj = self.coef[(r, j)];
+            let per_neuron = lines.iter().zip(row.iter()).zip(zmax);
+            for (((l, &cj), &zm), new) in per_neuron.zip(new_row.iter_mut()) {
                 if cj == 0.0 {
                     continue;
                 }
@@ -227,9 +237,9 @@ impl Linear {
                     (l.al, l.bl)
                 };
                 let v = cj * a;
-                coef[(r, j)] = v;
-                err += v.abs() * zmax[j];
-                terms.push(TINY * zmax[j]);
+                *new = v;
+                err += v.abs() * zm;
+                terms.push(TINY * zm);
                 terms.push(mul0(cj, b));
             }
             terms.push((2.0 * U * err * 1.0625 + TINY).next_up());
@@ -240,9 +250,10 @@ impl Linear {
 
     /// Upper bounds of the rows over the box.
     fn over(&self, b: &Bx) -> Vec<f64> {
-        (0..self.coef.nrows())
-            .map(|r| {
-                let row = self.coef.row(r);
+        self.coef
+            .row_iter()
+            .zip(&self.off)
+            .map(|(row, &off)| {
                 let terms = row
                     .iter()
                     .zip(b.lo.iter().zip(&b.hi))
@@ -255,7 +266,7 @@ impl Linear {
                             }
                         },
                     );
-                sum_upper(terms.chain([self.off[r]]))
+                sum_upper(terms.chain([off]))
             })
             .collect()
     }
@@ -562,11 +573,15 @@ impl<'a> NetBounds<'a> {
                 )));
             }
         }
+        // the value before layer `i` (`s.boxes[i]`)
+        let mut cur = y.clone();
         for (i, layer) in net.layers.iter().enumerate() {
-            let cur = &s.boxes[i];
-            let (next, lines) = match layer {
+            let next = match layer {
                 Layer::Affine { w, b } => {
-                    let mut next = affine_box(w, b.as_slice(), cur);
+                    // an affine layer has no relaxation lines; its entry
+                    // comes first, so `backward` sees every layer to here
+                    s.lines.push(Vec::new());
+                    let mut next = affine_box(w, b.as_slice(), &cur);
                     if matches!(net.layers.get(i + 1), Some(Layer::Act(_))) {
                         let k = w.nrows();
                         let spec = Linear {
@@ -582,10 +597,7 @@ impl<'a> NetBounds<'a> {
                                 }
                             }
                         }
-                        for j in 0..k {
-                            next.hi[j] = next.hi[j].min(up[j]);
-                            next.lo[j] = next.lo[j].max(-up[k + j]);
-                        }
+                        tighten(&mut next, &up);
                         if !next.is_proper() {
                             return Err(Trouble::Overflow);
                         }
@@ -597,15 +609,19 @@ impl<'a> NetBounds<'a> {
                                     c.lo.len()
                                 )));
                             }
-                            for j in 0..k {
+                            let claims = c.lo.iter().zip(&c.hi);
+                            let proven = next.lo.iter().zip(&next.hi);
+                            for (j, ((&c_lo, &c_hi), (&p_lo, &p_hi))) in
+                                claims.zip(proven).enumerate()
+                            {
                                 // NaN claims fail this test too
-                                let ok = c.lo[j] <= next.lo[j] && c.hi[j] >= next.hi[j];
-                                if !ok || !c.lo[j].is_finite() || !c.hi[j].is_finite() {
+                                let ok = c_lo <= p_lo && c_hi >= p_hi;
+                                if !ok || !c_lo.is_finite() || !c_hi.is_finite() {
                                     return Err(Trouble::Neuron {
                                         layer: layer_no,
                                         neuron: j,
-                                        claimed: (c.lo[j], c.hi[j]),
-                                        proven: (next.lo[j], next.hi[j]),
+                                        claimed: (c_lo, c_hi),
+                                        proven: (p_lo, p_hi),
                                     });
                                 }
                             }
@@ -615,7 +631,7 @@ impl<'a> NetBounds<'a> {
                         }
                         s.witness.push(next.clone());
                     }
-                    (next, Vec::new())
+                    next
                 }
                 Layer::Act(Activation::Relu) => {
                     let lines = cur
@@ -624,7 +640,8 @@ impl<'a> NetBounds<'a> {
                         .zip(&cur.hi)
                         .map(|(&l, &u)| relu_lines(l, u))
                         .collect();
-                    (act_box(Activation::Relu, cur), lines)
+                    s.lines.push(lines);
+                    act_box(Activation::Relu, &cur)
                 }
                 Layer::Act(a) => {
                     let lines = cur
@@ -633,25 +650,28 @@ impl<'a> NetBounds<'a> {
                         .zip(&cur.hi)
                         .map(|(&l, &u)| smooth_lines(*a, l, u))
                         .collect();
-                    (act_box(*a, cur), lines)
+                    s.lines.push(lines);
+                    act_box(*a, &cur)
                 }
             };
             if !next.is_proper() {
                 return Err(Trouble::Overflow);
             }
-            s.boxes.push(next);
-            s.lines.push(lines);
+            s.boxes.push(next.clone());
+            cur = next;
         }
         Ok(s)
     }
 
     /// Back-substitute a bound on the value before layer `end` to the input.
     fn backward(&self, mut bound: Linear, end: usize) -> Linear {
-        for i in (0..end).rev() {
-            let zmax = self.boxes[i].abs_max();
-            bound = match &self.net.layers[i] {
+        // (`boxes` and `lines` have an entry for every layer before `end`)
+        let layers = self.boxes.iter().zip(&self.net.layers).zip(&self.lines);
+        for ((before, layer), lines) in layers.take(end).rev() {
+            let zmax = before.abs_max();
+            bound = match layer {
                 Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
-                Layer::Act(_) => bound.through_relax(&self.lines[i], &zmax),
+                Layer::Act(_) => bound.through_relax(lines, &zmax),
             };
         }
         bound
@@ -659,23 +679,22 @@ impl<'a> NetBounds<'a> {
 
     /// The output box: IBP intersected with back-substitution of `±I`.
     pub fn output(&self) -> Bx {
-        let mut out = self
-            .boxes
-            .last()
-            .cloned()
-            .unwrap_or_else(|| self.boxes[0].clone());
+        // `boxes` starts with the input box: never empty
+        let (Some(input), Some(last)) = (self.boxes.first(), self.boxes.last()) else {
+            let m = self.net.outputs();
+            return Bx {
+                lo: vec![f64::NEG_INFINITY; m],
+                hi: vec![f64::INFINITY; m],
+            };
+        };
+        let mut out = last.clone();
         let m = out.lo.len();
         let spec = Linear {
             coef: plus_minus(m),
             off: vec![0.0; 2 * m],
         };
-        let up = self
-            .backward(spec, self.net.layers.len())
-            .over(&self.boxes[0]);
-        for j in 0..m {
-            out.hi[j] = out.hi[j].min(up[j]);
-            out.lo[j] = out.lo[j].max(-up[m + j]);
-        }
+        let up = self.backward(spec, self.net.layers.len()).over(input);
+        tighten(&mut out, &up);
         out
     }
 
@@ -694,15 +713,20 @@ impl<'a> NetBounds<'a> {
     /// other's support ([`Start::support`]). The slope search measures its
     /// candidates over the box (any slopes give a sound line).
     pub fn rows_upper_in(&self, spec: &DMatrix<f64>, slopes: usize, start: &Start) -> Vec<f64> {
-        let out = self.boxes.last().unwrap_or(&self.boxes[0]);
-        let input = &self.boxes[0];
+        // `boxes` starts with the input box: never empty (no bound without)
+        let (Some(input), Some(out)) = (self.boxes.first(), self.boxes.last()) else {
+            return vec![f64::INFINITY; spec.nrows()];
+        };
         let concretise = |lin: Linear| -> Vec<f64> {
             match start {
                 Start::Box => lin.over(input),
-                _ => (0..lin.coef.nrows())
-                    .map(|r| {
-                        let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
-                        sum_upper([start.support(&row, input), lin.off[r]])
+                _ => lin
+                    .coef
+                    .row_iter()
+                    .zip(&lin.off)
+                    .map(|(row, &off)| {
+                        let row: Vec<f64> = row.iter().copied().collect();
+                        sum_upper([start.support(&row, input), off])
                     })
                     .collect(),
             }
@@ -710,28 +734,29 @@ impl<'a> NetBounds<'a> {
         let back = if slopes == 0 {
             concretise(self.linear(spec.clone()))
         } else {
+            // (a measure only ranks sound candidates: any value is safe)
             let measure = |_: usize, cand: &Linear| -> (f64, Vec<f64>) {
-                let corner = (0..input.lo.len())
-                    .map(|j| {
-                        if cand.coef[(0, j)] >= 0.0 {
-                            input.hi[j]
-                        } else {
-                            input.lo[j]
-                        }
-                    })
+                let corner = cand
+                    .coef
+                    .row(0)
+                    .iter()
+                    .zip(input.lo.iter().zip(&input.hi))
+                    .map(|(c, (&lo, &hi))| if *c >= 0.0 { hi } else { lo })
                     .collect();
-                (cand.over(input)[0], corner)
+                let value = cand.over(input).first().copied().unwrap_or(f64::NAN);
+                (value, corner)
             };
             concretise(self.linear_optimised(spec.clone(), slopes, &measure))
         };
-        (0..spec.nrows())
-            .map(|r| {
-                let row: Vec<f64> = spec.row(r).iter().copied().collect();
+        spec.row_iter()
+            .zip(&back)
+            .map(|(row, &back)| {
+                let row: Vec<f64> = row.iter().copied().collect();
                 let ibp = ravel_base::num::dot_box_upper(&row, &out.lo, &out.hi);
-                if back[r].is_nan() {
+                if back.is_nan() {
                     ibp
                 } else {
-                    ibp.min(back[r])
+                    ibp.min(back)
                 }
             })
             .collect()
@@ -745,13 +770,15 @@ impl<'a> NetBounds<'a> {
         lines: &[Vec<Lines>],
         trace: &mut [Vec<f64>],
     ) -> Linear {
-        for i in (0..self.net.layers.len()).rev() {
-            let zmax = self.boxes[i].abs_max();
-            bound = match &self.net.layers[i] {
+        // one box before, one set of lines and one trace per layer
+        let layers = self.boxes.iter().zip(&self.net.layers).zip(lines);
+        for (((before, layer), lines), trace) in layers.zip(trace.iter_mut()).rev() {
+            let zmax = before.abs_max();
+            bound = match layer {
                 Layer::Affine { w, b } => bound.through_affine(w, b, &zmax),
                 Layer::Act(_) => {
-                    trace[i] = bound.coef.row(0).iter().copied().collect();
-                    bound.through_relax(&lines[i], &zmax)
+                    *trace = bound.coef.row(0).iter().copied().collect();
+                    bound.through_relax(lines, &zmax)
                 }
             };
         }
@@ -767,83 +794,120 @@ impl<'a> NetBounds<'a> {
     /// whatever the search does; only how tight it is depends on it.
     fn linear_optimised(&self, spec: DMatrix<f64>, steps: usize, measure: &Measure) -> Linear {
         let mut best = self.linear(spec.clone());
-        let layers = self.net.layers.len();
-        let unstable = |i: usize, l: &Lines| {
-            matches!(self.net.layers[i], Layer::Act(Activation::Relu)) && l.au > 0.0 && l.au < 1.0
-        };
-        for r in 0..spec.nrows() {
+        for (r, best_off) in best.off.iter_mut().enumerate() {
             let row = Linear {
                 coef: spec.rows(r, 1).into_owned(),
                 off: vec![0.0],
             };
-            let mut lines = self.lines.clone();
-            let mut trace = vec![Vec::new(); layers];
-            let mut cand = self.backward_traced(row.clone(), &lines, &mut trace);
-            let mut at = measure(r, &cand).1;
             let own = Linear {
                 coef: best.coef.rows(r, 1).into_owned(),
-                off: vec![best.off[r]],
+                off: vec![*best_off],
             };
-            let mut best_value = measure(r, &own).0;
-            for k in 0..steps {
-                // gradient: forward from `at` through the lines the row's signs chose
-                let mut h = at.clone();
-                let mut grad: Vec<Vec<f64>> = vec![Vec::new(); layers];
-                for (i, layer) in self.net.layers.iter().enumerate() {
-                    match layer {
-                        Layer::Affine { w, b } => {
-                            h = (0..w.nrows())
-                                .map(|j| {
-                                    (0..w.ncols()).map(|c| w[(j, c)] * h[c]).sum::<f64>() + b[j]
-                                })
-                                .collect();
-                        }
-                        Layer::Act(_) => {
-                            grad[i] = vec![0.0; h.len()];
-                            for (j, z) in h.iter_mut().enumerate() {
-                                let (l, c) = (lines[i][j], trace[i].get(j).copied().unwrap_or(0.0));
-                                if c >= 0.0 {
-                                    *z = l.au * *z + l.bu;
-                                } else {
-                                    if unstable(i, &l) {
-                                        grad[i][j] = c * *z;
-                                    }
-                                    *z = l.al * *z + l.bl;
-                                }
-                            }
-                        }
-                    }
-                }
-                let gmax = grad.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
-                if !(gmax > 0.0 && gmax.is_finite()) {
-                    break;
-                }
-                let rate = 0.5 * 0.8f64.powi(k as i32) / gmax;
-                let mut moved = false;
-                for (i, g) in grad.iter().enumerate() {
-                    for (j, gj) in g.iter().enumerate() {
-                        if *gj != 0.0 {
-                            let al = (lines[i][j].al - rate * gj).clamp(0.0, 1.0);
-                            moved |= al != lines[i][j].al;
-                            lines[i][j].al = al;
-                            lines[i][j].bl = 0.0;
-                        }
-                    }
-                }
-                if !moved {
-                    break;
-                }
-                cand = self.backward_traced(row.clone(), &lines, &mut trace);
-                let (v, point) = measure(r, &cand);
-                at = point;
-                if v < best_value {
-                    best_value = v;
-                    best.coef.set_row(r, &cand.coef.row(0));
-                    best.off[r] = cand.off[0];
+            if let Some(better) = self.search_slopes(r, row, &own, steps, measure) {
+                // a row's bound has one offset
+                if let Some(&off) = better.off.first() {
+                    best.coef.set_row(r, &better.coef.row(0));
+                    *best_off = off;
                 }
             }
         }
         best
+    }
+
+    /// The slope search of [`NetBounds::linear_optimised`] for row `r` of
+    /// the spec (`row`, as a one-row bound): the best candidate measured
+    /// below `own` (CROWN's own lines' bound), if any.
+    fn search_slopes(
+        &self,
+        r: usize,
+        row: Linear,
+        own: &Linear,
+        steps: usize,
+        measure: &Measure,
+    ) -> Option<Linear> {
+        let layers = self.net.layers.len();
+        let mut lines = self.lines.clone();
+        let mut trace = vec![Vec::new(); layers];
+        let mut cand = self.backward_traced(row.clone(), &lines, &mut trace);
+        let mut at = measure(r, &cand).1;
+        let mut best_value = measure(r, own).0;
+        let mut best = None;
+        for k in 0..steps {
+            let grad = self.slope_gradient(&at, &lines, &trace);
+            let gmax = grad.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+            if !(gmax > 0.0 && gmax.is_finite()) {
+                break;
+            }
+            let rate = 0.5 * 0.8f64.powi(k as i32) / gmax;
+            let mut moved = false;
+            for (g, lines) in grad.iter().zip(lines.iter_mut()) {
+                for (gj, l) in g.iter().zip(lines.iter_mut()) {
+                    if *gj != 0.0 {
+                        let al = (l.al - rate * gj).clamp(0.0, 1.0);
+                        moved |= al != l.al;
+                        l.al = al;
+                        l.bl = 0.0;
+                    }
+                }
+            }
+            if !moved {
+                break;
+            }
+            cand = self.backward_traced(row.clone(), &lines, &mut trace);
+            let (v, point) = measure(r, &cand);
+            at = point;
+            if v < best_value {
+                best_value = v;
+                best = Some(cand.clone());
+            }
+        }
+        best
+    }
+
+    /// The gradient of a traced row's bound in the lower slopes of the
+    /// unstable ReLUs, at the network input `at`: forward from `at` through
+    /// the lines the row's signs chose (`trace`: its coefficients on each
+    /// activation's output), per layer (empty for affine layers).
+    fn slope_gradient(
+        &self,
+        at: &[f64],
+        lines: &[Vec<Lines>],
+        trace: &[Vec<f64>],
+    ) -> Vec<Vec<f64>> {
+        let mut h = at.to_vec();
+        let mut grad: Vec<Vec<f64>> = vec![Vec::new(); self.net.layers.len()];
+        let layers = self.net.layers.iter().zip(lines).zip(trace);
+        for (((layer, lines), trace), grad) in layers.zip(grad.iter_mut()) {
+            match layer {
+                Layer::Affine { w, b } => {
+                    h = w
+                        .row_iter()
+                        .zip(b.iter())
+                        .map(|(w_row, bj)| {
+                            w_row.iter().zip(&h).map(|(a, x)| a * x).sum::<f64>() + bj
+                        })
+                        .collect();
+                }
+                Layer::Act(act) => {
+                    *grad = vec![0.0; h.len()];
+                    let relu = matches!(act, Activation::Relu);
+                    let per_neuron = h.iter_mut().zip(lines).zip(grad.iter_mut());
+                    for (j, ((z, &l), g)) in per_neuron.enumerate() {
+                        let c = trace.get(j).copied().unwrap_or(0.0);
+                        if c >= 0.0 {
+                            *z = l.au * *z + l.bu;
+                        } else {
+                            // an unstable ReLU's lower slope is free
+                            if relu && l.au > 0.0 && l.au < 1.0 {
+                                *g = c * *z;
+                            }
+                            *z = l.al * *z + l.bl;
+                        }
+                    }
+                }
+            }
+        }
+        grad
     }
 
     /// `S π(y) ≤ G y + h` over the input box, for specification rows `S`.
@@ -935,23 +999,26 @@ fn dual_support(c: &[f64], rows: &[(Vec<f64>, f64)], mu: &[f64], x: &Bx) -> f64 
         return f64::INFINITY;
     }
     let mu: Vec<f64> = mu.iter().map(|m| if *m > 0.0 { *m } else { 0.0 }).collect();
-    let n = c.len();
     let mut r = c.to_vec();
     let mut mag: Vec<f64> = c.iter().map(|v| v.abs()).collect();
     for ((a, _), m) in rows.iter().zip(&mu) {
         if *m == 0.0 {
             continue;
         }
-        for j in 0..n {
-            let t = a[j] * m;
-            r[j] -= t;
-            mag[j] += t.abs();
+        // every row has one coefficient per coordinate of `c`
+        for ((rj, mag_j), aj) in r.iter_mut().zip(mag.iter_mut()).zip(a) {
+            let t = aj * m;
+            *rj -= t;
+            *mag_j += t.abs();
         }
     }
     let xmax = x.abs_max();
     let k = rows.len() + 2;
-    let err =
-        sum_upper((0..n).map(|j| mul0((gamma(k) * mag[j] * 1.0625 + TINY).next_up(), xmax[j])));
+    let err = sum_upper(
+        mag.iter()
+            .zip(&xmax)
+            .map(|(mag_j, xm)| mul0((gamma(k) * mag_j * 1.0625 + TINY).next_up(), *xm)),
+    );
     let mh = sum_upper(rows.iter().zip(&mu).map(|((_, h), m)| mul0(*m, *h)));
     sum_upper([dot_box_upper(&r, &x.lo, &x.hi), err, mh])
 }
@@ -1055,10 +1122,12 @@ impl Loop<'_> {
         let p = self.obs.ncols();
         let mut lo = Vec::with_capacity(p);
         let mut hi = Vec::with_capacity(p);
-        for j in 0..p {
-            let col: Vec<f64> = self.obs.column(j).iter().copied().collect();
-            lo.push(sum_lower([dot_box_lower(&col, &x.lo, &x.hi), self.v.lo[j]]));
-            hi.push(sum_upper([dot_box_upper(&col, &x.lo, &x.hi), self.v.hi[j]]));
+        // (the sensor noise box has one entry per observation)
+        let noise = self.v.lo.iter().zip(&self.v.hi);
+        for (col, (&v_lo, &v_hi)) in self.obs.column_iter().zip(noise) {
+            let col: Vec<f64> = col.iter().copied().collect();
+            lo.push(sum_lower([dot_box_lower(&col, &x.lo, &x.hi), v_lo]));
+            hi.push(sum_upper([dot_box_upper(&col, &x.lo, &x.hi), v_hi]));
         }
         Bx { lo, hi }
     }
@@ -1067,11 +1136,14 @@ impl Loop<'_> {
     fn model_delta(&self, xmax: &[f64], umax: &[f64]) -> Vec<f64> {
         match &self.plant.err {
             None => vec![0.0; self.plant.a.nrows()],
-            Some((ea, eb, ec)) => (0..ea.nrows())
-                .map(|i| {
-                    let ra: Vec<f64> = ea.row(i).iter().copied().collect();
-                    let rb: Vec<f64> = eb.row(i).iter().copied().collect();
-                    sum_upper([abs_dot(&ra, xmax), abs_dot(&rb, umax), ec[i]])
+            Some((ea, eb, ec)) => ea
+                .row_iter()
+                .zip(eb.row_iter())
+                .zip(ec)
+                .map(|((ra, rb), &ec_i)| {
+                    let ra: Vec<f64> = ra.iter().copied().collect();
+                    let rb: Vec<f64> = rb.iter().copied().collect();
+                    sum_upper([abs_dot(&ra, xmax), abs_dot(&rb, umax), ec_i])
                 })
                 .collect(),
         }
@@ -1110,7 +1182,8 @@ impl Loop<'_> {
             u,
         );
         (0..facets.nrows())
-            .map(|r| {
+            .zip(&lin.off)
+            .map(|(r, &lin_off)| {
                 let f: Vec<f64> = facets.row(r).iter().copied().collect();
                 let fa_r: Vec<f64> = fa.row(r).iter().copied().collect();
                 let fb_r: Vec<f64> = fb.row(r).iter().copied().collect();
@@ -1127,7 +1200,7 @@ impl Loop<'_> {
                     common,
                 ]);
                 let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
-                let reach_lp = sum_upper([start.support(&row, x), lin.off[r]]);
+                let reach_lp = sum_upper([start.support(&row, x), lin_off]);
                 if reach_lp.is_nan() || separate.is_nan() {
                     f64::NAN
                 } else {
@@ -1159,31 +1232,38 @@ impl Loop<'_> {
         } else {
             // a candidate row over y, measured by what this step makes of
             // it: L A x + G Cᵀx over x's box, G v over v's box, offsets
+            // (a measure only ranks sound candidates: any value is safe)
             let measure = |r: usize, cand: &Linear| -> (f64, Vec<f64>) {
                 let g: Vec<f64> = cand.coef.row(0).iter().copied().collect();
-                let total: Vec<f64> = (0..n)
-                    .map(|j| la[(r, j)] + (0..g.len()).map(|k| g[k] * ct[(k, j)]).sum::<f64>())
+                // (L A)ᵣ + g Cᵀ, one entry per state
+                let total: Vec<f64> = la
+                    .row(r)
+                    .iter()
+                    .zip(ct.column_iter())
+                    .map(|(a, ct_j)| a + g.iter().zip(ct_j.iter()).map(|(g, c)| g * c).sum::<f64>())
                     .collect();
-                let xs: Vec<f64> = (0..n)
-                    .map(|j| if total[j] >= 0.0 { x.hi[j] } else { x.lo[j] })
+                let xs: Vec<f64> = total
+                    .iter()
+                    .zip(x.lo.iter().zip(&x.hi))
+                    .map(|(t, (&lo, &hi))| if *t >= 0.0 { hi } else { lo })
                     .collect();
-                let vs: Vec<f64> = (0..g.len())
-                    .map(|k| {
-                        if g[k] >= 0.0 {
-                            self.v.hi[k]
-                        } else {
-                            self.v.lo[k]
-                        }
-                    })
+                let vs: Vec<f64> = g
+                    .iter()
+                    .zip(self.v.lo.iter().zip(&self.v.hi))
+                    .map(|(g, (&lo, &hi))| if *g >= 0.0 { hi } else { lo })
                     .collect();
                 let value = sum_upper(
-                    (0..n)
-                        .map(|j| mul0(total[j], xs[j]))
-                        .chain((0..g.len()).map(|k| mul0(g[k], vs[k])))
-                        .chain([cand.off[0]]),
+                    total
+                        .iter()
+                        .zip(&xs)
+                        .map(|(t, x)| mul0(*t, *x))
+                        .chain(g.iter().zip(&vs).map(|(g, v)| mul0(*g, *v)))
+                        .chain(cand.off.first().copied()),
                 );
-                let ys = (0..g.len())
-                    .map(|k| (0..n).map(|j| ct[(k, j)] * xs[j]).sum::<f64>() + vs[k])
+                let ys = ct
+                    .row_iter()
+                    .zip(&vs)
+                    .map(|(ct_k, v)| ct_k.iter().zip(&xs).map(|(c, x)| c * x).sum::<f64>() + v)
                     .collect();
                 (value, ys)
             };
@@ -1193,7 +1273,8 @@ impl Loop<'_> {
         let cx = abs_times(&ct, &xmax);
         let coef = la + gc;
         let off = (0..lin.coef.nrows())
-            .map(|r| {
+            .zip(lin.off.iter().zip(&net.off))
+            .map(|(r, (&lin_off, &net_off))| {
                 let l: Vec<f64> = lin.coef.row(r).iter().copied().collect();
                 let g: Vec<f64> = net.coef.row(r).iter().copied().collect();
                 // the sum LA + GC is one more rounding per entry
@@ -1204,8 +1285,8 @@ impl Loop<'_> {
                         .map(|(c, m)| mul0((c.abs() * U).next_up(), *m)),
                 );
                 sum_upper([
-                    lin.off[r],
-                    net.off[r],
+                    lin_off,
+                    net_off,
                     sum_upper(l.iter().zip(&self.plant.c).map(|(a, b)| mul0(*a, *b))),
                     dot_box_upper(&l, &self.w.lo, &self.w.hi),
                     dot_box_upper(&g, &self.v.lo, &self.v.hi),
@@ -1239,10 +1320,11 @@ impl Loop<'_> {
             return Err(Trouble::Overflow);
         }
         let n = x.lo.len();
+        // the bounds of `x⁺` and of `−x⁺`
         let ub = self.facet_bounds(&plus_minus(n), x, start, &nb, &u);
         let next = Bx {
-            lo: ub[n..].iter().map(|v| -v).collect(),
-            hi: ub[..n].to_vec(),
+            lo: ub.iter().skip(n).map(|v| -v).collect(),
+            hi: ub.iter().take(n).copied().collect(),
         };
         if !next.is_proper() {
             return Err(Trouble::Overflow);
@@ -1264,23 +1346,24 @@ impl Loop<'_> {
         let delta = self.model_delta(&x.abs_max(), &u.abs_max());
         let mut lo = Vec::with_capacity(n);
         let mut hi = Vec::with_capacity(n);
-        for i in 0..n {
+        // (`c`, `w` and `delta` have one entry per state)
+        let per_state = self.plant.c.iter().zip(w).zip(&delta);
+        for (i, ((&c, &w_i), &delta_i)) in (0..n).zip(per_state) {
             let ra: Vec<f64> = self.plant.a.row(i).iter().copied().collect();
             let rb: Vec<f64> = self.plant.b.row(i).iter().copied().collect();
-            let c = self.plant.c[i];
             lo.push(sum_lower([
                 dot_box_lower(&ra, &x.lo, &x.hi),
                 dot_box_lower(&rb, &u.lo, &u.hi),
                 c,
-                w[i],
-                -delta[i],
+                w_i,
+                -delta_i,
             ]));
             hi.push(sum_upper([
                 dot_box_upper(&ra, &x.lo, &x.hi),
                 dot_box_upper(&rb, &u.lo, &u.hi),
                 c,
-                w[i],
-                delta[i],
+                w_i,
+                delta_i,
             ]));
         }
         let b = Bx { lo, hi };
@@ -1339,10 +1422,12 @@ impl<'a> Chain<'a> {
         let Some(first) = self.links.first() else {
             return vec![f64::INFINITY; lin.coef.nrows()];
         };
-        (0..lin.coef.nrows())
-            .map(|r| {
-                let row: Vec<f64> = lin.coef.row(r).iter().copied().collect();
-                sum_upper([self.start.support(&row, &first.x), lin.off[r]])
+        lin.coef
+            .row_iter()
+            .zip(&lin.off)
+            .map(|(row, &off)| {
+                let row: Vec<f64> = row.iter().copied().collect();
+                sum_upper([self.start.support(&row, &first.x), off])
             })
             .collect()
     }
@@ -1364,11 +1449,14 @@ impl<'a> Chain<'a> {
         // a bound linear in y_s becomes one linear in x_s, then is unrolled
         let through = |back: &Linear| -> Vec<f64> {
             let coef = mul(&back.coef, &ct);
-            let off = (0..back.coef.nrows())
-                .map(|r| {
-                    let g: Vec<f64> = back.coef.row(r).iter().copied().collect();
+            let off = back
+                .coef
+                .row_iter()
+                .zip(&back.off)
+                .map(|(g, &back_off)| {
+                    let g: Vec<f64> = g.iter().copied().collect();
                     sum_upper([
-                        back.off[r],
+                        back_off,
                         dot_box_upper(&g, &lp.v.lo, &lp.v.hi),
                         product_error(g.iter().copied(), &cx, &xmax, g.len()),
                     ])
@@ -1449,11 +1537,12 @@ impl<'a> Chain<'a> {
                 }
             }
         }
+        // the bounds of `x⁺`, of `−x⁺`, then along the directions
         let next = Bx {
-            lo: ub[n..2 * n].iter().map(|v| -v).collect(),
-            hi: ub[..n].to_vec(),
+            lo: ub.iter().skip(n).take(n).map(|v| -v).collect(),
+            hi: ub.iter().take(n).copied().collect(),
         };
-        let offsets = ub[2 * n..].to_vec();
+        let offsets = ub.iter().skip(2 * n).copied().collect::<Vec<_>>();
         if !next.is_proper() || offsets.iter().any(|v| !v.is_finite()) {
             return Err(Trouble::Overflow);
         }
@@ -1473,6 +1562,7 @@ impl<'a> Chain<'a> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
     use crate::exact::{is_upper, Extreme, Fixed};

@@ -43,14 +43,19 @@ pub fn covers_within(
         }
         // a cell overlapping the piece: with positive length along every
         // axis the piece is wide in, containing it along the others
+        // (a cell of another dimension overlaps nothing)
         let cell = cells.iter().find(|c| {
-            (0..n).all(|d| {
-                if piece.lo[d] < piece.hi[d] {
-                    c.lo[d] < piece.hi[d] && c.hi[d] > piece.lo[d]
-                } else {
-                    c.lo[d] <= piece.lo[d] && piece.lo[d] <= c.hi[d]
-                }
-            })
+            c.lo.len() == n
+                && c.hi.len() == n
+                && (c.lo.iter().zip(&c.hi))
+                    .zip(piece.lo.iter().zip(&piece.hi))
+                    .all(|((c_lo, c_hi), (p_lo, p_hi))| {
+                        if p_lo < p_hi {
+                            c_lo < p_hi && c_hi > p_lo
+                        } else {
+                            c_lo <= p_lo && p_lo <= c_hi
+                        }
+                    })
         });
         let Some(c) = cell else {
             if misses(&piece) {
@@ -65,25 +70,33 @@ pub fn covers_within(
             return Err(Some(mid));
         };
         let mut rest = piece.clone();
-        for d in 0..n {
-            if c.lo[d] > rest.lo[d] {
+        for (d, (&c_lo, &c_hi)) in c.lo.iter().zip(&c.hi).enumerate() {
+            if rest.lo.get(d).is_some_and(|&r| c_lo > r) {
                 let mut slab = rest.clone();
-                slab.hi[d] = c.lo[d];
+                set(&mut slab.hi, d, c_lo);
                 stack.push(slab);
-                rest.lo[d] = c.lo[d];
+                set(&mut rest.lo, d, c_lo);
             }
-            if c.hi[d] < rest.hi[d] {
+            if rest.hi.get(d).is_some_and(|&r| c_hi < r) {
                 let mut slab = rest.clone();
-                slab.lo[d] = c.hi[d];
+                set(&mut slab.lo, d, c_hi);
                 stack.push(slab);
-                rest.hi[d] = c.hi[d];
+                set(&mut rest.hi, d, c_hi);
             }
         }
     }
     Ok(())
 }
 
+/// Set entry `d` of a box's ends `v` to `x` (`d` is an axis of the box).
+fn set(v: &mut [f64], d: usize, x: f64) {
+    if let Some(e) = v.get_mut(d) {
+        *e = x;
+    }
+}
+
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

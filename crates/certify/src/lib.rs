@@ -43,6 +43,8 @@
 //! UNSUPPORTED (never VALID).
 
 #![forbid(unsafe_code)]
+// the checker reads untrusted certificates: no panicking shortcuts
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod bounds;
 mod cover;
@@ -51,7 +53,7 @@ pub mod network;
 /// Exact sums of `f64` values for the property tests of directed rounding
 /// (the same file serves the integration tests; each crate uses part of it).
 #[cfg(test)]
-#[allow(dead_code)]
+#[allow(dead_code, clippy::indexing_slicing)]
 #[path = "../../../tests/common/exact.rs"]
 mod exact;
 
@@ -98,6 +100,30 @@ pub struct Report {
     pub duals: Vec<Vec<Vec<f64>>>,
 }
 
+/// Why the checker does not accept a certificate, or one cell of it (what
+/// [`CellCheck`] answers; its text is the message users see).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Error {
+    /// The certificate (or the cell) is not a readable
+    /// `ravel-certificate/1`: a field missing or malformed, a limit
+    /// exceeded, or a coverage the work limit could not decide.
+    Unreadable(String),
+    /// A claim is false, or the evidence cannot serve the VERIFIED
+    /// properties: the first failing item.
+    Invalid(String),
+}
+
+impl std::fmt::Display for Error {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Error::Unreadable(m) | Error::Invalid(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+/// A reading failure: why the certificate is not readable.
 type R<T> = Result<T, String>;
 
 impl Report {
@@ -159,13 +185,11 @@ fn matrix(v: &Value, rows: usize, cols: usize, what: &str) -> R<nalgebra::DMatri
     if a.len() != rows {
         return Err(format!("`{what}` has {} rows, expected {rows}", a.len()));
     }
-    let mut m = nalgebra::DMatrix::zeros(rows, cols);
-    for (i, r) in a.iter().enumerate() {
-        for (j, x) in vector(r, cols, what)?.into_iter().enumerate() {
-            m[(i, j)] = x;
-        }
+    let mut entries = Vec::new();
+    for r in a {
+        entries.extend(vector(r, cols, what)?);
     }
-    Ok(m)
+    Ok(nalgebra::DMatrix::from_row_slice(rows, cols, &entries))
 }
 
 fn boxed(v: &Value, n: usize, what: &str) -> R<Bx> {
@@ -265,13 +289,13 @@ impl Initial {
                 norm,
             } => {
                 let mut scaled = Vec::with_capacity(center.len());
-                for i in 0..center.len() {
-                    let gap =
-                        sum_lower([b.lo[i], -center[i]]).max(sum_lower([center[i], -b.hi[i]]));
+                let ends = b.lo.iter().zip(&b.hi);
+                for ((&c, &r), (&lo, &hi)) in center.iter().zip(radius).zip(ends) {
+                    let gap = sum_lower([lo, -c]).max(sum_lower([c, -hi]));
                     if gap <= 0.0 {
                         scaled.push(0.0);
-                    } else if radius[i] > 0.0 {
-                        scaled.push((gap / radius[i]).next_down());
+                    } else if r > 0.0 {
+                        scaled.push((gap / r).next_down());
                     } else {
                         return true;
                     }
@@ -449,9 +473,12 @@ impl Problem {
         })
     }
 
+    /// The loop at step `t` (its plant, or the last one past the list).
     fn at<'a>(&'a self, t: usize, net: &'a Network, slopes: usize) -> Loop<'a> {
+        #[allow(clippy::indexing_slicing)] // `Problem::read` refuses an empty list of plants
+        let plant = &self.plants[t.min(self.plants.len() - 1)];
         Loop {
-            plant: &self.plants[t.min(self.plants.len() - 1)],
+            plant,
             obs: &self.obs,
             w: &self.w,
             v: &self.v,
@@ -522,7 +549,8 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
     let mut invalid: Option<String> = None;
     let mut unsupported: Option<String> = None;
     let mut verified = Vec::new();
-    for (i, (v, (name, prop))) in verdicts.iter().zip(&problem.props).enumerate() {
+    for (i, (v, named)) in verdicts.iter().zip(&problem.props).enumerate() {
+        let (name, prop) = named;
         if get(v, "property")?.as_str() != Some(name.as_str()) {
             return Err(format!(
                 "verdict {i} is not about property `{}`",
@@ -531,7 +559,7 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
         }
         let shown = ravel_base::text::sanitize(name);
         match get(v, "status")?.as_str() {
-            Some("VERIFIED") => verified.push(i),
+            Some("VERIFIED") => verified.push(named),
             Some("UNSURE") => report
                 .properties
                 .push(format!("{shown}: UNSURE (no claim)")),
@@ -563,21 +591,21 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             Some("checkable") => {
                 let needed = verified
                     .iter()
-                    .map(|&i| problem.last_step(&problem.props[i].1))
+                    .map(|(_, p)| problem.last_step(p))
                     .max()
                     .unwrap_or(0);
-                match evidence(&problem, net, ev, needed, &verified, report)? {
+                match evidence(&problem, net, ev, needed, &verified, report) {
                     Ok(()) => {
-                        for &i in &verified {
-                            let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                        for (name, _) in &verified {
+                            let shown = ravel_base::text::sanitize(name);
                             report
                                 .properties
                                 .push(format!("{shown}: VERIFIED (checked)"));
                         }
                     }
-                    Err(msg) => {
-                        for &i in &verified {
-                            let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                    Err(Error::Invalid(msg)) => {
+                        for (name, _) in &verified {
+                            let shown = ravel_base::text::sanitize(name);
                             report
                                 .properties
                                 .push(format!("{shown}: VERIFIED — not established"));
@@ -585,13 +613,14 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                         report.evidence_failure = Some(msg.clone());
                         invalid.get_or_insert(msg);
                     }
+                    Err(Error::Unreadable(e)) => return Err(e),
                 }
             }
             Some("unsupported") => {
                 let why = get(ev, "reason")?.as_str().unwrap_or("no reason given");
                 let why = ravel_base::text::sanitize_to(why, 600);
-                for &i in &verified {
-                    let shown = ravel_base::text::sanitize(&problem.props[i].0);
+                for (name, _) in &verified {
+                    let shown = ravel_base::text::sanitize(name);
                     report
                         .properties
                         .push(format!("{shown}: VERIFIED — not checkable: {why}"));
@@ -639,107 +668,146 @@ struct Mode {
     slopes: usize,
 }
 
-/// Read the evidence's settings; the inner error is evidence that cannot
-/// serve the verified properties.
-fn mode(problem: &Problem, ev: &Value, needed: usize) -> R<Result<Mode, String>> {
-    let steps = uint(get(ev, "steps")?, "evidence.steps")?;
+/// Read the evidence's settings; [`Error::Invalid`] when they cannot serve
+/// the verified properties (steps up to `needed`).
+fn mode(problem: &Problem, ev: &Value, needed: usize) -> Result<Mode, Error> {
+    let steps = get(ev, "steps")
+        .and_then(|s| uint(s, "evidence.steps"))
+        .map_err(Error::Unreadable)?;
     if steps < needed || steps > problem.horizon {
-        return Ok(Err(format!(
+        return Err(Error::Invalid(format!(
             "the evidence covers steps 0..={steps}, the verified properties need 0..={needed}"
         )));
     }
     let unrolled = match ev.get("mode").and_then(Value::as_str) {
         Some("unrolled") => true,
         Some("one_step") => false,
-        _ => return Err("`evidence.mode` must be \"one_step\" or \"unrolled\"".into()),
+        _ => {
+            return Err(Error::Unreadable(
+                "`evidence.mode` must be \"one_step\" or \"unrolled\"".into(),
+            ))
+        }
     };
-    Ok(Ok(Mode {
+    Ok(Mode {
         steps,
         unrolled,
-        slopes: slope_steps(ev)?,
-    }))
+        slopes: slope_steps(ev).map_err(Error::Unreadable)?,
+    })
 }
 
-/// Check the VERIFIED evidence; the outer error is an unreadable
-/// certificate, the inner one the first false claim.
+/// Check the VERIFIED evidence for the `verified` properties: every cell's
+/// chain, the cells' coverage of the initial set, and every cell's proof of
+/// every property. [`Error::Invalid`] is the first false claim.
 fn evidence(
     problem: &Problem,
     net: &Network,
     ev: &Value,
     needed: usize,
-    verified: &[usize],
+    verified: &[&(String, Prop)],
     report: &mut Report,
-) -> R<Result<(), String>> {
-    let mode = match mode(problem, ev, needed)? {
-        Ok(m) => m,
-        Err(e) => return Ok(Err(e)),
-    };
-    let cells_json = get(ev, "cells")?
-        .as_array()
-        .ok_or("`evidence.cells` must be an array")?;
-    // the checker's work grows with cells × steps: the analysis's own limits
-    if cells_json.len() as u64 > ravel_base::limits::MAX_CELLS {
-        return Err(format!(
-            "{} cells: more than the {} any analysis makes",
-            cells_json.len(),
-            ravel_base::limits::MAX_CELLS
-        ));
-    }
+) -> Result<(), Error> {
+    let mode = mode(problem, ev, needed)?;
+    let cells_json = evidence_cells(ev).map_err(Error::Unreadable)?;
     let mut chains = Vec::with_capacity(cells_json.len());
     for (c, cell) in cells_json.iter().enumerate() {
-        match cell_chain(problem, net, cell, mode, c)? {
-            Ok(chain) => chains.push(chain),
-            Err(e) => return Ok(Err(e)),
-        }
+        chains.push(cell_chain(problem, net, cell, mode, c)?);
     }
     let cells: Vec<Bx> = chains.iter().map(|ch| ch.start.clone()).collect();
     let x0 = &problem.initial;
     match cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
         Ok(()) => {}
         Err(Some(p)) => {
-            return Ok(Err(format!(
+            return Err(Error::Invalid(format!(
                 "the cells do not cover the initial set: {p:?} is in no cell"
             )))
         }
         // undecided is not false: the certificate is not checkable
         Err(None) => {
-            return Err(
+            return Err(Error::Unreadable(
                 "the cells' coverage of the initial set could not be decided within the work limit"
                     .into(),
-            )
+            ))
         }
     }
-    for &i in verified {
+    for property in verified {
         for (c, chain) in chains.iter().enumerate() {
-            if let Err(e) = cell_proves(problem, i, chain, c) {
-                return Ok(Err(e));
-            }
+            cell_proves(problem, property, chain, c)?;
         }
     }
     report.cells = cells.len();
     report.steps = mode.steps;
-    Ok(Ok(()))
+    Ok(())
 }
 
-/// Check one cell's chain of claimed sets (`c` names it in messages); the
-/// outer error is an unreadable cell, the inner one the first false claim.
+/// The evidence's cells, at most as many as any analysis makes (the
+/// checker's work grows with cells × steps).
+fn evidence_cells(ev: &Value) -> R<&Vec<Value>> {
+    let cells = get(ev, "cells")?
+        .as_array()
+        .ok_or("`evidence.cells` must be an array")?;
+    if cells.len() as u64 > ravel_base::limits::MAX_CELLS {
+        return Err(format!(
+            "{} cells: more than the {} any analysis makes",
+            cells.len(),
+            ravel_base::limits::MAX_CELLS
+        ));
+    }
+    Ok(cells)
+}
+
+/// Check one cell's chain of claimed sets (`c` names it in messages):
+/// [`Error::Unreadable`] for a malformed cell, [`Error::Invalid`] for the
+/// first false claim.
 fn cell_chain(
     problem: &Problem,
     net: &Network,
     cell: &Value,
     mode: Mode,
     c: usize,
-) -> R<Result<CellChain, String>> {
-    let Mode {
-        steps,
-        unrolled,
-        slopes,
-    } = mode;
+) -> Result<CellChain, Error> {
     let n = problem.n;
-    let start = claimed_box(get(cell, "box")?, n, "cell box")?;
+    let start = get(cell, "box")
+        .and_then(|b| claimed_box(b, n, "cell box"))
+        .map_err(Error::Unreadable)?;
     if !start.is_proper() {
-        return Ok(Err(format!("cell {c}'s box is empty")));
+        return Err(Error::Invalid(format!("cell {c}'s box is empty")));
     }
+    let claims = claimed_steps(cell, mode.steps, c).map_err(Error::Unreadable)?;
+    let mut walk = Walk {
+        problem,
+        net,
+        slopes: mode.slopes,
+        c,
+        links: Chain::new(problem.initial.start(), mode.unrolled),
+        sets: Vec::with_capacity(claims.len() + 1),
+        last: start.clone(),
+        last_rows: match &problem.initial {
+            Initial::Polytope { rows, .. } => rows.clone(),
+            Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
+        },
+    };
+    for (k, claim) in claims.iter().enumerate() {
+        let claim = Claim::read(claim, n).map_err(Error::Unreadable)?;
+        walk.step(k, claim)?;
+    }
+    let goal_duals = vectors(cell.get("goal_duals"), "goal_duals").map_err(Error::Unreadable)?;
+    let Walk {
+        mut sets,
+        last,
+        last_rows,
+        ..
+    } = walk;
+    sets.push(last);
+    Ok(CellChain {
+        start,
+        sets,
+        last_rows,
+        goal_duals,
+    })
+}
+
+/// Cell `c`'s claimed steps, exactly `steps` of them.
+fn claimed_steps(cell: &Value, steps: usize, c: usize) -> R<&Vec<Value>> {
     let claims = get(cell, "steps")?
         .as_array()
         .ok_or("`steps` must be an array")?;
@@ -749,34 +817,28 @@ fn cell_chain(
             claims.len()
         ));
     }
-    let mut chain = vec![start.clone()];
-    let mut links = Chain::new(problem.initial.start(), unrolled);
-    // the inequalities of the previous claimed set (step 0: a polytope X0's)
-    let mut prev_rows: Vec<(Vec<f64>, f64)> = match &problem.initial {
-        Initial::Polytope { rows, .. } => rows.clone(),
-        Initial::Box(_) | Initial::Ball { .. } => Vec::new(),
-    };
-    for (k, claim) in claims.iter().enumerate() {
-        let t = k + 1;
+    Ok(claims)
+}
+
+/// One claimed step of a cell as read: the claimed set, its inequalities
+/// (none: the set is its box), their dual witnesses and the claimed
+/// pre-activation bounds of every hidden layer.
+struct Claim {
+    set: Bx,
+    rows: Rows,
+    duals: Vec<Vec<f64>>,
+    witness: Vec<Bx>,
+}
+
+impl Claim {
+    /// Read one entry of a cell's `steps` over `n` states.
+    fn read(claim: &Value, n: usize) -> R<Claim> {
         let set = claimed_box(get(claim, "set")?, n, "claimed set")?;
-        let rows_now = match claim.get("rows") {
+        let claimed_rows = match claim.get("rows") {
             None => Vec::new(),
             Some(r) => rows(r, n, "claimed rows")?,
         };
-        let given = vectors(claim.get("duals"), "duals")?;
-        let duals = Duals::given(&given);
-        let start_k = if !prev_rows.is_empty() {
-            Start::Polytope {
-                rows: &prev_rows,
-                duals: &duals,
-            }
-        } else if k == 0 {
-            problem.initial.start()
-        } else {
-            Start::Box
-        };
-        let directions = (!rows_now.is_empty())
-            .then(|| nalgebra::DMatrix::from_fn(rows_now.len(), n, |r, j| rows_now[r].0[j]));
+        let duals = vectors(claim.get("duals"), "duals")?;
         let witness = get(claim, "preactivations")?
             .as_array()
             .ok_or("`preactivations` must be an array")?
@@ -786,73 +848,141 @@ fn cell_chain(
                 claimed_box(b, len, "pre-activation bounds")
             })
             .collect::<R<Vec<_>>>()?;
-        let prev = &chain[k];
-        let stepped = links.step(
-            problem.at(k, net, slopes),
-            prev,
-            start_k,
+        Ok(Claim {
+            set,
+            rows: claimed_rows,
+            duals,
+            witness,
+        })
+    }
+}
+
+/// A cell's chain being checked one claimed step at a time.
+struct Walk<'a> {
+    problem: &'a Problem,
+    net: &'a Network,
+    /// The evidence's slope-search steps.
+    slopes: usize,
+    /// The cell's index, for messages.
+    c: usize,
+    /// The checker's own steps so far (for unrolled bounds).
+    links: Chain<'a>,
+    /// The claimed sets before the last one, from the cell's box.
+    sets: Vec<Bx>,
+    /// The last claimed set (at first the cell's box).
+    last: Bx,
+    /// The last claimed set's inequalities (step 0: a polytope X0's).
+    last_rows: Rows,
+}
+
+impl Walk<'_> {
+    /// Check claimed step `k + 1` against the checker's own one-step bound
+    /// of the last claimed set, along its inequalities and its box facets;
+    /// it becomes the last claimed set.
+    fn step(&mut self, k: usize, claim: Claim) -> Result<(), Error> {
+        let (problem, c, t) = (self.problem, self.c, k + 1);
+        let duals = Duals::given(&claim.duals);
+        let start = if !self.last_rows.is_empty() {
+            Start::Polytope {
+                rows: &self.last_rows,
+                duals: &duals,
+            }
+        } else if k == 0 {
+            problem.initial.start()
+        } else {
+            Start::Box
+        };
+        // every row has `n` entries (read by `rows`)
+        let directions = (!claim.rows.is_empty()).then(|| {
+            nalgebra::DMatrix::from_row_iterator(
+                claim.rows.len(),
+                problem.n,
+                claim.rows.iter().flat_map(|(a, _)| a.iter().copied()),
+            )
+        });
+        let stepped = self.links.step(
+            problem.at(k, self.net, self.slopes),
+            &self.last,
+            start,
             directions.as_ref(),
-            Some(&witness),
+            Some(&claim.witness),
         );
         let proven = match stepped {
             Ok(st) => {
-                for (r, ((_, b), o)) in rows_now.iter().zip(&st.offsets).enumerate() {
-                    // a claim holds only against a number (NaN proves nothing)
-                    if b.is_nan() || o.is_nan() || b < o {
-                        return Ok(Err(format!(
-                            "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
-                            ravel_base::text::compact(o - b)
-                        )));
-                    }
-                }
+                offsets_hold(&claim.rows, &st.offsets, c, t)?;
                 st.next
             }
-            Err(Trouble::Neuron {
-                layer,
-                neuron,
-                claimed,
-                proven,
-            }) => {
-                return Ok(Err(format!(
-                    "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
-                    claimed.0, claimed.1, proven.0, proven.1
-                )))
-            }
-            Err(Trouble::Shape(s)) => return Err(format!("cell {c}, step {t}: {s}")),
-            Err(Trouble::Overflow) => {
-                return Ok(Err(format!("cell {c}, step {t}: the checker's bound overflows")))
-            }
+            Err(trouble) => return Err(step_trouble(trouble, c, t)),
         };
-        for i in 0..n {
-            if proven.hi[i].is_nan() || set.hi[i] < proven.hi[i] {
-                return Ok(Err(format!(
-                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
-                    facet(i, true),
-                    set.hi[i],
-                    proven.hi[i],
-                    ravel_base::text::compact(proven.hi[i] - set.hi[i])
-                )));
-            }
-            if proven.lo[i].is_nan() || set.lo[i] > proven.lo[i] {
-                return Ok(Err(format!(
-                    "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
-                    facet(i, false),
-                    set.lo[i],
-                    proven.lo[i],
-                    ravel_base::text::compact(set.lo[i] - proven.lo[i])
-                )));
-            }
-        }
-        chain.push(set);
-        prev_rows = rows_now;
+        facets_hold(&claim.set, &proven, c, t)?;
+        self.sets.push(std::mem::replace(&mut self.last, claim.set));
+        self.last_rows = claim.rows;
+        Ok(())
     }
-    let goal_duals = vectors(cell.get("goal_duals"), "goal_duals")?;
-    Ok(Ok(CellChain {
-        start,
-        sets: chain,
-        last_rows: prev_rows,
-        goal_duals,
-    }))
+}
+
+/// Whether every claimed inequality of cell `c`'s step `t` has an offset
+/// at least the checker's `proven` one.
+fn offsets_hold(claimed: &Rows, proven: &[f64], c: usize, t: usize) -> Result<(), Error> {
+    for (r, ((_, b), o)) in claimed.iter().zip(proven).enumerate() {
+        // a claim holds only against a number (NaN proves nothing)
+        if b.is_nan() || o.is_nan() || b < o {
+            return Err(Error::Invalid(format!(
+                "cell {c}, step {t}, inequality {r}: claimed offset {b}, the checker proves only {o} (short by {})",
+                ravel_base::text::compact(o - b)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Whether cell `c`'s claimed set at step `t` contains the checker's
+/// `proven` box, facet by facet.
+fn facets_hold(set: &Bx, proven: &Bx, c: usize, t: usize) -> Result<(), Error> {
+    let claimed = set.lo.iter().zip(&set.hi);
+    let own = proven.lo.iter().zip(&proven.hi);
+    for (i, ((&lo, &hi), (&p_lo, &p_hi))) in claimed.zip(own).enumerate() {
+        if p_hi.is_nan() || hi < p_hi {
+            return Err(Error::Invalid(format!(
+                "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                facet(i, true),
+                hi,
+                p_hi,
+                ravel_base::text::compact(p_hi - hi)
+            )));
+        }
+        if p_lo.is_nan() || lo > p_lo {
+            return Err(Error::Invalid(format!(
+                "cell {c}, step {t}, {}: claimed {}, the checker proves only {} (short by {})",
+                facet(i, false),
+                lo,
+                p_lo,
+                ravel_base::text::compact(lo - p_lo)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Why the checker's step from cell `c`'s set at step `t − 1` failed, as
+/// the checker's answer: a witness of the wrong shape is unreadable; a
+/// neuron bound it cannot prove, or an overflow, is a false claim.
+fn step_trouble(trouble: Trouble, c: usize, t: usize) -> Error {
+    match trouble {
+        Trouble::Neuron {
+            layer,
+            neuron,
+            claimed,
+            proven,
+        } => Error::Invalid(format!(
+            "cell {c}, step {t}: pre-activation bound of neuron {neuron} of hidden layer {layer} is [{}, {}], the checker proves only [{}, {}]",
+            claimed.0, claimed.1, proven.0, proven.1
+        )),
+        Trouble::Shape(s) => Error::Unreadable(format!("cell {c}, step {t}: {s}")),
+        Trouble::Overflow => Error::Invalid(format!(
+            "cell {c}, step {t}: the checker's bound overflows"
+        )),
+    }
 }
 
 /// A list of number vectors of any lengths (absent: none).
@@ -871,14 +1001,25 @@ fn vectors(v: Option<&Value>, what: &str) -> R<Vec<Vec<f64>>> {
     }
 }
 
-/// Whether one cell's checked chain proves VERIFIED property `i`.
-fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Result<(), String> {
-    let (name, prop) = &problem.props[i];
+/// Whether one cell's checked chain proves the VERIFIED property `(name,
+/// prop)`; [`Error::Invalid`] names the first row that fails.
+fn cell_proves(
+    problem: &Problem,
+    (name, prop): &(String, Prop),
+    chain: &CellChain,
+    c: usize,
+) -> Result<(), Error> {
     let shown = ravel_base::text::sanitize(name);
     let sets = &chain.sets;
     match prop {
         Prop::Goal(g) => {
-            let last = &sets[problem.horizon];
+            // the evidence covers the horizon when a goal is verified
+            let Some(last) = sets.get(problem.horizon) else {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: cell {c} has no set at step {}",
+                    problem.horizon
+                )));
+            };
             let duals = Duals::given(&chain.goal_duals);
             let support = Start::Polytope {
                 rows: &chain.last_rows,
@@ -892,11 +1033,11 @@ fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Resu
                 };
                 let worst = sum_upper([top, -b]);
                 if worst.is_nan() || worst > 0.0 {
-                    return Err(format!(
+                    return Err(Error::Invalid(format!(
                         "goal `{shown}`: cell {c}'s set at step {} leaves goal row {r} by {}",
                         problem.horizon,
                         ravel_base::text::compact(worst)
-                    ));
+                    )));
                 }
             }
         }
@@ -912,9 +1053,9 @@ fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Resu
                         .iter()
                         .any(|(a, b)| sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0);
                     if !separated {
-                        return Err(format!(
+                        return Err(Error::Invalid(format!(
                             "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
-                        ));
+                        )));
                     }
                 }
             }
@@ -933,6 +1074,7 @@ fn cell_proves(problem: &Problem, i: usize, chain: &CellChain, c: usize) -> Resu
 pub struct CellCheck<'a> {
     problem: Problem,
     net: &'a Network,
+    /// The VERIFIED properties' indices (each within the problem's).
     verified: Vec<usize>,
     mode: Mode,
 }
@@ -940,12 +1082,16 @@ pub struct CellCheck<'a> {
 impl<'a> CellCheck<'a> {
     /// From a certificate whose evidence has its settings (`steps`, `mode`,
     /// `slope_steps`; the cells are not read).
-    pub fn new(cert: &Value, net: &'a Network) -> Result<CellCheck<'a>, String> {
-        let problem =
-            Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
-        let verdicts = get(cert, "verdicts")?
-            .as_array()
-            .ok_or("`verdicts` must be an array")?;
+    pub fn new(cert: &Value, net: &'a Network) -> Result<CellCheck<'a>, Error> {
+        let problem = get(cert, "problem")
+            .and_then(|p| Problem::read(p, net).map_err(|e| format!("problem: {e}")))
+            .map_err(Error::Unreadable)?;
+        let verdicts = get(cert, "verdicts")
+            .and_then(|v| {
+                v.as_array()
+                    .ok_or_else(|| "`verdicts` must be an array".to_string())
+            })
+            .map_err(Error::Unreadable)?;
         let verified: Vec<usize> = verdicts
             .iter()
             .enumerate()
@@ -955,10 +1101,12 @@ impl<'a> CellCheck<'a> {
             .collect();
         let needed = verified
             .iter()
-            .map(|&i| problem.last_step(&problem.props[i].1))
+            .filter_map(|&i| problem.props.get(i))
+            .map(|(_, p)| problem.last_step(p))
             .max()
             .unwrap_or(0);
-        let mode = mode(&problem, get(cert, "evidence")?, needed)??;
+        let ev = get(cert, "evidence").map_err(Error::Unreadable)?;
+        let mode = mode(&problem, ev, needed)?;
         Ok(CellCheck {
             problem,
             net,
@@ -969,10 +1117,14 @@ impl<'a> CellCheck<'a> {
 
     /// Whether `cell` (a certificate cell: its box, its claimed steps)
     /// proves every VERIFIED property on its own; the first failure.
-    pub fn check(&self, cell: &Value) -> Result<(), String> {
-        let chain = cell_chain(&self.problem, self.net, cell, self.mode, 0)??;
-        for &i in &self.verified {
-            cell_proves(&self.problem, i, &chain, 0)?;
+    pub fn check(&self, cell: &Value) -> Result<(), Error> {
+        let chain = cell_chain(&self.problem, self.net, cell, self.mode, 0)?;
+        for property in self
+            .verified
+            .iter()
+            .filter_map(|&i| self.problem.props.get(i))
+        {
+            cell_proves(&self.problem, property, &chain, 0)?;
         }
         Ok(())
     }
@@ -1011,9 +1163,10 @@ fn replay(
         return Ok(Err("starts outside the initial set".into()));
     }
     let mut x = Bx::point(&x0);
-    for t in 0..step {
-        let w = vector(&ws[t], n, "process_noise")?;
-        let v = vector(&vs[t], q, "sensor_noise")?;
+    // (both lists have at least `step` entries)
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+        let w = vector(w, n, "process_noise")?;
+        let v = vector(v, q, "sensor_noise")?;
         if !problem.w.contains(&w) {
             return Ok(Err(format!(
                 "has process noise outside its box at step {t}"

@@ -145,12 +145,9 @@ impl Input {
     fn gauge(center: &[f64], radius: &[f64], norm: u8, b: &Bx) -> (f64, f64) {
         let mut lo_parts = Vec::new();
         let mut hi_parts = Vec::new();
-        for i in 0..center.len() {
-            let gap_lo = sum_lower([b.lo[i], -center[i]])
-                .max(sum_lower([center[i], -b.hi[i]]))
-                .max(0.0);
-            let gap_hi = sum_upper([b.hi[i], -center[i]]).max(sum_upper([center[i], -b.lo[i]]));
-            let r = radius[i];
+        for ((&c, &r), (&lo, &hi)) in center.iter().zip(radius).zip(b.lo.iter().zip(&b.hi)) {
+            let gap_lo = sum_lower([lo, -c]).max(sum_lower([c, -hi])).max(0.0);
+            let gap_hi = sum_upper([hi, -c]).max(sum_upper([c, -lo]));
             let (l, h) = if r > 0.0 {
                 ((gap_lo / r).next_down().max(0.0), (gap_hi / r).next_up())
             } else if gap_lo > 0.0 {
@@ -232,15 +229,18 @@ impl Input {
 
 fn robust_rows(k: usize, m: usize) -> DMatrix<f64> {
     let others: Vec<usize> = (0..m).filter(|&j| j != k).collect();
-    DMatrix::from_fn(others.len(), m, |r, c| {
-        if c == others[r] {
-            1.0
-        } else if c == k {
-            -1.0
-        } else {
-            0.0
-        }
-    })
+    let entries = others.iter().flat_map(|&j| {
+        (0..m).map(move |c| {
+            if c == j {
+                1.0
+            } else if c == k {
+                -1.0
+            } else {
+                0.0
+            }
+        })
+    });
+    DMatrix::from_row_iterator(others.len(), m, entries)
 }
 
 /// Whether the output box `y` certainly violates the property.
@@ -445,7 +445,9 @@ fn proves(
     let nb = NetBounds::new(net, cell, None).map_err(|t| t.to_string())?;
     match p {
         Prop::Require(rows) => {
-            let spec = DMatrix::from_fn(rows.len(), m, |r, c| rows[r].0[c]);
+            // (every row has `m` coefficients, read by `row_list`)
+            let entries = rows.iter().flat_map(|(a, _)| a.iter().copied());
+            let spec = DMatrix::from_row_iterator(rows.len(), m, entries);
             for (k, (u, (_, b))) in nb
                 .rows_upper_in(&spec, slopes, start)
                 .iter()
@@ -461,7 +463,8 @@ fn proves(
         }
         Prop::Avoid(members) => {
             for (k, rows) in members.iter().enumerate() {
-                let spec = DMatrix::from_fn(rows.len(), m, |r, c| -rows[r].0[c]);
+                let entries = rows.iter().flat_map(|(a, _)| a.iter().map(|v| -v));
+                let spec = DMatrix::from_row_iterator(rows.len(), m, entries);
                 let sep = nb
                     .rows_upper_in(&spec, slopes, start)
                     .iter()
@@ -537,6 +540,21 @@ fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
     report
 }
 
+/// A network certificate's problem as read: the input and output sizes,
+/// the input set and the properties.
+struct Problem {
+    n: usize,
+    m: usize,
+    input: Input,
+    props: Vec<(String, Prop)>,
+}
+
+/// The VERIFIED properties, each with the label its checks use.
+type Verified<'p> = Vec<(&'p (String, Prop), usize)>;
+
+/// Check a network certificate against `net` (coverage within `cover_work`
+/// steps, none without; polytope duals from `solve` when given); the error
+/// says why the certificate is unreadable.
 fn inner(
     cert: &Value,
     net: &Network,
@@ -545,6 +563,68 @@ fn inner(
     solve: Option<CellSolver>,
 ) -> R<Answer> {
     let problem = get(cert, "problem")?;
+    let (n, m) = sizes(problem, net)?;
+    let input = match get(problem, "input")? {
+        // a spec that only selects actions: no input set, no properties
+        Value::Null => None,
+        v => Some(Input::read(v, n).map_err(|e| format!("input: {e}"))?),
+    };
+    let props = read_props(problem, m)?;
+    let verdicts = get(cert, "verdicts")?
+        .as_array()
+        .ok_or("`verdicts` must be an array")?;
+    if verdicts.len() != props.len() {
+        return Err(format!(
+            "{} verdicts for {} properties",
+            verdicts.len(),
+            props.len()
+        ));
+    }
+    let Some(input) = input else {
+        if props.is_empty() {
+            return Ok(Answer::Valid);
+        }
+        return Err("properties without an input set".into());
+    };
+    let problem = Problem { n, m, input, props };
+    let (verified, mut invalid) = problem.verdicts(net, verdicts, report)?;
+    let mut unsupported: Option<String> = None;
+    if !verified.is_empty() {
+        let ev = get(cert, "evidence")?;
+        match get(ev, "status")?.as_str() {
+            Some("checkable") => {
+                let failure = problem.evidence(net, ev, &verified, report, (cover_work, solve))?;
+                for ((name, _), _) in &verified {
+                    let shown = ravel_base::text::sanitize(name);
+                    report.properties.push(match failure {
+                        None => format!("{shown}: VERIFIED (checked)"),
+                        Some(_) => format!("{shown}: VERIFIED — not established"),
+                    });
+                }
+                if let Some(msg) = failure {
+                    report.evidence_failure = Some(msg.clone());
+                    invalid.get_or_insert(msg);
+                }
+            }
+            Some("unsupported") => {
+                let why =
+                    ravel_base::text::sanitize_to(get(ev, "reason")?.as_str().unwrap_or(""), 600);
+                for ((name, _), _) in &verified {
+                    let shown = ravel_base::text::sanitize(name);
+                    report
+                        .properties
+                        .push(format!("{shown}: VERIFIED — not checkable: {why}"));
+                }
+                unsupported.get_or_insert(why);
+            }
+            _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
+        }
+    }
+    Ok(decide(invalid, unsupported))
+}
+
+/// The problem's input and output sizes, which must be the network's.
+fn sizes(problem: &Value, net: &Network) -> R<(usize, usize)> {
     let n = uint(get(problem, "inputs")?, "inputs")?;
     let m = uint(get(problem, "outputs")?, "outputs")?;
     if n != net.inputs || m != net.outputs() {
@@ -554,11 +634,11 @@ fn inner(
             net.outputs()
         ));
     }
-    let input = match get(problem, "input")? {
-        // a spec that only selects actions: no input set, no properties
-        Value::Null => None,
-        v => Some(Input::read(v, n).map_err(|e| format!("input: {e}"))?),
-    };
+    Ok((n, m))
+}
+
+/// The recorded properties over `m` outputs, with their names.
+fn read_props(problem: &Value, m: usize) -> R<Vec<(String, Prop)>> {
     let mut props = Vec::new();
     for p in get(problem, "properties")?
         .as_array()
@@ -583,190 +663,205 @@ fn inner(
         };
         props.push((name, prop));
     }
-    let verdicts = get(cert, "verdicts")?
-        .as_array()
-        .ok_or("`verdicts` must be an array")?;
-    if verdicts.len() != props.len() {
-        return Err(format!(
-            "{} verdicts for {} properties",
-            verdicts.len(),
-            props.len()
-        ));
-    }
-    let Some(input) = input else {
-        if props.is_empty() {
-            return Ok(Answer::Valid);
+    Ok(props)
+}
+
+impl Problem {
+    /// Read the verdicts (one per property, in order) into the report,
+    /// replaying every FALSIFIED one: the VERIFIED properties with their
+    /// labels, and the first invalid counterexample's message.
+    fn verdicts<'p>(
+        &'p self,
+        net: &Network,
+        verdicts: &[Value],
+        report: &mut Report,
+    ) -> R<(Verified<'p>, Option<String>)> {
+        let mut invalid: Option<String> = None;
+        let mut verified = Vec::new();
+        for (i, (v, named)) in verdicts.iter().zip(&self.props).enumerate() {
+            let (name, p) = named;
+            if get(v, "property")?.as_str() != Some(name.as_str()) {
+                return Err(format!(
+                    "verdict {i} is not about property `{}`",
+                    ravel_base::text::sanitize(name)
+                ));
+            }
+            let shown = ravel_base::text::sanitize(name);
+            let label = self.label(p, v)?;
+            match get(v, "status")?.as_str() {
+                Some("VERIFIED") => verified.push((named, label)),
+                Some("UNSURE") => report
+                    .properties
+                    .push(format!("{shown}: UNSURE (no claim)")),
+                Some("FALSIFIED") => {
+                    let x = vector(get(v, "input")?, self.n, "counterexample input")?;
+                    match self.refutation(net, p, label, &x) {
+                        None => report
+                            .properties
+                            .push(format!("{shown}: FALSIFIED (input replayed)")),
+                        Some(why) => {
+                            report
+                                .properties
+                                .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
+                            invalid.get_or_insert(format!(
+                                "property `{shown}`: the counterexample: {why}"
+                            ));
+                        }
+                    }
+                }
+                _ => {
+                    return Err(format!(
+                        "verdict {i}: `status` must be VERIFIED, FALSIFIED or UNSURE"
+                    ))
+                }
+            }
         }
-        return Err("properties without an input set".into());
-    };
-    let label_of = |p: &Prop, v: &Value| -> R<usize> {
+        Ok((verified, invalid))
+    }
+
+    /// The label property `p`'s checks use: a robustness property's own or
+    /// its verdict's (0 for the other kinds), within the outputs.
+    fn label(&self, p: &Prop, v: &Value) -> R<usize> {
         let k = match p {
             Prop::Robust(Some(k)) => *k,
             Prop::Robust(None) => uint(get(v, "label")?, "label")?,
             _ => 0,
         };
-        if k >= m {
+        if k >= self.m {
             return Err(format!("label {k} is out of range"));
         }
         Ok(k)
-    };
-    let mut invalid: Option<String> = None;
-    let mut unsupported: Option<String> = None;
-    let mut verified = Vec::new();
-    for (i, (v, (name, p))) in verdicts.iter().zip(&props).enumerate() {
-        if get(v, "property")?.as_str() != Some(name.as_str()) {
+    }
+
+    /// Why the recorded input `x` does not falsify property `p`
+    /// ([`replay_input`]; for a robustness property without a label, the
+    /// recorded label must also be the centre's); `None`: it does.
+    fn refutation(&self, net: &Network, p: &Prop, label: usize, x: &[f64]) -> Option<String> {
+        let why = replay_input(net, &self.input, p, label, x);
+        if let (Prop::Robust(None), None) = (p, &why) {
+            if !self.centre_has(net, label) {
+                return Some(format!("label {label} is not certainly the centre's"));
+            }
+        }
+        why
+    }
+
+    /// Whether `label` is certainly the network's label at the input set's
+    /// centre (a polytope has none).
+    fn centre_has(&self, net: &Network, label: usize) -> bool {
+        self.input.centre().is_some_and(|c| {
+            let yc = network_box(net, &Bx::point(&c));
+            yc.is_proper() && {
+                let r = robust_rows(label, self.m);
+                (0..r.nrows()).all(|k| {
+                    let a: Vec<f64> = r.row(k).iter().copied().collect();
+                    dot_box_upper(&a, &yc.lo, &yc.hi) < 0.0
+                })
+            }
+        })
+    }
+
+    /// Check the VERIFIED evidence `ev` (coverage within `cover_work`
+    /// steps, none without; a polytope input's duals from `solve` when
+    /// given, else from the cells): the first failure (a gap in the
+    /// coverage, or cell by cell the first property that its bounds do not
+    /// prove); the error says why the evidence is unreadable.
+    fn evidence(
+        &self,
+        net: &Network,
+        ev: &Value,
+        verified: &Verified,
+        report: &mut Report,
+        (cover_work, solve): (Option<usize>, Option<CellSolver>),
+    ) -> R<Option<String>> {
+        // `optimise_slopes`: the checker's own slope search
+        let slopes = super::slope_steps(ev)?;
+        let cells_json = get(ev, "cells")?
+            .as_array()
+            .ok_or("`cells` must be an array")?;
+        // before any work per cell: the analysis's own limit
+        if cells_json.len() as u64 > MAX_CELLS {
             return Err(format!(
-                "verdict {i} is not about property `{}`",
-                ravel_base::text::sanitize(name)
+                "{} cells: more than the {MAX_CELLS} any analysis makes",
+                cells_json.len()
             ));
         }
-        let shown = ravel_base::text::sanitize(name);
-        let label = label_of(p, v)?;
-        match get(v, "status")?.as_str() {
-            Some("VERIFIED") => verified.push((i, label)),
-            Some("UNSURE") => report
-                .properties
-                .push(format!("{shown}: UNSURE (no claim)")),
-            Some("FALSIFIED") => {
-                let x = vector(get(v, "input")?, n, "counterexample input")?;
-                let mut why = replay_input(net, &input, p, label, &x);
-                if let (Prop::Robust(None), None) = (p, &why) {
-                    // the recorded label must be the centre's
-                    let centre = input.centre().is_some_and(|c| {
-                        let yc = network_box(net, &Bx::point(&c));
-                        yc.is_proper() && {
-                            let r = robust_rows(label, m);
-                            (0..r.nrows()).all(|k| {
-                                let a: Vec<f64> = r.row(k).iter().copied().collect();
-                                dot_box_upper(&a, &yc.lo, &yc.hi) < 0.0
-                            })
-                        }
-                    });
-                    if !centre {
-                        why = Some(format!("label {label} is not certainly the centre's"));
-                    }
-                }
-                let ok = why.is_none();
-                if ok {
-                    report
-                        .properties
-                        .push(format!("{shown}: FALSIFIED (input replayed)"));
-                } else {
-                    let why = why.unwrap_or_default();
-                    report
-                        .properties
-                        .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
-                    invalid.get_or_insert(format!("property `{shown}`: the counterexample: {why}"));
-                }
-            }
-            _ => {
-                return Err(format!(
-                    "verdict {i}: `status` must be VERIFIED, FALSIFIED or UNSURE"
-                ))
-            }
+        let cells: Vec<Bx> = cells_json
+            .iter()
+            .map(|c| bx(c, self.n, "cell"))
+            .collect::<R<_>>()?;
+        // a polytope input's dual witnesses, per cell (absent: none)
+        let given: Vec<Vec<Vec<f64>>> = match (&self.input, solve) {
+            (Input::Polytope { .. }, None) => cells_json
+                .iter()
+                .map(|c| super::vectors(c.get("duals"), "cell duals"))
+                .collect::<R<_>>()?,
+            _ => vec![Vec::new(); cells.len()],
+        };
+        report.cells = cells.len();
+        // (no work limit: the writer's per-cell check, which does
+        // not ask for coverage)
+        let input = &self.input;
+        let covered = match cover_work {
+            None => Ok(()),
+            Some(work) => covers_within(&cells, &input.bbox(), &|piece| input.misses(piece), work),
+        };
+        match covered {
+            Err(Some(x)) => Ok(Some(format!(
+                "the cells do not cover the input set (near {x:?})"
+            ))),
+            // undecided is not false: the certificate is not checkable
+            Err(None) => Err(
+                "the cells' coverage of the input set could not be decided within the work limit"
+                    .into(),
+            ),
+            // cell by cell, each cell's properties in order (the
+            // order its dual vectors are used in)
+            Ok(()) => Ok(cells
+                .iter()
+                .zip(&given)
+                .enumerate()
+                .find_map(|(c, (cell, given))| {
+                    let per_cell = |g: &[f64]| solve.and_then(|f| f(g, cell));
+                    let duals = match solve {
+                        Some(_) => Duals::solved(&per_cell),
+                        None => Duals::given(given),
+                    };
+                    let failed = self.first_unproven(net, cell, c, verified, slopes, &duals);
+                    report.duals.push(duals.used());
+                    failed
+                })),
         }
     }
-    if !verified.is_empty() {
-        let ev = get(cert, "evidence")?;
-        match get(ev, "status")?.as_str() {
-            Some("checkable") => {
-                // `optimise_slopes`: the checker's own slope search
-                let slopes = super::slope_steps(ev)?;
-                let cells_json = get(ev, "cells")?
-                    .as_array()
-                    .ok_or("`cells` must be an array")?;
-                // before any work per cell: the analysis's own limit
-                if cells_json.len() as u64 > MAX_CELLS {
-                    return Err(format!(
-                        "{} cells: more than the {MAX_CELLS} any analysis makes",
-                        cells_json.len()
-                    ));
-                }
-                let cells: Vec<Bx> = cells_json
-                    .iter()
-                    .map(|c| bx(c, n, "cell"))
-                    .collect::<R<_>>()?;
-                // a polytope input's dual witnesses, per cell (absent: none)
-                let given: Vec<Vec<Vec<f64>>> = match (&input, solve) {
-                    (Input::Polytope { .. }, None) => cells_json
-                        .iter()
-                        .map(|c| super::vectors(c.get("duals"), "cell duals"))
-                        .collect::<R<_>>()?,
-                    _ => vec![Vec::new(); cells.len()],
-                };
-                report.cells = cells.len();
-                // (no work limit: the writer's per-cell check, which does
-                // not ask for coverage)
-                let covered = match cover_work {
-                    None => Ok(()),
-                    Some(work) => {
-                        covers_within(&cells, &input.bbox(), &|piece| input.misses(piece), work)
-                    }
-                };
-                let failure = match covered {
-                    Err(Some(x)) => {
-                        Some(format!("the cells do not cover the input set (near {x:?})"))
-                    }
-                    // undecided is not false: the certificate is not checkable
-                    Err(None) => {
-                        return Err(
-                            "the cells' coverage of the input set could not be decided within the work limit"
-                                .into(),
-                        )
-                    }
-                    // cell by cell, each cell's properties in order (the
-                    // order its dual vectors are used in)
-                    Ok(()) => cells.iter().enumerate().find_map(|(c, cell)| {
-                        let per_cell = |g: &[f64]| solve.and_then(|f| f(g, cell));
-                        let duals = match solve {
-                            Some(_) => Duals::solved(&per_cell),
-                            None => Duals::given(&given[c]),
-                        };
-                        let start = input.start(&duals);
-                        let failed = verified.iter().find_map(|&(i, label)| {
-                            proves(net, cell, &props[i].1, (label, m, slopes), &start)
-                                .err()
-                                .map(|e| {
-                                    format!(
-                                        "property `{}`, cell {c}: {e}",
-                                        ravel_base::text::sanitize(&props[i].0)
-                                    )
-                                })
-                        });
-                        report.duals.push(duals.used());
-                        failed
-                    }),
-                };
-                for &(i, _) in &verified {
-                    let shown = ravel_base::text::sanitize(&props[i].0);
-                    report.properties.push(match failure {
-                        None => format!("{shown}: VERIFIED (checked)"),
-                        Some(_) => format!("{shown}: VERIFIED — not established"),
-                    });
-                }
-                if let Some(msg) = failure {
-                    report.evidence_failure = Some(msg.clone());
-                    invalid.get_or_insert(msg);
-                }
-            }
-            Some("unsupported") => {
-                let why =
-                    ravel_base::text::sanitize_to(get(ev, "reason")?.as_str().unwrap_or(""), 600);
-                for &(i, _) in &verified {
-                    let shown = ravel_base::text::sanitize(&props[i].0);
-                    report
-                        .properties
-                        .push(format!("{shown}: VERIFIED — not checkable: {why}"));
-                }
-                unsupported.get_or_insert(why);
-            }
-            _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
-        }
+
+    /// The first of the `verified` properties that the checker's bounds over
+    /// cell `c` do not prove (with `slopes` steps of slope search and the
+    /// polytope input's `duals`), as the message naming it.
+    fn first_unproven(
+        &self,
+        net: &Network,
+        cell: &Bx,
+        c: usize,
+        verified: &Verified,
+        slopes: usize,
+        duals: &Duals,
+    ) -> Option<String> {
+        let start = self.input.start(duals);
+        verified.iter().find_map(|&((name, p), label)| {
+            proves(net, cell, p, (label, self.m, slopes), &start)
+                .err()
+                .map(|e| {
+                    format!(
+                        "property `{}`, cell {c}: {e}",
+                        ravel_base::text::sanitize(name)
+                    )
+                })
+        })
     }
-    Ok(decide(invalid, unsupported))
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
     use nalgebra::DVector;

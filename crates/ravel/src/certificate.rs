@@ -254,7 +254,7 @@ fn derive(
                     cells.push(cell);
                     continue;
                 }
-                Err(e) => e,
+                Err(e) => e.to_string(),
             },
             Err(e) => e,
         };

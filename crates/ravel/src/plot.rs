@@ -152,96 +152,19 @@ pub fn svg(
     samples: &[Trajectory],
 ) -> String {
     let (i, j) = dims;
-    // the window: every finite set and state, with a 5 % margin
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
-    let mut grow = |x: f64, y: f64| {
-        if x.is_finite() && y.is_finite() {
-            lo = [lo[0].min(x), lo[1].min(y)];
-            hi = [hi[0].max(x), hi[1].max(y)];
-        }
-    };
-    for b in &outcome.reach {
-        if b.is_finite() {
-            grow(b.lo[i], b.lo[j]);
-            grow(b.hi[i], b.hi[j]);
-        }
-    }
-    for tr in samples {
-        for x in &tr.states {
-            grow(x[i], x[j]);
-        }
-    }
-    let x0 = plan.initial.bbox();
-    grow(x0.lo[i], x0.lo[j]);
-    grow(x0.hi[i], x0.hi[j]);
-    if !(lo[0].is_finite() && lo[1].is_finite()) {
-        lo = [-1.0, -1.0];
-        hi = [1.0, 1.0];
-    }
-    let span = |a: f64, b: f64| (b - a).max(1e-9);
-    let (mx, my) = (0.05 * span(lo[0], hi[0]), 0.05 * span(lo[1], hi[1]));
-    let v = View {
-        x0: lo[0] - mx,
-        x1: hi[0] + mx,
-        y0: lo[1] - my,
-        y1: hi[1] + my,
-    };
-    let window = [(v.x0, v.y0), (v.x1, v.y0), (v.x1, v.y1), (v.x0, v.y1)];
+    let v = window(plan, outcome, dims, samples);
     let total = SIZE + 2.0 * PAD;
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{t}\" height=\"{t}\" viewBox=\"0 0 {t} {t}\" font-family=\"sans-serif\" font-size=\"12\">\n<title>{}</title>\n<rect width=\"{t}\" height=\"{t}\" fill=\"white\"/>\n",
         xml(title),
         t = f(total)
     );
-    let mut dropped = false;
     s += "<g id=\"properties\">\n";
-    for p in &plan.properties {
-        let (members, style) = match &p.kind {
-            PropertyKind::Goal(g) => (
-                vec![g],
-                "fill=\"#2e7d32\" fill-opacity=\"0.15\" stroke=\"#2e7d32\"",
-            ),
-            PropertyKind::Avoid { members, .. } => (
-                members.iter().collect(),
-                "fill=\"#c62828\" fill-opacity=\"0.15\" stroke=\"#c62828\"",
-            ),
-        };
-        for m in members {
-            let (rows, d) = planar(&m.rows, i, j);
-            dropped |= d;
-            let poly = clip(&window, &rows);
-            if poly.len() >= 3 {
-                s += &format!("<!-- {} -->\n", xml(&p.name));
-                s += &polygon(&v, &poly, style);
-            }
-        }
-    }
+    let (properties, dropped_goal) = properties(&v, plan, dims);
+    s += &properties;
     s += "</g>\n<g id=\"initial\">\n";
-    s += &match &plan.initial {
-        Region::Polytope { bbox, rows } => {
-            let (rows, d) = planar(rows, i, j);
-            dropped |= d;
-            let b = [
-                (bbox.lo[i], bbox.lo[j]),
-                (bbox.hi[i], bbox.lo[j]),
-                (bbox.hi[i], bbox.hi[j]),
-                (bbox.lo[i], bbox.hi[j]),
-            ];
-            polygon(
-                &v,
-                &clip(&b, &rows),
-                "fill=\"#9e9e9e\" fill-opacity=\"0.4\" stroke=\"#616161\"",
-            )
-        }
-        _ => rect(
-            &v,
-            &x0,
-            i,
-            j,
-            "fill=\"#9e9e9e\" fill-opacity=\"0.4\" stroke=\"#616161\"",
-        ),
-    };
+    let (initial, dropped_initial) = initial(&v, plan, dims);
+    s += &initial;
     s += "</g>\n<g id=\"cells\">\n";
     for cell in &outcome.cells {
         for set in cell.iter().skip(1) {
@@ -274,25 +197,143 @@ pub fn svg(
         s += &path(&v, tr, i, j, "stroke=\"#757575\" stroke-width=\"0.4\"");
     }
     s += "</g>\n";
-    for p in &outcome.properties {
-        if let Some(tr) = &p.counterexample {
-            s += "<g id=\"counterexample\">\n";
-            s += &path(&v, tr, i, j, "stroke=\"#b71c1c\" stroke-width=\"2\"");
-            for x in &tr.states {
-                if x[i].is_finite() && x[j].is_finite() {
-                    s += &format!(
-                        "<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"#b71c1c\"/>\n",
-                        f(v.px(x[i])),
-                        f(v.py(x[j]))
-                    );
-                }
-            }
-            s += "</g>\n";
-            break;
+    if let Some(tr) = outcome
+        .properties
+        .iter()
+        .find_map(|p| p.counterexample.as_ref())
+    {
+        s += &counterexample(&v, tr, dims);
+    }
+    s += &caption(
+        &v,
+        title,
+        plan,
+        outcome,
+        dims,
+        dropped_goal || dropped_initial,
+    );
+    s += "</svg>\n";
+    s
+}
+
+/// The window: every finite set and state of the plotted coordinates
+/// `(i, j)`, with a 5 % margin (`[-1, 1]²` when there is none).
+fn window(plan: &Plan, outcome: &Outcome, (i, j): (usize, usize), samples: &[Trajectory]) -> View {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    let mut grow = |x: f64, y: f64| {
+        if x.is_finite() && y.is_finite() {
+            lo = [lo[0].min(x), lo[1].min(y)];
+            hi = [hi[0].max(x), hi[1].max(y)];
+        }
+    };
+    for b in &outcome.reach {
+        if b.is_finite() {
+            grow(b.lo[i], b.lo[j]);
+            grow(b.hi[i], b.hi[j]);
         }
     }
-    // axes and caption
-    s += &format!(
+    for tr in samples {
+        for x in &tr.states {
+            grow(x[i], x[j]);
+        }
+    }
+    let x0 = plan.initial.bbox();
+    grow(x0.lo[i], x0.lo[j]);
+    grow(x0.hi[i], x0.hi[j]);
+    if !(lo[0].is_finite() && lo[1].is_finite()) {
+        lo = [-1.0, -1.0];
+        hi = [1.0, 1.0];
+    }
+    let span = |a: f64, b: f64| (b - a).max(1e-9);
+    let (mx, my) = (0.05 * span(lo[0], hi[0]), 0.05 * span(lo[1], hi[1]));
+    View {
+        x0: lo[0] - mx,
+        x1: hi[0] + mx,
+        y0: lo[1] - my,
+        y1: hi[1] + my,
+    }
+}
+
+/// The goal (green) and avoid sets (red) clipped to the window, and
+/// whether an inequality on other coordinates was left out.
+fn properties(v: &View, plan: &Plan, (i, j): (usize, usize)) -> (String, bool) {
+    let window = [(v.x0, v.y0), (v.x1, v.y0), (v.x1, v.y1), (v.x0, v.y1)];
+    let mut s = String::new();
+    let mut dropped = false;
+    for p in &plan.properties {
+        let (members, style) = match &p.kind {
+            PropertyKind::Goal(g) => (
+                vec![g],
+                "fill=\"#2e7d32\" fill-opacity=\"0.15\" stroke=\"#2e7d32\"",
+            ),
+            PropertyKind::Avoid { members, .. } => (
+                members.iter().collect(),
+                "fill=\"#c62828\" fill-opacity=\"0.15\" stroke=\"#c62828\"",
+            ),
+        };
+        for m in members {
+            let (rows, d) = planar(&m.rows, i, j);
+            dropped |= d;
+            let poly = clip(&window, &rows);
+            if poly.len() >= 3 {
+                s += &format!("<!-- {} -->\n", xml(&p.name));
+                s += &polygon(v, &poly, style);
+            }
+        }
+    }
+    (s, dropped)
+}
+
+/// The initial set (grey): a polytope's planar rows clipped to its box,
+/// else its box; and whether an inequality on other coordinates was left
+/// out.
+fn initial(v: &View, plan: &Plan, (i, j): (usize, usize)) -> (String, bool) {
+    let style = "fill=\"#9e9e9e\" fill-opacity=\"0.4\" stroke=\"#616161\"";
+    match &plan.initial {
+        Region::Polytope { bbox, rows } => {
+            let (rows, dropped) = planar(rows, i, j);
+            let b = [
+                (bbox.lo[i], bbox.lo[j]),
+                (bbox.hi[i], bbox.lo[j]),
+                (bbox.hi[i], bbox.hi[j]),
+                (bbox.lo[i], bbox.hi[j]),
+            ];
+            (polygon(v, &clip(&b, &rows), style), dropped)
+        }
+        _ => (rect(v, &plan.initial.bbox(), i, j, style), false),
+    }
+}
+
+/// The falsifying trajectory's group (red, with a dot per finite state).
+fn counterexample(v: &View, tr: &Trajectory, (i, j): (usize, usize)) -> String {
+    let mut s = "<g id=\"counterexample\">\n".to_string();
+    s += &path(v, tr, i, j, "stroke=\"#b71c1c\" stroke-width=\"2\"");
+    for x in &tr.states {
+        if x[i].is_finite() && x[j].is_finite() {
+            s += &format!(
+                "<circle cx=\"{}\" cy=\"{}\" r=\"3\" fill=\"#b71c1c\"/>\n",
+                f(v.px(x[i])),
+                f(v.py(x[j]))
+            );
+        }
+    }
+    s += "</g>\n";
+    s
+}
+
+/// The frame, the axes' labels and the caption (the title, the verdict,
+/// and a note when inequalities were left out of the drawing).
+fn caption(
+    v: &View,
+    title: &str,
+    plan: &Plan,
+    outcome: &Outcome,
+    (i, j): (usize, usize),
+    dropped: bool,
+) -> String {
+    let total = SIZE + 2.0 * PAD;
+    let mut s = format!(
         "<rect x=\"{p}\" y=\"{p}\" width=\"{w}\" height=\"{w}\" fill=\"none\" stroke=\"black\"/>\n",
         p = f(PAD),
         w = f(SIZE)
@@ -326,7 +367,6 @@ pub fn svg(
         outcome.verdict.as_str(),
         note
     );
-    s += "</svg>\n";
     s
 }
 

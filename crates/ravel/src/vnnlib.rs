@@ -22,6 +22,9 @@
 //! FALSIFIED input may lie on the boundary of the unsafe set (the generated
 //! spec says so).
 
+// the importer reads untrusted text: no panicking shortcuts
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -59,7 +62,8 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     fn err(&self, at: usize, message: impl Into<String>) -> ImportError {
-        let before = &self.text[..at.min(self.text.len())];
+        // positions are of ASCII characters (or the end): character boundaries
+        let before = self.text.get(..at.min(self.text.len())).unwrap_or_default();
         let line = before.matches('\n').count() + 1;
         let column = before
             .rsplit('\n')
@@ -77,11 +81,10 @@ fn parse_sexps(cx: &Ctx, text: &str) -> Result<Vec<Sexp>, ImportError> {
     let bytes = text.as_bytes();
     let mut stack: Vec<(Vec<Sexp>, usize)> = vec![(Vec::new(), 0)];
     let mut i = 0;
-    while i < bytes.len() {
-        let c = bytes[i];
+    while let Some(&c) = bytes.get(i) {
         match c {
             b';' => {
-                while i < bytes.len() && bytes[i] != b'\n' {
+                while bytes.get(i).is_some_and(|&b| b != b'\n') {
                     i += 1;
                 }
             }
@@ -105,13 +108,14 @@ fn parse_sexps(cx: &Ctx, text: &str) -> Result<Vec<Sexp>, ImportError> {
             c if c.is_ascii_whitespace() => i += 1,
             _ => {
                 let start = i;
-                while i < bytes.len()
-                    && !bytes[i].is_ascii_whitespace()
-                    && !matches!(bytes[i], b'(' | b')' | b';')
+                while bytes
+                    .get(i)
+                    .is_some_and(|b| !b.is_ascii_whitespace() && !matches!(b, b'(' | b')' | b';'))
                 {
                     i += 1;
                 }
-                let atom = String::from_utf8_lossy(&bytes[start..i]).into_owned();
+                let atom =
+                    String::from_utf8_lossy(bytes.get(start..i).unwrap_or_default()).into_owned();
                 if let Some(top) = stack.last_mut() {
                     top.0.push(Sexp::Atom(atom, start));
                 }
@@ -238,24 +242,24 @@ impl Importer<'_> {
                     Some((Sexp::Atom(h, _), rest)) => (h.as_str(), rest),
                     _ => return Err(self.cx.err(*at, "expected an arithmetic expression")),
                 };
-                match (head, args.len()) {
-                    ("+", n) if n >= 1 => {
+                match (head, args) {
+                    ("+", [_, ..]) => {
                         let mut acc = Linear::default();
                         for a in args {
                             acc = acc.plus(self.linear(a)?);
                         }
                         Ok(acc)
                     }
-                    ("-", 1) => Ok(self.linear(&args[0])?.scaled(-1.0)),
-                    ("-", n) if n >= 2 => {
-                        let mut acc = self.linear(&args[0])?;
-                        for a in &args[1..] {
+                    ("-", [a]) => Ok(self.linear(a)?.scaled(-1.0)),
+                    ("-", [first, rest @ ..]) => {
+                        let mut acc = self.linear(first)?;
+                        for a in rest {
                             acc = acc.plus(self.linear(a)?.scaled(-1.0));
                         }
                         Ok(acc)
                     }
-                    ("*", 2) => {
-                        let (a, b) = (self.linear(&args[0])?, self.linear(&args[1])?);
+                    ("*", [a, b]) => {
+                        let (a, b) = (self.linear(a)?, self.linear(b)?);
                         if a.terms.is_empty() {
                             Ok(b.scaled(a.constant))
                         } else if b.terms.is_empty() {
@@ -285,8 +289,8 @@ impl Importer<'_> {
             Some((Sexp::Atom(h, _), rest)) => (h.as_str(), rest),
             _ => return Err(self.cx.err(*at, "expected a constraint")),
         };
-        match head {
-            "and" | "or" => {
+        match (head, args) {
+            ("and" | "or", _) => {
                 if args.is_empty() {
                     return Err(self.cx.err(*at, format!("an empty `{head}` is not supported")));
                 }
@@ -313,8 +317,8 @@ impl Importer<'_> {
                     k => (k, Tree::And(parts.into_iter().map(|p| p.1).collect())),
                 })
             }
-            "<=" | ">=" | "<" | ">" | "=" if args.len() == 2 => {
-                let mut diff = self.linear(&args[0])?.plus(self.linear(&args[1])?.scaled(-1.0));
+            ("<=" | ">=" | "<" | ">" | "=", [lhs, rhs]) => {
+                let mut diff = self.linear(lhs)?.plus(self.linear(rhs)?.scaled(-1.0));
                 diff.terms.retain(|_, v| *v != 0.0);
                 if diff.terms.is_empty() {
                     return Err(self.cx.err(*at, "a comparison without variables constrains nothing"));
@@ -444,110 +448,23 @@ pub fn import(
         outputs: ravel_base::limits::MAX_DIM as usize,
         declared: BTreeMap::new(),
     };
-    let mut input_rows: Vec<Row> = Vec::new();
-    let mut output_trees: Vec<Tree> = Vec::new();
-    let mut strict = false;
+    let mut asserted = Asserted::default();
     for e in &sexps {
-        let Sexp::List(items, at) = e else {
-            return Err(im.cx.err(
-                e.at(),
-                "expected a command `(declare-const …)` or `(assert …)`",
-            ));
-        };
-        match items.first() {
-            Some(Sexp::Atom(h, _)) if h == "declare-const" => {
-                let (var, sort) = match (items.get(1), items.get(2), items.len()) {
-                    (Some(Sexp::Atom(v, vat)), Some(Sexp::Atom(s, sat)), 3) => {
-                        ((v.as_str(), *vat), (s.as_str(), *sat))
-                    }
-                    _ => return Err(im.cx.err(*at, "expected `(declare-const NAME Real)`")),
-                };
-                if sort.0 != "Real" {
-                    return Err(im.cx.err(
-                        sort.1,
-                        format!("sort `{}` is not supported (only Real)", clean(sort.0)),
-                    ));
-                }
-                let Some(v) = im.variable(var.0) else {
-                    return Err(im.cx.err(
-                        var.1,
-                        format!("`{}` is not an input X_i or an output Y_j", clean(var.0)),
-                    ));
-                };
-                if v.1 >= im.inputs {
-                    return Err(im.cx.err(
-                        var.1,
-                        format!(
-                            "`{}`: ravel analyses at most {} inputs and outputs",
-                            clean(var.0),
-                            im.inputs
-                        ),
-                    ));
-                }
-                if im.declared.insert(v, var.1).is_some() {
-                    return Err(im
-                        .cx
-                        .err(var.1, format!("`{}` is declared twice", clean(var.0))));
-                }
-            }
-            Some(Sexp::Atom(h, _)) if h == "assert" && items.len() == 2 => {
-                strict |= contains_strict(&items[1]);
-                let (kind, tree) = im.constraint(&items[1])?;
-                split(tree, kind, &mut input_rows, &mut output_trees);
-            }
-            Some(Sexp::Atom(h, hat)) => {
-                return Err(im.cx.err(
-                    *hat,
-                    format!(
-                        "command `{}` is not supported (supported: declare-const, assert)",
-                        clean(h)
-                    ),
-                ))
-            }
-            _ => return Err(im.cx.err(*at, "expected a command")),
-        }
+        im.command(e, &mut asserted)?;
     }
-    for (out, letter) in [(false, 'X'), (true, 'Y')] {
-        let count = im.declared.keys().filter(|k| k.0 == out).count();
-        if count == 0 {
-            return Err(im.cx.err(0, format!("no {letter}_i is declared")));
-        }
-        if let Some(((_, k), at)) = im
-            .declared
-            .iter()
-            .find(|((o, k), _)| *o == out && *k >= count)
-        {
-            return Err(im.cx.err(*at, format!("{letter}_{k} is declared but not every {letter}_i below it: indices must run from 0 without gaps")));
-        }
-        if out {
-            im.outputs = count;
-        } else {
-            im.inputs = count;
-        }
-    }
-    if output_trees.is_empty() {
+    im.count_declared()?;
+    if asserted.outputs.is_empty() {
         return Err(im.cx.err(
             0,
             "there is no constraint on the outputs: every input would be a counterexample",
         ));
     }
-    let members = dnf(Tree::And(output_trees), MAX_MEMBERS).ok_or_else(|| {
+    let members = dnf(Tree::And(asserted.outputs), MAX_MEMBERS).ok_or_else(|| {
         im.cx.err(
             0,
             format!("the output constraints expand into more than {MAX_MEMBERS} polytopes"),
         )
     })?;
-    // the input set: a box when every row bounds one variable
-    let mut lo = vec![f64::NEG_INFINITY; im.inputs];
-    let mut hi = vec![f64::INFINITY; im.inputs];
-    let mut general = Vec::new();
-    for r in &input_rows {
-        match r.coefs.as_slice() {
-            [(i, c)] if *c > 0.0 => hi[*i] = hi[*i].min(r.rhs / c),
-            [(i, c)] if *c < 0.0 => lo[*i] = lo[*i].max(r.rhs / c),
-            _ => general.push(r.clone()),
-        }
-    }
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -562,7 +479,7 @@ pub fn import(
         s,
         "// the input set and the outputs that must never occur (the avoid set)."
     );
-    if strict {
+    if asserted.strict {
         let _ = writeln!(
             s,
             "// Strict comparisons are read as non-strict: the avoid set is the closure"
@@ -578,29 +495,7 @@ pub fn import(
         im.inputs, im.outputs
     );
     let _ = writeln!(s, "model \"{}\"\n", model_path.replace('"', "\\\""));
-    if general.is_empty() {
-        if let Some(i) = (0..im.inputs).find(|&i| !(lo[i].is_finite() && hi[i].is_finite())) {
-            return Err(im.cx.err(
-                0,
-                format!("X_{i} is not bounded: every input needs a lower and an upper bound"),
-            ));
-        }
-        let parts: Vec<String> = (0..im.inputs)
-            .map(|i| format!("x[{i}] in [{}, {}]", fmt_num(lo[i]), fmt_num(hi[i])))
-            .collect();
-        let _ = writeln!(s, "input X = box({})\n", parts.join(",\n              "));
-    } else {
-        let mut rows: Vec<String> = general.iter().map(|r| row_text(r, "x")).collect();
-        for i in 0..im.inputs {
-            if lo[i].is_finite() {
-                rows.push(format!("x[{i}] >= {}", fmt_num(lo[i])));
-            }
-            if hi[i].is_finite() {
-                rows.push(format!("x[{i}] <= {}", fmt_num(hi[i])));
-            }
-        }
-        let _ = writeln!(s, "input X = {{ {} }}\n", rows.join(",\n            "));
-    }
+    s += &im.input_set(&asserted.inputs)?;
     let texts: Vec<String> = members
         .iter()
         .map(|m| {
@@ -616,6 +511,165 @@ pub fn import(
     Ok(s)
 }
 
+/// What the asserts say: the input rows (a conjunction), the output
+/// constraints (a conjunction), and whether a strict comparison occurs.
+#[derive(Default)]
+struct Asserted {
+    inputs: Vec<Row>,
+    outputs: Vec<Tree>,
+    strict: bool,
+}
+
+impl Importer<'_> {
+    /// One top-level command: a declaration, or an assert added to
+    /// `asserted`.
+    fn command(&mut self, e: &Sexp, asserted: &mut Asserted) -> Result<(), ImportError> {
+        let Sexp::List(items, at) = e else {
+            return Err(self.cx.err(
+                e.at(),
+                "expected a command `(declare-const …)` or `(assert …)`",
+            ));
+        };
+        match items.as_slice() {
+            [Sexp::Atom(h, _), ..] if h == "declare-const" => self.declare(items, *at),
+            [Sexp::Atom(h, _), body] if h == "assert" => {
+                asserted.strict |= contains_strict(body);
+                let (kind, tree) = self.constraint(body)?;
+                split(tree, kind, &mut asserted.inputs, &mut asserted.outputs);
+                Ok(())
+            }
+            [Sexp::Atom(h, hat), ..] => Err(self.cx.err(
+                *hat,
+                format!(
+                    "command `{}` is not supported (supported: declare-const, assert)",
+                    clean(h)
+                ),
+            )),
+            _ => Err(self.cx.err(*at, "expected a command")),
+        }
+    }
+
+    /// `(declare-const NAME Real)` (`items`, at `at`) of an input `X_i` or
+    /// an output `Y_j`, each once.
+    fn declare(&mut self, items: &[Sexp], at: usize) -> Result<(), ImportError> {
+        let (var, sort) = match items {
+            [_, Sexp::Atom(v, vat), Sexp::Atom(s, sat)] => ((v.as_str(), *vat), (s.as_str(), *sat)),
+            _ => return Err(self.cx.err(at, "expected `(declare-const NAME Real)`")),
+        };
+        if sort.0 != "Real" {
+            return Err(self.cx.err(
+                sort.1,
+                format!("sort `{}` is not supported (only Real)", clean(sort.0)),
+            ));
+        }
+        let Some(v) = self.variable(var.0) else {
+            return Err(self.cx.err(
+                var.1,
+                format!("`{}` is not an input X_i or an output Y_j", clean(var.0)),
+            ));
+        };
+        if v.1 >= self.inputs {
+            return Err(self.cx.err(
+                var.1,
+                format!(
+                    "`{}`: ravel analyses at most {} inputs and outputs",
+                    clean(var.0),
+                    self.inputs
+                ),
+            ));
+        }
+        if self.declared.insert(v, var.1).is_some() {
+            return Err(self
+                .cx
+                .err(var.1, format!("`{}` is declared twice", clean(var.0))));
+        }
+        Ok(())
+    }
+
+    /// The numbers of inputs and outputs: the declared `X_i` and `Y_j`,
+    /// which must run from 0 without gaps.
+    fn count_declared(&mut self) -> Result<(), ImportError> {
+        for (out, letter) in [(false, 'X'), (true, 'Y')] {
+            let count = self.declared.keys().filter(|k| k.0 == out).count();
+            if count == 0 {
+                return Err(self.cx.err(0, format!("no {letter}_i is declared")));
+            }
+            if let Some(((_, k), at)) = self
+                .declared
+                .iter()
+                .find(|((o, k), _)| *o == out && *k >= count)
+            {
+                return Err(self.cx.err(*at, format!("{letter}_{k} is declared but not every {letter}_i below it: indices must run from 0 without gaps")));
+            }
+            if out {
+                self.outputs = count;
+            } else {
+                self.inputs = count;
+            }
+        }
+        Ok(())
+    }
+
+    /// The input set's item (`input X = …`) from the input rows: a box when
+    /// every row bounds one variable (then every input needs both bounds),
+    /// else a polytope of the other rows and the bounds.
+    fn input_set(&self, input_rows: &[Row]) -> Result<String, ImportError> {
+        let mut lo = vec![f64::NEG_INFINITY; self.inputs];
+        let mut hi = vec![f64::INFINITY; self.inputs];
+        let mut general = Vec::new();
+        for r in input_rows {
+            // every variable is declared, and the declared indices run
+            // from 0 to `inputs` without gaps: `i` is in range
+            match r.coefs.as_slice() {
+                [(i, c)] if *c > 0.0 => {
+                    if let Some(h) = hi.get_mut(*i) {
+                        *h = h.min(r.rhs / c);
+                    }
+                }
+                [(i, c)] if *c < 0.0 => {
+                    if let Some(l) = lo.get_mut(*i) {
+                        *l = l.max(r.rhs / c);
+                    }
+                }
+                _ => general.push(r.clone()),
+            }
+        }
+        let bounds = lo.iter().zip(&hi).enumerate();
+        if general.is_empty() {
+            if let Some(i) = lo
+                .iter()
+                .zip(&hi)
+                .position(|(l, h)| !(l.is_finite() && h.is_finite()))
+            {
+                return Err(self.cx.err(
+                    0,
+                    format!("X_{i} is not bounded: every input needs a lower and an upper bound"),
+                ));
+            }
+            let parts: Vec<String> = bounds
+                .map(|(i, (l, h))| format!("x[{i}] in [{}, {}]", fmt_num(*l), fmt_num(*h)))
+                .collect();
+            Ok(format!(
+                "input X = box({})\n\n",
+                parts.join(",\n              ")
+            ))
+        } else {
+            let mut rows: Vec<String> = general.iter().map(|r| row_text(r, "x")).collect();
+            for (i, (l, h)) in bounds {
+                if l.is_finite() {
+                    rows.push(format!("x[{i}] >= {}", fmt_num(*l)));
+                }
+                if h.is_finite() {
+                    rows.push(format!("x[{i}] <= {}", fmt_num(*h)));
+                }
+            }
+            Ok(format!(
+                "input X = {{ {} }}\n\n",
+                rows.join(",\n            ")
+            ))
+        }
+    }
+}
 fn contains_strict(e: &Sexp) -> bool {
     match e {
         Sexp::Atom(a, _) => a == "<" || a == ">",

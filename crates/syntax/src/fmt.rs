@@ -63,45 +63,48 @@ fn lex(src: &str) -> Vec<Tok> {
             Some(Tok::Punct(p)) if p == "]"
         )
     };
-    while i < chars.len() {
-        let c = chars[i];
+    // the character at `k`, and the characters `a..b` (`a ≤ b ≤ len`) as text
+    let at = |k: usize| chars.get(k).copied();
+    let between =
+        |a: usize, b: usize| -> String { chars.get(a..b).unwrap_or_default().iter().collect() };
+    while let Some(c) = at(i) {
         if c == '\u{feff}' || c == ' ' || c == '\t' {
             i += 1;
         } else if c == '\n' || c == '\r' {
-            if c == '\r' && chars.get(i + 1) == Some(&'\n') {
+            if c == '\r' && at(i + 1) == Some('\n') {
                 i += 1;
             }
             out.push(Tok::Newline);
             i += 1;
-        } else if c == '/' && chars.get(i + 1) == Some(&'/') {
+        } else if c == '/' && at(i + 1) == Some('/') {
             let start = i;
-            while i < chars.len() && chars[i] != '\n' && chars[i] != '\r' {
+            while at(i).is_some_and(|d| d != '\n' && d != '\r') {
                 i += 1;
             }
-            let text: String = chars[start..i].iter().collect();
+            let text = between(start, i);
             out.push(Tok::Line(text.trim_end().to_string()));
-        } else if c == '/' && chars.get(i + 1) == Some(&'*') {
+        } else if c == '/' && at(i + 1) == Some('*') {
             let start = i;
             i += 2;
-            while i < chars.len() && !(chars[i] == '*' && chars.get(i + 1) == Some(&'/')) {
+            while at(i).is_some_and(|d| !(d == '*' && at(i + 1) == Some('/'))) {
                 i += 1;
             }
             i = (i + 2).min(chars.len());
-            out.push(Tok::Block(chars[start..i].iter().collect()));
+            out.push(Tok::Block(between(start, i)));
         } else if c == '"' {
             let start = i;
             i += 1;
-            while i < chars.len() && chars[i] != '"' && chars[i] != '\n' && chars[i] != '\r' {
+            while at(i).is_some_and(|d| d != '"' && d != '\n' && d != '\r') {
                 i += 1;
             }
             i = (i + 1).min(chars.len());
-            out.push(Tok::Str(chars[start..i].iter().collect()));
+            out.push(Tok::Str(between(start, i)));
         } else if c.is_ascii_alphabetic() || c == '_' {
             let start = i;
-            while i < chars.len() && (chars[i].is_ascii_alphanumeric() || chars[i] == '_') {
+            while at(i).is_some_and(|d| d.is_ascii_alphanumeric() || d == '_') {
                 i += 1;
             }
-            out.push(Tok::Word(chars[start..i].iter().collect()));
+            out.push(Tok::Word(between(start, i)));
         } else if c.is_ascii_digit()
             || (c == '.' && chars.get(i + 1).is_some_and(char::is_ascii_digit))
             || (c == '-'
@@ -114,22 +117,22 @@ fn lex(src: &str) -> Vec<Tok> {
             if c == '-' {
                 i += 1;
             }
-            while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '.') {
+            while at(i).is_some_and(|d| d.is_ascii_digit() || d == '.') {
                 i += 1;
             }
-            if i < chars.len() && (chars[i] == 'e' || chars[i] == 'E') {
+            if matches!(at(i), Some('e' | 'E')) {
                 let mut k = i + 1;
-                if k < chars.len() && (chars[k] == '+' || chars[k] == '-') {
+                if matches!(at(k), Some('+' | '-')) {
                     k += 1;
                 }
-                if k < chars.len() && chars[k].is_ascii_digit() {
+                if at(k).is_some_and(|d| d.is_ascii_digit()) {
                     i = k;
-                    while i < chars.len() && chars[i].is_ascii_digit() {
+                    while at(i).is_some_and(|d| d.is_ascii_digit()) {
                         i += 1;
                     }
                 }
             }
-            out.push(Tok::Num(chars[start..i].iter().collect()));
+            out.push(Tok::Num(between(start, i)));
         } else if (c == '<' || c == '>') && chars.get(i + 1) == Some(&'=') {
             out.push(Tok::Punct(format!("{c}=")));
             i += 2;
@@ -308,6 +311,7 @@ pub fn format(source: &str) -> Result<String, Error> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

@@ -6,11 +6,13 @@
 //! `ravel::check`, which reports every problem at once.
 
 #![forbid(unsafe_code)]
+// the parser reads untrusted text: no panicking shortcuts
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub mod ast;
 pub mod diag;
 pub mod fmt;
 
-use pest::iterators::Pair;
+use pest::iterators::{Pair, Pairs};
 use pest::Parser;
 
 use crate::diag::{Code, Diagnostic};
@@ -26,6 +28,30 @@ mod generated {
 use generated::{Grammar, Rule};
 
 type P<'a> = Pair<'a, Rule>;
+
+/// The children of a pair, in order.
+type Children<'a> = Pairs<'a, Rule>;
+
+/// The next child of a pair where the grammar guarantees one (`what`
+/// names it).
+#[allow(clippy::expect_used)] // pest yields only parse trees the grammar admits
+fn child<'a>(children: &mut Children<'a>, what: &str) -> P<'a> {
+    children.next().expect(what)
+}
+
+/// A quoted path (the grammar's `string`, which starts and ends with `"`)
+/// without its quotes.
+fn quoted(lit: P) -> Spanned<String> {
+    let text = lit.as_str();
+    let inside = text
+        .strip_prefix('"')
+        .and_then(|t| t.strip_suffix('"'))
+        .unwrap_or(text);
+    Spanned {
+        node: inside.to_string(),
+        span: span(&lit),
+    }
+}
 
 fn span(p: &P) -> Span {
     Span::new(p.as_span().start(), p.as_span().end())
@@ -82,9 +108,10 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
 pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
     let mut pairs =
         Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
-    let spec = pairs
-        .next()
-        .expect("the grammar's `spec` rule always yields one pair");
+    let spec = child(
+        &mut pairs,
+        "the grammar's `spec` rule always yields one pair",
+    );
     let mut b = Builder { errors: Vec::new() };
     let items = spec
         .into_inner()
@@ -211,7 +238,7 @@ impl Builder {
         let mut inner = p.into_inner();
         match rule {
             Rule::system => {
-                let name = self.ident(inner.next().expect("system name"));
+                let name = self.ident(child(&mut inner, "system name"));
                 let stmts = inner.map(|st| self.system_stmt(st)).collect();
                 Item::System(System {
                     name,
@@ -219,92 +246,22 @@ impl Builder {
                     span: s,
                 })
             }
-            Rule::controller => {
-                let lit = inner.next().expect("controller path");
-                let text = lit.as_str();
-                Item::Controller(Spanned {
-                    node: text[1..text.len() - 1].to_string(),
-                    span: span(&lit),
-                })
-            }
-            Rule::initial | Rule::goal => {
-                let name = self.ident(inner.next().expect("set name"));
-                let set = self.set_expr(inner.next().expect("set"));
-                let def = SetDef { name, set, span: s };
-                if rule == Rule::initial {
-                    Item::Initial(def)
-                } else {
-                    Item::Goal(def)
+            Rule::controller => Item::Controller(quoted(child(&mut inner, "controller path"))),
+            Rule::initial | Rule::goal | Rule::input_set | Rule::require => {
+                let def = self.set_def(s, &mut inner);
+                match rule {
+                    Rule::initial => Item::Initial(def),
+                    Rule::goal => Item::Goal(def),
+                    Rule::input_set => Item::Input(def),
+                    _ => Item::Require(def),
                 }
             }
-            Rule::avoid => {
-                let name = self.ident(inner.next().expect("set name"));
-                let set = self.set_expr(inner.next().expect("set"));
-                let steps = inner.next().map(|st| {
-                    let ss = span(&st);
-                    let which = st.into_inner().next().expect("steps form");
-                    let is_range = which.as_rule() == Rule::steps_range;
-                    let mut nums = which.into_inner();
-                    let a = self.integer(nums.next().expect("step")).node;
-                    let b = if is_range {
-                        self.integer(nums.next().expect("step")).node
-                    } else {
-                        a
-                    };
-                    Spanned {
-                        node: (a, b),
-                        span: ss,
-                    }
-                });
-                Item::Avoid(AvoidDef {
-                    name,
-                    set,
-                    steps,
-                    span: s,
-                })
-            }
-            Rule::horizon => Item::Horizon(self.integer(inner.next().expect("horizon value"))),
-            Rule::network => {
-                let name = self.ident(inner.next().expect("network name"));
-                let (mut input, mut output) = (Vec::new(), Vec::new());
-                for st in inner {
-                    let is_input = st.as_rule() == Rule::input_decl;
-                    let mut parts = st.into_inner();
-                    let n = self.ident(parts.next().expect("vector name"));
-                    let d = self.integer(parts.next().expect("dimension"));
-                    if is_input {
-                        input.push((n, d));
-                    } else {
-                        output.push((n, d));
-                    }
-                }
-                Item::Network(NetworkDecl {
-                    name,
-                    input,
-                    output,
-                    span: s,
-                })
-            }
-            Rule::model => {
-                let lit = inner.next().expect("model path");
-                let text = lit.as_str();
-                Item::Model(Spanned {
-                    node: text[1..text.len() - 1].to_string(),
-                    span: span(&lit),
-                })
-            }
-            Rule::input_set | Rule::require => {
-                let name = self.ident(inner.next().expect("set name"));
-                let set = self.set_expr(inner.next().expect("set"));
-                let def = SetDef { name, set, span: s };
-                if rule == Rule::input_set {
-                    Item::Input(def)
-                } else {
-                    Item::Require(def)
-                }
-            }
+            Rule::avoid => Item::Avoid(self.avoid(s, inner)),
+            Rule::horizon => Item::Horizon(self.integer(child(&mut inner, "horizon value"))),
+            Rule::network => Item::Network(self.network(s, inner)),
+            Rule::model => Item::Model(quoted(child(&mut inner, "model path"))),
             Rule::robust => {
-                let name = self.ident(inner.next().expect("property name"));
+                let name = self.ident(child(&mut inner, "property name"));
                 let label = inner.next().map(|l| self.integer(l));
                 Item::Robust(RobustDef {
                     name,
@@ -313,41 +270,8 @@ impl Builder {
                 })
             }
             Rule::select => {
-                let name = self.ident(inner.next().expect("select name"));
-                let stmts = inner
-                    .map(|st| {
-                        let ss = span(&st);
-                        let rule = st.as_rule();
-                        let arg = st.into_inner().next().expect("select argument");
-                        let asp = span(&arg);
-                        let node = match (rule, arg.as_rule()) {
-                            (Rule::norm_stmt, _) => SelectStmt::Norm(Spanned {
-                                node: arg.as_str().to_string(),
-                                span: asp,
-                            }),
-                            (_, Rule::string) => {
-                                let text = arg.as_str();
-                                SelectStmt::File(Spanned {
-                                    node: text[1..text.len() - 1].to_string(),
-                                    span: asp,
-                                })
-                            }
-                            (Rule::epsilon_stmt, Rule::number) => SelectStmt::Epsilon(Spanned {
-                                node: Value::Scalar(self.number(arg).node),
-                                span: asp,
-                            }),
-                            (Rule::epsilon_stmt, _) => SelectStmt::Epsilon(Spanned {
-                                node: Value::Vector(self.numbers(arg)),
-                                span: asp,
-                            }),
-                            _ => SelectStmt::Inline(Spanned {
-                                node: self.value_of(arg),
-                                span: asp,
-                            }),
-                        };
-                        Spanned { node, span: ss }
-                    })
-                    .collect();
+                let name = self.ident(child(&mut inner, "select name"));
+                let stmts = inner.map(|st| self.select_stmt(st)).collect();
                 Item::Select(SelectDef {
                     name,
                     stmts,
@@ -355,8 +279,8 @@ impl Builder {
                 })
             }
             Rule::radius => {
-                let name = self.ident(inner.next().expect("radius name"));
-                let property = self.ident(inner.next().expect("property name"));
+                let name = self.ident(child(&mut inner, "radius name"));
+                let property = self.ident(child(&mut inner, "property name"));
                 let budget = inner.next().map(|b| self.budget(b)).unwrap_or_default();
                 Item::Radius(RadiusDef {
                     name,
@@ -373,30 +297,123 @@ impl Builder {
         }
     }
 
+    /// `NAME = set` of an `initial`, `goal`, `input` or `require` item
+    /// spanning `s`.
+    fn set_def(&mut self, s: Span, inner: &mut Children) -> SetDef {
+        let name = self.ident(child(inner, "set name"));
+        let set = self.set_expr(child(inner, "set"));
+        SetDef { name, set, span: s }
+    }
+
+    /// An `avoid` item spanning `s`: `NAME = set`, then optionally the
+    /// steps it applies at.
+    fn avoid(&mut self, s: Span, mut inner: Children) -> AvoidDef {
+        let name = self.ident(child(&mut inner, "set name"));
+        let set = self.set_expr(child(&mut inner, "set"));
+        let steps = inner.next().map(|st| self.steps(st));
+        AvoidDef {
+            name,
+            set,
+            steps,
+            span: s,
+        }
+    }
+
+    /// `at steps [a, b]`, or `at step k` as `(k, k)`.
+    fn steps(&mut self, st: P) -> Spanned<(u64, u64)> {
+        let ss = span(&st);
+        let which = child(&mut st.into_inner(), "steps form");
+        let is_range = which.as_rule() == Rule::steps_range;
+        let mut nums = which.into_inner();
+        let a = self.integer(child(&mut nums, "step")).node;
+        let b = if is_range {
+            self.integer(child(&mut nums, "step")).node
+        } else {
+            a
+        };
+        Spanned {
+            node: (a, b),
+            span: ss,
+        }
+    }
+
+    /// A `network` item spanning `s`: its name, then its `input` and
+    /// `output` declarations in order.
+    fn network(&mut self, s: Span, mut inner: Children) -> NetworkDecl {
+        let name = self.ident(child(&mut inner, "network name"));
+        let (mut input, mut output) = (Vec::new(), Vec::new());
+        for st in inner {
+            let is_input = st.as_rule() == Rule::input_decl;
+            let mut parts = st.into_inner();
+            let n = self.ident(child(&mut parts, "vector name"));
+            let d = self.integer(child(&mut parts, "dimension"));
+            if is_input {
+                input.push((n, d));
+            } else {
+                output.push((n, d));
+            }
+        }
+        NetworkDecl {
+            name,
+            input,
+            output,
+            span: s,
+        }
+    }
+
+    /// One statement of a `select` item: `epsilon`, `norm`, or the
+    /// observations (a file or an inline value).
+    fn select_stmt(&mut self, st: P) -> Spanned<SelectStmt> {
+        let ss = span(&st);
+        let rule = st.as_rule();
+        let arg = child(&mut st.into_inner(), "select argument");
+        let asp = span(&arg);
+        let node = match (rule, arg.as_rule()) {
+            (Rule::norm_stmt, _) => SelectStmt::Norm(Spanned {
+                node: arg.as_str().to_string(),
+                span: asp,
+            }),
+            (_, Rule::string) => SelectStmt::File(quoted(arg)),
+            (Rule::epsilon_stmt, Rule::number) => SelectStmt::Epsilon(Spanned {
+                node: Value::Scalar(self.number(arg).node),
+                span: asp,
+            }),
+            (Rule::epsilon_stmt, _) => SelectStmt::Epsilon(Spanned {
+                node: Value::Vector(self.numbers(arg)),
+                span: asp,
+            }),
+            _ => SelectStmt::Inline(Spanned {
+                node: self.value_of(arg),
+                span: asp,
+            }),
+        };
+        Spanned { node, span: ss }
+    }
+
     fn system_stmt(&mut self, p: P) -> SystemStmt {
         let s = span(&p);
         let rule = p.as_rule();
         let mut inner = p.into_inner();
         if rule == Rule::time_decl {
             let _keyword = inner.next();
-            let kind = self.ident(inner.next().expect("time kind"));
+            let kind = self.ident(child(&mut inner, "time kind"));
             let dt = inner.next().map(|d| self.number(d));
             return SystemStmt::Time { kind, dt, span: s };
         }
-        let name = self.ident(inner.next().expect("statement name"));
+        let name = self.ident(child(&mut inner, "statement name"));
         match rule {
             Rule::state_decl => SystemStmt::State {
                 name,
-                dim: self.integer(inner.next().expect("dim")),
+                dim: self.integer(child(&mut inner, "dim")),
                 span: s,
             },
             Rule::control_decl => SystemStmt::Control {
                 name,
-                dim: self.integer(inner.next().expect("dim")),
+                dim: self.integer(child(&mut inner, "dim")),
                 span: s,
             },
             Rule::bound_decl => {
-                let b = inner.next().expect("box");
+                let b = child(&mut inner, "box");
                 let bs = span(&b);
                 SystemStmt::Bound {
                     name,
@@ -408,7 +425,7 @@ impl Builder {
                 }
             }
             Rule::assign => {
-                let v = inner.next().expect("value");
+                let v = child(&mut inner, "value");
                 let vs = span(&v);
                 let node = if v.as_rule() == Rule::per_step {
                     Value::PerStep(
@@ -443,7 +460,7 @@ impl Builder {
     }
 
     fn value(&mut self, p: P) -> Value {
-        let v = p.into_inner().next().expect("value kind");
+        let v = child(&mut p.into_inner(), "value kind");
         self.value_of(v)
     }
 
@@ -463,10 +480,10 @@ impl Builder {
                     .collect(),
             ),
             Rule::vector => Value::Vector(self.numbers(v)),
-            Rule::eye => Value::Eye(self.integer(v.into_inner().next().expect("eye size"))),
+            Rule::eye => Value::Eye(self.integer(child(&mut v.into_inner(), "eye size"))),
             Rule::zeros => {
                 let mut it = v.into_inner();
-                let n = self.integer(it.next().expect("zeros size"));
+                let n = self.integer(child(&mut it, "zeros size"));
                 let m = it.next().map(|m| self.integer(m));
                 Value::Zeros(n, m)
             }
@@ -488,13 +505,13 @@ impl Builder {
                     }
                     Rule::ball => {
                         let mut it = a.into_inner();
-                        let c = it.next().expect("centre");
+                        let c = child(&mut it, "centre");
                         let cs = span(&c);
                         let center = Spanned {
                             node: self.numbers(c),
                             span: cs,
                         };
-                        let r = it.next().expect("radius");
+                        let r = child(&mut it, "radius");
                         let rs = span(&r);
                         let radius = Spanned {
                             node: match r.as_rule() {
@@ -525,14 +542,14 @@ impl Builder {
     }
 
     fn box_set(&mut self, p: P) -> BoxSet {
-        let body = p.into_inner().next().expect("box body");
+        let body = child(&mut p.into_inner(), "box body");
         match body.as_rule() {
             Rule::named_intervals => BoxSet::Named(
                 body.into_inner()
                     .map(|ni| {
                         let mut it = ni.into_inner();
-                        let c = self.component(it.next().expect("component"));
-                        let i = self.interval(it.next().expect("interval"));
+                        let c = self.component(child(&mut it, "component"));
+                        let i = self.interval(child(&mut it, "interval"));
                         (c, i)
                     })
                     .collect(),
@@ -544,16 +561,16 @@ impl Builder {
     fn interval(&mut self, p: P) -> Interval {
         let s = span(&p);
         let mut it = p.into_inner();
-        let lo = self.number(it.next().expect("lo"));
-        let hi = self.number(it.next().expect("hi"));
+        let lo = self.number(child(&mut it, "lo"));
+        let hi = self.number(child(&mut it, "hi"));
         Interval { lo, hi, span: s }
     }
 
     fn component(&mut self, p: P) -> Component {
         let s = span(&p);
         let mut it = p.into_inner();
-        let name = self.ident(it.next().expect("name"));
-        let index = self.integer(it.next().expect("index"));
+        let name = self.ident(child(&mut it, "name"));
+        let index = self.integer(child(&mut it, "index"));
         Component {
             name,
             index,
@@ -563,41 +580,38 @@ impl Builder {
 
     fn term(&mut self, p: P, sign: f64) -> (f64, Component) {
         let mut coef = sign;
-        let mut comp = None;
         for part in p.into_inner() {
             match part.as_rule() {
                 Rule::unsigned => coef *= part.as_str().parse::<f64>().unwrap_or(f64::NAN),
-                Rule::component => comp = Some(self.component(part)),
+                // the grammar puts the component last
+                Rule::component => return (coef, self.component(part)),
                 other => unreachable!("grammar term rule {other:?}"),
             }
         }
-        (coef, comp.expect("a term has a component"))
+        unreachable!("a term has a component")
     }
 
     fn constraint(&mut self, p: P) -> Constraint {
         let s = span(&p);
         let mut it = p.into_inner();
-        let expr = it.next().expect("expression");
-        let cmp = match it.next().expect("comparison").as_str() {
+        let expr = child(&mut it, "expression");
+        let cmp = match child(&mut it, "comparison").as_str() {
             "<=" => Cmp::Le,
             _ => Cmp::Ge,
         };
-        let rhs = self.number(it.next().expect("rhs"));
+        let rhs = self.number(child(&mut it, "rhs"));
         let mut terms = Vec::new();
         let mut sign = 1.0;
         for part in expr.into_inner() {
             match part.as_rule() {
                 Rule::first_term => {
-                    let mut sub = part.into_inner().peekable();
+                    let mut sub = part.into_inner();
+                    let mut t = child(&mut sub, "term");
                     let mut first_sign = 1.0;
-                    if sub.peek().is_some_and(|q| q.as_rule() == Rule::add_op) {
-                        first_sign = if sub.next().expect("op").as_str() == "-" {
-                            -1.0
-                        } else {
-                            1.0
-                        };
+                    if t.as_rule() == Rule::add_op {
+                        first_sign = if t.as_str() == "-" { -1.0 } else { 1.0 };
+                        t = child(&mut sub, "term");
                     }
-                    let t = sub.next().expect("term");
                     terms.push(self.term(t, first_sign));
                 }
                 Rule::add_op => sign = if part.as_str() == "-" { -1.0 } else { 1.0 },
@@ -618,8 +632,8 @@ impl Builder {
         b.into_inner()
             .map(|item| {
                 let mut kv = item.into_inner();
-                let k = self.ident(kv.next().expect("budget name"));
-                let v = self.number(kv.next().expect("budget value"));
+                let k = self.ident(child(&mut kv, "budget name"));
+                let v = self.number(child(&mut kv, "budget value"));
                 (k, v)
             })
             .collect()
@@ -628,7 +642,7 @@ impl Builder {
     fn analysis_stmt(&mut self, p: P) -> Spanned<AnalysisStmt> {
         let s = span(&p);
         let rule = p.as_rule();
-        let arg = p.into_inner().next().expect("analysis argument");
+        let arg = child(&mut p.into_inner(), "analysis argument");
         let node = match rule {
             Rule::propagator => AnalysisStmt::Propagator(self.ident(arg)),
             Rule::partitioner => match arg.as_rule() {
@@ -637,7 +651,7 @@ impl Builder {
                 }
                 Rule::guided => {
                     let mut it = arg.into_inner();
-                    let g = it.next().expect("guide");
+                    let g = child(&mut it, "guide");
                     let guide = Spanned {
                         node: g.as_str().to_string(),
                         span: span(&g),
@@ -649,7 +663,7 @@ impl Builder {
             },
             Rule::boundary | Rule::shape => match arg.as_rule() {
                 Rule::boundary_polytope => {
-                    let d = arg.into_inner().next().expect("directions");
+                    let d = child(&mut arg.into_inner(), "directions");
                     let ds = span(&d);
                     let node = match d.as_rule() {
                         Rule::integer => Value::Scalar(self.integer(d).node as f64),
@@ -686,6 +700,7 @@ impl Builder {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

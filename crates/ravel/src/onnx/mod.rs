@@ -23,6 +23,9 @@
 //! [`InputType`] (`double`: float64; anything else: float32): the type a
 //! counterexample's input must have.
 
+// the loader reads untrusted files: no panicking shortcuts
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
 pub mod build;
 pub mod proto;
 
@@ -31,7 +34,9 @@ use std::collections::{BTreeMap, HashMap};
 use nalgebra::{DMatrix, DVector};
 use prost::Message;
 
-use proto::{dtype, AttributeProto, ModelProto, NodeProto, TensorProto};
+use proto::{
+    dtype, AttributeProto, GraphProto, ModelProto, NodeProto, TensorProto, ValueInfoProto,
+};
 use ravel_base::limits::{
     MAX_CONTROLLER_BYTES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS, MAX_TENSOR_ELEMENTS, MAX_WIDTH,
 };
@@ -592,6 +597,8 @@ impl Lowering {
         self.push_affine(DMatrix::identity(n, n), bias);
     }
 
+    /// Lower one node onto the chain: a constant is recorded, any other
+    /// op must consume the running value and becomes its new producer.
     fn node(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
         let op = n.op_type.clone().unwrap_or_default();
         if n.domain
@@ -610,17 +617,7 @@ impl Lowering {
         }
         let out = n.output.first().cloned().unwrap_or_default();
         if op == "Constant" {
-            let t = attr(n, "value").and_then(|a| a.t.as_ref()).ok_or_else(|| {
-                err(
-                    OnnxErrorKind::Unsupported,
-                    format!("{} has no tensor 'value'", node_label(n)),
-                    "use a tensor-valued Constant",
-                )
-            })?;
-            let t = tensor_values(t, &ExternalFiles::new())?;
-            check_finite(&format!("constant '{}'", sanitize(&out)), &t)?;
-            self.consts.insert(out, t);
-            return Ok(());
+            return self.constant(n, out);
         }
         let first = n.input.first().cloned().unwrap_or_default();
         let uses_current = n.input.iter().any(|i| i == &self.current);
@@ -635,294 +632,20 @@ impl Lowering {
                 "export a plain feed-forward network on one input (constant folding on)",
             ));
         }
+        let data_first = first == self.current;
         match op.as_str() {
-            "Gemm" => {
-                if first != self.current || attr_i(n, "transA", 0) != 0 {
-                    return Err(err(
-                        OnnxErrorKind::Unsupported,
-                        format!(
-                            "{} must have the data as its first input and transA = 0",
-                            node_label(n)
-                        ),
-                        "re-export with the input as A",
-                    ));
-                }
-                let bname = n.input.get(1).cloned().unwrap_or_default();
-                let bt = self.consts.get(&bname).cloned().ok_or_else(|| {
-                    err(
-                        OnnxErrorKind::Unsupported,
-                        format!(
-                            "{} has a non-constant weight '{}'",
-                            node_label(n),
-                            sanitize(&bname)
-                        ),
-                        "weights must be initializers",
-                    )
-                })?;
-                if bt.dims.len() != 2 {
-                    return Err(err(
-                        OnnxErrorKind::Malformed,
-                        format!(
-                            "{} has weight of shape {}, expected 2-D",
-                            node_label(n),
-                            shape_text(&bt.dims)
-                        ),
-                        "re-export the model",
-                    ));
-                }
-                let &[r, c] = bt.dims.as_slice() else {
-                    return Err(err(
-                        OnnxErrorKind::Malformed,
-                        format!("{} has a weight that is not 2-D", node_label(n)),
-                        "re-export the model",
-                    ));
-                };
-                Self::check_width(n, r.max(c))?;
-                let m = DMatrix::from_row_slice(r, c, &bt.data);
-                let alpha = attr_f(n, "alpha", 1.0);
-                let beta = attr_f(n, "beta", 1.0);
-                if !(alpha.is_finite() && beta.is_finite()) {
-                    return Err(err(
-                        OnnxErrorKind::NonFinite,
-                        format!(
-                            "{} has a non-finite alpha ({alpha}) or beta ({beta})",
-                            node_label(n)
-                        ),
-                        "re-export the model",
-                    ));
-                }
-                let mut w = if attr_i(n, "transB", 0) != 0 {
-                    m
-                } else {
-                    m.transpose()
-                };
-                if alpha != 1.0 {
-                    w *= alpha;
-                }
-                self.expect_width(n, w.ncols())?;
-                let outputs = w.nrows();
-                let mut b = DVector::zeros(outputs);
-                if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
-                    let ct = self.consts.get(cname).cloned().ok_or_else(|| {
-                        err(
-                            OnnxErrorKind::Unsupported,
-                            format!(
-                                "{} has a non-constant bias '{}'",
-                                node_label(n),
-                                sanitize(cname)
-                            ),
-                            "biases must be initializers",
-                        )
-                    })?;
-                    self.width = Some(outputs);
-                    b = self.broadcast(n, &ct)? * beta;
-                }
-                self.push_affine(w, b);
-            }
-            "MatMul" => {
-                let (t, const_first) = self.const_operand(n)?;
-                if const_first || t.dims.len() != 2 {
-                    return Err(err(
-                        OnnxErrorKind::Unsupported,
-                        format!(
-                            "{} must multiply the data (left) by a 2-D constant (right)",
-                            node_label(n)
-                        ),
-                        "export Linear layers as x @ W",
-                    ));
-                }
-                let &[r, c] = t.dims.as_slice() else {
-                    return Err(err(
-                        OnnxErrorKind::Unsupported,
-                        format!("{} must multiply by a 2-D constant", node_label(n)),
-                        "export Linear layers as x @ W",
-                    ));
-                };
-                Self::check_width(n, r.max(c))?;
-                let w = DMatrix::from_row_slice(r, c, &t.data).transpose();
-                self.expect_width(n, w.ncols())?;
-                let outputs = w.nrows();
-                self.push_affine(w, DVector::zeros(outputs));
-            }
-            "Add" | "Sub" | "Mul" | "Div" => {
-                let (t, const_first) = self.const_operand(n)?;
-                let v = self.broadcast(n, &t)?;
-                Self::check_width(n, v.len())?;
-                let w = v.len();
-                match (op.as_str(), const_first) {
-                    ("Add", _) => self.add_bias(v),
-                    ("Sub", false) => self.add_bias(-v),
-                    ("Sub", true) => self.push_affine(-DMatrix::<f64>::identity(w, w), v),
-                    ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
-                    (_, false) => {
-                        if v.iter().any(|x| *x == 0.0) {
-                            return Err(err(
-                                OnnxErrorKind::NonFinite,
-                                format!("{} divides by zero", node_label(n)),
-                                "fix the normalisation constants",
-                            ));
-                        }
-                        self.push_affine(
-                            DMatrix::from_diagonal(&v.map(|x| 1.0 / x)),
-                            DVector::zeros(w),
-                        );
-                    }
-                    (_, true) => {
-                        return Err(err(
-                            OnnxErrorKind::Unsupported,
-                            format!(
-                                "{} divides a constant by the data, which is not affine",
-                                node_label(n)
-                            ),
-                            "only division by constants is supported",
-                        ));
-                    }
-                }
-            }
+            "Gemm" => self.gemm(n, data_first)?,
+            "MatMul" => self.matmul(n)?,
+            "Add" | "Sub" | "Mul" | "Div" => self.elementwise(n, &op)?,
             "Relu" => self.layers.push(Layer::Act(Activation::Relu)),
             "Tanh" => self.layers.push(Layer::Act(Activation::Tanh)),
             "Sigmoid" => self.layers.push(Layer::Act(Activation::Sigmoid)),
-            "Clip" => {
-                let w = self.width()?;
-                // opset ≥ 11: optional constant inputs; before: attributes
-                let bound = |k: usize, name: &str| -> Result<Option<Vec<f64>>, OnnxError> {
-                    match n.input.get(k).filter(|s| !s.is_empty()) {
-                        Some(c) => {
-                            let t = self.consts.get(c).ok_or_else(|| {
-                                err(
-                                    OnnxErrorKind::Unsupported,
-                                    format!("{} has a computed {name}", node_label(n)),
-                                    "clip bounds must be constants",
-                                )
-                            })?;
-                            Ok(Some(self.broadcast(n, t)?.iter().copied().collect()))
-                        }
-                        None => Ok(attr(n, name).and_then(|a| a.f).map(|f| vec![f as f64; w])),
-                    }
-                };
-                // ±FLT_MAX (the old opsets' defaults, written out by some
-                // exporters) means no bound on that side
-                let unbounded = |v: Option<Vec<f64>>| {
-                    v.filter(|v| !v.iter().all(|x| x.abs() >= f32::MAX as f64))
-                };
-                let (lo, hi) = (unbounded(bound(1, "min")?), unbounded(bound(2, "max")?));
-                if let (Some(l), Some(h)) = (&lo, &hi) {
-                    if l.iter().zip(h).any(|(l, h)| l > h) {
-                        return Err(err(
-                            OnnxErrorKind::Malformed,
-                            format!("{} has min above max", node_label(n)),
-                            "check the clamp bounds of the exported policy",
-                        ));
-                    }
-                }
-                if lo
-                    .iter()
-                    .chain(&hi)
-                    .flatten()
-                    .any(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
-                {
-                    return Err(err(
-                        OnnxErrorKind::NonFinite,
-                        format!("{} has a non-finite or huge bound", node_label(n)),
-                        "clamp to finite bounds within ±1e15",
-                    ));
-                }
-                let shown = |v: &Option<Vec<f64>>| {
-                    v.as_ref()
-                        .and_then(|v| v.first())
-                        .map_or("·".to_string(), |x| ravel_syntax::diag::compact(*x))
-                };
-                self.notes
-                    .push(format!("clip [{}, {}]", shown(&lo), shown(&hi)));
-                self.layers.extend(ravel_base::nn::clamp_layers(
-                    w,
-                    lo.as_deref(),
-                    hi.as_deref(),
-                ));
-            }
-            "LeakyRelu" => {
-                let w = self.width()?;
-                let alpha = attr_f(n, "alpha", 0.01);
-                if !alpha.is_finite() || alpha.abs() > MAX_MAGNITUDE {
-                    return Err(err(
-                        OnnxErrorKind::NonFinite,
-                        format!("{} has a non-finite slope", node_label(n)),
-                        "re-export the model",
-                    ));
-                }
-                Self::check_width(n, 2 * w)?;
-                self.notes.push(format!(
-                    "leaky_relu {} as relu pairs",
-                    ravel_syntax::diag::compact(alpha)
-                ));
-                self.layers
-                    .extend(ravel_base::nn::leaky_relu_layers(w, alpha));
-            }
-            "BatchNormalization" => {
-                let training = attr_i(n, "training_mode", 0) != 0
-                    || n.output.iter().skip(1).any(|o| !o.is_empty());
-                if training {
-                    return Err(training_mode(n));
-                }
-                let w = self.width()?;
-                let param = |k: usize| -> Result<Vec<f64>, OnnxError> {
-                    let name = n.input.get(k).cloned().unwrap_or_default();
-                    let t = self.consts.get(&name).ok_or_else(|| {
-                        err(
-                            OnnxErrorKind::Unsupported,
-                            format!(
-                                "{} has a non-constant parameter '{}'",
-                                node_label(n),
-                                sanitize(&name)
-                            ),
-                            "export in eval mode with constant folding on",
-                        )
-                    })?;
-                    Ok(self.broadcast(n, t)?.iter().copied().collect())
-                };
-                let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);
-                let eps = attr_f(n, "epsilon", 1e-5);
-                let mut diag = Vec::with_capacity(w);
-                let mut shift = Vec::with_capacity(w);
-                for (((s, b), m), v) in scale.iter().zip(&bias).zip(&mean).zip(&var) {
-                    let d = s / (v + eps).sqrt();
-                    let denominator = v + eps;
-                    if denominator.is_nan() || denominator <= 0.0 || !d.is_finite() {
-                        return Err(err(
-                            OnnxErrorKind::NonFinite,
-                            format!("{} has a non-positive variance", node_label(n)),
-                            "re-export the model",
-                        ));
-                    }
-                    diag.push(d);
-                    shift.push(b - m * d);
-                }
-                self.notes.push("batch normalisation".to_string());
-                self.push_affine(
-                    DMatrix::from_diagonal(&DVector::from_vec(diag)),
-                    DVector::from_vec(shift),
-                );
-            }
-            "Dropout" => {
-                if first != self.current {
-                    return Err(err(
-                        OnnxErrorKind::Unsupported,
-                        format!("{} drops out a constant", node_label(n)),
-                        "export with constant folding on",
-                    ));
-                }
-                // opset ≥ 12: a third input `training_mode`; before 7: `is_test`
-                let training = n.input.get(2).filter(|s| !s.is_empty()).is_some_and(|t| {
-                    self.consts
-                        .get(t)
-                        .is_none_or(|c| c.data.iter().any(|v| *v != 0.0))
-                }) || attr(n, "is_test").and_then(|a| a.i) == Some(0);
-                if training {
-                    return Err(training_mode(n));
-                }
-            }
+            "Clip" => self.clip(n)?,
+            "LeakyRelu" => self.leaky_relu(n)?,
+            "BatchNormalization" => self.batch_norm(n)?,
+            "Dropout" => self.dropout(n, data_first)?,
             "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" => {
-                if first != self.current {
+                if !data_first {
                     return Err(err(
                         OnnxErrorKind::Unsupported,
                         format!("{} reshapes a constant", node_label(n)),
@@ -943,6 +666,339 @@ impl Lowering {
             }
         }
         self.current = out;
+        Ok(())
+    }
+
+    /// A `Constant` node: its tensor, checked finite, under the name `out`.
+    fn constant(&mut self, n: &NodeProto, out: String) -> Result<(), OnnxError> {
+        let t = attr(n, "value").and_then(|a| a.t.as_ref()).ok_or_else(|| {
+            err(
+                OnnxErrorKind::Unsupported,
+                format!("{} has no tensor 'value'", node_label(n)),
+                "use a tensor-valued Constant",
+            )
+        })?;
+        let t = tensor_values(t, &ExternalFiles::new())?;
+        check_finite(&format!("constant '{}'", sanitize(&out)), &t)?;
+        self.consts.insert(out, t);
+        Ok(())
+    }
+
+    /// The constant `name` that node `n` takes as its `what` (a weight or
+    /// a bias), or the error naming it (`hint`: how to fix it).
+    fn named_const(
+        &self,
+        n: &NodeProto,
+        name: &str,
+        what: &str,
+        hint: &str,
+    ) -> Result<Tensor, OnnxError> {
+        self.consts.get(name).cloned().ok_or_else(|| {
+            err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} has a non-constant {what} '{}'",
+                    node_label(n),
+                    sanitize(name)
+                ),
+                hint,
+            )
+        })
+    }
+
+    /// `Gemm`: `alpha·A·B + beta·C` with the data as `A` (`data_first`,
+    /// `transA = 0`), constant `B` (optionally transposed) and `C`.
+    fn gemm(&mut self, n: &NodeProto, data_first: bool) -> Result<(), OnnxError> {
+        if !data_first || attr_i(n, "transA", 0) != 0 {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} must have the data as its first input and transA = 0",
+                    node_label(n)
+                ),
+                "re-export with the input as A",
+            ));
+        }
+        let bname = n.input.get(1).cloned().unwrap_or_default();
+        let bt = self.named_const(n, &bname, "weight", "weights must be initializers")?;
+        if bt.dims.len() != 2 {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "{} has weight of shape {}, expected 2-D",
+                    node_label(n),
+                    shape_text(&bt.dims)
+                ),
+                "re-export the model",
+            ));
+        }
+        let &[r, c] = bt.dims.as_slice() else {
+            return Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} has a weight that is not 2-D", node_label(n)),
+                "re-export the model",
+            ));
+        };
+        Self::check_width(n, r.max(c))?;
+        let m = DMatrix::from_row_slice(r, c, &bt.data);
+        let alpha = attr_f(n, "alpha", 1.0);
+        let beta = attr_f(n, "beta", 1.0);
+        if !(alpha.is_finite() && beta.is_finite()) {
+            return Err(err(
+                OnnxErrorKind::NonFinite,
+                format!(
+                    "{} has a non-finite alpha ({alpha}) or beta ({beta})",
+                    node_label(n)
+                ),
+                "re-export the model",
+            ));
+        }
+        let mut w = if attr_i(n, "transB", 0) != 0 {
+            m
+        } else {
+            m.transpose()
+        };
+        if alpha != 1.0 {
+            w *= alpha;
+        }
+        self.expect_width(n, w.ncols())?;
+        let outputs = w.nrows();
+        let mut b = DVector::zeros(outputs);
+        if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
+            let ct = self.named_const(n, cname, "bias", "biases must be initializers")?;
+            self.width = Some(outputs);
+            b = self.broadcast(n, &ct)? * beta;
+        }
+        self.push_affine(w, b);
+        Ok(())
+    }
+
+    /// `MatMul`: the data (left) times a 2-D constant (right).
+    fn matmul(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let (t, const_first) = self.const_operand(n)?;
+        if const_first || t.dims.len() != 2 {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} must multiply the data (left) by a 2-D constant (right)",
+                    node_label(n)
+                ),
+                "export Linear layers as x @ W",
+            ));
+        }
+        let &[r, c] = t.dims.as_slice() else {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("{} must multiply by a 2-D constant", node_label(n)),
+                "export Linear layers as x @ W",
+            ));
+        };
+        Self::check_width(n, r.max(c))?;
+        let w = DMatrix::from_row_slice(r, c, &t.data).transpose();
+        self.expect_width(n, w.ncols())?;
+        let outputs = w.nrows();
+        self.push_affine(w, DVector::zeros(outputs));
+        Ok(())
+    }
+
+    /// `Add`, `Sub`, `Mul` or `Div` (`op`) of the data and a constant of one
+    /// or `width` elements (division only by the constant).
+    fn elementwise(&mut self, n: &NodeProto, op: &str) -> Result<(), OnnxError> {
+        let (t, const_first) = self.const_operand(n)?;
+        let v = self.broadcast(n, &t)?;
+        Self::check_width(n, v.len())?;
+        let w = v.len();
+        match (op, const_first) {
+            ("Add", _) => self.add_bias(v),
+            ("Sub", false) => self.add_bias(-v),
+            ("Sub", true) => self.push_affine(-DMatrix::<f64>::identity(w, w), v),
+            ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
+            (_, false) => {
+                if v.iter().any(|x| *x == 0.0) {
+                    return Err(err(
+                        OnnxErrorKind::NonFinite,
+                        format!("{} divides by zero", node_label(n)),
+                        "fix the normalisation constants",
+                    ));
+                }
+                self.push_affine(
+                    DMatrix::from_diagonal(&v.map(|x| 1.0 / x)),
+                    DVector::zeros(w),
+                );
+            }
+            (_, true) => {
+                return Err(err(
+                    OnnxErrorKind::Unsupported,
+                    format!(
+                        "{} divides a constant by the data, which is not affine",
+                        node_label(n)
+                    ),
+                    "only division by constants is supported",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `Clip`: a clamp between optional bounds (ReLU layers that compute
+    /// it exactly).
+    fn clip(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let w = self.width()?;
+        // ±FLT_MAX (the old opsets' defaults, written out by some
+        // exporters) means no bound on that side
+        let unbounded =
+            |v: Option<Vec<f64>>| v.filter(|v| !v.iter().all(|x| x.abs() >= f32::MAX as f64));
+        let lo = unbounded(self.clip_bound(n, w, 1, "min")?);
+        let hi = unbounded(self.clip_bound(n, w, 2, "max")?);
+        if let (Some(l), Some(h)) = (&lo, &hi) {
+            if l.iter().zip(h).any(|(l, h)| l > h) {
+                return Err(err(
+                    OnnxErrorKind::Malformed,
+                    format!("{} has min above max", node_label(n)),
+                    "check the clamp bounds of the exported policy",
+                ));
+            }
+        }
+        if lo
+            .iter()
+            .chain(&hi)
+            .flatten()
+            .any(|v| !v.is_finite() || v.abs() > MAX_MAGNITUDE)
+        {
+            return Err(err(
+                OnnxErrorKind::NonFinite,
+                format!("{} has a non-finite or huge bound", node_label(n)),
+                "clamp to finite bounds within ±1e15",
+            ));
+        }
+        let shown = |v: &Option<Vec<f64>>| {
+            v.as_ref()
+                .and_then(|v| v.first())
+                .map_or("·".to_string(), |x| ravel_syntax::diag::compact(*x))
+        };
+        self.notes
+            .push(format!("clip [{}, {}]", shown(&lo), shown(&hi)));
+        self.layers.extend(ravel_base::nn::clamp_layers(
+            w,
+            lo.as_deref(),
+            hi.as_deref(),
+        ));
+        Ok(())
+    }
+
+    /// A `Clip` bound per element of a value of width `w`: opset ≥ 11's
+    /// optional constant input `k`, or before, the attribute `name`.
+    fn clip_bound(
+        &self,
+        n: &NodeProto,
+        w: usize,
+        k: usize,
+        name: &str,
+    ) -> Result<Option<Vec<f64>>, OnnxError> {
+        match n.input.get(k).filter(|s| !s.is_empty()) {
+            Some(c) => {
+                let t = self.consts.get(c).ok_or_else(|| {
+                    err(
+                        OnnxErrorKind::Unsupported,
+                        format!("{} has a computed {name}", node_label(n)),
+                        "clip bounds must be constants",
+                    )
+                })?;
+                Ok(Some(self.broadcast(n, t)?.iter().copied().collect()))
+            }
+            None => Ok(attr(n, name).and_then(|a| a.f).map(|f| vec![f as f64; w])),
+        }
+    }
+
+    /// `LeakyRelu`: pairs of ReLUs that compute it exactly.
+    fn leaky_relu(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let w = self.width()?;
+        let alpha = attr_f(n, "alpha", 0.01);
+        if !alpha.is_finite() || alpha.abs() > MAX_MAGNITUDE {
+            return Err(err(
+                OnnxErrorKind::NonFinite,
+                format!("{} has a non-finite slope", node_label(n)),
+                "re-export the model",
+            ));
+        }
+        Self::check_width(n, 2 * w)?;
+        self.notes.push(format!(
+            "leaky_relu {} as relu pairs",
+            ravel_syntax::diag::compact(alpha)
+        ));
+        self.layers
+            .extend(ravel_base::nn::leaky_relu_layers(w, alpha));
+        Ok(())
+    }
+
+    /// `BatchNormalization` in inference form: the diagonal affine map
+    /// `scale/√(var + ε)`, `B − mean·scale/√(var + ε)`.
+    fn batch_norm(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
+        let training =
+            attr_i(n, "training_mode", 0) != 0 || n.output.iter().skip(1).any(|o| !o.is_empty());
+        if training {
+            return Err(training_mode(n));
+        }
+        let w = self.width()?;
+        let param = |k: usize| -> Result<Vec<f64>, OnnxError> {
+            let name = n.input.get(k).cloned().unwrap_or_default();
+            let t = self.consts.get(&name).ok_or_else(|| {
+                err(
+                    OnnxErrorKind::Unsupported,
+                    format!(
+                        "{} has a non-constant parameter '{}'",
+                        node_label(n),
+                        sanitize(&name)
+                    ),
+                    "export in eval mode with constant folding on",
+                )
+            })?;
+            Ok(self.broadcast(n, t)?.iter().copied().collect())
+        };
+        let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);
+        let eps = attr_f(n, "epsilon", 1e-5);
+        let mut diag = Vec::with_capacity(w);
+        let mut shift = Vec::with_capacity(w);
+        for (((s, b), m), v) in scale.iter().zip(&bias).zip(&mean).zip(&var) {
+            let d = s / (v + eps).sqrt();
+            let denominator = v + eps;
+            if denominator.is_nan() || denominator <= 0.0 || !d.is_finite() {
+                return Err(err(
+                    OnnxErrorKind::NonFinite,
+                    format!("{} has a non-positive variance", node_label(n)),
+                    "re-export the model",
+                ));
+            }
+            diag.push(d);
+            shift.push(b - m * d);
+        }
+        self.notes.push("batch normalisation".to_string());
+        self.push_affine(
+            DMatrix::from_diagonal(&DVector::from_vec(diag)),
+            DVector::from_vec(shift),
+        );
+        Ok(())
+    }
+
+    /// `Dropout` in inference mode (the identity) on the data
+    /// (`data_first`).
+    fn dropout(&self, n: &NodeProto, data_first: bool) -> Result<(), OnnxError> {
+        if !data_first {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!("{} drops out a constant", node_label(n)),
+                "export with constant folding on",
+            ));
+        }
+        // opset ≥ 12: a third input `training_mode`; before 7: `is_test`
+        let training = n.input.get(2).filter(|s| !s.is_empty()).is_some_and(|t| {
+            self.consts
+                .get(t)
+                .is_none_or(|c| c.data.iter().any(|v| *v != 0.0))
+        }) || attr(n, "is_test").and_then(|a| a.i) == Some(0);
+        if training {
+            return Err(training_mode(n));
+        }
         Ok(())
     }
 
@@ -1017,20 +1073,7 @@ fn decode_message(e: &prost::DecodeError) -> String {
 
 /// Decode an ONNX model and lower it to a network.
 pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxError> {
-    let model = ModelProto::decode(bytes).map_err(|e| {
-        err(
-            OnnxErrorKind::Decode,
-            format!("the file is not a valid ONNX model ({})", decode_message(&e)),
-            "check that the path points to an .onnx file exported by PyTorch, Keras or similar, and that it is complete",
-        )
-    })?;
-    if model.opset_import.is_empty() {
-        return Err(err(
-            OnnxErrorKind::Decode,
-            "the file has no opset_import: it is truncated or not an ONNX model",
-            "every ONNX exporter writes the operator set version; re-export or re-copy the file",
-        ));
-    }
+    let model = decode(bytes)?;
     let graph = model.graph.as_ref().ok_or_else(|| {
         err(
             OnnxErrorKind::Decode,
@@ -1038,79 +1081,10 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             "check that the path points to an .onnx file",
         )
     })?;
-    if graph.node.len() > MAX_NODES {
-        return Err(err(
-            OnnxErrorKind::Unsupported,
-            format!(
-                "the graph has {} nodes, more than ravel's limit of {MAX_NODES}",
-                graph.node.len()
-            ),
-            "ravel verifies small feed-forward controllers",
-        ));
-    }
-    let mut parameters = 0u64;
-    for t in &graph.initializer {
-        parameters = parameters.saturating_add(tensor_size(t)?.0);
-    }
-    if parameters > MAX_PARAMETERS {
-        return Err(err(
-            OnnxErrorKind::Unsupported,
-            format!("the controller has {parameters} weights, more than ravel's limit of {MAX_PARAMETERS}"),
-            "ravel verifies small feed-forward controllers",
-        ));
-    }
-    let mut consts = HashMap::new();
-    for t in &graph.initializer {
-        let name = tensor_name(t);
-        let v = tensor_values(t, external)?;
-        check_finite(&format!("initializer '{name}'"), &v)?;
-        consts.insert(name, v);
-    }
-    let data_inputs: Vec<_> = graph
-        .input
-        .iter()
-        .filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or("")))
-        .collect();
-    if data_inputs.len() != 1 {
-        return Err(err(
-            OnnxErrorKind::Unsupported,
-            format!(
-                "the graph has {} data inputs; ravel needs exactly one (the observation vector)",
-                data_inputs.len()
-            ),
-            "export the controller with a single input tensor",
-        ));
-    }
-    let [input] = data_inputs.as_slice() else {
-        return Err(err(
-            OnnxErrorKind::Unsupported,
-            "the graph needs exactly one data input",
-            "export the controller with a single input tensor",
-        ));
-    };
-    let declared = input
-        .r#type
-        .as_ref()
-        .and_then(|t| t.tensor_type.as_ref())
-        .and_then(|t| t.shape.as_ref())
-        .map(|s| {
-            // the product of the fixed dimensions; symbolic ones (batch) count as 1
-            s.dim
-                .iter()
-                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as u64)
-                .try_fold(1u64, |a, d| a.checked_mul(d).filter(|p| *p <= MAX_WIDTH))
-        });
-    let declared = match declared {
-        Some(None) => {
-            return Err(err(
-                OnnxErrorKind::Unsupported,
-                format!("the graph input is wider than ravel's limit of {MAX_WIDTH}"),
-                "ravel verifies controllers with at most 4096 inputs",
-            ))
-        }
-        Some(Some(w)) => Some(w as usize),
-        None => None,
-    };
+    check_size(graph)?;
+    let consts = initializers(graph, external)?;
+    let input = data_input(graph, &consts)?;
+    let declared = declared_width(input)?;
     let mut low = Lowering {
         consts,
         current: input.name.clone().unwrap_or_default(),
@@ -1148,9 +1122,136 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             "give the graph input a static shape",
         ));
     };
-    // alpha, beta and Div by small constants can scale weights past the
-    // checked initializers: the network itself must be within the limits
-    for l in &low.layers {
+    check_scaled(&low.layers)?;
+    let net = Network::new(inputs, low.layers).with_input_type(input_type(input));
+    let outputs = net.outputs();
+    Ok(Controller {
+        net,
+        inputs,
+        outputs,
+        notes: low.notes,
+    })
+}
+
+/// The decoded model, which must record its operator set.
+fn decode(bytes: &[u8]) -> Result<ModelProto, OnnxError> {
+    let model = ModelProto::decode(bytes).map_err(|e| {
+        err(
+            OnnxErrorKind::Decode,
+            format!("the file is not a valid ONNX model ({})", decode_message(&e)),
+            "check that the path points to an .onnx file exported by PyTorch, Keras or similar, and that it is complete",
+        )
+    })?;
+    if model.opset_import.is_empty() {
+        return Err(err(
+            OnnxErrorKind::Decode,
+            "the file has no opset_import: it is truncated or not an ONNX model",
+            "every ONNX exporter writes the operator set version; re-export or re-copy the file",
+        ));
+    }
+    Ok(model)
+}
+
+/// Refuse a graph with more nodes or weights than ravel's limits.
+fn check_size(graph: &GraphProto) -> Result<(), OnnxError> {
+    if graph.node.len() > MAX_NODES {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph has {} nodes, more than ravel's limit of {MAX_NODES}",
+                graph.node.len()
+            ),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
+    let mut parameters = 0u64;
+    for t in &graph.initializer {
+        parameters = parameters.saturating_add(tensor_size(t)?.0);
+    }
+    if parameters > MAX_PARAMETERS {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the controller has {parameters} weights, more than ravel's limit of {MAX_PARAMETERS}"),
+            "ravel verifies small feed-forward controllers",
+        ));
+    }
+    Ok(())
+}
+
+/// The graph's initializers by name, each decoded and checked finite.
+fn initializers(
+    graph: &GraphProto,
+    external: &ExternalFiles,
+) -> Result<HashMap<String, Tensor>, OnnxError> {
+    let mut consts = HashMap::new();
+    for t in &graph.initializer {
+        let name = tensor_name(t);
+        let v = tensor_values(t, external)?;
+        check_finite(&format!("initializer '{name}'"), &v)?;
+        consts.insert(name, v);
+    }
+    Ok(consts)
+}
+
+/// The graph's one data input (an input that is not an initializer).
+fn data_input<'g>(
+    graph: &'g GraphProto,
+    consts: &HashMap<String, Tensor>,
+) -> Result<&'g ValueInfoProto, OnnxError> {
+    let data_inputs: Vec<_> = graph
+        .input
+        .iter()
+        .filter(|i| !consts.contains_key(i.name.as_deref().unwrap_or("")))
+        .collect();
+    if data_inputs.len() != 1 {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            format!(
+                "the graph has {} data inputs; ravel needs exactly one (the observation vector)",
+                data_inputs.len()
+            ),
+            "export the controller with a single input tensor",
+        ));
+    }
+    let [input] = data_inputs.as_slice() else {
+        return Err(err(
+            OnnxErrorKind::Unsupported,
+            "the graph needs exactly one data input",
+            "export the controller with a single input tensor",
+        ));
+    };
+    Ok(input)
+}
+
+/// The input's declared width: the product of its fixed dimensions
+/// (symbolic ones, such as the batch, count as 1); `None` without a shape.
+fn declared_width(input: &ValueInfoProto) -> Result<Option<usize>, OnnxError> {
+    let declared = input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.shape.as_ref())
+        .map(|s| {
+            s.dim
+                .iter()
+                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as u64)
+                .try_fold(1u64, |a, d| a.checked_mul(d).filter(|p| *p <= MAX_WIDTH))
+        });
+    match declared {
+        Some(None) => Err(err(
+            OnnxErrorKind::Unsupported,
+            format!("the graph input is wider than ravel's limit of {MAX_WIDTH}"),
+            "ravel verifies controllers with at most 4096 inputs",
+        )),
+        Some(Some(w)) => Ok(Some(w as usize)),
+        None => Ok(None),
+    }
+}
+
+/// Refuse a network whose weights left the limits: alpha, beta and `Div`
+/// by small constants can scale weights past the checked initializers.
+fn check_scaled(layers: &[Layer]) -> Result<(), OnnxError> {
+    for l in layers {
         if let Layer::Affine { w, b } = l {
             if let Some(v) = w
                 .iter()
@@ -1168,10 +1269,14 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
             }
         }
     }
-    // the input's element type is the stored model's precision: float64
-    // for `double`, float32 otherwise (the stricter rule: every float32 value
-    // is a float64 one, and float32's rounding errors bound float64's)
-    let input_type = match input
+    Ok(())
+}
+
+/// The stored model's precision, from the input's element type: float64
+/// for `double`, float32 otherwise (the stricter rule: every float32 value
+/// is a float64 one, and float32's rounding errors bound float64's).
+fn input_type(input: &ValueInfoProto) -> InputType {
+    match input
         .r#type
         .as_ref()
         .and_then(|t| t.tensor_type.as_ref())
@@ -1179,13 +1284,5 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
     {
         Some(dtype::DOUBLE) => InputType::F64,
         _ => InputType::F32,
-    };
-    let net = Network::new(inputs, low.layers).with_input_type(input_type);
-    let outputs = net.outputs();
-    Ok(Controller {
-        net,
-        inputs,
-        outputs,
-        notes: low.notes,
-    })
+    }
 }

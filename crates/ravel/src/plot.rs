@@ -218,7 +218,12 @@ pub fn svg(
 
 /// The window: every finite set and state of the plotted coordinates
 /// `(i, j)`, with a 5 % margin (`[-1, 1]²` when there is none).
-fn window(plan: &Plan, outcome: &Outcome, (i, j): (usize, usize), samples: &[Trajectory]) -> View {
+fn window(
+    plan: &SystemPlan,
+    outcome: &SystemOutcome,
+    (i, j): (usize, usize),
+    samples: &[Trajectory],
+) -> View {
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
     let mut grow = |x: f64, y: f64| {
@@ -257,7 +262,7 @@ fn window(plan: &Plan, outcome: &Outcome, (i, j): (usize, usize), samples: &[Tra
 
 /// The goal (green) and avoid sets (red) clipped to the window, and
 /// whether an inequality on other coordinates was left out.
-fn properties(v: &View, plan: &Plan, (i, j): (usize, usize)) -> (String, bool) {
+fn properties(v: &View, plan: &SystemPlan, (i, j): (usize, usize)) -> (String, bool) {
     let window = [(v.x0, v.y0), (v.x1, v.y0), (v.x1, v.y1), (v.x0, v.y1)];
     let mut s = String::new();
     let mut dropped = false;
@@ -288,7 +293,7 @@ fn properties(v: &View, plan: &Plan, (i, j): (usize, usize)) -> (String, bool) {
 /// The initial set (grey): a polytope's planar rows clipped to its box,
 /// else its box; and whether an inequality on other coordinates was left
 /// out.
-fn initial(v: &View, plan: &Plan, (i, j): (usize, usize)) -> (String, bool) {
+fn initial(v: &View, plan: &SystemPlan, (i, j): (usize, usize)) -> (String, bool) {
     let style = "fill=\"#9e9e9e\" fill-opacity=\"0.4\" stroke=\"#616161\"";
     match &plan.initial {
         Region::Polytope { bbox, rows } => {
@@ -327,8 +332,8 @@ fn counterexample(v: &View, tr: &Trajectory, (i, j): (usize, usize)) -> String {
 fn caption(
     v: &View,
     title: &str,
-    plan: &Plan,
-    outcome: &Outcome,
+    plan: &SystemPlan,
+    outcome: &SystemOutcome,
     (i, j): (usize, usize),
     dropped: bool,
 ) -> String {

@@ -13,17 +13,18 @@ use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
-mod analysis;
+mod analysis_block;
 mod controller;
-mod extra;
 mod network;
+mod regions;
 mod select;
 mod sets;
 mod system;
+mod time;
 
 use crate::ir::{Guide, Partitioner};
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
-pub use extra::{zero_order_hold, DEFAULT_BUDGET};
+pub use analysis_block::DEFAULT_BUDGET;
 pub use network::{
     is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec, SelectSpec,
     MAX_OBSERVATIONS,
@@ -36,6 +37,7 @@ use ravel_base::limits::{
 };
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{compact, Code, Diagnostic};
+pub use time::zero_order_hold;
 
 /// Data files a spec names (observation CSVs), as read by the caller:
 /// the path as written in the spec → the bytes or the read error.
@@ -933,7 +935,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     );
     let horizon = horizon(cx, it.horizons.first().copied());
     let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
-    let an = analysis::analysis(cx, &it.analyses, &sp.state, None);
+    let an = analysis_block::analysis_block(cx, &it.analyses, &sp.state, None);
     let (sys, state, control, time, time_span) =
         (sp.sys, sp.state, sp.control, sp.time, sp.time_span);
     let (mut plant, per_step_lists, limits) = (pp.plant, pp.per_step_lists, pp.limits);

@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{analysis, controller, sha256_hex, ControllerFile, Ctx};
+use super::{analysis_block, controller, sha256_hex, ControllerFile, Ctx};
 use crate::ir::{NetPropagator, Partitioner};
 use crate::onnx::Controller;
 use ravel_analysis::sets::{Polytope, Region};
@@ -642,7 +642,7 @@ pub(super) fn check_network(
     }
 
     // ---- analysis ----
-    let an = analysis::analysis(cx, &analyses, &input, Some(&output));
+    let an = analysis_block::analysis_block(cx, &analyses, &input, Some(&output));
     if let (Some(span), Some(c)) = (an.sdp_span, &net) {
         if let Some(act) = c.net.layers.iter().find_map(|l| match l {
             ravel_base::nn::Layer::Act(a) if *a != ravel_base::nn::Activation::Relu => Some(*a),

@@ -6,10 +6,18 @@ use std::collections::BTreeMap;
 use super::{partitioner_names, Ctx, BOUNDARIES, DEFAULT_SAMPLES, PLANNED_PROPAGATORS};
 use crate::ir::{Guide, NetPropagator, Partitioner};
 use ravel_analysis::closed_loop::{Boundary, Propagator};
+use ravel_analysis::partition::Budget;
 use ravel_analysis::shape::Shape;
 use ravel_base::limits::{within, MAX_CELLS, MAX_SAMPLES, MAX_SLOPE_STEPS};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{did_you_mean, Code, Diagnostic};
+
+/// Default budget of the guided partitioners.
+pub const DEFAULT_BUDGET: Budget = Budget {
+    calls: 256,
+    min_size: 1.0 / 64.0,
+    seconds: None,
+};
 
 /// The checked analysis choices (each `None` when it had an error), with
 /// the spans later checks point at.
@@ -34,7 +42,7 @@ pub(super) struct AnalysisPart {
 /// Check the (first) analysis block; defaults where it says nothing.
 /// `state` is what a partition splits (the state, or a network's input);
 /// `output` is present for network specs (the output vector shapes are over).
-pub(super) fn analysis(
+pub(super) fn analysis_block(
     cx: &mut Ctx,
     analyses: &[&Analysis],
     state: &Option<(String, usize)>,
@@ -426,4 +434,147 @@ fn at_most(
         return None;
     }
     usize::try_from(count.node).ok()
+}
+
+impl Ctx {
+    /// `boundary polytope K` or `boundary polytope [[…], …]`.
+    pub(super) fn boundary_polytope(
+        &mut self,
+        v: &Spanned<Value>,
+        name: &str,
+        n: usize,
+    ) -> Option<Boundary> {
+        match &v.node {
+            Value::Scalar(k) => {
+                let k = *k as usize;
+                if n != 2 {
+                    self.err(
+                        Diagnostic::new(Code::Boundary, v.span, format!("evenly spread directions need a 2-D state, but `{name}` has {n} components"))
+                            .label("a count of directions")
+                            .hint(format!("give the directions as a matrix with {n} columns: `boundary polytope [[…], …]`")),
+                    );
+                    return None;
+                }
+                if k == 0 || k > 1000 {
+                    self.err(
+                        Diagnostic::new(
+                            Code::Boundary,
+                            v.span,
+                            format!("{k} directions: a polytope boundary needs between 1 and 1000"),
+                        )
+                        .label("bad count")
+                        .hint("8 or 16 directions are typical"),
+                    );
+                    return None;
+                }
+                Some(Boundary::spread(k))
+            }
+            Value::Matrix(rows) => {
+                let m = self.matrix(
+                    v,
+                    "the boundary directions",
+                    rows.len(),
+                    Some(n),
+                    &format!("one direction per row, {n} columns (one per component of `{name}`)"),
+                )?;
+                for (r, row) in rows.iter().enumerate() {
+                    if m.row(r).iter().all(|v| *v == 0.0) {
+                        self.err(
+                            Diagnostic::new(
+                                Code::Boundary,
+                                row.span,
+                                "a zero direction bounds nothing",
+                            )
+                            .label("all zeros")
+                            .hint("remove the row or give it a non-zero entry"),
+                        );
+                        return None;
+                    }
+                }
+                Some(Boundary::Polytope(m))
+            }
+            _ => None,
+        }
+    }
+
+    /// The budget of a guided partitioner.
+    pub(super) fn budget(&mut self, items: &[(Spanned<String>, Spanned<f64>)]) -> Option<Budget> {
+        const NAMES: [&str; 3] = ["calls", "min_size", "time"];
+        let mut b = DEFAULT_BUDGET;
+        let mut ok = true;
+        let mut seen: Vec<(&str, Span)> = Vec::new();
+        for (k, v) in items {
+            if let Some((_, first)) = seen.iter().find(|(s, _)| *s == k.node) {
+                self.duplicate(&format!("the budget item `{}`", k.node), *first, k.span);
+                ok = false;
+                continue;
+            }
+            seen.push((&k.node, k.span));
+            let x = self.finite(v);
+            let bad = |cx: &mut Ctx, what: &str, hint: &str| {
+                cx.err(
+                    Diagnostic::new(Code::Budget, v.span, format!("`{}` {what}", k.node))
+                        .label("invalid budget")
+                        .hint(hint.to_string()),
+                );
+            };
+            match k.node.as_str() {
+                "calls" => {
+                    if !((1.0..=ravel_base::limits::MAX_CALLS as f64).contains(&x)
+                        && x.fract() == 0.0)
+                    {
+                        bad(
+                            self,
+                            "must be a whole number of cell evaluations from 1 to 100000",
+                            "e.g. `calls 200`",
+                        );
+                        ok = false;
+                    } else {
+                        b.calls = x as usize;
+                    }
+                }
+                "min_size" => {
+                    if !(x > 0.0 && x <= 1.0) {
+                        bad(
+                            self,
+                            "must be a fraction of the initial set's width in (0, 1]",
+                            "e.g. `min_size 0.01`: cells narrower than 1 % are not split",
+                        );
+                        ok = false;
+                    } else {
+                        b.min_size = x;
+                    }
+                }
+                "time" => {
+                    if !(x > 0.0 && x.is_finite()) {
+                        bad(
+                            self,
+                            "must be a positive number of seconds",
+                            "e.g. `time 2.5`",
+                        );
+                        ok = false;
+                    } else {
+                        b.seconds = Some(x);
+                    }
+                }
+                other => {
+                    let mut d = Diagnostic::new(
+                        Code::UnknownName,
+                        k.span,
+                        format!("unknown budget item `{other}`"),
+                    )
+                    .label("not a budget item");
+                    d = match did_you_mean(other, NAMES) {
+                        Some(s) => d.hint(format!(
+                            "did you mean `{s}`? Budget items: calls, min_size, time"
+                        )),
+                        None => d.hint("budget items: calls N, min_size r, time s"),
+                    };
+                    self.err(d);
+                    ok = false;
+                }
+            }
+        }
+        ok.then_some(b)
+    }
 }

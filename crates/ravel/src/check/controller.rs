@@ -1,8 +1,9 @@
 //! The controller: load it from the bytes the caller read and check its
-//! sizes against the plant.
+//! sizes against the plant; an SDP propagator's need for a ReLU network.
 
 use super::{onnx_code, ControllerFile, Ctx};
 use crate::onnx::{self, Controller};
+use ravel_base::nn::{Activation, Layer};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{Code, Diagnostic};
 
@@ -84,4 +85,44 @@ pub(super) fn controller(
     }
 
     ctrl
+}
+
+/// The semidefinite program that would encode a network.
+#[derive(Clone, Copy)]
+pub(super) enum Sdp {
+    /// Reach-SDP, over a system spec's controller.
+    Reach,
+    /// The SDP relaxation, of a network spec's model.
+    Relaxation,
+}
+
+/// An SDP (named at `span`) encodes ReLU networks only: report the first
+/// other activation of `net`.
+pub(super) fn sdp_needs_relu(cx: &mut Ctx, span: Span, net: &Controller, sdp: Sdp) {
+    let Some(act) = net.net.layers.iter().find_map(|l| match l {
+        Layer::Act(a) if *a != Activation::Relu => Some(*a),
+        _ => None,
+    }) else {
+        return;
+    };
+    let (encoder, network, instead) = match sdp {
+        Sdp::Reach => (
+            "Reach-SDP",
+            "the controller",
+            "`reach_lp` or `crown_unrolled`",
+        ),
+        Sdp::Relaxation => ("the SDP relaxation", "the model", "`crown` or `fast_lin`"),
+    };
+    cx.err(
+        Diagnostic::new(
+            Code::SdpActivation,
+            span,
+            format!(
+                "{encoder} encodes ReLU networks only, but {network} uses {}",
+                act.name()
+            ),
+        )
+        .label("needs a ReLU network")
+        .hint(format!("use {instead}, which handle tanh and sigmoid")),
+    );
 }

@@ -24,6 +24,7 @@ mod time;
 
 use crate::ir::{Guide, Partitioner};
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
+use analysis_block::AnalysisPart;
 pub use analysis_block::DEFAULT_BUDGET;
 pub use network::{
     is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec, SelectSpec,
@@ -82,24 +83,15 @@ pub fn check_task(
     if !is_network_spec(spec) {
         return check(spec, controller).map(|c| Task::System(Box::new(c)));
     }
-    let mut cx = Ctx {
-        diags: Vec::new(),
-        numbers: 0,
-    };
+    let mut cx = Ctx::new();
     let checked = network::check_network(&mut cx, spec, controller, data);
     match checked {
         Some(c) if cx.diags.is_empty() => Ok(Task::Network(Box::new(c))),
         _ => {
             if cx.diags.is_empty() {
-                cx.diags.push(
-                    Diagnostic::new(Code::Missing, Span::new(0, 0), "the spec is incomplete")
-                        .label("here")
-                        .hint("see docs/language.md"),
-                );
+                cx.err(incomplete());
             }
-            cx.diags
-                .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
-            Err(cx.diags)
+            Err(cx.sorted_diags())
         }
     }
 }
@@ -225,9 +217,56 @@ struct Mat {
     is_vector: bool,
 }
 
+/// The whole spec: where a missing item is reported.
+const WHOLE: Span = Span { start: 0, end: 0 };
+
+/// "the spec is incomplete": a part is missing although no diagnostic says why.
+fn incomplete() -> Diagnostic {
+    Diagnostic::new(Code::Missing, WHOLE, "the spec is incomplete")
+        .label("here")
+        .hint("see docs/language.md")
+}
+
+/// The controller (or model) analysed: the command line's path, pointed at
+/// where the spec names its own (`written`) or at the whole spec; else the spec's.
+fn effective_path(
+    file: Option<&ControllerFile>,
+    written: Option<&Spanned<String>>,
+) -> Option<Spanned<String>> {
+    match file.and_then(|f| f.path_override.as_ref()) {
+        Some(p) => Some(Spanned {
+            node: p.clone(),
+            span: written.map_or(WHOLE, |c| c.span),
+        }),
+        None => written.cloned(),
+    }
+}
+
+/// SHA-256 of the file's bytes in hex (empty when it was not read).
+fn file_sha256(file: Option<&ControllerFile>) -> String {
+    file.and_then(|f| f.bytes.as_ref().ok())
+        .map(|b| sha256_hex(b))
+        .unwrap_or_default()
+}
+
 impl Ctx {
+    fn new() -> Self {
+        Ctx {
+            diags: Vec::new(),
+            numbers: 0,
+        }
+    }
+
     fn err(&mut self, d: Diagnostic) {
         self.diags.push(d);
+    }
+
+    /// The diagnostics so far, taken out sorted by position (and by code at
+    /// one position; otherwise in the order found).
+    fn sorted_diags(&mut self) -> Vec<Diagnostic> {
+        self.diags
+            .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
+        std::mem::take(&mut self.diags)
     }
 
     fn finite(&mut self, x: &Spanned<f64>) -> f64 {
@@ -266,6 +305,15 @@ impl Ctx {
             .related(first, "first defined here")
             .hint("remove one of the definitions"),
         );
+    }
+
+    /// Report every definition of `what` after the first (`spans` in source order).
+    fn duplicates(&mut self, what: &str, spans: &[Span]) {
+        if let Some((first, rest)) = spans.split_first() {
+            for s in rest {
+                self.duplicate(what, *first, *s);
+            }
+        }
     }
 
     fn eval(&mut self, v: &Spanned<Value>, name: &str) -> Option<Mat> {
@@ -785,7 +833,6 @@ struct Items<'a> {
 }
 
 fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
-    let whole = Span::new(0, 0);
     // ---- collect top-level items, reporting duplicates ----
     let mut systems: Vec<&System> = Vec::new();
     let mut controllers: Vec<&Spanned<String>> = Vec::new();
@@ -813,32 +860,18 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
         }
     }
     network::network_items_in_system(cx, spec);
-    for (what, spans) in [
-        (
-            "the system",
-            systems.iter().map(|s| s.name.span).collect::<Vec<_>>(),
-        ),
-        (
-            "the controller",
-            controllers.iter().map(|c| c.span).collect(),
-        ),
-        (
-            "the initial set",
-            initials.iter().map(|s| s.name.span).collect(),
-        ),
-        ("the goal", goals.iter().map(|s| s.name.span).collect()),
-        ("the horizon", horizons.iter().map(|h| h.span).collect()),
-        (
-            "the analysis block",
-            analyses.iter().map(|a| a.span).collect(),
-        ),
-    ] {
-        if let Some((first, rest)) = spans.split_first() {
-            for s in rest {
-                cx.duplicate(what, *first, *s);
-            }
-        }
-    }
+    let spans: Vec<Span> = systems.iter().map(|s| s.name.span).collect();
+    cx.duplicates("the system", &spans);
+    let spans: Vec<Span> = controllers.iter().map(|c| c.span).collect();
+    cx.duplicates("the controller", &spans);
+    let spans: Vec<Span> = initials.iter().map(|s| s.name.span).collect();
+    cx.duplicates("the initial set", &spans);
+    let spans: Vec<Span> = goals.iter().map(|s| s.name.span).collect();
+    cx.duplicates("the goal", &spans);
+    let spans: Vec<Span> = horizons.iter().map(|h| h.span).collect();
+    cx.duplicates("the horizon", &spans);
+    let spans: Vec<Span> = analyses.iter().map(|a| a.span).collect();
+    cx.duplicates("the analysis block", &spans);
     // set names are unique across initial, goal and avoid sets
     let mut set_names: BTreeMap<&str, Span> = BTreeMap::new();
     let named = initials
@@ -859,7 +892,7 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
         cx.err(Diagnostic {
             code: Code::Missing,
             message: format!("the spec has no {what}"),
-            span: Some(whole),
+            span: Some(WHOLE),
             label: "required item missing".into(),
             hint: Some(format!("add {example}")),
             related: vec![],
@@ -903,31 +936,17 @@ fn items<'a>(cx: &mut Ctx, spec: &'a Spec, has_override: bool) -> Items<'a> {
 /// Check a parsed spec. `controller` is the controller file as read by the caller
 /// (`None` if the spec names none or it was not read).
 pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked, Vec<Diagnostic>> {
-    let mut cx = Ctx {
-        diags: Vec::new(),
-        numbers: 0,
-    };
+    let mut cx = Ctx::new();
     let cx = &mut cx;
-    let whole = Span::new(0, 0);
-    let path_override = controller.and_then(|f| f.path_override.clone());
-    let it = items(cx, spec, path_override.is_some());
-    // the controller analysed: the command line's, or the spec's
-    let effective: Option<Spanned<String>> = match (&path_override, it.controllers.first()) {
-        (Some(p), first) => Some(Spanned {
-            node: p.clone(),
-            span: first.map_or(whole, |c| c.span),
-        }),
-        (None, first) => first.map(|c| (*c).clone()),
-    };
-    let controller_sha256 = controller
-        .and_then(|f| f.bytes.as_ref().ok())
-        .map(|b| sha256_hex(b))
-        .unwrap_or_default();
+    let has_override = controller.is_some_and(|f| f.path_override.is_some());
+    let it = items(cx, spec, has_override);
+    let path = effective_path(controller, it.controllers.first().copied());
+    let controller_sha256 = file_sha256(controller);
     let sp = system::system(cx, &it.systems);
-    let pp = system::plant(cx, &sp);
+    let mut pp = system::plant(cx, &sp);
     let ctrl = controller::controller(
         cx,
-        effective.as_ref(),
+        path.as_ref(),
         controller,
         pp.p_dim,
         sp.assigns.contains_key("C"),
@@ -936,76 +955,119 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let horizon = horizon(cx, it.horizons.first().copied());
     let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
     let an = analysis_block::analysis_block(cx, &it.analyses, &sp.state, None);
-    let (sys, state, control, time, time_span) =
-        (sp.sys, sp.state, sp.control, sp.time, sp.time_span);
-    let (mut plant, per_step_lists, limits) = (pp.plant, pp.per_step_lists, pp.limits);
-    let (initial, goal, avoid_specs) = (sets.initial, sets.goal, sets.avoids);
-    let (propagator, partition, boundary) = (an.propagator, an.partition, an.boundary);
-    let p_dim = pp.p_dim;
-    let (hull_span, guided_span, sdp_span, propagator_span, samples, seed) = (
-        an.hull_span,
-        an.guided_span,
-        an.sdp_span,
-        an.propagator_span,
-        an.samples,
-        an.seed,
-    );
-    let horizons = &it.horizons;
 
     // ---- checks that combine sections ----
-    if let (Some(span), Some(c)) = (sdp_span, &ctrl) {
-        if let Some(act) = c.net.layers.iter().find_map(|l| match l {
-            ravel_base::nn::Layer::Act(a) if *a != ravel_base::nn::Activation::Relu => Some(*a),
-            _ => None,
-        }) {
+    if let Some(c) = &ctrl {
+        propagator_fits_controller(cx, &an, c, &sp.state, pp.p_dim, horizon);
+    }
+    samples_drawn(cx, &an);
+    if let Some(h) = horizon {
+        per_step_lengths(cx, &pp.per_step_lists, h);
+    }
+    if let (Ok(Some(dt)), Some(plants)) = (sp.time, pp.plant.as_mut()) {
+        discretise(cx, plants, dt, sp.time_span.unwrap_or(WHOLE));
+    }
+    if let (Some(h), Some((_, n))) = (horizon, &sp.state) {
+        let span = it.horizons.first().map_or(WHOLE, |h| h.span);
+        let directions = match &an.boundary {
+            Some(Boundary::Polytope(d)) => d.nrows(),
+            Some(Boundary::Hull) => 48,
+            _ => 0,
+        };
+        sizes(
+            cx,
+            span,
+            h,
+            *n,
+            directions,
+            an.samples,
+            an.partition.as_ref(),
+        );
+    }
+
+    if !cx.diags.is_empty() {
+        return Err(cx.sorted_diags());
+    }
+    // Every part was produced without diagnostics, so each one is present;
+    // a missing one here would be a checker bug, reported rather than a panic.
+    let assembled = (|| {
+        Some(Checked {
+            system: sp.sys?.name.node.clone(),
+            state: sp.state?,
+            control: sp.control?,
+            plants: pp.plant?,
+            dt: sp.time.ok().flatten(),
+            limits: pp.limits,
+            controller_path: path?.node,
+            controller_sha256,
+            controller_resolved: controller.map(|f| f.resolved.clone()).unwrap_or_default(),
+            controller: ctrl?,
+            initial: sets.initial?,
+            goal: sets.goal,
+            avoids: sets.avoids,
+            horizon: horizon?,
+            propagator: an.propagator?,
+            partitioner: an.partition?,
+            boundary: an.boundary?,
+            samples: an.samples,
+            seed: an.seed,
+            slope_steps: an.slope_steps,
+        })
+    })();
+    assembled.ok_or_else(|| vec![incomplete()])
+}
+
+/// The propagator can take the controller: Reach-SDP needs a ReLU network
+/// and a semidefinite program within [`MAX_SDP_DIM`]; unrolled CROWN keeps
+/// every neuron's bounds for every step.
+fn propagator_fits_controller(
+    cx: &mut Ctx,
+    an: &AnalysisPart,
+    c: &Controller,
+    state: &Option<(String, usize)>,
+    p_dim: Option<usize>,
+    horizon: Option<usize>,
+) {
+    if let Some(span) = an.sdp_span {
+        controller::sdp_needs_relu(cx, span, c, controller::Sdp::Reach);
+    }
+    let neurons = c.net.activation_neurons() as u64;
+    let span = an.propagator_span.unwrap_or(WHOLE);
+    if let (Some(Propagator::ReachSdp), Some((_, n)), Some(p)) = (an.propagator, state, p_dim) {
+        // ξ = (x, v), the hidden neurons, the two saturation layers, and 1
+        let m = c.outputs as u64;
+        let dim = *n as u64 + p as u64 + neurons + 2 * m + 1;
+        if dim > MAX_SDP_DIM {
             cx.err(
                 Diagnostic::new(
-                    Code::SdpActivation,
+                    Code::Limit,
                     span,
-                    format!(
-                        "Reach-SDP encodes ReLU networks only, but the controller uses {}",
-                        act.name()
-                    ),
+                    format!("Reach-SDP would solve semidefinite programs of dimension {dim}, beyond the limit of {MAX_SDP_DIM}"),
                 )
-                .label("needs a ReLU network")
-                .hint("use `reach_lp` or `crown_unrolled`, which handle tanh and sigmoid"),
+                .label("too large for Reach-SDP")
+                .hint("use `reach_lp` or `crown_unrolled`, or a smaller controller"),
             );
         }
     }
-    if let Some(c) = &ctrl {
-        let neurons = c.net.activation_neurons() as u64;
-        let span = propagator_span.unwrap_or(whole);
-        if let (Some(Propagator::ReachSdp), Some((_, n)), Some(p)) = (propagator, &state, p_dim) {
-            // ξ = (x, v), the hidden neurons, the two saturation layers, and 1
-            let m = c.outputs as u64;
-            let dim = *n as u64 + p as u64 + neurons + 2 * m + 1;
-            if dim > MAX_SDP_DIM {
-                cx.err(
-                    Diagnostic::new(
-                        Code::Limit,
-                        span,
-                        format!("Reach-SDP would solve semidefinite programs of dimension {dim}, beyond the limit of {MAX_SDP_DIM}"),
-                    )
-                    .label("too large for Reach-SDP")
-                    .hint("use `reach_lp` or `crown_unrolled`, or a smaller controller"),
-                );
-            }
-        }
-        if let (Some(Propagator::CrownUnrolled), Some(h)) = (propagator, horizon) {
-            if !within(&[h as u64, neurons.max(1)], MAX_UNROLLED_NEURON_STEPS) {
-                cx.err(
-                    Diagnostic::new(
-                        Code::Limit,
-                        span,
-                        format!("unrolled CROWN would keep {neurons} neurons' bounds for each of {h} steps, beyond the limit of {MAX_UNROLLED_NEURON_STEPS}"),
-                    )
-                    .label("too much to keep")
-                    .hint("use a shorter horizon or `reach_lp`"),
-                );
-            }
+    if let (Some(Propagator::CrownUnrolled), Some(h)) = (an.propagator, horizon) {
+        if !within(&[h as u64, neurons.max(1)], MAX_UNROLLED_NEURON_STEPS) {
+            cx.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    span,
+                    format!("unrolled CROWN would keep {neurons} neurons' bounds for each of {h} steps, beyond the limit of {MAX_UNROLLED_NEURON_STEPS}"),
+                )
+                .label("too much to keep")
+                .hint("use a shorter horizon or `reach_lp`"),
+            );
         }
     }
-    if let (Some(span), true) = (hull_span, samples == 0) {
+}
+
+/// A hull boundary and a sample-guided partitioner take their directions or
+/// their guidance from Monte Carlo samples.
+fn samples_drawn(cx: &mut Ctx, an: &AnalysisPart) {
+    if let (Some(span), true) = (an.hull_span, an.samples == 0) {
         cx.err(
             Diagnostic::new(
                 Code::Boundary,
@@ -1016,7 +1078,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             .hint("draw samples (e.g. `samples 1000`) or use `boundary polytope 8`"),
         );
     }
-    if let (Some((g, span)), true) = (guided_span, samples == 0) {
+    if let (Some((g, span)), true) = (an.guided_span, an.samples == 0) {
         if g != Guide::Property {
             cx.err(
                 Diagnostic::new(
@@ -1032,93 +1094,49 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             );
         }
     }
-    if let Some(h) = horizon {
-        for (len, span) in &per_step_lists {
-            if *len < h {
-                cx.err(
-                    Diagnostic::new(
-                        Code::PerStepLength,
-                        *span,
-                        format!("the list has {len} values but the horizon is {h}"),
-                    )
-                    .label(format!("{len} value(s)"))
-                    .hint(format!(
-                        "give one value per step 0 … {}: at least {h}",
-                        h - 1
-                    )),
-                );
-            }
-        }
-    }
-    if let (Ok(Some(dt)), Some(plants)) = (time, plant.as_mut()) {
-        let mut ok = true;
-        for p in plants.iter_mut() {
-            match zero_order_hold(p, dt) {
-                Some(d) => *p = d,
-                None => ok = false,
-            }
-        }
-        if !ok {
+}
+
+/// Every `per_step(…)` list gives a value for each of the `h` steps.
+fn per_step_lengths(cx: &mut Ctx, lists: &[(usize, Span)], h: usize) {
+    for (len, span) in lists {
+        if *len < h {
             cx.err(
                 Diagnostic::new(
-                    Code::TimeStep,
-                    time_span.unwrap_or(whole),
-                    format!("e^(A·{}) overflows", compact(dt)),
+                    Code::PerStepLength,
+                    *span,
+                    format!("the list has {len} values but the horizon is {h}"),
                 )
-                .label("time step too large for these dynamics")
-                .hint("use a smaller dt"),
+                .label(format!("{len} value(s)"))
+                .hint(format!(
+                    "give one value per step 0 … {}: at least {h}",
+                    h - 1
+                )),
             );
         }
     }
-    let dt = time.ok().flatten();
-    if let (Some(h), Some((_, n))) = (horizon, &state) {
-        let span = horizons.first().map_or(whole, |h| h.span);
-        let directions = match &boundary {
-            Some(Boundary::Polytope(d)) => d.nrows(),
-            Some(Boundary::Hull) => 48,
-            _ => 0,
-        };
-        sizes(cx, span, h, *n, directions, samples, partition.as_ref());
-    }
+}
 
-    if !cx.diags.is_empty() {
-        cx.diags
-            .sort_by_key(|d| (d.span.map_or(0, |s| s.start), d.code));
-        return Err(std::mem::take(&mut cx.diags));
+/// Discretise a continuous-time plant over the time step `dt` (declared at
+/// `span`) by zero-order hold; an exponential that overflows is reported.
+fn discretise(cx: &mut Ctx, plants: &mut [Plant], dt: f64, span: Span) {
+    let mut ok = true;
+    for p in plants.iter_mut() {
+        match zero_order_hold(p, dt) {
+            Some(d) => *p = d,
+            None => ok = false,
+        }
     }
-    // Every part was produced without diagnostics, so each one is present;
-    // a missing one here would be a checker bug, reported rather than a panic.
-    let assembled = (|| {
-        Some(Checked {
-            system: sys?.name.node.clone(),
-            state: state?,
-            control: control?,
-            plants: plant?,
-            dt,
-            limits,
-            controller_path: effective?.node,
-            controller_sha256,
-            controller_resolved: controller.map(|f| f.resolved.clone()).unwrap_or_default(),
-            controller: ctrl?,
-            initial: initial?,
-            goal,
-            avoids: avoid_specs,
-            horizon: horizon?,
-            propagator: propagator?,
-            partitioner: partition?,
-            boundary: boundary?,
-            samples,
-            seed,
-            slope_steps: an.slope_steps,
-        })
-    })();
-    assembled.ok_or_else(|| {
-        vec![
-            Diagnostic::new(Code::Missing, whole, "the spec is incomplete")
-                .label("here")
-                .hint("see docs/language.md"),
-        ]
-    })
+    if !ok {
+        cx.err(
+            Diagnostic::new(
+                Code::TimeStep,
+                span,
+                format!("e^(A·{}) overflows", compact(dt)),
+            )
+            .label("time step too large for these dynamics")
+            .hint("use a smaller dt"),
+        );
+    }
 }
 
 /// The limits on products of sizes (see [`ravel_base::limits`]): simulated steps

@@ -4,10 +4,49 @@
 use super::Ctx;
 use ravel_analysis::lp;
 use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
+use ravel_base::limits::MAX_POLYTOPE_DIM;
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{Code, Diagnostic};
 
 impl Ctx {
+    /// The one member of an initial or input set (`set`: "initial set" or
+    /// "input set") over the vector `name` of dimension `dim`: a box, a
+    /// bounded polytope or a ball.
+    pub(super) fn region(
+        &mut self,
+        atom: &Spanned<SetAtom>,
+        name: &str,
+        dim: usize,
+        set: &str,
+    ) -> Option<Region> {
+        let role = format!("the {set}");
+        match &atom.node {
+            SetAtom::Box(b) => {
+                let sb = Spanned {
+                    node: b.clone(),
+                    span: atom.span,
+                };
+                self.box_set(&sb, name, dim, true, &role).map(Region::Box)
+            }
+            SetAtom::Polytope(_) if dim > MAX_POLYTOPE_DIM => {
+                self.err(
+                    Diagnostic::new(
+                        Code::Limit,
+                        atom.span,
+                        format!("a polytope {set} in {dim} dimensions, beyond the limit of {MAX_POLYTOPE_DIM}"),
+                    )
+                    .label("too many dimensions for a polytope")
+                    .hint("use a box or a ball, which are bounded in closed form"),
+                );
+                None
+            }
+            SetAtom::Polytope(cs) => self
+                .polytope(cs, name, dim)
+                .and_then(|p| self.bounded_polytope(p, atom.span, &role)),
+            SetAtom::Ball(b) => self.ball(b, atom.span, name, dim),
+        }
+    }
+
     /// A polytope initial set: it must be bounded and not empty. Its bounding
     /// box comes from `2n` certified LP bounds inside a large box; a bound
     /// that reaches the large box's edge means the polytope is unbounded

@@ -2,7 +2,6 @@
 
 use super::{AvoidSpec, Ctx, GoalDef};
 use ravel_analysis::sets::{Polytope, Region};
-use ravel_base::limits::MAX_POLYTOPE_DIM;
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{Code, Diagnostic};
 
@@ -22,132 +21,122 @@ pub(super) fn sets(
     state: &Option<(String, usize)>,
     horizon: Option<usize>,
 ) -> SetsPart {
-    let mut initial = None;
-    let mut goal = None;
-    let mut avoid_specs = Vec::new();
-    if let Some((xn, n)) = &state {
-        if let Some(init) = initials.first() {
-            let members = &init.set.node.members;
-            if members.len() > 1 {
-                cx.err(
-                    Diagnostic::new(
-                        Code::SetKind,
-                        init.set.span,
-                        "the initial set cannot be a union",
-                    )
-                    .label("a union")
-                    .hint("verify each part in its own spec, or use the bounding box"),
-                );
-            } else if let Some(first) = members.first() {
-                match &first.node {
-                    SetAtom::Box(b) => {
-                        let sb = Spanned {
-                            node: b.clone(),
-                            span: first.span,
-                        };
-                        initial = cx
-                            .box_set(&sb, xn, *n, true, "the initial set")
-                            .map(|b| (init.name.node.clone(), Region::Box(b)));
-                    }
-                    SetAtom::Polytope(_) if *n > MAX_POLYTOPE_DIM => {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::Limit,
-                                first.span,
-                                format!("a polytope initial set in {n} dimensions, beyond the limit of {MAX_POLYTOPE_DIM}"),
-                            )
-                            .label("too many dimensions for a polytope")
-                            .hint("use a box or a ball, which are bounded in closed form"),
-                        );
-                    }
-                    SetAtom::Polytope(cs) => {
-                        initial = cx
-                            .polytope(cs, xn, *n)
-                            .and_then(|p| cx.bounded_polytope(p, first.span, "the initial set"))
-                            .map(|r| (init.name.node.clone(), r));
-                    }
-                    SetAtom::Ball(b) => {
-                        initial = cx
-                            .ball(b, first.span, xn, *n)
-                            .map(|r| (init.name.node.clone(), r));
-                    }
-                }
-            }
-        }
-        if let Some(g) = goals.first() {
-            let members = &g.set.node.members;
-            if members.len() > 1 {
-                cx.err(
-                    Diagnostic::new(Code::SetKind, g.set.span, "the goal cannot be a union")
-                        .label("a union")
-                        .hint("the final reachable set must lie in one box or polytope"),
-                );
-            } else if let Some(p) = members
-                .first()
-                .and_then(|m| cx.set_atom(m, xn, *n, "the goal"))
-            {
-                goal = Some(GoalDef {
-                    name: g.name.node.clone(),
-                    set: p,
-                });
-            }
-        }
-        for a in avoids {
-            let members: Vec<Option<Polytope>> = a
-                .set
-                .node
-                .members
-                .iter()
-                .map(|m| cx.set_atom(m, xn, *n, "the avoid set"))
-                .collect();
-            let steps = match (&a.steps, horizon) {
-                (None, Some(h)) => Some((0, h)),
-                (Some(s), h) => {
-                    let (lo, hi) = s.node;
-                    if lo > hi {
-                        cx.err(
-                            Diagnostic::new(
-                                Code::StepRange,
-                                s.span,
-                                format!("step range [{lo}, {hi}] is empty"),
-                            )
-                            .label("first step after last")
-                            .hint("write `at steps [first, last]`"),
-                        );
-                        None
-                    } else if h.is_some_and(|h| hi as usize > h) {
-                        let h = h.unwrap_or(0);
-                        cx.err(
-                            Diagnostic::new(
-                                Code::StepRange,
-                                s.span,
-                                format!("step {hi} is beyond the horizon {h}"),
-                            )
-                            .label("beyond the horizon")
-                            .hint(format!("steps run from 0 (the initial set) to {h}")),
-                        );
-                        None
-                    } else {
-                        Some((lo as usize, hi as usize))
-                    }
-                }
-                (None, None) => None,
-            };
-            if members.iter().all(Option::is_some) {
-                if let Some(steps) = steps {
-                    avoid_specs.push(AvoidSpec {
-                        name: a.name.node.clone(),
-                        members: members.into_iter().flatten().collect(),
-                        steps,
-                    });
-                }
-            }
+    let mut part = SetsPart {
+        initial: None,
+        goal: None,
+        avoids: Vec::new(),
+    };
+    let Some((xn, n)) = state else {
+        return part;
+    };
+    if let Some(init) = initials.first() {
+        part.initial = initial(cx, init, xn, *n);
+    }
+    if let Some(g) = goals.first() {
+        part.goal = goal(cx, g, xn, *n);
+    }
+    for a in avoids {
+        if let Some(spec) = avoid(cx, a, xn, *n, horizon) {
+            part.avoids.push(spec);
         }
     }
+    part
+}
 
-    SetsPart {
-        initial,
-        goal,
-        avoids: avoid_specs,
+/// The initial set over the state `xn` of dimension `n`: one box, polytope or ball.
+fn initial(cx: &mut Ctx, init: &SetDef, xn: &str, n: usize) -> Option<(String, Region)> {
+    let members = &init.set.node.members;
+    if members.len() > 1 {
+        cx.err(
+            Diagnostic::new(
+                Code::SetKind,
+                init.set.span,
+                "the initial set cannot be a union",
+            )
+            .label("a union")
+            .hint("verify each part in its own spec, or use the bounding box"),
+        );
+        return None;
     }
+    let region = cx.region(members.first()?, xn, n, "initial set")?;
+    Some((init.name.node.clone(), region))
+}
+
+/// The goal: one box or polytope over the state.
+fn goal(cx: &mut Ctx, g: &SetDef, xn: &str, n: usize) -> Option<GoalDef> {
+    let members = &g.set.node.members;
+    if members.len() > 1 {
+        cx.err(
+            Diagnostic::new(Code::SetKind, g.set.span, "the goal cannot be a union")
+                .label("a union")
+                .hint("the final reachable set must lie in one box or polytope"),
+        );
+        return None;
+    }
+    let set = cx.set_atom(members.first()?, xn, n, "the goal")?;
+    Some(GoalDef {
+        name: g.name.node.clone(),
+        set,
+    })
+}
+
+/// An avoid set: a union of boxes and polytopes over the state, at the steps
+/// given (every step up to the horizon when none are).
+fn avoid(
+    cx: &mut Ctx,
+    a: &AvoidDef,
+    xn: &str,
+    n: usize,
+    horizon: Option<usize>,
+) -> Option<AvoidSpec> {
+    let members: Vec<Option<Polytope>> = a
+        .set
+        .node
+        .members
+        .iter()
+        .map(|m| cx.set_atom(m, xn, n, "the avoid set"))
+        .collect();
+    let steps = match (&a.steps, horizon) {
+        (None, Some(h)) => Some((0, h)),
+        (Some(s), h) => step_range(cx, s, h),
+        (None, None) => None,
+    };
+    if !members.iter().all(Option::is_some) {
+        return None;
+    }
+    Some(AvoidSpec {
+        name: a.name.node.clone(),
+        members: members.into_iter().flatten().collect(),
+        steps: steps?,
+    })
+}
+
+/// `at steps [lo, hi]`: not empty, and within the horizon `h` (when known).
+fn step_range(cx: &mut Ctx, s: &Spanned<(u64, u64)>, h: Option<usize>) -> Option<(usize, usize)> {
+    let (lo, hi) = s.node;
+    if lo > hi {
+        cx.err(
+            Diagnostic::new(
+                Code::StepRange,
+                s.span,
+                format!("step range [{lo}, {hi}] is empty"),
+            )
+            .label("first step after last")
+            .hint("write `at steps [first, last]`"),
+        );
+        return None;
+    }
+    if let Some(h) = h.filter(|h| hi as usize > *h) {
+        cx.err(
+            Diagnostic::new(
+                Code::StepRange,
+                s.span,
+                format!("step {hi} is beyond the horizon {h}"),
+            )
+            .label("beyond the horizon")
+            .hint(format!("steps run from 0 (the initial set) to {h}")),
+        );
+        return None;
+    }
+    Some((lo as usize, hi as usize))
 }

@@ -58,41 +58,9 @@ impl Ctx {
         role: &str,
     ) -> Option<Region> {
         let n = p.rows.first().map_or(0, |r| r.0.len());
-        // Boundedness does not depend on the scale of the rows: a non-empty
-        // P is bounded iff its recession cone {d | H d ≤ 0} is {0}, decided
-        // on the unit box with every row normalised (so tiny coefficients or
-        // a large right-hand side cannot mislead it).
-        let unit: Vec<(Vec<f64>, f64)> = p
-            .rows
-            .iter()
-            .filter_map(|(a, _)| {
-                let norm = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                (norm > 0.0).then(|| (a.iter().map(|v| v / norm).collect(), 0.0))
-            })
-            .collect();
-        let (ulo, uhi) = (vec![-1.0; n], vec![1.0; n]);
-        for i in 0..n {
-            for sign in [1.0, -1.0] {
-                let r = lp::maximize(&axis(n, i, sign), &unit, &ulo, &uhi);
-                // the cone is {0} (every maximum is 0) or contains a
-                // direction scaled to reach 1 in some ±e_i: the
-                // threshold ½ is far from both, whatever the LP's accuracy
-                if r.issue.is_none() && r.value < 0.5 {
-                    continue;
-                }
-                let d = if r.issue.is_some() {
-                    not_bounded(role, span, r.issue)
-                } else {
-                    Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
-                        .label(format!(
-                            "component {i} has no finite {} bound",
-                            if sign > 0.0 { "upper" } else { "lower" }
-                        ))
-                        .hint("add inequalities that bound every component, or use a box")
-                };
-                self.err(d);
-                return None;
-            }
+        if let Some(d) = unbounded(&p.rows, n, span, role) {
+            self.err(d);
+            return None;
         }
         // The polytope is bounded: find a box B whose bounds the LP bounds
         // of P ∩ B stay strictly inside; then P ⊆ B (P is convex, so a point
@@ -110,22 +78,7 @@ impl Ctx {
         // intervals, which bound those components without any LP and keep
         // the LPs well scaled when the set lies far from the origin.
         let rows: Vec<(Vec<f64>, f64)> = p.rows.iter().map(|(a, h)| pow2_scaled(a, *h)).collect();
-        let mut fixed_lo = vec![f64::NEG_INFINITY; n];
-        let mut fixed_hi = vec![f64::INFINITY; n];
-        for (a, h) in &rows {
-            let mut nz = a.iter().enumerate().filter(|(_, v)| **v != 0.0);
-            if let (Some((i, &c)), None) = (nz.next(), nz.next()) {
-                // c·x_i ≤ h with c a power-of-two multiple: h / c rounded outward
-                let q = h / c;
-                if c > 0.0 {
-                    if let Some(f) = fixed_hi.get_mut(i) {
-                        *f = f.min(q.next_up());
-                    }
-                } else if let Some(f) = fixed_lo.get_mut(i) {
-                    *f = f.max(q.next_down());
-                }
-            }
-        }
+        let (fixed_lo, fixed_hi) = single_variable_bounds(&rows, n);
         let p = Polytope { rows };
         // boxes of 1e3·s, 1e6·s, …, 1e18·s (six tries at most, whatever the
         // numbers: a scale that overflows makes the first try the last)
@@ -268,6 +221,67 @@ impl Ctx {
             norm,
         })
     }
+}
+
+/// Why a polytope over `n` variables is not bounded, if it is not.
+/// Boundedness does not depend on the scale of the rows: a non-empty P is
+/// bounded iff its recession cone {d | H d ≤ 0} is {0}, decided on the unit
+/// box with every row normalised (so tiny coefficients or a large right-hand
+/// side cannot mislead it).
+fn unbounded(rows: &[(Vec<f64>, f64)], n: usize, span: Span, role: &str) -> Option<Diagnostic> {
+    let unit: Vec<(Vec<f64>, f64)> = rows
+        .iter()
+        .filter_map(|(a, _)| {
+            let norm = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            (norm > 0.0).then(|| (a.iter().map(|v| v / norm).collect(), 0.0))
+        })
+        .collect();
+    let (ulo, uhi) = (vec![-1.0; n], vec![1.0; n]);
+    for i in 0..n {
+        for sign in [1.0, -1.0] {
+            let r = lp::maximize(&axis(n, i, sign), &unit, &ulo, &uhi);
+            // the cone is {0} (every maximum is 0) or contains a
+            // direction scaled to reach 1 in some ±e_i: the
+            // threshold ½ is far from both, whatever the LP's accuracy
+            if r.issue.is_none() && r.value < 0.5 {
+                continue;
+            }
+            if r.issue.is_some() {
+                return Some(not_bounded(role, span, r.issue));
+            }
+            return Some(
+                Diagnostic::new(Code::EmptyOrUnbounded, span, format!("{role} is unbounded"))
+                    .label(format!(
+                        "component {i} has no finite {} bound",
+                        if sign > 0.0 { "upper" } else { "lower" }
+                    ))
+                    .hint("add inequalities that bound every component, or use a box"),
+            );
+        }
+    }
+    None
+}
+
+/// The bounds that single-variable rows (`c·x_i ≤ h`, with `c` a power of
+/// two, see [`pow2_scaled`]) put on each of the `n` components: `h / c`
+/// rounded outward; infinite where no such row bounds a side.
+fn single_variable_bounds(rows: &[(Vec<f64>, f64)], n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut lo = vec![f64::NEG_INFINITY; n];
+    let mut hi = vec![f64::INFINITY; n];
+    for (a, h) in rows {
+        let mut nz = a.iter().enumerate().filter(|(_, v)| **v != 0.0);
+        if let (Some((i, &c)), None) = (nz.next(), nz.next()) {
+            let q = h / c;
+            if c > 0.0 {
+                if let Some(f) = hi.get_mut(i) {
+                    *f = f.min(q.next_up());
+                }
+            } else if let Some(f) = lo.get_mut(i) {
+                *f = f.max(q.next_down());
+            }
+        }
+    }
+    (lo, hi)
 }
 
 /// "`role` is empty".

@@ -132,41 +132,8 @@ pub(super) fn select(
         seen.push((key, st.span));
         match &st.node {
             SelectStmt::Epsilon(v) => {
-                let values: Vec<f64> = match &v.node {
-                    Value::Scalar(r) => {
-                        let x = cx.finite(&Spanned {
-                            node: *r,
-                            span: v.span,
-                        });
-                        vec![x; n]
-                    }
-                    Value::Vector(rs) => rs.iter().map(|x| cx.finite(x)).collect(),
-                    _ => Vec::new(),
-                };
-                if values.len() != n {
-                    bad(
-                        cx,
-                        v.span,
-                        format!(
-                            "ε has {} values, but `{xn}` has {n} components",
-                            values.len()
-                        ),
-                        "wrong length",
-                        "give one ε, or one per input",
-                    );
-                    ok = false;
-                } else if values.iter().any(|e| *e < 0.0) {
-                    bad(
-                        cx,
-                        v.span,
-                        "ε is negative".into(),
-                        "negative radius",
-                        "ε must be ≥ 0 (0: that input is not perturbed)",
-                    );
-                    ok = false;
-                } else {
-                    epsilon = Some(values);
-                }
+                epsilon = ball_radii(cx, v, xn, n);
+                ok &= epsilon.is_some();
             }
             SelectStmt::Norm(p) => {
                 norm = match p.node.as_str() {
@@ -176,79 +143,14 @@ pub(super) fn select(
                 }
             }
             SelectStmt::Inline(v) => {
-                let rows: Vec<&Spanned<Vec<Spanned<f64>>>> = match &v.node {
-                    Value::Matrix(rows) => rows.iter().collect(),
-                    _ => Vec::new(),
-                };
-                if rows.len() > MAX_OBSERVATIONS {
-                    bad(
-                        cx,
-                        v.span,
-                        format!("more than {MAX_OBSERVATIONS} observations"),
-                        "too many",
-                        "put them in a CSV file and split it",
-                    );
-                    ok = false;
-                    continue;
-                }
-                let mut obs = Vec::new();
-                for r in rows {
-                    if r.node.len() != n {
-                        bad(
-                            cx,
-                            r.span,
-                            format!(
-                                "an observation of {} values, but `{xn}` has {n} components",
-                                r.node.len()
-                            ),
-                            "wrong width",
-                            "every row holds one observation: one value per network input",
-                        );
-                        ok = false;
-                        continue;
-                    }
-                    obs.push(r.node.iter().map(|x| cx.finite(x)).collect());
-                }
-                observations = Some(obs);
+                let (rows, all_rows_ok) = inline(cx, v, xn, n);
+                observations = rows;
+                ok &= all_rows_ok;
             }
-            SelectStmt::File(p) => match data.get(&p.node) {
-                Some(Ok(bytes)) => match std::str::from_utf8(bytes) {
-                    Ok(text) => {
-                        observations = csv(cx, text, p.span, n, &sanitize(&p.node));
-                        ok &= observations.is_some();
-                    }
-                    Err(_) => {
-                        bad(
-                            cx,
-                            p.span,
-                            format!("`{}` is not UTF-8 text", sanitize(&p.node)),
-                            "not a CSV file",
-                            "observations are comma-separated numbers, one row per line",
-                        );
-                        ok = false;
-                    }
-                },
-                Some(Err(e)) => {
-                    bad(
-                        cx,
-                        p.span,
-                        format!("cannot read `{}`: {}", sanitize(&p.node), sanitize(e)),
-                        "this file",
-                        "observation files are read from the spec file's folder or a folder below it (no `..`, no absolute path, no link leaving it)",
-                    );
-                    ok = false;
-                }
-                None => {
-                    bad(
-                        cx,
-                        p.span,
-                        format!("`{}` was not read", sanitize(&p.node)),
-                        "not available",
-                        "the file must be readable next to the spec",
-                    );
-                    ok = false;
-                }
-            },
+            SelectStmt::File(p) => {
+                observations = from_file(cx, p, n, data);
+                ok &= observations.is_some();
+            }
         }
     }
     if epsilon.is_none() && !seen.iter().any(|(k, _)| *k == "epsilon") {
@@ -280,4 +182,127 @@ pub(super) fn select(
         norm,
         observations: observations?,
     })
+}
+
+/// `epsilon r` or `epsilon [r, …]`: the ball's radius per input (`None`
+/// after an error).
+fn ball_radii(cx: &mut Ctx, v: &Spanned<Value>, xn: &str, n: usize) -> Option<Vec<f64>> {
+    let values: Vec<f64> = match &v.node {
+        Value::Scalar(r) => {
+            let x = cx.finite(&Spanned {
+                node: *r,
+                span: v.span,
+            });
+            vec![x; n]
+        }
+        Value::Vector(rs) => rs.iter().map(|x| cx.finite(x)).collect(),
+        _ => Vec::new(),
+    };
+    if values.len() != n {
+        bad(
+            cx,
+            v.span,
+            format!(
+                "ε has {} values, but `{xn}` has {n} components",
+                values.len()
+            ),
+            "wrong length",
+            "give one ε, or one per input",
+        );
+        return None;
+    }
+    if values.iter().any(|e| *e < 0.0) {
+        bad(
+            cx,
+            v.span,
+            "ε is negative".into(),
+            "negative radius",
+            "ε must be ≥ 0 (0: that input is not perturbed)",
+        );
+        return None;
+    }
+    Some(values)
+}
+
+/// `observations [[…], …]`: the rows of the right width (`None` when there
+/// are too many), and whether every row had it.
+fn inline(cx: &mut Ctx, v: &Spanned<Value>, xn: &str, n: usize) -> (Option<Vec<Vec<f64>>>, bool) {
+    let rows: Vec<&Spanned<Vec<Spanned<f64>>>> = match &v.node {
+        Value::Matrix(rows) => rows.iter().collect(),
+        _ => Vec::new(),
+    };
+    if rows.len() > MAX_OBSERVATIONS {
+        bad(
+            cx,
+            v.span,
+            format!("more than {MAX_OBSERVATIONS} observations"),
+            "too many",
+            "put them in a CSV file and split it",
+        );
+        return (None, false);
+    }
+    let mut ok = true;
+    let mut obs = Vec::new();
+    for r in rows {
+        if r.node.len() != n {
+            bad(
+                cx,
+                r.span,
+                format!(
+                    "an observation of {} values, but `{xn}` has {n} components",
+                    r.node.len()
+                ),
+                "wrong width",
+                "every row holds one observation: one value per network input",
+            );
+            ok = false;
+            continue;
+        }
+        obs.push(r.node.iter().map(|x| cx.finite(x)).collect());
+    }
+    (Some(obs), ok)
+}
+
+/// `observations "file.csv"`: the file's rows (`None` after an error).
+fn from_file(
+    cx: &mut Ctx,
+    p: &Spanned<String>,
+    n: usize,
+    data: &DataFiles,
+) -> Option<Vec<Vec<f64>>> {
+    match data.get(&p.node) {
+        Some(Ok(bytes)) => match std::str::from_utf8(bytes) {
+            Ok(text) => csv(cx, text, p.span, n, &sanitize(&p.node)),
+            Err(_) => {
+                bad(
+                    cx,
+                    p.span,
+                    format!("`{}` is not UTF-8 text", sanitize(&p.node)),
+                    "not a CSV file",
+                    "observations are comma-separated numbers, one row per line",
+                );
+                None
+            }
+        },
+        Some(Err(e)) => {
+            bad(
+                cx,
+                p.span,
+                format!("cannot read `{}`: {}", sanitize(&p.node), sanitize(e)),
+                "this file",
+                "observation files are read from the spec file's folder or a folder below it (no `..`, no absolute path, no link leaving it)",
+            );
+            None
+        }
+        None => {
+            bad(
+                cx,
+                p.span,
+                format!("`{}` was not read", sanitize(&p.node)),
+                "not available",
+                "the file must be readable next to the spec",
+            );
+            None
+        }
+    }
 }

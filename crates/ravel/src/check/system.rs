@@ -26,134 +26,158 @@ pub(super) struct SystemPart<'a> {
 /// Check the declarations of the (first) system block.
 pub(super) fn system<'a>(cx: &mut Ctx, systems: &[&'a System]) -> SystemPart<'a> {
     let sys = systems.first().copied();
-    let mut state: Option<(String, usize)> = None;
-    let mut control: Option<(String, usize)> = None;
-    let mut assigns: BTreeMap<&str, (&Spanned<Value>, Span)> = BTreeMap::new();
-    let mut bounds: Vec<(&Spanned<String>, &Spanned<BoxSet>)> = Vec::new();
-    let mut time_span = None;
-    let mut time: Result<Option<f64>, ()> = Ok(None);
-    if let Some(sys) = sys {
-        let mut state_span = None;
-        let mut control_span = None;
-        for st in &sys.stmts {
-            match st {
-                SystemStmt::State { name, dim, span } => {
-                    if let Some(first) = state_span {
-                        cx.duplicate("the state", first, *span);
-                    } else {
-                        state_span = Some(*span);
-                        state = cx
-                            .positive(dim, "the state dimension")
-                            .map(|d| (name.node.clone(), d));
-                    }
+    let mut part = SystemPart {
+        sys,
+        state: None,
+        control: None,
+        assigns: BTreeMap::new(),
+        bounds: Vec::new(),
+        time_span: None,
+        time: Ok(None),
+    };
+    let Some(sys) = sys else {
+        return part;
+    };
+    let mut state_span = None;
+    let mut control_span = None;
+    for st in &sys.stmts {
+        match st {
+            SystemStmt::State { name, dim, span } => {
+                if let Some(first) = state_span {
+                    cx.duplicate("the state", first, *span);
+                } else {
+                    state_span = Some(*span);
+                    part.state = cx
+                        .positive(dim, "the state dimension")
+                        .map(|d| (name.node.clone(), d));
                 }
-                SystemStmt::Control { name, dim, span } => {
-                    if let Some(first) = control_span {
-                        cx.duplicate("the control", first, *span);
-                    } else {
-                        control_span = Some(*span);
-                        control = cx
-                            .positive(dim, "the control dimension")
-                            .map(|d| (name.node.clone(), d));
-                    }
+            }
+            SystemStmt::Control { name, dim, span } => {
+                if let Some(first) = control_span {
+                    cx.duplicate("the control", first, *span);
+                } else {
+                    control_span = Some(*span);
+                    part.control = cx
+                        .positive(dim, "the control dimension")
+                        .map(|d| (name.node.clone(), d));
                 }
-                SystemStmt::Assign { name, value, .. } => {
-                    const KNOWN: [&str; 4] = ["A", "B", "C", "c"];
-                    if !KNOWN.contains(&name.node.as_str()) {
-                        let mut d = Diagnostic::new(
-                            Code::UnknownName,
-                            name.span,
-                            format!("unknown plant parameter `{}`", name.node),
-                        )
-                        .label("not a plant parameter");
-                        d = match did_you_mean(&name.node, KNOWN) {
-                            Some(s) => d.hint(format!("did you mean `{s}`? The plant is x' = A x + B u + c + w, y = Cᵀ x + v")),
-                            None => d.hint("the plant is x' = A x + B u + c + w, y = Cᵀ x + v: define A, B and optionally c and C"),
-                        };
-                        cx.err(d);
-                    } else if let Some((_, first)) = assigns.get(name.node.as_str()) {
-                        cx.duplicate(&format!("`{}`", name.node), *first, name.span);
-                    } else {
-                        assigns.insert(&name.node, (value, name.span));
-                    }
-                }
-                SystemStmt::Bound { name, set, .. } => bounds.push((name, set)),
-                SystemStmt::Time { kind, dt, span } => {
-                    if let Some(first) = time_span {
-                        cx.duplicate("the time declaration", first, *span);
-                    } else {
-                        time_span = Some(*span);
-                        time = cx.time_decl(kind, dt, *span);
-                    }
+            }
+            SystemStmt::Assign { name, value, .. } => {
+                parameter(cx, name, value, &mut part.assigns);
+            }
+            SystemStmt::Bound { name, set, .. } => part.bounds.push((name, set)),
+            SystemStmt::Time { kind, dt, span } => {
+                if let Some(first) = part.time_span {
+                    cx.duplicate("the time declaration", first, *span);
+                } else {
+                    part.time_span = Some(*span);
+                    part.time = cx.time_decl(kind, dt, *span);
                 }
             }
         }
-        if let (Some((xn, _)), Some((un, _)), Some(ss), Some(cs)) =
-            (&state, &control, state_span, control_span)
-        {
-            if xn == un {
-                cx.duplicate(&format!("the name `{xn}`"), ss, cs);
-            }
+    }
+    let state = part.state.as_ref().zip(state_span);
+    let control = part.control.as_ref().zip(control_span);
+    vector_names(cx, state, control);
+    declared(cx, sys, state_span, control_span, &part.assigns);
+    part
+}
+
+/// `NAME = value`: a plant parameter (`A`, `B`, `C` or `c`), defined once.
+fn parameter<'a>(
+    cx: &mut Ctx,
+    name: &'a Spanned<String>,
+    value: &'a Spanned<Value>,
+    assigns: &mut BTreeMap<&'a str, (&'a Spanned<Value>, Span)>,
+) {
+    const KNOWN: [&str; 4] = ["A", "B", "C", "c"];
+    if !KNOWN.contains(&name.node.as_str()) {
+        let mut d = Diagnostic::new(
+            Code::UnknownName,
+            name.span,
+            format!("unknown plant parameter `{}`", name.node),
+        )
+        .label("not a plant parameter");
+        d = match did_you_mean(&name.node, KNOWN) {
+            Some(s) => d.hint(format!("did you mean `{s}`? The plant is x' = A x + B u + c + w, y = Cᵀ x + v")),
+            None => d.hint("the plant is x' = A x + B u + c + w, y = Cᵀ x + v: define A, B and optionally c and C"),
+        };
+        cx.err(d);
+    } else if let Some((_, first)) = assigns.get(name.node.as_str()) {
+        cx.duplicate(&format!("`{}`", name.node), *first, name.span);
+    } else {
+        assigns.insert(&name.node, (value, name.span));
+    }
+}
+
+/// The state and the control have different names, neither of them the
+/// noise's `w` or `v` (each declaration with its span).
+fn vector_names(
+    cx: &mut Ctx,
+    state: Option<(&(String, usize), Span)>,
+    control: Option<(&(String, usize), Span)>,
+) {
+    if let (Some(((xn, _), ss)), Some(((un, _), cs))) = (state, control) {
+        if xn == un {
+            cx.duplicate(&format!("the name `{xn}`"), ss, cs);
         }
-        for (decl, span) in [(&state, state_span), (&control, control_span)] {
-            if let (Some((name, _)), Some(span)) = (decl, span) {
-                if name == "w" || name == "v" {
-                    cx.err(
-                        Diagnostic::new(
-                            Code::Duplicate,
-                            span,
-                            format!(
-                                "the name `{name}` is reserved for {} noise",
-                                if name == "w" { "process" } else { "sensor" }
-                            ),
-                        )
-                        .label("reserved name")
-                        .hint("`w` and `v` name the process and sensor noise; choose another name"),
-                    );
-                }
-            }
-        }
-        if state_span.is_none() {
+    }
+    for ((name, _), span) in [state, control].into_iter().flatten() {
+        if name == "w" || name == "v" {
             cx.err(
-                Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")
-                    .label("in this system")
-                    .hint("add `state x[n]`"),
+                Diagnostic::new(
+                    Code::Duplicate,
+                    span,
+                    format!(
+                        "the name `{name}` is reserved for {} noise",
+                        if name == "w" { "process" } else { "sensor" }
+                    ),
+                )
+                .label("reserved name")
+                .hint("`w` and `v` name the process and sensor noise; choose another name"),
             );
         }
-        if control_span.is_none() {
+    }
+}
+
+/// The system declares its state, its control, `A` and `B`.
+fn declared(
+    cx: &mut Ctx,
+    sys: &System,
+    state_span: Option<Span>,
+    control_span: Option<Span>,
+    assigns: &BTreeMap<&str, (&Spanned<Value>, Span)>,
+) {
+    if state_span.is_none() {
+        cx.err(
+            Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")
+                .label("in this system")
+                .hint("add `state x[n]`"),
+        );
+    }
+    if control_span.is_none() {
+        cx.err(
+            Diagnostic::new(
+                Code::Missing,
+                sys.name.span,
+                "the system declares no control",
+            )
+            .label("in this system")
+            .hint("add `control u[m]`"),
+        );
+    }
+    for req in ["A", "B"] {
+        if !assigns.contains_key(req) {
             cx.err(
                 Diagnostic::new(
                     Code::Missing,
                     sys.name.span,
-                    "the system declares no control",
+                    format!("the system does not define `{req}`"),
                 )
                 .label("in this system")
-                .hint("add `control u[m]`"),
+                .hint(format!("add `{req} = [[…], …]`")),
             );
         }
-        for req in ["A", "B"] {
-            if !assigns.contains_key(req) {
-                cx.err(
-                    Diagnostic::new(
-                        Code::Missing,
-                        sys.name.span,
-                        format!("the system does not define `{req}`"),
-                    )
-                    .label("in this system")
-                    .hint(format!("add `{req} = [[…], …]`")),
-                );
-            }
-        }
-    }
-
-    SystemPart {
-        sys,
-        state,
-        control,
-        assigns,
-        bounds,
-        time_span,
-        time,
     }
 }
 
@@ -167,142 +191,177 @@ pub(super) struct PlantPart {
     pub p_dim: Option<usize>,
 }
 
+/// A parameter's values per step (one when it is constant), and the span of
+/// its `per_step(…)` list.
+type PerStep<T> = (Vec<T>, Option<Span>);
+
 /// Evaluate `A`, `B`, `c`, `C` and the bounds against the declared sizes.
 pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
-    let (state, control, assigns, bounds) = (&sp.state, &sp.control, &sp.assigns, &sp.bounds);
-    let mut plant: Option<Vec<Plant>> = None;
-    let mut per_step_lists: Vec<(usize, Span)> = Vec::new();
-    let mut limits = None;
-    let mut p_dim = None;
-    if let (Some((xn, n)), Some((un, m))) = (&state, &control) {
-        let (n, m) = (*n, *m);
-        let a = assigns.get("A").and_then(|(v, _)| {
-            per_step(cx, v, &mut |cx, v| {
-                cx.matrix(
-                    v,
-                    "A",
-                    n,
-                    Some(n),
-                    &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
-                )
-            })
-        });
-        let b = assigns.get("B").and_then(|(v, _)| {
-            per_step(cx, v, &mut |cx, v| {
-                cx.matrix(
-                    v,
-                    "B",
-                    n,
-                    Some(m),
-                    &format!("B is n × m: {n} states by {m} controls"),
-                )
-            })
-        });
-        let c = match assigns.get("c") {
-            Some((v, _)) => per_step(cx, v, &mut |cx, v| {
-                cx.vector(v, "c", n, &format!("c has one entry per state ({n})"))
-            }),
-            None => Some((vec![DVector::zeros(n)], None)),
-        };
-        let obs = match assigns.get("C") {
-            Some((v, _)) => cx.matrix(
+    let mut part = PlantPart {
+        plant: None,
+        per_step_lists: Vec::new(),
+        limits: None,
+        p_dim: None,
+    };
+    let (Some((xn, n)), Some((un, m))) = (&sp.state, &sp.control) else {
+        return part;
+    };
+    let (n, m, assigns) = (*n, *m, &sp.assigns);
+    let a = assigns.get("A").and_then(|(v, _)| {
+        per_step(cx, v, &mut |cx, v| {
+            cx.matrix(
                 v,
-                "C",
+                "A",
                 n,
-                None,
-                &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
-            ),
-            None => Some(DMatrix::identity(n, n)),
-        };
-        let p = obs.as_ref().map(|o| o.ncols());
-        p_dim = p;
-        let mut w = Some(IBox::new(vec![0.0; n], vec![0.0; n]));
-        let mut v = p.map(|p| IBox::new(vec![0.0; p], vec![0.0; p]));
-        let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
-        for (name, set) in bounds.iter() {
-            let key = name.node.as_str();
-            if let Some(first) = seen.get(key) {
-                cx.duplicate(&format!("the bound on `{key}`"), *first, name.span);
-                continue;
-            }
-            seen.insert(key, name.span);
-            if key == "w" {
-                w = cx.box_set(set, "w", n, true, "the process noise box");
-            } else if key == "v" {
-                match p {
-                    Some(p) => v = cx.box_set(set, "v", p, true, "the sensor noise box"),
-                    None => v = None,
-                }
-            } else if key == un {
-                limits = cx.box_set(set, un, m, true, "the control limit box");
-            } else {
-                let cands = ["w", "v", un.as_str()];
-                let mut d = Diagnostic::new(
-                    Code::UnknownName,
-                    name.span,
-                    format!("unknown bounded quantity `{key}`"),
-                )
-                .label("not a noise or control name");
-                d = match did_you_mean(key, cands) {
-                    Some(s) => d.hint(format!("did you mean `{s}`? Bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
-                    None => d.hint(format!("bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
-                };
-                cx.err(d);
+                Some(n),
+                &format!("A is n × n with n = {n}, the dimension of `{xn}`"),
+            )
+        })
+    });
+    let b = assigns.get("B").and_then(|(v, _)| {
+        per_step(cx, v, &mut |cx, v| {
+            cx.matrix(
+                v,
+                "B",
+                n,
+                Some(m),
+                &format!("B is n × m: {n} states by {m} controls"),
+            )
+        })
+    });
+    let c = match assigns.get("c") {
+        Some((v, _)) => per_step(cx, v, &mut |cx, v| {
+            cx.vector(v, "c", n, &format!("c has one entry per state ({n})"))
+        }),
+        None => Some((vec![DVector::zeros(n)], None)),
+    };
+    let obs = match assigns.get("C") {
+        Some((v, _)) => cx.matrix(
+            v,
+            "C",
+            n,
+            None,
+            &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
+        ),
+        None => Some(DMatrix::identity(n, n)),
+    };
+    let p = obs.as_ref().map(|o| o.ncols());
+    part.p_dim = p;
+    let bounds = bounds(cx, &sp.bounds, n, (un.as_str(), m), p);
+    part.limits = bounds.limits;
+    if let (Some(a), Some(b), Some(c), Some(obs), Some(w), Some(v)) =
+        (a, b, c, obs, bounds.w, bounds.v)
+    {
+        for (list, span) in [(a.0.len(), a.1), (b.0.len(), b.1), (c.0.len(), c.1)] {
+            if let Some(span) = span {
+                part.per_step_lists.push((list, span));
             }
         }
-        if let (Some(a), Some(b), Some(c), Some(obs), Some(w), Some(v)) = (a, b, c, obs, w, v) {
-            for (list, span) in [(a.0.len(), a.1), (b.0.len(), b.1), (c.0.len(), c.1)] {
-                if let Some(span) = span {
-                    per_step_lists.push((list, span));
-                }
-            }
-            let len = a.0.len().max(b.0.len()).max(c.0.len());
-            // each step's plant holds A, B, c and a copy of C (checked before any is built)
-            let per_step = n as u64 * (n + m + 1 + obs.ncols()) as u64;
-            if !within(&[len as u64, per_step], MAX_PLANT_NUMBERS) {
-                let span = a.1.or(b.1).or(c.1).unwrap_or_else(|| Span::new(0, 0));
-                cx.err(
-                    Diagnostic::new(
-                        Code::Limit,
-                        span,
-                        format!("{len} steps of a plant with {n} states hold more than {MAX_PLANT_NUMBERS} numbers"),
-                    )
-                    .label("too large a time-varying plant")
-                    .hint("use fewer per_step entries or a smaller state"),
-                );
-                return PlantPart {
-                    plant: None,
-                    per_step_lists,
-                    limits,
-                    p_dim,
-                };
-            }
-            // step k uses entry k of each list, or its last entry
-            fn pick<T: Clone>(v: &[T], k: usize) -> Option<T> {
-                v.get(k).or(v.last()).cloned()
-            }
-            // lists are never empty (the grammar); `None` would only drop the plant
-            plant = (0..len)
-                .map(|k| {
-                    Some(Plant {
-                        a: pick(&a.0, k)?,
-                        b: pick(&b.0, k)?,
-                        c: pick(&c.0, k)?,
-                        obs: obs.clone(),
-                        w: w.clone(),
-                        v: v.clone(),
-                        err: None,
-                    })
-                })
-                .collect::<Option<Vec<Plant>>>()
-                .filter(|p| !p.is_empty());
-        }
+        part.plant = plants(cx, (n, m), &a, &b, &c, obs, (w, v));
     }
+    part
+}
 
-    PlantPart {
-        plant,
-        per_step_lists,
-        limits,
-        p_dim,
+/// The noise boxes and the control limits, from the bound statements.
+struct Bounds {
+    /// The process noise box (zero when not given).
+    w: Option<IBox>,
+    /// The sensor noise box (zero when not given).
+    v: Option<IBox>,
+    limits: Option<IBox>,
+}
+
+/// Check the bounds on `w` (`n` states), `v` (`p` observations) and the
+/// control `un` (`m` components).
+fn bounds(
+    cx: &mut Ctx,
+    bounds: &[(&Spanned<String>, &Spanned<BoxSet>)],
+    n: usize,
+    (un, m): (&str, usize),
+    p: Option<usize>,
+) -> Bounds {
+    let mut w = Some(IBox::new(vec![0.0; n], vec![0.0; n]));
+    let mut v = p.map(|p| IBox::new(vec![0.0; p], vec![0.0; p]));
+    let mut limits = None;
+    let mut seen: BTreeMap<&str, Span> = BTreeMap::new();
+    for (name, set) in bounds.iter() {
+        let key = name.node.as_str();
+        if let Some(first) = seen.get(key) {
+            cx.duplicate(&format!("the bound on `{key}`"), *first, name.span);
+            continue;
+        }
+        seen.insert(key, name.span);
+        if key == "w" {
+            w = cx.box_set(set, "w", n, true, "the process noise box");
+        } else if key == "v" {
+            match p {
+                Some(p) => v = cx.box_set(set, "v", p, true, "the sensor noise box"),
+                None => v = None,
+            }
+        } else if key == un {
+            limits = cx.box_set(set, un, m, true, "the control limit box");
+        } else {
+            let cands = ["w", "v", un];
+            let mut d = Diagnostic::new(
+                Code::UnknownName,
+                name.span,
+                format!("unknown bounded quantity `{key}`"),
+            )
+            .label("not a noise or control name");
+            d = match did_you_mean(key, cands) {
+                Some(s) => d.hint(format!("did you mean `{s}`? Bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
+                None => d.hint(format!("bounds apply to `w` (process noise), `v` (sensor noise) or `{un}` (control limits)")),
+            };
+            cx.err(d);
+        }
     }
+    Bounds { w, v, limits }
+}
+
+/// The plant of each step (`n` states, `m` controls): step k uses entry k
+/// of each list, or its last entry. The plants must stay within
+/// [`MAX_PLANT_NUMBERS`] (checked before any is built).
+fn plants(
+    cx: &mut Ctx,
+    (n, m): (usize, usize),
+    a: &PerStep<DMatrix<f64>>,
+    b: &PerStep<DMatrix<f64>>,
+    c: &PerStep<DVector<f64>>,
+    obs: DMatrix<f64>,
+    (w, v): (IBox, IBox),
+) -> Option<Vec<Plant>> {
+    let len = a.0.len().max(b.0.len()).max(c.0.len());
+    // each step's plant holds A, B, c and a copy of C
+    let per_step = n as u64 * (n + m + 1 + obs.ncols()) as u64;
+    if !within(&[len as u64, per_step], MAX_PLANT_NUMBERS) {
+        let span = a.1.or(b.1).or(c.1).unwrap_or_else(|| Span::new(0, 0));
+        cx.err(
+            Diagnostic::new(
+                Code::Limit,
+                span,
+                format!("{len} steps of a plant with {n} states hold more than {MAX_PLANT_NUMBERS} numbers"),
+            )
+            .label("too large a time-varying plant")
+            .hint("use fewer per_step entries or a smaller state"),
+        );
+        return None;
+    }
+    fn pick<T: Clone>(v: &[T], k: usize) -> Option<T> {
+        v.get(k).or(v.last()).cloned()
+    }
+    // lists are never empty (the grammar); `None` would only drop the plant
+    (0..len)
+        .map(|k| {
+            Some(Plant {
+                a: pick(&a.0, k)?,
+                b: pick(&b.0, k)?,
+                c: pick(&c.0, k)?,
+                obs: obs.clone(),
+                w: w.clone(),
+                v: v.clone(),
+                err: None,
+            })
+        })
+        .collect::<Option<Vec<Plant>>>()
+        .filter(|p| !p.is_empty())
 }

@@ -13,10 +13,10 @@ mod common;
 
 use common::{net_certificate, run_net};
 use nalgebra::{DMatrix, DVector};
-use ravel::check::{NetProperty, NetPropertyKind};
 use ravel::execute::network::Witness;
 use ravel::execute::Verdict;
 use ravel::ir::Partitioner;
+use ravel::ir::{NetProperty, NetPropertyKind};
 use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::nn::{Activation, InputType, Layer, Network};

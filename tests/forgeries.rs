@@ -237,8 +237,8 @@ fn a_forged_counterexample_at_the_top_of_f64_is_replayed_not_trusted() {
 /// certificate may call it proven.
 #[test]
 fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
-    use ravel::check::{NetProperty, NetPropertyKind};
     use ravel::ir::NetPropagator;
+    use ravel::ir::{NetProperty, NetPropertyKind};
     use ravel_analysis::sets::{IBox, Polytope, Region};
     use ravel_base::nn::{Layer, Network};
     let n = 5;
@@ -547,7 +547,7 @@ analysis {{
 /// 6.2e-294), forced to VERIFIED, is not VALID.
 #[test]
 fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
-    use ravel::check::{NetProperty, NetPropertyKind};
+    use ravel::ir::{NetProperty, NetPropertyKind};
     use ravel_analysis::sets::{IBox, Polytope, Region};
     use ravel_base::nn::{Activation, Layer, Network};
     let net = Network::new(
@@ -597,7 +597,7 @@ fn an_underflowing_coefficient_in_a_network_certificate_proves_nothing() {
 /// (found by review); every slope setting must now leave it unproven.
 #[test]
 fn an_underflowing_coefficient_times_a_huge_hidden_value_is_no_proof() {
-    use ravel::check::{NetProperty, NetPropertyKind};
+    use ravel::ir::{NetProperty, NetPropertyKind};
     use ravel_analysis::sets::{IBox, Polytope, Region};
     use ravel_base::nn::{Activation, InputType, Layer, Network};
     let m = |r: usize, c: usize, v: &[f64]| nalgebra::DMatrix::from_row_slice(r, c, v);

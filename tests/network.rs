@@ -7,11 +7,11 @@ mod common;
 
 use common::{net_plan as plan, random_network, run_net as run};
 use nalgebra::{DMatrix, DVector};
-use ravel::check::{NetProperty, NetPropertyKind, RadiusSpec};
 use ravel::execute::network::execute_network;
 use ravel::execute::Control;
 use ravel::execute::Verdict;
 use ravel::ir::{Guide, NetPropagator, Partitioner};
+use ravel::ir::{NetProperty, NetPropertyKind, RadiusSpec};
 use ravel::lower::NetworkPlan;
 use ravel_analysis::partition::Budget;
 use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
@@ -299,7 +299,7 @@ fn robustness_verdicts_agree_with_samples() {
 /// action; with and without partitioning, for every ball norm.
 #[test]
 fn carrl_bounds_contain_sampled_values() {
-    use ravel::check::SelectSpec;
+    use ravel::ir::SelectSpec;
     let mut rng = Rng::new(31);
     let mut optimal = 0;
     for case in 0..30 {
@@ -430,7 +430,7 @@ fn network_certificates_catch_false_claims() {
 /// bounds and no claim.
 #[test]
 fn time_limit_keeps_every_bound_sound() {
-    use ravel::check::SelectSpec;
+    use ravel::ir::SelectSpec;
     let mut rng = Rng::new(4);
     let net = random_network(&mut rng, 2, 3, Activation::Relu, (2, 6));
     let input = Region::Box(IBox::new(vec![-0.5, -0.5], vec![0.5, 0.5]));
@@ -462,7 +462,7 @@ fn time_limit_keeps_every_bound_sound() {
 /// the same outcome, number for number, as on one.
 #[test]
 fn threads_never_change_a_network_result() {
-    use ravel::check::SelectSpec;
+    use ravel::ir::SelectSpec;
     let mut rng = Rng::new(12);
     let net = random_network(&mut rng, 2, 3, Activation::Relu, (2, 6));
     let input = Region::Ball {

@@ -3,9 +3,10 @@
 //! same sets (compared row by row), and get the expected verdicts; files
 //! outside the supported fragment are refused with their line.
 
-use ravel::check::{NetPropertyKind, Task};
+use ravel::check::Task;
 use ravel::execute::network::execute_network;
 use ravel::execute::Control;
+use ravel::ir::NetPropertyKind;
 use ravel_analysis::sets::Region;
 use std::path::Path;
 

@@ -7,9 +7,9 @@
 
 mod common;
 
-use ravel::check::{NetProperty, NetPropertyKind};
 use ravel::execute::Verdict;
 use ravel::ir::NetPropagator;
+use ravel::ir::{NetProperty, NetPropertyKind};
 use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::{IBox, Norm, Polytope, Region};
 use ravel_base::nn::{Layer, Network};

@@ -2,9 +2,9 @@
 #![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
-use ravel::check::NetProperty;
 use ravel::execute::network::{execute_network, NetworkOutcome};
 use ravel::execute::Control;
+use ravel::ir::NetProperty;
 use ravel::ir::{NetPropagator, Partitioner};
 use ravel::lower::NetworkPlan;
 use ravel_analysis::sets::Region;

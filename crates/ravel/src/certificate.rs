@@ -510,7 +510,7 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
 /// The problem of a network spec as a certificate records it (and `ravel
 /// certify` compares it with the spec's, number for number).
 pub fn network_problem_json(plan: &crate::lower::NetworkPlan) -> Value {
-    use crate::check::NetPropertyKind;
+    use crate::ir::NetPropertyKind;
     use ravel_analysis::sets::Region;
     let rows = |r: &[(Vec<f64>, f64)]| -> Value {
         r.iter().map(|(a, b)| json!({ "a": a, "b": b })).collect()

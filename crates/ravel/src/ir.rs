@@ -1,8 +1,11 @@
 //! Plain types shared by the phases after parsing: what `check` produces
-//! and `lower` and `execute` consume. Keeping them here lets the phases stack
-//! (`check` → `lower` → `execute`) without importing each other backwards.
+//! and `lower` and `execute` consume — the properties of both kinds of spec,
+//! radius searches, action selections, partitioners and propagators, in one
+//! home. Keeping them here lets the phases stack (`check` → `lower` →
+//! `execute`) without importing each other backwards.
 
 use ravel_analysis::partition::Budget;
+use ravel_analysis::sets::{Norm, Polytope};
 
 /// What guides a refining partitioner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,4 +88,85 @@ impl NetPropagator {
     pub fn from_name(name: &str) -> Option<NetPropagator> {
         NetPropagator::ALL.into_iter().find(|p| p.name() == name)
     }
+}
+
+/// What a property demands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PropertyKind {
+    /// The final reachable set lies in this set.
+    Goal(Polytope),
+    /// No reachable set at these steps touches any member.
+    Avoid {
+        /// The union's members.
+        members: Vec<Polytope>,
+        /// First and last step (inclusive, clipped to the horizon).
+        steps: (usize, usize),
+    },
+}
+
+/// A named property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Property {
+    /// The set's name from the spec.
+    pub name: String,
+    /// What it demands.
+    pub kind: PropertyKind,
+}
+
+impl Property {
+    /// The last step the property constrains (the horizon for a goal).
+    pub fn last_step(&self) -> usize {
+        match &self.kind {
+            PropertyKind::Goal(_) => usize::MAX,
+            PropertyKind::Avoid { steps, .. } => steps.1,
+        }
+    }
+}
+
+/// What a network property demands of the outputs `y = f(x)` on the whole input set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum NetPropertyKind {
+    /// Every inequality holds: `y` lies in the polytope.
+    Require(Polytope),
+    /// `y` lies in no member of the union.
+    Avoid(Vec<Polytope>),
+    /// `y[label] > y[j]` for every other `j`; without a label, the label of
+    /// the input set's centre (decided by `execute`).
+    Robust(Option<usize>),
+}
+
+/// A named network property.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NetProperty {
+    /// Its name.
+    pub name: String,
+    /// What it demands.
+    pub kind: NetPropertyKind,
+}
+
+/// A minimal-adversarial-perturbation search: the input set scaled about its
+/// centre by `s ∈ [0, max]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RadiusSpec {
+    /// Its name.
+    pub name: String,
+    /// The index of the property in `NetworkChecked::properties`.
+    pub property: usize,
+    /// The largest scale tried.
+    pub max: f64,
+    /// Bisection stops when the bracket is narrower than this.
+    pub tolerance: f64,
+}
+
+/// Robust action selection (CARRL): every observation's ε-ball.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SelectSpec {
+    /// Its name.
+    pub name: String,
+    /// The ball's radius per input.
+    pub epsilon: Vec<f64>,
+    /// The ball's norm.
+    pub norm: Norm,
+    /// The observations (each of the input size).
+    pub observations: Vec<Vec<f64>>,
 }

@@ -7,43 +7,10 @@
 //! turns goal and avoid sets into properties over the steps they constrain.
 
 use crate::check::{Checked, NetworkChecked, Task};
-pub use crate::ir::{Guide, Partitioner};
+pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
-use ravel_analysis::sets::{IBox, Polytope, Region};
+use ravel_analysis::sets::{IBox, Region};
 use ravel_base::nn::Layer;
-
-/// What a property demands.
-#[derive(Clone, Debug, PartialEq)]
-pub enum PropertyKind {
-    /// The final reachable set lies in this set.
-    Goal(Polytope),
-    /// No reachable set at these steps touches any member.
-    Avoid {
-        /// The union's members.
-        members: Vec<Polytope>,
-        /// First and last step (inclusive, clipped to the horizon).
-        steps: (usize, usize),
-    },
-}
-
-/// A named property.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Property {
-    /// The set's name from the spec.
-    pub name: String,
-    /// What it demands.
-    pub kind: PropertyKind,
-}
-
-impl Property {
-    /// The last step the property constrains (the horizon for a goal).
-    pub fn last_step(&self) -> usize {
-        match &self.kind {
-            PropertyKind::Goal(_) => usize::MAX,
-            PropertyKind::Avoid { steps, .. } => steps.1,
-        }
-    }
-}
 
 /// Everything the executor needs to run a task, as plain data: one variant
 /// per kind of spec (a third kind of plant is a third variant).
@@ -225,11 +192,11 @@ pub struct NetworkPlan {
     /// Its name.
     pub input_set_name: String,
     /// The robust action selections, in spec order.
-    pub selects: Vec<crate::check::SelectSpec>,
+    pub selects: Vec<crate::ir::SelectSpec>,
     /// The properties, in spec order.
-    pub properties: Vec<crate::check::NetProperty>,
+    pub properties: Vec<crate::ir::NetProperty>,
     /// The radius searches, in spec order.
-    pub radii: Vec<crate::check::RadiusSpec>,
+    pub radii: Vec<crate::ir::RadiusSpec>,
     /// The propagator.
     pub propagator: crate::ir::NetPropagator,
     /// How the input set is split.

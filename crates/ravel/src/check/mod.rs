@@ -22,14 +22,12 @@ mod sets;
 mod system;
 mod time;
 
+use crate::ir::SelectSpec;
 use crate::ir::{Guide, Partitioner};
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use analysis_block::AnalysisPart;
 pub use analysis_block::DEFAULT_BUDGET;
-pub use network::{
-    is_network_spec, NetProperty, NetPropertyKind, NetworkChecked, RadiusSpec, SelectSpec,
-    MAX_OBSERVATIONS,
-};
+pub use network::{is_network_spec, NetworkChecked, MAX_OBSERVATIONS};
 use ravel_analysis::closed_loop::{Boundary, Plant, Propagator};
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::limits::{

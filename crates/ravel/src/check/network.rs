@@ -7,48 +7,13 @@ use std::collections::BTreeMap;
 
 use super::analysis_block::{self, AnalysisPart};
 use super::{controller, effective_path, file_sha256, ControllerFile, Ctx, WHOLE};
-use crate::ir::{NetPropagator, Partitioner};
+use crate::ir::{NetPropagator, NetProperty, NetPropertyKind, Partitioner, RadiusSpec, SelectSpec};
 use crate::onnx::Controller;
 use ravel_analysis::sets::{Polytope, Region};
 use ravel_analysis::shape::Shape;
 use ravel_base::limits::{within, MAX_SDP_DIM, MAX_STORED_NUMBERS};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{compact, Code, Diagnostic};
-
-/// What a network property demands of the outputs `y = f(x)` on the whole input set.
-#[derive(Clone, Debug, PartialEq)]
-pub enum NetPropertyKind {
-    /// Every inequality holds: `y` lies in the polytope.
-    Require(Polytope),
-    /// `y` lies in no member of the union.
-    Avoid(Vec<Polytope>),
-    /// `y[label] > y[j]` for every other `j`; without a label, the label of
-    /// the input set's centre (decided by `execute`).
-    Robust(Option<usize>),
-}
-
-/// A named network property.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NetProperty {
-    /// Its name.
-    pub name: String,
-    /// What it demands.
-    pub kind: NetPropertyKind,
-}
-
-/// A minimal-adversarial-perturbation search: the input set scaled about its
-/// centre by `s ∈ [0, max]`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RadiusSpec {
-    /// Its name.
-    pub name: String,
-    /// The index of the property in [`NetworkChecked::properties`].
-    pub property: usize,
-    /// The largest scale tried.
-    pub max: f64,
-    /// Bisection stops when the bracket is narrower than this.
-    pub tolerance: f64,
-}
 
 /// A network spec that passed every check.
 #[derive(Clone, Debug)]
@@ -87,19 +52,6 @@ pub struct NetworkChecked {
     pub seed: u64,
     /// Projected-gradient steps on the lower ReLU slopes (0: CROWN's own).
     pub slope_steps: usize,
-}
-
-/// Robust action selection (CARRL): every observation's ε-ball.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SelectSpec {
-    /// Its name.
-    pub name: String,
-    /// The ball's radius per input.
-    pub epsilon: Vec<f64>,
-    /// The ball's norm.
-    pub norm: ravel_analysis::sets::Norm,
-    /// The observations (each of the input size).
-    pub observations: Vec<Vec<f64>>,
 }
 
 /// The most observations of one select block.

@@ -27,9 +27,9 @@
 
 use nalgebra::DMatrix;
 
-use crate::check::{NetPropertyKind, RadiusSpec};
 use crate::execute::{Control, Verdict};
 use crate::ir::{Guide, NetPropagator, Partitioner};
+use crate::ir::{NetPropertyKind, RadiusSpec};
 use crate::lower::NetworkPlan;
 use ravel_analysis::batch;
 use ravel_analysis::crown::{Mode, Relaxation};

@@ -64,13 +64,13 @@ fn main() {
             ))
         });
         let outcome = outcome.expect("ran");
-        let id = ravel::certificate::Identity {
+        let id = ravel::certificate_writer::Identity {
             spec_path: path.display().to_string(),
             spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
         };
         let mut text = String::new();
         let write = median(|| {
-            let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+            let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
             text = serde_json::to_string(&cert).unwrap_or_default();
         });
         let mut report = None;

@@ -294,7 +294,7 @@ fn run(
     if let Some(target) = &opts.certificate {
         let file = certificate_file(target, cert_dir, file_name);
         let id = identity(&file, path, &l.source);
-        let mut cert = ravel::certificate::build(&run, &id);
+        let mut cert = ravel::certificate_writer::build(&run, &id);
         record_controller(&mut cert, &file, run.controller_resolved());
         if let Err(msg) = write_certificate(&file, &cert) {
             fail_item(
@@ -424,8 +424,8 @@ fn folder_of(file: &Path) -> &Path {
 /// Who a certificate written to `file` is about: the spec's path, relative
 /// to the certificate's folder (so that `certify` works from any working
 /// folder, and after the folder is moved with the spec), and its hash.
-fn identity(file: &Path, spec: &Path, source: &str) -> ravel::certificate::Identity {
-    ravel::certificate::Identity {
+fn identity(file: &Path, spec: &Path, source: &str) -> ravel::certificate_writer::Identity {
+    ravel::certificate_writer::Identity {
         spec_path: super::relative_to(folder_of(file), spec)
             .display()
             .to_string(),

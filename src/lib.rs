@@ -771,7 +771,7 @@ impl Certifying {
             return Err(self
                 .invalid("the controller file is not the one certified (SHA-256 differs)".into()));
         }
-        if ravel::certificate::network_sha256(plan.network())
+        if ravel::certificate_writer::network_sha256(plan.network())
             != hash("controller", "network_sha256")
         {
             return Err(self.invalid(
@@ -784,7 +784,7 @@ impl Certifying {
             short_hash(spec_sha),
             short_hash(&hash("spec", "sha256"))
         );
-        let problem = ravel::certificate::problem_json(plan);
+        let problem = ravel::certificate_writer::problem_json(plan);
         if let Some(d) = first_difference(
             &problem,
             cert.get("problem").unwrap_or(&Value::Null),

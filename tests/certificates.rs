@@ -19,11 +19,11 @@ fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
     let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
     let plan = ravel::lower::lower_system(&checked);
     let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: spec.to_string(),
         spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
     };
-    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
     (plan, cert)
 }
 
@@ -486,11 +486,11 @@ fn a_wrong_verified_verdict_never_gets_a_valid_certificate() {
     );
     outcome.properties[0].status = ravel::execute::Verdict::Verified;
     outcome.properties[0].counterexample = None;
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     match answer(&cert, &plan) {
         Answer::Unsupported(m) => assert!(m.contains("or its verdict is wrong"), "{m}"),
@@ -602,11 +602,11 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
         }
         let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
         assert_eq!(outcome.verdict, ravel::execute::Verdict::Verified, "{spec}");
-        let id = ravel::certificate::Identity {
+        let id = ravel::certificate_writer::Identity {
             spec_path: spec.to_string(),
             spec_sha256: String::new(),
         };
-        let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+        let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
         assert_eq!(cert["evidence"]["slope_steps"], steps, "{spec}");
         assert_eq!(answer(&cert, &plan), Answer::Valid, "{spec}");
         let mut off = cert.clone();

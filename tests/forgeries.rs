@@ -32,11 +32,11 @@ fn analyse(source: &str, dir: &Path) -> (ravel::lower::SystemPlan, ravel::execut
 }
 
 fn certificate(plan: &ravel::lower::SystemPlan, outcome: &ravel::execute::SystemOutcome) -> Value {
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    ravel::certificate::build_system(plan, outcome, &id)
+    ravel::certificate_writer::build_system(plan, outcome, &id)
 }
 
 fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
@@ -276,13 +276,13 @@ fn a_deep_linear_network_near_the_top_of_f64_proves_no_false_requirement() {
             Verdict::Verified,
             "{propagator:?}: a false requirement verified"
         );
-        let id = ravel::certificate::Identity {
+        let id = ravel::certificate_writer::Identity {
             spec_path: String::new(),
             spec_sha256: String::new(),
         };
         out.properties[0].status = Verdict::Verified;
         out.properties[0].counterexample = None;
-        let mut forced = ravel::certificate::build_network(&plan, &out, &id);
+        let mut forced = ravel::certificate_writer::build_network(&plan, &out, &id);
         assert!(!matches!(
             ravel_certify::network::check(&forced, &net).answer,
             Answer::Valid

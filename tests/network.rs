@@ -389,11 +389,11 @@ fn network_certificates_catch_false_claims() {
     );
     let mut out = run(&p);
     assert_eq!(out.properties[0].status, Verdict::Falsified);
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: "t".into(),
         spec_sha256: String::new(),
     };
-    let honest = ravel::certificate::build_network(&p, &out, &id);
+    let honest = ravel::certificate_writer::build_network(&p, &out, &id);
     assert_eq!(check(&honest, &net).answer, Answer::Valid);
     // a counterexample moved outside the input set
     let mut moved = honest.clone();
@@ -402,7 +402,7 @@ fn network_certificates_catch_false_claims() {
     // the verdict forced to VERIFIED
     out.properties[0].status = Verdict::Verified;
     out.properties[0].counterexample = None;
-    let forced = ravel::certificate::build_network(&p, &out, &id);
+    let forced = ravel::certificate_writer::build_network(&p, &out, &id);
     assert_eq!(forced["evidence"]["status"], "unsupported");
     assert!(matches!(
         check(&forced, &net).answer,
@@ -797,11 +797,11 @@ fn network_certificates_check_optimised_slopes() {
         p.slope_steps = 8;
         let out = run(&p);
         assert_eq!(out.properties[0].status, Verdict::Verified, "case {case}");
-        let id = ravel::certificate::Identity {
+        let id = ravel::certificate_writer::Identity {
             spec_path: "t".into(),
             spec_sha256: String::new(),
         };
-        let cert = ravel::certificate::build_network(&p, &out, &id);
+        let cert = ravel::certificate_writer::build_network(&p, &out, &id);
         assert_eq!(cert["evidence"]["slope_steps"], 8);
         assert_eq!(check(&cert, &net).answer, Answer::Valid, "case {case}");
         let mut off = cert.clone();

@@ -606,11 +606,11 @@ fn every_trajectory_stays_inside_what_execute_reports() {
             );
             // the certificate of the result: VALID (every VERIFIED verdict
             // re-checked), never INVALID
-            let id = ravel::certificate::Identity {
+            let id = ravel::certificate_writer::Identity {
                 spec_path: String::new(),
                 spec_sha256: String::new(),
             };
-            let cert = ravel::certificate::build_system(&plan, &out, &id);
+            let cert = ravel::certificate_writer::build_system(&plan, &out, &id);
             let report = ravel_certify::check(&cert, &plan.closed_loop.net);
             match &report.answer {
                 ravel_certify::Answer::Valid => {
@@ -693,7 +693,7 @@ fn trajectories_stay_inside_the_checkers_own_bounds() {
     for seed in 0..90u64 {
         let case = random_case(seed);
         let Region::Box(x0) = &case.x0 else { continue };
-        let (plants, w, v) = ravel::certificate::loop_data(&case.cl);
+        let (plants, w, v) = ravel::certificate_writer::loop_data(&case.cl);
         let pl = &case.cl.plant;
         let x0b = Bx {
             lo: x0.lo.clone(),

@@ -118,11 +118,11 @@ fn certificate_summary(
     outcome: &ravel::execute::SystemOutcome,
 ) -> String {
     use ravel_certify::Answer;
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: name.to_string(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build_system(plan, outcome, &id);
+    let cert = ravel::certificate_writer::build_system(plan, outcome, &id);
     // the document survives a round trip through its text exactly
     let text = serde_json::to_string(&cert).expect("serialisable");
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
@@ -217,10 +217,10 @@ fn network_specs() {
             "{name}: verdict differs from its `// expect:` header"
         );
         // the category guard of certificates: every shipped network spec's is VALID
-        let cert = ravel::certificate::build_network(
+        let cert = ravel::certificate_writer::build_network(
             &plan,
             &out,
-            &ravel::certificate::Identity {
+            &ravel::certificate_writer::Identity {
                 spec_path: name.clone(),
                 spec_sha256: String::new(),
             },

@@ -275,7 +275,7 @@ const PHASES: [&str; 9] = [
     "lower",
     "execute",
     "report",
-    "certificate",
+    "certificate_writer",
     "plot",
 ];
 

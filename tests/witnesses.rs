@@ -45,11 +45,11 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let (plan, outcome) = analyse(&narrowed);
     assert_eq!(outcome.properties[0].status, Verdict::Verified);
     assert_eq!(outcome.cells.len(), 1);
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: String::new(),
         spec_sha256: String::new(),
     };
-    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
     assert_eq!(
         cert["evidence"]["status"], "checkable",
         "{}",
@@ -78,7 +78,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     assert_ne!(outcome.properties[0].status, Verdict::Verified);
     outcome.properties[0].status = Verdict::Verified;
     outcome.properties[0].counterexample = None;
-    let cert = ravel::certificate::build_system(&plan, &outcome, &id);
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     assert!(matches!(
         ravel_certify::check(&cert, &plan.closed_loop.net).answer,

@@ -103,9 +103,9 @@ pub fn run_net(p: &NetworkPlan) -> NetworkOutcome {
 
 /// The certificate of a network result, with an empty identity.
 pub fn net_certificate(p: &NetworkPlan, out: &NetworkOutcome) -> Value {
-    let id = ravel::certificate::Identity {
+    let id = ravel::certificate_writer::Identity {
         spec_path: "t".into(),
         spec_sha256: String::new(),
     };
-    ravel::certificate::build_network(p, out, &id)
+    ravel::certificate_writer::build_network(p, out, &id)
 }

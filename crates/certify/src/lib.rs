@@ -63,7 +63,7 @@ use bounds::{Bx, Chain, Duals, Loop, PlantRows, Start, Trouble};
 use ravel_base::nn::Network;
 use ravel_base::num::{dot_box_lower, dot_box_upper, sum_lower, sum_upper};
 
-/// The certificate format this module reads and `ravel::certificate` writes.
+/// The certificate format this module reads and `ravel::certificate_writer` writes.
 pub const FORMAT: &str = "ravel-certificate/1";
 
 /// The answer about one certificate.

@@ -8,7 +8,7 @@
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-pub mod certificate;
+pub mod certificate_writer;
 pub mod check;
 pub mod execute;
 pub mod ir;
@@ -210,7 +210,7 @@ pub fn front_end_task(
 /// front end, and whatever the analysis cannot decide (a solver issue, an
 /// overflow, the time limit) is an UNSURE property of the run, with its
 /// reason. Reports ([`report::text`], [`report::json`]) and certificates
-/// ([`certificate::build`]) are made from the run.
+/// ([`certificate_writer::build`]) are made from the run.
 pub fn run(task: &Task, ctl: &Control) -> Run {
     execute::execute(lower::lower(task), ctl)
 }

@@ -45,23 +45,56 @@ const SYMBOLS: [&CStr; 8] = [
 /// The addresses of [`SYMBOLS`] in the loaded library, in that order.
 struct Table([usize; 8]);
 
-static TABLE: OnceLock<Result<Table, String>> = OnceLock::new();
+static TABLE: OnceLock<Result<Table, LoadError>> = OnceLock::new();
+
+/// Why OpenBLAS could not be used; its `Display` says what to do.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LoadError {
+    /// No library of these names could be opened.
+    NoLibrary {
+        /// The names tried, in order.
+        tried: Vec<String>,
+    },
+    /// The library lacks a routine Clarabel calls.
+    NoRoutine {
+        /// The routine's name.
+        routine: String,
+    },
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoadError::NoLibrary { tried } => write!(
+                f,
+                "the BLAS/LAPACK library could not be loaded (tried {}; run scripts/install-deps.sh)",
+                tried.join(", ")
+            ),
+            LoadError::NoRoutine { routine } => {
+                write!(f, "libopenblas.so.0 has no routine {routine}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
 
 /// Opens OpenBLAS (once per process) and resolves the routines Clarabel
 /// calls. The error says which library or routine was missing.
-pub fn load() -> Result<(), String> {
+pub fn load() -> Result<(), LoadError> {
     match TABLE.get_or_init(open) {
         Ok(_) => Ok(()),
         Err(e) => Err(e.clone()),
     }
 }
 
-fn open() -> Result<Table, String> {
+/// [`open_from`] the usual names of OpenBLAS.
+fn open() -> Result<Table, LoadError> {
     open_from(&NAMES)
 }
 
 /// [`open`] with the library names to try.
-fn open_from(names: &[&CStr]) -> Result<Table, String> {
+fn open_from(names: &[&CStr]) -> Result<Table, LoadError> {
     let mut handle = std::ptr::null_mut();
     for name in names {
         // SAFETY: `name` is a NUL-terminated constant; dlopen has no other
@@ -73,21 +106,20 @@ fn open_from(names: &[&CStr]) -> Result<Table, String> {
         }
     }
     if handle.is_null() {
-        let tried: Vec<_> = names.iter().map(|n| n.to_string_lossy()).collect();
-        return Err(format!(
-            "the BLAS/LAPACK library could not be loaded (tried {}; run scripts/install-deps.sh)",
-            tried.join(", ")
-        ));
+        let tried = names
+            .iter()
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect();
+        return Err(LoadError::NoLibrary { tried });
     }
     let mut table = [0usize; 8];
     for (slot, sym) in table.iter_mut().zip(SYMBOLS) {
         // SAFETY: a valid handle and a NUL-terminated name.
         let f = unsafe { libc::dlsym(handle, sym.as_ptr()) };
         if f.is_null() {
-            return Err(format!(
-                "libopenblas.so.0 has no routine {}",
-                sym.to_string_lossy()
-            ));
+            return Err(LoadError::NoRoutine {
+                routine: sym.to_string_lossy().into_owned(),
+            });
         }
         *slot = f as usize;
     }
@@ -157,7 +189,7 @@ mod tests {
     fn a_missing_library_is_an_error_not_a_crash() {
         let e = open_from(&[c"libravel-no-such-blas.so.0"]).err();
         assert!(
-            e.is_some_and(|e| e.contains("libravel-no-such-blas.so.0")),
+            e.is_some_and(|e| e.to_string().contains("libravel-no-such-blas.so.0")),
             "a library that does not exist must not load"
         );
     }

@@ -9,6 +9,7 @@ pub mod dense;
 pub mod expm;
 pub mod issue;
 pub mod lp;
+pub mod nonlinear;
 pub mod open_loop;
 pub mod partition;
 pub mod pool;

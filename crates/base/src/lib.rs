@@ -1,5 +1,5 @@
 //! What the analysis and the certificate checker share, and nothing else:
-//! feed-forward networks ([`nn`]), outward-rounded numerics ([`num`]), the
+//! feed-forward networks ([`nn`]), plant expressions ([`expr`]), outward-rounded numerics ([`num`]), the
 //! resource limits every phase obeys ([`limits`]), a seeded random number
 //! generator ([`rng`]) and text made safe to show ([`text`]).
 //!
@@ -7,6 +7,7 @@
 //! is part of what a VALID answer trusts; keep it small.
 #![forbid(unsafe_code)]
 
+pub mod expr;
 pub mod limits;
 pub mod nn;
 pub mod num;

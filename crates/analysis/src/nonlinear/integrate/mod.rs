@@ -1,0 +1,1 @@
+//! Validated integration of a nonlinear plant over one control period.

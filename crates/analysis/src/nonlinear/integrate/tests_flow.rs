@@ -1,0 +1,397 @@
+//! The validated flow against float simulation.
+
+use super::flow::{flow, flow_scaled, image, FlowError, Settings};
+use super::interval::{DomainError, Interval};
+use super::simulate::simulate;
+use super::tm::Tm;
+use ravel_base::expr::{Func, Id, Node, Tape, Time, VectorField};
+use ravel_base::rng::Rng;
+
+/// A tape under construction.
+struct B(Tape);
+
+impl B {
+    fn new() -> B {
+        B(Tape::new())
+    }
+    fn v(&mut self, i: u32) -> Id {
+        self.0.push(Node::Var(i))
+    }
+    fn c(&mut self, c: f64) -> Id {
+        self.0.push(Node::Const(c))
+    }
+    fn add(&mut self, a: Id, b: Id) -> Id {
+        self.0.push(Node::Add(a, b))
+    }
+    fn sub(&mut self, a: Id, b: Id) -> Id {
+        self.0.push(Node::Sub(a, b))
+    }
+    fn mul(&mut self, a: Id, b: Id) -> Id {
+        self.0.push(Node::Mul(a, b))
+    }
+    fn div(&mut self, a: Id, b: Id) -> Id {
+        self.0.push(Node::Div(a, b))
+    }
+    fn cmul(&mut self, c: f64, a: Id) -> Id {
+        let k = self.c(c);
+        self.mul(k, a)
+    }
+    fn f(&mut self, f: Func, a: Id) -> Id {
+        self.0.push(Node::Func(f, a))
+    }
+    fn pow(&mut self, a: Id, n: i32) -> Id {
+        self.0.push(Node::Powi(a, n))
+    }
+    fn field(self, outputs: Vec<Id>, m: usize, p: usize) -> VectorField {
+        VectorField {
+            tape: self.0,
+            states: outputs.len(),
+            outputs,
+            controls: m,
+            disturbances: p,
+            time: Time::Continuous { period: 0.0 },
+        }
+    }
+}
+
+/// `ẋ0 = x1`, `ẋ1 = −sin(x0) − 0.3·x1 + u`.
+fn pendulum() -> VectorField {
+    let mut b = B::new();
+    let (x0, x1, u) = (b.v(0), b.v(1), b.v(2));
+    let s = b.f(Func::Sin, x0);
+    let d = b.cmul(0.3, x1);
+    let a = b.add(s, d);
+    let f1 = b.sub(u, a);
+    b.field(vec![x1, f1], 1, 0)
+}
+
+/// Van der Pol, `μ = 1`: `ẋ0 = x1`, `ẋ1 = (1 − x0²)·x1 − x0`.
+fn van_der_pol() -> VectorField {
+    let mut b = B::new();
+    let (x0, x1) = (b.v(0), b.v(1));
+    let one = b.c(1.0);
+    let sq = b.pow(x0, 2);
+    let m = b.sub(one, sq);
+    let p = b.mul(m, x1);
+    let f1 = b.sub(p, x0);
+    b.field(vec![x1, f1], 0, 0)
+}
+
+/// `ẋ0 = −x0 + x1·x2`, `ẋ1 = −x1 + x0²`, `ẋ2 = x0 − x2³ + w`.
+fn poly3() -> VectorField {
+    let mut b = B::new();
+    let (x0, x1, x2, w) = (b.v(0), b.v(1), b.v(2), b.v(3));
+    let p = b.mul(x1, x2);
+    let f0 = b.sub(p, x0);
+    let sq = b.pow(x0, 2);
+    let f1 = b.sub(sq, x1);
+    let cube = b.pow(x2, 3);
+    let d = b.sub(x0, cube);
+    let f2 = b.add(d, w);
+    b.field(vec![f0, f1, f2], 0, 1)
+}
+
+/// `ẋ0 = −tanh(x0) + 0.5·x1`,
+/// `ẋ1 = √(x0² + 1) − exp(0.5·x1) + log(2 + x0) / (1 + x1²) − cos(x0)·tan(0.3·x1)`.
+fn transcendental() -> VectorField {
+    let mut b = B::new();
+    let (x0, x1) = (b.v(0), b.v(1));
+    let t = b.f(Func::Tanh, x0);
+    let h = b.cmul(0.5, x1);
+    let f0 = b.sub(h, t);
+    let one = b.c(1.0);
+    let sq0 = b.pow(x0, 2);
+    let a = b.add(sq0, one);
+    let root = b.f(Func::Sqrt, a);
+    let e = b.f(Func::Exp, h);
+    let two = b.c(2.0);
+    let l = b.add(two, x0);
+    let lg = b.f(Func::Log, l);
+    let sq1 = b.pow(x1, 2);
+    let den = b.add(one, sq1);
+    let q = b.div(lg, den);
+    let c = b.f(Func::Cos, x0);
+    let s = b.cmul(0.3, x1);
+    let tn = b.f(Func::Tan, s);
+    let ct = b.mul(c, tn);
+    let r1 = b.sub(root, e);
+    let r2 = b.add(r1, q);
+    let f1 = b.sub(r2, ct);
+    b.field(vec![f0, f1], 0, 0)
+}
+
+/// A random plant: `ẋᵢ = −xᵢ + Σ` of a few random terms (products of two
+/// states, `sin`/`cos` of a state, a control).
+fn random_plant(g: &mut Rng, n: usize) -> VectorField {
+    let mut b = B::new();
+    let xs: Vec<Id> = (0..n as u32).map(|i| b.v(i)).collect();
+    let u = b.v(n as u32);
+    let mut outs = Vec::new();
+    for &xi in &xs {
+        let mut acc = b.cmul(-1.0, xi);
+        for _ in 0..3 {
+            let (a, c) = (xs[g.below(n)], xs[g.below(n)]);
+            let coef = g.uniform(-0.8, 0.8);
+            let term = match g.below(4) {
+                0 => b.mul(a, c),
+                1 => b.f(Func::Sin, a),
+                2 => b.f(Func::Cos, c),
+                _ => u,
+            };
+            let t = b.cmul(coef, term);
+            acc = b.add(acc, t);
+        }
+        outs.push(acc);
+    }
+    b.field(outs, 1, 0)
+}
+
+/// One test case: a plant, the initial box (centre, radius), the control
+/// and disturbance boxes, the period.
+struct Case {
+    name: &'static str,
+    field: VectorField,
+    centre: Vec<f64>,
+    radius: Vec<f64>,
+    period: f64,
+}
+
+/// Every variable (states, controls, disturbances) is a symbol: the
+/// models of the inputs and the sample at `z`.
+fn models(case: &Case) -> Vec<Tm> {
+    let n = case.centre.len();
+    (0..n)
+        .map(|i| Tm::symbol(i, case.centre[i], case.radius[i], n))
+        .collect()
+}
+
+/// Simulates samples (the corners of the symbol cube and random points) in
+/// eight chunks: every intermediate state must lie in the pipe, the final
+/// one in the end models at the sample's `z`. `Err` names the first miss.
+fn check(case: &Case, s: &Settings, scale: f64, samples: usize) -> Result<(), String> {
+    let f = &case.field;
+    let (n, m) = (f.states, f.controls);
+    let all = models(case);
+    let (x, rest) = all.split_at(n);
+    let (u, w) = rest.split_at(m);
+    let out = flow_scaled(f, x, u, w, case.period, s, scale).map_err(|e| format!("{e}"))?;
+    let dim = case.centre.len();
+    let mut g = Rng::new(17);
+    let corners = 1usize << dim.min(6);
+    for k in 0..corners + samples {
+        let z: Vec<f64> = if k < corners {
+            (0..dim).map(|i| if k >> i & 1 == 1 { 1.0 } else { -1.0 }).collect()
+        } else {
+            (0..dim).map(|_| g.uniform(-1.0, 1.0)).collect()
+        };
+        let v: Vec<f64> = (0..dim)
+            .map(|i| case.centre[i] + case.radius[i] * z[i])
+            .collect();
+        let (mut y, rest) = (v[..n].to_vec(), &v[n..]);
+        let (uv, wv) = rest.split_at(m);
+        for chunk in 0..8 {
+            y = simulate(f, &y, uv, wv, case.period / 8.0);
+            for (i, (yi, p)) in y.iter().zip(&out.pipe).enumerate() {
+                let tol = 1e-10 * (1.0 + yi.abs());
+                if !(p.lo - tol <= *yi && *yi <= p.hi + tol) {
+                    return Err(format!("{}: x{i} = {yi} ∉ pipe {p:?} (chunk {chunk}, z {z:?})", case.name));
+                }
+            }
+        }
+        for (i, (yi, t)) in y.iter().zip(&out.end).enumerate() {
+            let iv = t.eval_at(&z);
+            let tol = 1e-10 * (1.0 + yi.abs());
+            if !(iv.lo - tol <= *yi && *yi <= iv.hi + tol) {
+                return Err(format!("{}: x{i}(T) = {yi} ∉ {iv:?} at z {z:?}", case.name));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn cases() -> Vec<Case> {
+    let mut g = Rng::new(5);
+    let mut v = vec![
+        Case {
+            name: "pendulum",
+            field: pendulum(),
+            centre: vec![0.5, -0.2, 0.1],
+            radius: vec![0.05, 0.05, 0.02],
+            period: 0.4,
+        },
+        Case {
+            name: "van der pol",
+            field: van_der_pol(),
+            centre: vec![1.2, 0.3],
+            radius: vec![0.05, 0.05],
+            period: 0.3,
+        },
+        Case {
+            name: "poly3",
+            field: poly3(),
+            centre: vec![0.5, 0.4, -0.3, 0.05],
+            radius: vec![0.03, 0.03, 0.03, 0.02],
+            period: 0.5,
+        },
+        Case {
+            name: "transcendental",
+            field: transcendental(),
+            centre: vec![0.6, 0.2],
+            radius: vec![0.04, 0.04],
+            period: 0.4,
+        },
+    ];
+    for _ in 0..3 {
+        let field = random_plant(&mut g, 3);
+        let centre = (0..4).map(|_| g.uniform(-0.5, 0.5)).collect();
+        v.push(Case {
+            name: "random",
+            field,
+            centre,
+            radius: vec![0.04, 0.04, 0.04, 0.05],
+            period: 0.5,
+        });
+    }
+    v
+}
+
+#[test]
+fn the_flow_contains_every_simulated_trajectory() {
+    for case in cases() {
+        check(&case, &Settings::default(), 1.0, 24).unwrap();
+        let low = Settings {
+            order: 3,
+            substeps: 2,
+        };
+        check(&case, &low, 1.0, 8).unwrap();
+    }
+}
+
+/// The mutation check: every Lagrange remainder shrunk to 90 % of its
+/// width (around its midpoint) must make the soundness test fail on some
+/// plant. With order 2 and few substeps the remainders dominate the width
+/// of the end set, so a trajectory from a corner leaves the shrunk set.
+#[test]
+fn a_shrunk_remainder_is_caught() {
+    let low = Settings {
+        order: 2,
+        substeps: 2,
+    };
+    let mut caught = Vec::new();
+    for case in cases() {
+        assert!(check(&case, &low, 1.0, 8).is_ok(), "{}", case.name);
+        if let Err(e) = check(&case, &low, 0.9, 8) {
+            caught.push(e);
+        }
+    }
+    assert!(!caught.is_empty(), "no plant caught the shrunk remainder");
+}
+
+/// Builds `ẋ = −x`.
+fn decay() -> VectorField {
+    let mut b = B::new();
+    let x = b.v(0);
+    let f = b.cmul(-1.0, x);
+    b.field(vec![f], 0, 0)
+}
+
+#[test]
+fn linear_decay_is_tight() {
+    let x = [Tm::symbol(0, 1.0, 0.1, 1)];
+    let out = flow(&decay(), &x, &[], &[], 1.0, &Settings::default()).unwrap();
+    let width = out.end[0].range().width();
+    let exact = 0.2 * (-1.0f64).exp();
+    assert!(width >= exact && width - exact < 1e-6, "width {width} against {exact}");
+    assert!(out.pipe[0].contains(1.1) && out.pipe[0].contains(0.9 * (-1.0f64).exp()));
+}
+
+#[test]
+fn float_simulation_is_accurate() {
+    let y = simulate(&decay(), &[1.0], &[], &[], 1.0);
+    assert!((y[0] - (-1.0f64).exp()).abs() < 1e-13);
+    let y = simulate(&pendulum(), &[0.5, 0.0], &[0.1], &[], 2.0);
+    let y2 = simulate(&pendulum(), &[0.5, 0.0], &[0.1], &[], 1.0);
+    let y2 = simulate(&pendulum(), &y2, &[0.1], &[], 1.0);
+    assert!((y[0] - y2[0]).abs() < 1e-11 && (y[1] - y2[1]).abs() < 1e-11);
+    assert!(simulate(&decay(), &[f64::NAN], &[], &[], 1.0)[0].is_nan());
+    assert!(simulate(&decay(), &[1.0], &[], &[], f64::NAN)[0].is_nan());
+}
+
+#[test]
+fn errors_never_bounds() {
+    let s = Settings::default();
+    // x' = x², blowing up at t = 1/1.1 < 2
+    let mut b = B::new();
+    let x = b.v(0);
+    let f = b.pow(x, 2);
+    let blow = b.field(vec![f], 0, 0);
+    let x0 = [Tm::symbol(0, 1.05, 0.05, 1)];
+    assert!(flow(&blow, &x0, &[], &[], 2.0, &s).is_err());
+    // log of a range through zero, abs at a kink
+    let mut b = B::new();
+    let x = b.v(0);
+    let f = b.f(Func::Log, x);
+    let log = b.field(vec![f], 0, 0);
+    let around0 = [Tm::symbol(0, 0.0, 1.0, 1)];
+    assert_eq!(
+        flow(&log, &around0, &[], &[], 0.1, &s),
+        Err(FlowError::Domain(DomainError::LogOfNonPositive))
+    );
+    let mut b = B::new();
+    let x = b.v(0);
+    let f = b.f(Func::Abs, x);
+    let abs = b.field(vec![f], 0, 0);
+    assert_eq!(
+        flow(&abs, &around0, &[], &[], 0.1, &s),
+        Err(FlowError::Domain(DomainError::AbsKink))
+    );
+    // away from the kink, abs is fine
+    assert!(flow(&abs, &[Tm::symbol(0, 1.0, 0.1, 1)], &[], &[], 0.1, &s).is_ok());
+    // non-finite inputs, hostile periods, malformed tapes
+    let nan = [Tm::constant(f64::NAN, 1)];
+    assert_eq!(flow(&decay(), &nan, &[], &[], 1.0, &s), Err(FlowError::Overflow));
+    let huge = [Tm::symbol(0, 1e308, 1e307, 1)];
+    assert!(flow(&blow, &huge, &[], &[], 1.0, &s).is_err());
+    let one = [Tm::symbol(0, 1.0, 0.1, 1)];
+    for p in [f64::NAN, -1.0, f64::INFINITY] {
+        assert_eq!(flow(&decay(), &one, &[], &[], p, &s), Err(FlowError::Malformed));
+    }
+    let mut bad = decay();
+    bad.tape.nodes.push(Node::Add(7, 9));
+    bad.outputs = vec![2];
+    assert_eq!(flow(&bad, &one, &[], &[], 1.0, &s), Err(FlowError::Malformed));
+    let mut bad = decay();
+    bad.outputs = vec![40];
+    assert_eq!(flow(&bad, &one, &[], &[], 1.0, &s), Err(FlowError::Malformed));
+    assert_eq!(flow(&decay(), &[], &[], &[], 1.0, &s), Err(FlowError::Malformed));
+    assert_eq!(image(&decay(), &one, &one, &[]), Err(FlowError::Malformed));
+    for e in [FlowError::NoEnclosure, FlowError::Overflow, FlowError::Malformed] {
+        assert_eq!(e.to_string(), e.as_str());
+    }
+}
+
+#[test]
+fn the_discrete_image_contains_every_point() {
+    let f = transcendental();
+    let x = [Tm::symbol(0, 0.6, 0.1, 2), Tm::symbol(1, 0.2, 0.1, 2)];
+    let out = image(&f, &x, &[], &[]).unwrap();
+    let mut g = Rng::new(9);
+    let mut scratch = Vec::new();
+    for _ in 0..500 {
+        let z = [g.uniform(-1.0, 1.0), g.uniform(-1.0, 1.0)];
+        let p = [0.6 + 0.1 * z[0], 0.2 + 0.1 * z[1]];
+        let y = f.eval(&p, &[], &[], &mut scratch);
+        for (yi, t) in y.iter().zip(&out) {
+            let iv = t.eval_at(&z);
+            assert!(iv.lo - 1e-12 <= *yi && *yi <= iv.hi + 1e-12);
+        }
+    }
+    // abs through zero is allowed in a plain evaluation
+    let mut b = B::new();
+    let v = b.v(0);
+    let a = b.f(Func::Abs, v);
+    let absf = b.field(vec![a], 0, 0);
+    let r = image(&absf, &[Tm::symbol(0, 0.0, 1.0, 1)], &[], &[]).unwrap();
+    assert!(r[0].range().contains(1.0) && r[0].range().lo >= -1e-300);
+    let _ = Interval::ZERO;
+}

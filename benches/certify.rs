@@ -76,7 +76,7 @@ fn main() {
         let mut report = None;
         let check = median(|| {
             let cert: serde_json::Value = serde_json::from_str(&text).expect("json");
-            report = Some(ravel_certify::check(&cert, &plan.closed_loop.net));
+            report = Some(ravel_certify::check(&cert, plan.closed_loop.net()));
         });
         let report = report.expect("ran");
         if report.answer != ravel_certify::Answer::Valid || report.cells == 0 {

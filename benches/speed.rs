@@ -572,7 +572,10 @@ fn tightness() {
         let dims = c.plants[0].a.nrows();
         for &st in steps {
             let mut plan = plan_of(&c, prop, grid(k, dims), 1000);
-            plan.closed_loop.slope_steps = st;
+            plan.closed_loop
+                .linear_mut()
+                .expect("a linear plant")
+                .slope_steps = st;
             let err = ravel::report::system::final_error(&execute_system(
                 &plan,
                 &Control {

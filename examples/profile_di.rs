@@ -23,10 +23,13 @@ fn main() {
     let mut plan = ravel::lower::lower_system(&c);
     // SLOPES=k: k slope-optimisation steps per back-substitution
     if let Some(k) = std::env::var("SLOPES").ok().and_then(|k| k.parse().ok()) {
-        plan.closed_loop.slope_steps = k;
+        plan.closed_loop
+            .linear_mut()
+            .expect("a linear plant")
+            .slope_steps = k;
     }
     if std::env::var_os("SHOW_LAYERS").is_some() {
-        for l in &plan.closed_loop.net.layers {
+        for l in &plan.closed_loop.net().layers {
             match l {
                 ravel_base::nn::Layer::Affine { w, .. } => eprint!("{}x{} ", w.nrows(), w.ncols()),
                 ravel_base::nn::Layer::Act(a) => eprint!("{} ", a.name()),

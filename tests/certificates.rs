@@ -28,7 +28,7 @@ fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
 }
 
 fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
-    check(cert, &plan.closed_loop.net).answer
+    check(cert, plan.closed_loop.net()).answer
 }
 
 fn expect_invalid(cert: &Value, plan: &ravel::lower::SystemPlan, words: &str, what: &str) {
@@ -150,7 +150,7 @@ fn a_changed_controller_weight_is_rejected() {
         (2, 1, Some(1), -1e-4),
         (4, 0, None, 1e-4),
     ] {
-        let mut net = plan.closed_loop.net.clone();
+        let mut net = plan.closed_loop.net().clone();
         let Some(Layer::Affine { w, b }) = net.layers.get_mut(layer) else {
             panic!("layer {layer} is affine");
         };
@@ -566,7 +566,7 @@ fn mutated_certificates_never_panic() {
             if let Some(slot) = bad.pointer_mut(ptr) {
                 *slot = value;
             }
-            let net = plan.closed_loop.net.clone();
+            let net = plan.closed_loop.net().clone();
             let got = std::panic::catch_unwind(move || check(&bad, &net).answer);
             assert!(got.is_ok(), "{spec}: a mutation at {ptr} panicked");
         }
@@ -590,7 +590,10 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
         let dir = Path::new(spec).parent().expect("folder");
         let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid");
         let mut plan = ravel::lower::lower_system(&checked);
-        plan.closed_loop.slope_steps = steps;
+        plan.closed_loop
+            .linear_mut()
+            .expect("a linear plant")
+            .slope_steps = steps;
         for q in &mut plan.properties {
             if let PropertyKind::Goal(g) = &mut q.kind {
                 for (a, b) in &mut g.rows {

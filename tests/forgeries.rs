@@ -40,7 +40,7 @@ fn certificate(plan: &ravel::lower::SystemPlan, outcome: &ravel::execute::System
 }
 
 fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
-    check(cert, &plan.closed_loop.net).answer
+    check(cert, plan.closed_loop.net()).answer
 }
 
 /// Set property `name`'s verdict in the certificate (and drop its trajectory).

@@ -573,7 +573,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 controller_sha256: String::new(),
                 controller_resolved: String::new(),
                 network_summary: String::new(),
-                closed_loop: case.cl.clone(),
+                closed_loop: ravel_analysis::feedback::Loop::Linear(Box::new(case.cl.clone())),
                 dt: None,
                 limits: None,
                 initial: x0.clone(),
@@ -611,7 +611,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 spec_sha256: String::new(),
             };
             let cert = ravel::certificate_writer::build_system(&plan, &out, &id);
-            let report = ravel_certify::check(&cert, &plan.closed_loop.net);
+            let report = ravel_certify::check(&cert, plan.closed_loop.net());
             match &report.answer {
                 ravel_certify::Answer::Valid => {
                     if out
@@ -864,7 +864,7 @@ fn cell_threads_give_the_same_outcome() {
 /// matrix-vector products (the order simulations have always used): the same
 /// controls and states, bit for bit.
 fn nalgebra_replays(plan: &ravel::lower::SystemPlan, tr: &ravel::execute::Trajectory, spec: &str) {
-    let cl = &plan.closed_loop;
+    let cl = plan.closed_loop.linear().expect("a linear plant");
     for t in 0..tr.controls.len() {
         let x = DVector::from_column_slice(&tr.states[t]);
         let mut h = cl.plant.obs.transpose() * &x + DVector::from_column_slice(&tr.sensor_noise[t]);

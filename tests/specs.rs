@@ -127,7 +127,7 @@ fn certificate_summary(
     let text = serde_json::to_string(&cert).expect("serialisable");
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
     assert_eq!(back, cert, "{name}: certificate does not round-trip");
-    let report = ravel_certify::check(&back, &plan.closed_loop.net);
+    let report = ravel_certify::check(&back, plan.closed_loop.net());
     assert_eq!(
         report.answer,
         Answer::Valid,

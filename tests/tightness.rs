@@ -119,7 +119,7 @@ fn reach_lp_is_never_looser_than_cl_crown_and_sdp_never_looser_than_reach_lp() {
             // one step from the same input set, at every step of the loop
             let states = sets(&lp, &cell);
             for (t, x) in states.iter().enumerate().take(lp.horizon) {
-                let cl_lp = &lp.closed_loop;
+                let cl_lp = lp.closed_loop.linear().expect("a linear plant");
                 let a = cl_lp.step(t, x, Propagator::ReachLp, &boundary).set;
                 let b = cl_lp.step(t, x, Propagator::CrownSeparate, &boundary).set;
                 let s = cl_lp.step(t, x, Propagator::ReachSdp, &boundary).set;
@@ -219,7 +219,10 @@ fn optimised_slopes_tighten_the_double_integrator() {
     use ravel::lower::PropertyKind;
     let run = |spec, prop, steps: usize, goal_x1: Option<f64>| {
         let mut p = plan(spec, prop, Partitioner::Uniform(vec![1, 1]), Boundary::Box);
-        p.closed_loop.slope_steps = steps;
+        p.closed_loop
+            .linear_mut()
+            .expect("a linear plant")
+            .slope_steps = steps;
         if let Some(h) = goal_x1 {
             for q in &mut p.properties {
                 if let PropertyKind::Goal(g) = &mut q.kind {

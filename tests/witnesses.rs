@@ -58,7 +58,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let cells = cert["evidence"]["cells"].as_array().expect("cells").len();
     assert!(cells > 1, "{cells} cell(s)");
     assert_eq!(
-        ravel_certify::check(&cert, &plan.closed_loop.net).answer,
+        ravel_certify::check(&cert, plan.closed_loop.net()).answer,
         Answer::Valid
     );
     // dropping one refined cell leaves X0 uncovered: INVALID
@@ -68,7 +68,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
         .expect("cells")
         .pop();
     assert!(matches!(
-        ravel_certify::check(&dropped, &plan.closed_loop.net).answer,
+        ravel_certify::check(&dropped, plan.closed_loop.net()).answer,
         Answer::Invalid(_)
     ));
     // a goal no analysis proves (x[1] ≤ −0.04 at step 5, while sampled
@@ -81,7 +81,7 @@ fn a_verdict_only_reach_sdp_proves_certifies_valid() {
     let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
     assert_eq!(cert["evidence"]["status"], "unsupported");
     assert!(matches!(
-        ravel_certify::check(&cert, &plan.closed_loop.net).answer,
+        ravel_certify::check(&cert, plan.closed_loop.net()).answer,
         Answer::Unsupported(_)
     ));
 }

@@ -169,6 +169,14 @@ pub enum Cut {
     Overflow,
     /// The run's time limit stopped the propagation before this step.
     TimeLimit,
+    /// A nonlinear plant's right-hand side may be undefined on the step's
+    /// set (a divisor that may be 0, the logarithm or square root of a
+    /// possibly non-positive or negative number, a pole of `tan`, or `abs`
+    /// at its kink inside a Taylor expansion).
+    Undefined,
+    /// The validated integrator found no enclosure of a nonlinear plant's
+    /// flow over the control period (the flow may blow up).
+    NoEnclosure,
 }
 
 impl Cut {
@@ -177,6 +185,8 @@ impl Cut {
         match self {
             Cut::Overflow => "overflow",
             Cut::TimeLimit => "time_limit",
+            Cut::Undefined => "undefined",
+            Cut::NoEnclosure => "no_enclosure",
         }
     }
 }
@@ -191,6 +201,10 @@ pub struct Step {
     pub issues: Vec<Issue>,
     /// Why the set is the whole space, if it is.
     pub cut: Option<Cut>,
+    /// A continuous-time nonlinear plant's states over the control period
+    /// that ends at this step, both sampling instants included (the
+    /// intersample enclosure); `None` for other plants.
+    pub between: Option<IBox>,
 }
 
 impl Step {
@@ -200,6 +214,7 @@ impl Step {
             set,
             issues,
             cut: None,
+            between: None,
         }
     }
 
@@ -210,15 +225,22 @@ impl Step {
             set: Region::Box(IBox::whole(n)),
             issues,
             cut: Some(Cut::Overflow),
+            between: None,
         }
     }
 
     /// A step the time limit left uncomputed: the whole space `ℝⁿ`.
     pub fn timed_out(n: usize) -> Step {
+        Step::whole(n, Cut::TimeLimit)
+    }
+
+    /// A step that is not a computed bound, for this reason: the whole space.
+    pub fn whole(n: usize, cut: Cut) -> Step {
         Step {
             set: Region::Box(IBox::whole(n)),
             issues: Vec::new(),
-            cut: Some(Cut::TimeLimit),
+            cut: Some(cut),
+            between: None,
         }
     }
 
@@ -489,18 +511,7 @@ impl ClosedLoop {
     /// The facet matrix of a boundary at step `t`: `[I; −I]` (the bounding
     /// box), then its directions.
     pub fn facets(&self, boundary: &Boundary, t: usize) -> DMatrix<f64> {
-        let n = self.states();
-        let dirs = boundary.directions(t);
-        let extra = dirs.map_or(0, DMatrix::nrows);
-        let mut f = DMatrix::zeros(2 * n + extra, n);
-        for i in 0..n {
-            f[(i, i)] = 1.0;
-            f[(n + i, i)] = -1.0;
-        }
-        if let Some(d) = dirs {
-            f.view_mut((2 * n, 0), (extra, n)).copy_from(d);
-        }
-        f
+        facets(self.states(), boundary, t)
     }
 
     /// The set `{x | F x ≤ ub}` for the facets of `boundary` at step `t`.
@@ -1022,6 +1033,22 @@ impl ClosedLoop {
         }
         bound
     }
+}
+
+/// The facet matrix of a boundary at step `t` for `n` states: `[I; −I]`
+/// (the bounding box), then its directions.
+pub fn facets(n: usize, boundary: &Boundary, t: usize) -> DMatrix<f64> {
+    let dirs = boundary.directions(t);
+    let extra = dirs.map_or(0, DMatrix::nrows);
+    let mut f = DMatrix::zeros(2 * n + extra, n);
+    for i in 0..n {
+        f[(i, i)] = 1.0;
+        f[(n + i, i)] = -1.0;
+    }
+    if let Some(d) = dirs {
+        f.view_mut((2 * n, 0), (extra, n)).copy_from(d);
+    }
+    f
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@ pub mod closed_loop;
 pub mod crown;
 pub mod dense;
 pub mod expm;
+pub mod feedback;
 pub mod issue;
 pub mod lp;
 pub mod nonlinear;

@@ -516,11 +516,58 @@ pub fn check(cert: &Value, net: &Network) -> Report {
     {
         return network::check(cert, net);
     }
+    if cert
+        .get("problem")
+        .and_then(|p| p.get("kind"))
+        .and_then(Value::as_str)
+        == Some("nonlinear")
+    {
+        return nonlinear(cert);
+    }
     let mut report = Report::empty();
     match check_inner(cert, net, &mut report) {
         Ok(answer) => report.answer = answer,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
+    report
+}
+
+/// Why no claim about a nonlinear plant is checked.
+const NONLINEAR: &str = "the checker does not yet re-derive the steps of a nonlinear plant (it has no validated integrator of its own), so no claim about one is checked";
+
+/// A nonlinear plant's certificate: readable, never VALID. Every verdict
+/// that claims something (VERIFIED or FALSIFIED) is reported not checked.
+fn nonlinear(cert: &Value) -> Report {
+    let mut report = Report::empty();
+    let mut read = || -> R<Answer> {
+        if get(cert, "format")?.as_str() != Some(FORMAT) {
+            return Err(format!("`format` must be {FORMAT}"));
+        }
+        let verdicts = get(cert, "verdicts")?
+            .as_array()
+            .ok_or("`verdicts` must be an array")?;
+        let mut lines = Vec::new();
+        for v in verdicts {
+            let name = get(v, "property")?
+                .as_str()
+                .ok_or("`property` must be a string")?;
+            let status = get(v, "status")?
+                .as_str()
+                .ok_or("`status` must be a string")?;
+            let shown = ravel_base::text::sanitize(name);
+            lines.push(match status {
+                "VERIFIED" | "FALSIFIED" => {
+                    format!("{shown}: {status} — not checkable: {NONLINEAR}")
+                }
+                "UNSURE" => format!("{shown}: UNSURE (no claim)"),
+                _ => return Err("`status` must be VERIFIED, FALSIFIED or UNSURE".into()),
+            });
+        }
+        report.properties = lines;
+        Ok(Answer::Unsupported(NONLINEAR.into()))
+    };
+    let answer = read();
+    report.answer = answer.unwrap_or_else(Answer::Unreadable);
     report
 }
 

@@ -21,6 +21,8 @@ use serde_json::{json, Value};
 
 use nalgebra::DMatrix;
 use ravel_analysis::closed_loop::{ClosedLoop, Propagator};
+use ravel_analysis::feedback::Loop as AnyLoop;
+use ravel_analysis::nonlinear::NonlinearLoop;
 
 use crate::execute::{Run, SystemOutcome, Trajectory, Verdict};
 use crate::lower::{Plan, PropertyKind, SystemPlan};
@@ -67,7 +69,10 @@ fn ineq_json(rows: &[(Vec<f64>, f64)]) -> Value {
 /// The problem as a certificate records it: what the checker reads, and
 /// what `ravel certify` compares with the spec's own lowering.
 pub fn system_problem_json(plan: &SystemPlan) -> Value {
-    let cl = &plan.closed_loop;
+    let cl = match &plan.closed_loop {
+        AnyLoop::Linear(cl) => cl,
+        AnyLoop::Nonlinear(nl) => return nonlinear_problem_json(plan, nl),
+    };
     let plants: Vec<Value> = cl
         .plants()
         .into_iter()
@@ -79,7 +84,67 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
             json!({ "A": rows_json(&p.a), "B": rows_json(&p.b), "c": p.c.as_slice(), "error": error })
         })
         .collect();
-    let initial = match &plan.initial {
+    json!({
+        "states": cl.states(),
+        "controls": cl.plant.b.ncols(),
+        "observations": cl.plant.obs.ncols(),
+        "horizon": plan.horizon,
+        "plants": plants,
+        "observation": rows_json(&cl.plant.obs),
+        "process_noise": box_json(&cl.plant.w),
+        "sensor_noise": box_json(&cl.plant.v),
+        "control_limits": plan.limits.as_ref().map(box_json),
+        "initial": initial_json(&plan.initial),
+        "properties": properties_json(plan),
+    })
+}
+
+/// A nonlinear loop's problem: the plant's tape instead of matrices.
+fn nonlinear_problem_json(plan: &SystemPlan, nl: &NonlinearLoop) -> Value {
+    use ravel_base::expr::{Node, Time};
+    let f = &nl.plant.field;
+    let nodes: Vec<Value> = f
+        .tape
+        .nodes
+        .iter()
+        .map(|n| match *n {
+            Node::Const(c) => json!(["const", c]),
+            Node::Var(i) => json!(["var", i]),
+            Node::Neg(a) => json!(["neg", a]),
+            Node::Add(a, b) => json!(["add", a, b]),
+            Node::Sub(a, b) => json!(["sub", a, b]),
+            Node::Mul(a, b) => json!(["mul", a, b]),
+            Node::Div(a, b) => json!(["div", a, b]),
+            Node::Powi(a, k) => json!(["powi", a, k]),
+            Node::Func(g, a) => json!([g.name(), a]),
+        })
+        .collect();
+    let time = match f.time {
+        Time::Continuous { period } => json!({ "continuous": period }),
+        Time::Discrete => json!("discrete"),
+    };
+    json!({
+        "kind": "nonlinear",
+        "states": f.states,
+        "controls": f.controls,
+        "disturbances": f.disturbances,
+        "observations": nl.plant.obs.ncols(),
+        "horizon": plan.horizon,
+        "time": time,
+        "tape": nodes,
+        "outputs": f.outputs,
+        "observation": rows_json(&nl.plant.obs),
+        "disturbance": box_json(&nl.plant.w),
+        "sensor_noise": box_json(&nl.plant.v),
+        "control_limits": plan.limits.as_ref().map(box_json),
+        "initial": initial_json(&plan.initial),
+        "properties": properties_json(plan),
+    })
+}
+
+/// The initial set as a certificate records it.
+fn initial_json(initial: &Region) -> Value {
+    match initial {
         Region::Box(b) => json!({ "box": box_json(b) }),
         Region::Ball {
             center,
@@ -89,7 +154,11 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
         Region::Polytope { bbox, rows } => {
             json!({ "polytope": { "bbox": box_json(bbox), "rows": ineq_json(rows) } })
         }
-    };
+    }
+}
+
+/// The properties as a certificate records them.
+fn properties_json(plan: &SystemPlan) -> Value {
     let properties: Vec<Value> = plan
         .properties
         .iter()
@@ -105,19 +174,7 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
             }),
         })
         .collect();
-    json!({
-        "states": cl.states(),
-        "controls": cl.plant.b.ncols(),
-        "observations": cl.plant.obs.ncols(),
-        "horizon": plan.horizon,
-        "plants": plants,
-        "observation": rows_json(&cl.plant.obs),
-        "process_noise": box_json(&cl.plant.w),
-        "sensor_noise": box_json(&cl.plant.v),
-        "control_limits": plan.limits.as_ref().map(box_json),
-        "initial": initial,
-        "properties": properties,
-    })
+    Value::Array(properties)
 }
 
 /// SHA-256 of the network as analysed (every layer's numbers, saturation
@@ -160,6 +217,43 @@ fn trajectory_json(tr: &Trajectory) -> Value {
     })
 }
 
+/// The linear closed loop of a plan (the checker's chain of boxes is for
+/// linear plants).
+fn linear(plan: &SystemPlan) -> Result<&ClosedLoop, String> {
+    match &plan.closed_loop {
+        AnyLoop::Linear(cl) => Ok(cl),
+        AnyLoop::Nonlinear(_) => Err(NONLINEAR_UNSUPPORTED.into()),
+    }
+}
+
+/// Why a nonlinear loop's VERIFIED evidence is not checkable yet.
+const NONLINEAR_UNSUPPORTED: &str = "the checker does not yet re-derive the steps of a nonlinear plant (its own validated integration is not built); the analysis's per-step claims are recorded as `claims`";
+
+/// A nonlinear loop's evidence: unsupported (the checker cannot re-derive
+/// it yet), with the analysis's claims: per cell, the box of every step up
+/// to `steps` and of every period between steps (continuous time).
+fn nonlinear_claims(outcome: &SystemOutcome, steps: usize) -> Value {
+    let cells: Vec<Value> = outcome
+        .cells
+        .iter()
+        .zip(&outcome.between)
+        .map(|(sets, between)| {
+            let at: Vec<Value> = sets
+                .iter()
+                .take(steps + 1)
+                .map(|r| box_json(&r.bbox()))
+                .collect();
+            let pipes: Vec<Value> = between
+                .iter()
+                .take(steps + 1)
+                .map(|b| b.as_ref().map_or(Value::Null, box_json))
+                .collect();
+            json!({ "steps": at, "between": pipes })
+        })
+        .collect();
+    json!({ "status": "unsupported", "reason": NONLINEAR_UNSUPPORTED, "claims": cells })
+}
+
 /// The closed loop's plants and noise boxes in the checker's types.
 pub fn loop_data(cl: &ClosedLoop) -> (Vec<PlantRows>, Bx, Bx) {
     let plants = cl
@@ -192,7 +286,7 @@ fn evidence_header(plan: &SystemPlan, steps: usize) -> Value {
     json!({
         "status": "checkable",
         "mode": mode,
-        "slope_steps": plan.closed_loop.slope_steps,
+        "slope_steps": plan.closed_loop.slope_steps(),
         "steps": steps,
         "cells": [],
     })
@@ -223,7 +317,7 @@ fn derive(
     cert: &Value,
     refine: bool,
 ) -> Result<Value, String> {
-    let cl = &plan.closed_loop;
+    let cl = linear(plan)?;
     let (plants, w, v) = loop_data(cl);
     let steps = header["steps"].as_u64().unwrap_or(0) as usize;
     let unrolled = header["mode"] == "unrolled";
@@ -309,7 +403,7 @@ fn derive_cell(
     steps: usize,
     unrolled: bool,
 ) -> Result<Value, String> {
-    let cl = &plan.closed_loop;
+    let cl = linear(plan)?;
     let mut set = Bx {
         lo: start.lo.clone(),
         hi: start.hi.clone(),
@@ -451,7 +545,7 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
         "controller": {
             "path": plan.controller_resolved,
             "sha256": plan.controller_sha256,
-            "network_sha256": network_sha256(&plan.closed_loop.net),
+            "network_sha256": network_sha256(plan.closed_loop.net()),
         },
         "analysis": {
             "propagator": plan.propagator.name(),
@@ -464,6 +558,10 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
     let Some(steps) = needed else {
         return cert;
     };
+    if let AnyLoop::Nonlinear(_) = &plan.closed_loop {
+        cert["evidence"] = nonlinear_claims(outcome, steps);
+        return cert;
+    }
     let header = evidence_header(plan, steps);
     cert["evidence"] = header.clone();
     // the analysis's cells first; the refinement only where the checker's
@@ -485,7 +583,7 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
         let mut candidate = cert.clone();
         candidate["evidence"] = evidence;
         // the checker's own sets may not prove what the analysis proved
-        let report = certify::check(&candidate, &plan.closed_loop.net);
+        let report = certify::check(&candidate, plan.closed_loop.net());
         match (report.evidence_failure, report.answer) {
             (Some(why), _) => failure = Some(why),
             (None, Answer::Unreadable(e)) => {

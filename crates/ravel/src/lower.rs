@@ -9,6 +9,7 @@
 use crate::check::{Checked, NetworkChecked, Task};
 pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
+use ravel_analysis::feedback::Loop;
 use ravel_analysis::sets::{IBox, Region};
 use ravel_base::nn::Layer;
 
@@ -51,7 +52,7 @@ impl Plan {
     /// saturation appended).
     pub fn network(&self) -> &ravel_base::nn::Network {
         match self {
-            Plan::System(p) => &p.closed_loop.net,
+            Plan::System(p) => p.closed_loop.net(),
             Plan::Network(p) => &p.net,
         }
     }
@@ -75,7 +76,7 @@ pub struct SystemPlan {
     /// A one-line description of the network, e.g. `2 → 5 relu → 5 relu → 1`.
     pub network_summary: String,
     /// The closed loop (saturation already part of the network).
-    pub closed_loop: ClosedLoop,
+    pub closed_loop: Loop,
     /// The time step when the spec's plant was continuous-time (already discretised).
     pub dt: Option<f64>,
     /// Control limits, if any (for reports).
@@ -152,8 +153,9 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
         controller_sha256: c.controller_sha256.clone(),
         controller_resolved: c.controller_resolved.clone(),
         network_summary: summary(c),
-        closed_loop: ClosedLoop::time_varying(c.plants.clone(), net)
-            .with_slope_steps(c.slope_steps),
+        closed_loop: Loop::Linear(Box::new(
+            ClosedLoop::time_varying(c.plants.clone(), net).with_slope_steps(c.slope_steps),
+        )),
         dt: c.dt,
         limits: c.limits.clone(),
         initial: c.initial.1.clone(),

@@ -8,7 +8,10 @@
 //! * [`NonlinearLoop`]: the plant composed with the controller's CROWN
 //!   bounds, step after step, keeping the dependency on the initial cell.
 
+mod closed;
 pub mod integrate;
+#[cfg(test)]
+mod tests;
 
 use crate::sets::IBox;
 use nalgebra::DMatrix;
@@ -37,12 +40,18 @@ pub struct NonlinearLoop {
     pub plant: NonlinearPlant,
     /// The controller.
     pub net: Network,
+    /// The validated integrator's settings.
+    pub settings: integrate::Settings,
 }
 
 impl NonlinearLoop {
     /// Assemble a loop (dimensions must agree; `check` guarantees it).
     pub fn new(plant: NonlinearPlant, net: Network) -> NonlinearLoop {
-        NonlinearLoop { plant, net }
+        NonlinearLoop {
+            plant,
+            net,
+            settings: integrate::Settings::default(),
+        }
     }
 
     /// The state dimension.

@@ -5,6 +5,7 @@
 
 use crate::lower::{Guide, Property, PropertyKind, SystemPlan};
 use ravel_analysis::closed_loop::{Cut, Propagator, Step};
+use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
 use ravel_analysis::partition::{refine_parallel, Budget, Stop, Strategy};
@@ -29,7 +30,12 @@ pub fn propagate_cell_until(
     parent: Option<&[Step]>,
     stop: &dyn Fn() -> bool,
 ) -> Vec<Step> {
-    let cl = &plan.closed_loop;
+    let cl = match &plan.closed_loop {
+        Loop::Linear(cl) => cl,
+        Loop::Nonlinear(nl) => {
+            return nl.reach(cell, plan.horizon, &plan.boundary, parent, stop);
+        }
+    };
     let n = cl.states();
     if plan.propagator == Propagator::CrownUnrolled {
         let parent: Option<Vec<Region>> = parent.map(|p| p.iter().map(|s| s.set.clone()).collect());
@@ -44,8 +50,8 @@ pub fn propagate_cell_until(
                 steps.push(Step::overflowed(n, Vec::new()));
                 continue;
             }
-            Some(Cut::TimeLimit) => {
-                steps.push(Step::timed_out(n));
+            Some(cut @ (Cut::TimeLimit | Cut::Undefined | Cut::NoEnclosure)) => {
+                steps.push(Step::whole(n, cut));
                 continue;
             }
             None if stop() => {
@@ -123,8 +129,19 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
                     }
                     break;
                 }
-                for m in members {
-                    let (s, issue) = separation_margin(m, &step.set);
+                // a continuous-time nonlinear plant: the period that ends
+                // at step t lies in the window too
+                let pipe = step
+                    .between
+                    .as_ref()
+                    .filter(|_| t > steps.0)
+                    .map(|b| Region::Box(b.clone()));
+                for (m, set) in members
+                    .iter()
+                    .flat_map(|m| [(m, Some(&step.set)), (m, pipe.as_ref())])
+                    .filter_map(|(m, s)| s.map(|s| (m, s)))
+                {
+                    let (s, issue) = separation_margin(m, set);
                     let s = sane(s);
                     let issue = issue || !step.issues.is_empty();
                     if s < best.value || (issue && !best.issue && s <= best.value) {

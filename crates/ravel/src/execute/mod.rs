@@ -113,6 +113,9 @@ pub struct SystemOutcome {
     pub partition_stop: Stop,
     /// `cells[c][t]`: the set of cell `c` at step `t`.
     pub cells: Vec<Vec<Region>>,
+    /// `between[c][t]`: cell `c`'s states over the control period ending at
+    /// step `t` (continuous-time nonlinear plants; `None` otherwise).
+    pub between: Vec<Vec<Option<IBox>>>,
     /// LP solver statuses that forced a fallback bound, with the step (sorted, unique).
     pub solver_issues: Vec<(usize, Issue)>,
     /// The bounding box of all cells per step.
@@ -343,7 +346,11 @@ pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
             partition_guided(plan, *guide, *budget, &shaped, &undecided, ctl)
         }
     };
-    let cells = part.sets;
+    let (cells, between): (Vec<Vec<Region>>, Vec<Vec<Option<IBox>>>) = part
+        .sets
+        .into_iter()
+        .map(|c| c.into_iter().map(|s| (s.set, s.between)).unzip())
+        .unzip();
     let properties = verdicts(plan, &part.gathered, &mc);
     let Gathered {
         reach,
@@ -360,10 +367,8 @@ pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
     SystemOutcome {
         partition: part.cells,
         partition_stop: part.stop,
-        cells: cells
-            .into_iter()
-            .map(|c| c.into_iter().map(|s| s.set).collect())
-            .collect(),
+        cells,
+        between,
         solver_issues,
         reach,
         sampled: mc.sampled,

@@ -74,7 +74,7 @@ pub fn simulate_states(
     if count == 0 {
         return out;
     }
-    let p = cl.plant.v.dim();
+    let p = cl.v().dim();
     let mut x = vec![0.0; n * count];
     for (c, &s) in live.iter().enumerate() {
         if let Some(states) = &out[s] {
@@ -86,8 +86,8 @@ pub fn simulate_states(
     let (mut w, mut v) = (vec![0.0; n * count], vec![0.0; p * count]);
     for t in 0..h {
         for (c, &s) in live.iter().enumerate() {
-            pick_noise_into(&mut rngs[s], &cl.plant.w, &mut w[c..], count);
-            pick_noise_into(&mut rngs[s], &cl.plant.v, &mut v[c..], count);
+            pick_noise_into(&mut rngs[s], &cl.w(), &mut w[c..], count);
+            pick_noise_into(&mut rngs[s], &cl.v(), &mut v[c..], count);
         }
         let (_, next) = cl.simulate_batch(t, &x, &w, &v, count);
         x = next;
@@ -130,8 +130,8 @@ pub(super) fn simulate_from(
         sensor_noise: Vec::with_capacity(h),
     };
     for t in 0..plan.horizon {
-        let w = pick_noise(&mut rng, &cl.plant.w);
-        let v = pick_noise(&mut rng, &cl.plant.v);
+        let w = pick_noise(&mut rng, &cl.w());
+        let v = pick_noise(&mut rng, &cl.v());
         let (u, next) = cl.simulate(t, &tr.states[t], &w, &v);
         tr.controls.push(u);
         tr.process_noise.push(w);
@@ -401,7 +401,7 @@ pub fn certainly_violates(
         let (Some(w), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
             return false;
         };
-        if !(cl.plant.w.contains_point(w) && cl.plant.v.contains_point(v)) {
+        if !(cl.w().contains_point(w) && cl.v().contains_point(v)) {
             return false;
         }
         match cl.enclose_step(t, &x, w, v) {

@@ -1,6 +1,8 @@
 //! The report of a closed loop: a [`SystemPlan`] and its [`SystemOutcome`]
 //! as text for people or as JSON for machines.
 
+use ravel_analysis::feedback::Loop;
+use ravel_base::expr::Time;
 use serde_json::{json, Value};
 
 use super::{
@@ -47,20 +49,27 @@ fn header_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
     let mut s = String::new();
     let x = &plan.state_name;
     let n = plan.closed_loop.states();
-    let m = plan.closed_loop.plant.b.ncols();
+    let m = plan.closed_loop.controls();
     let mut timing = String::new();
-    if let Some(dt) = plan.dt {
-        let err = plan
-            .closed_loop
-            .plant
-            .err
-            .as_ref()
-            .map_or(0.0, ModelError::max);
-        timing += &format!(
-            ", continuous time, dt {} (zero-order hold, entries enclosed to ±{})",
-            num(dt),
-            num(err)
-        );
+    match (&plan.closed_loop, plan.dt) {
+        (Loop::Linear(cl), Some(dt)) => {
+            let err = cl.plant.err.as_ref().map_or(0.0, ModelError::max);
+            timing += &format!(
+                ", continuous time, dt {} (zero-order hold, entries enclosed to ±{})",
+                num(dt),
+                num(err)
+            );
+        }
+        (Loop::Linear(_), None) => {}
+        (Loop::Nonlinear(nl), _) => {
+            timing += &match nl.plant.field.time {
+                Time::Continuous { period } => format!(
+                    ", nonlinear, continuous time, control period {} (zero-order hold, validated integration)",
+                    num(period)
+                ),
+                Time::Discrete => ", nonlinear, discrete time".to_string(),
+            };
+        }
     }
     if plan.closed_loop.is_time_varying() {
         timing += ", time-varying";
@@ -88,7 +97,7 @@ fn header_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
     s += &format!(
         "  analysis    {}{}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
         plan.propagator.name(),
-        slopes_text(plan.closed_loop.slope_steps),
+        slopes_text(plan.closed_loop.slope_steps()),
         partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         boundary_text(&plan.boundary),
         plan.samples,
@@ -155,6 +164,12 @@ fn notes_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
                 "  the time limit stopped the analysis at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n"
             );
         }
+        Some((t, cut @ (Cut::Undefined | Cut::NoEnclosure))) => {
+            s += &format!(
+                "  {} at step {t}: from there on the reachable sets are the whole space (shown as ±inf)\n",
+                cut_reason(cut)
+            );
+        }
         None => {}
     }
     if out.samples_drawn < plan.samples {
@@ -212,6 +227,7 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             let what = match cut {
                     Cut::Overflow => format!("bounds overflowed at step {t}: the reachable set no longer fits in f64 numbers"),
                     Cut::TimeLimit => format!("the time limit stopped the analysis at step {t}"),
+                    Cut::Undefined | Cut::NoEnclosure => format!("{} at step {t}", cut_reason(cut)),
                 };
             format!(
                 "{what}, so nothing is proven from there on; {}",
@@ -345,11 +361,14 @@ pub fn json(
         "verdict": out.verdict.as_str(),
         "system": plan.system,
         "state": { "name": plan.state_name, "dim": plan.closed_loop.states() },
-        "control": { "name": plan.control_name, "dim": plan.closed_loop.plant.b.ncols() },
+        "control": { "name": plan.control_name, "dim": plan.closed_loop.controls() },
         "controller": { "path": plan.controller_path, "resolved": plan.controller_resolved, "sha256": plan.controller_sha256, "network": plan.network_summary },
         "horizon": plan.horizon,
         "dt": plan.dt.map(f),
-        "model_error": plan.closed_loop.plant.err.as_ref().map(|e| f(e.max())),
+        "model_error": match &plan.closed_loop {
+            Loop::Linear(cl) => cl.plant.err.as_ref().map(|e| f(e.max())),
+            Loop::Nonlinear(_) => None,
+        },
         "analysis": {
             "propagator": plan.propagator.name(),
             "partitioner": partitioner_name(&plan.partitioner),
@@ -364,7 +383,7 @@ pub fn json(
             },
             "samples": plan.samples,
             "seed": plan.seed,
-            "slope_steps": plan.closed_loop.slope_steps,
+            "slope_steps": plan.closed_loop.slope_steps(),
         },
         "reachable": steps,
         "final_error": final_error(out).map(f),
@@ -378,4 +397,14 @@ pub fn json(
         v["time_ms"] = json!(ms);
     }
     v
+}
+
+/// Why a nonlinear plant's step is not bounded, for a person.
+fn cut_reason(cut: Cut) -> &'static str {
+    match cut {
+        Cut::Undefined => "the plant's right-hand side may be undefined on the reachable set (a divisor that may be 0, log or sqrt of a possibly non-positive number, a pole of tan, or abs at its kink)",
+        Cut::NoEnclosure => "the validated integrator found no enclosure of the flow over the control period",
+        Cut::Overflow => "bounds overflowed",
+        Cut::TimeLimit => "the time limit stopped the analysis",
+    }
 }

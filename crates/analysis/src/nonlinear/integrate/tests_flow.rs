@@ -180,7 +180,9 @@ fn check(case: &Case, s: &Settings, scale: f64, samples: usize) -> Result<(), St
     let corners = 1usize << dim.min(6);
     for k in 0..corners + samples {
         let z: Vec<f64> = if k < corners {
-            (0..dim).map(|i| if k >> i & 1 == 1 { 1.0 } else { -1.0 }).collect()
+            (0..dim)
+                .map(|i| if k >> i & 1 == 1 { 1.0 } else { -1.0 })
+                .collect()
         } else {
             (0..dim).map(|_| g.uniform(-1.0, 1.0)).collect()
         };
@@ -194,7 +196,10 @@ fn check(case: &Case, s: &Settings, scale: f64, samples: usize) -> Result<(), St
             for (i, (yi, p)) in y.iter().zip(&out.pipe).enumerate() {
                 let tol = 1e-10 * (1.0 + yi.abs());
                 if !(p.lo - tol <= *yi && *yi <= p.hi + tol) {
-                    return Err(format!("{}: x{i} = {yi} ∉ pipe {p:?} (chunk {chunk}, z {z:?})", case.name));
+                    return Err(format!(
+                        "{}: x{i} = {yi} ∉ pipe {p:?} (chunk {chunk}, z {z:?})",
+                        case.name
+                    ));
                 }
             }
         }
@@ -301,7 +306,10 @@ fn linear_decay_is_tight() {
     let out = flow(&decay(), &x, &[], &[], 1.0, &Settings::default()).unwrap();
     let width = out.end[0].range().width();
     let exact = 0.2 * (-1.0f64).exp();
-    assert!(width >= exact && width - exact < 1e-6, "width {width} against {exact}");
+    assert!(
+        width >= exact && width - exact < 1e-6,
+        "width {width} against {exact}"
+    );
     assert!(out.pipe[0].contains(1.1) && out.pipe[0].contains(0.9 * (-1.0f64).exp()));
 }
 
@@ -349,23 +357,42 @@ fn errors_never_bounds() {
     assert!(flow(&abs, &[Tm::symbol(0, 1.0, 0.1, 1)], &[], &[], 0.1, &s).is_ok());
     // non-finite inputs, hostile periods, malformed tapes
     let nan = [Tm::constant(f64::NAN, 1)];
-    assert_eq!(flow(&decay(), &nan, &[], &[], 1.0, &s), Err(FlowError::Overflow));
+    assert_eq!(
+        flow(&decay(), &nan, &[], &[], 1.0, &s),
+        Err(FlowError::Overflow)
+    );
     let huge = [Tm::symbol(0, 1e308, 1e307, 1)];
     assert!(flow(&blow, &huge, &[], &[], 1.0, &s).is_err());
     let one = [Tm::symbol(0, 1.0, 0.1, 1)];
     for p in [f64::NAN, -1.0, f64::INFINITY] {
-        assert_eq!(flow(&decay(), &one, &[], &[], p, &s), Err(FlowError::Malformed));
+        assert_eq!(
+            flow(&decay(), &one, &[], &[], p, &s),
+            Err(FlowError::Malformed)
+        );
     }
     let mut bad = decay();
     bad.tape.nodes.push(Node::Add(7, 9));
     bad.outputs = vec![2];
-    assert_eq!(flow(&bad, &one, &[], &[], 1.0, &s), Err(FlowError::Malformed));
+    assert_eq!(
+        flow(&bad, &one, &[], &[], 1.0, &s),
+        Err(FlowError::Malformed)
+    );
     let mut bad = decay();
     bad.outputs = vec![40];
-    assert_eq!(flow(&bad, &one, &[], &[], 1.0, &s), Err(FlowError::Malformed));
-    assert_eq!(flow(&decay(), &[], &[], &[], 1.0, &s), Err(FlowError::Malformed));
+    assert_eq!(
+        flow(&bad, &one, &[], &[], 1.0, &s),
+        Err(FlowError::Malformed)
+    );
+    assert_eq!(
+        flow(&decay(), &[], &[], &[], 1.0, &s),
+        Err(FlowError::Malformed)
+    );
     assert_eq!(image(&decay(), &one, &one, &[]), Err(FlowError::Malformed));
-    for e in [FlowError::NoEnclosure, FlowError::Overflow, FlowError::Malformed] {
+    for e in [
+        FlowError::NoEnclosure,
+        FlowError::Overflow,
+        FlowError::Malformed,
+    ] {
         assert_eq!(e.to_string(), e.as_str());
     }
 }

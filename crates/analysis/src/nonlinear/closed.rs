@@ -1,0 +1,358 @@
+//! The nonlinear closed loop, step after step: the state as first-order
+//! Taylor models over the initial cell, the controller's CROWN bounds over
+//! the step's observation box composed with them, and the plant's
+//! validated flow (or map) over one control period.
+//!
+//! Per step `t`, with the state `x(z) ∈ c + G z + R` (`z ∈ [−1, 1]ⁿ` the
+//! cell's own coordinates):
+//! 1. the observation `y = Cᵀ x + v` as Taylor models, and its box `Y`;
+//! 2. CROWN over `Y`: `L y + l ≤ u ≤ U y + ū` for every control (the
+//!    saturation is part of the network);
+//! 3. `u ∈ M y + m + E` with `M`, `m` the middle of the two bounds (any
+//!    floats: `E` is bounded in outward-rounded interval arithmetic over
+//!    `Y` from the two bounds themselves), so the control keeps its linear
+//!    dependency on `z`;
+//! 4. the plant over the period, controls and disturbances held:
+//!    [`integrate::flow`] (continuous time, with the intersample
+//!    enclosure) or [`integrate::image`] (discrete time).
+//!
+//! Every failure of the arithmetic (a bound that is not finite, a
+//! right-hand side that may be undefined, a flow without an enclosure)
+//! cuts the cell: that step and every later one are the whole space.
+
+use super::integrate::{self, DomainError, FlowError, Interval, Tm};
+use super::NonlinearLoop;
+use crate::closed_loop::{Boundary, Cut, Step};
+use crate::crown::{Mode, Relaxation};
+use crate::sets::{IBox, Region};
+use nalgebra::DMatrix;
+use ravel_base::expr::Time;
+
+/// The state after one step, and the hull of the states in between.
+struct Advanced {
+    /// The state at the next sampling instant.
+    next: Vec<Tm>,
+    /// The states over the period (continuous time), including both ends.
+    pipe: Option<IBox>,
+}
+
+impl NonlinearLoop {
+    /// Reachable sets of one cell over the horizon (step 0 is the cell).
+    /// With `parent` (the sets of a cell containing this one) every set is
+    /// intersected with the parent's; `stop` is asked before each step
+    /// whether the time is up.
+    pub fn reach(
+        &self,
+        cell: &Region,
+        horizon: usize,
+        boundary: &Boundary,
+        parent: Option<&[Step]>,
+        stop: &dyn Fn() -> bool,
+    ) -> Vec<Step> {
+        let n = self.states();
+        let mut steps = Vec::with_capacity(horizon + 1);
+        steps.push(Step::new(cell.clone(), Vec::new()));
+        let mut state = symbols(&cell.bbox());
+        for t in 0..horizon {
+            let Some(x) = state.as_ref() else {
+                let cut = steps.last().and_then(Step::cut).unwrap_or(Cut::Overflow);
+                steps.push(Step::whole(n, cut));
+                continue;
+            };
+            if stop() {
+                state = None;
+                steps.push(Step::whole(n, Cut::TimeLimit));
+                continue;
+            }
+            match self.advance(x) {
+                Ok(a) => {
+                    let mut step = Step::new(region_of(&a.next, boundary, t + 1), Vec::new());
+                    step.between = a.pipe;
+                    if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
+                        if p.cut().is_none() && step.cut().is_none() {
+                            step.set = step.set.intersect(&p.set);
+                            step.between = match (step.between, &p.between) {
+                                (Some(a), Some(b)) => Some(a.intersect(b)),
+                                (a, _) => a,
+                            };
+                        }
+                    }
+                    if step.cut().is_some() {
+                        state = None;
+                    } else {
+                        state = Some(a.next);
+                    }
+                    steps.push(step);
+                }
+                Err(cut) => {
+                    state = None;
+                    steps.push(Step::whole(n, cut));
+                }
+            }
+        }
+        steps
+    }
+
+    /// One closed-loop step of the Taylor-model state `x`.
+    fn advance(&self, x: &[Tm]) -> Result<Advanced, Cut> {
+        let syms = x.first().map_or(0, |t| t.g.len());
+        let y = self.observe(x, syms).map_err(|_| Cut::Overflow)?;
+        let ybox = range_box(&y);
+        if !ybox.is_finite() {
+            return Err(Cut::Overflow);
+        }
+        let u = self.control(&y, &ybox, syms)?;
+        let w: Vec<Tm> = (0..self.plant.w.dim())
+            .map(|i| Tm::from_interval(Interval::new(self.plant.w.lo[i], self.plant.w.hi[i]), syms))
+            .collect();
+        let field = &self.plant.field;
+        match field.time {
+            Time::Continuous { period } => {
+                let out =
+                    integrate::flow(field, x, &u, &w, period, &self.settings).map_err(cut_of)?;
+                Ok(Advanced {
+                    next: out.end,
+                    pipe: Some(interval_box(&out.pipe)),
+                })
+            }
+            Time::Discrete => Ok(Advanced {
+                next: integrate::image(field, x, &u, &w).map_err(cut_of)?,
+                pipe: None,
+            }),
+        }
+    }
+
+    /// `y = Cᵀ x + v` as Taylor models.
+    fn observe(&self, x: &[Tm], syms: usize) -> Result<Vec<Tm>, DomainError> {
+        let obs = &self.plant.obs;
+        let refs: Vec<&Tm> = x.iter().collect();
+        (0..obs.ncols())
+            .map(|j| {
+                let col: Vec<f64> = obs.column(j).iter().copied().collect();
+                let mut y = integrate::combine(&col, &refs, 0.0)?;
+                if let (Some(&lo), Some(&hi)) = (self.plant.v.lo.get(j), self.plant.v.hi.get(j)) {
+                    y = y.add_interval(Interval::new(lo, hi))?;
+                }
+                debug_assert_eq!(y.g.len(), syms);
+                Ok(y)
+            })
+            .collect()
+    }
+
+    /// The controls as Taylor models: the middle of CROWN's two linear
+    /// bounds over `ybox`, composed with `y`, plus an interval holding the
+    /// distance to either bound.
+    fn control(&self, y: &[Tm], ybox: &IBox, syms: usize) -> Result<Vec<Tm>, Cut> {
+        let m = self.plant.field.controls;
+        let rel = Relaxation::new(&self.net, ybox, Mode::Crown);
+        if !rel.is_finite() {
+            return Err(Cut::Overflow);
+        }
+        // rows 2i: u_i ≤ …, rows 2i+1: −u_i ≤ …
+        let spec = DMatrix::from_fn(2 * m, m, |r, c| match (r / 2 == c, r % 2) {
+            (true, 0) => 1.0,
+            (true, _) => -1.0,
+            _ => 0.0,
+        });
+        let b = rel.upper(&spec);
+        let refs: Vec<&Tm> = y.iter().collect();
+        let yiv: Vec<Interval> = (0..ybox.dim())
+            .map(|j| Interval::new(ybox.lo[j], ybox.hi[j]))
+            .collect();
+        let mut out = Vec::with_capacity(m);
+        for i in 0..m {
+            let up: Vec<f64> = b.coef.row(2 * i).to_vec();
+            let low: Vec<f64> = b.coef.row(2 * i + 1).iter().map(|v| -v).collect();
+            let (ou, ol) = (b.offset[2 * i], -b.offset[2 * i + 1]);
+            let mid: Vec<f64> = up
+                .iter()
+                .zip(&low)
+                .map(|(a, c)| 0.5 * a + 0.5 * c)
+                .collect();
+            let m0 = 0.5 * ou + 0.5 * ol;
+            // u − (M y + m) ∈ [(L − M) y + l − m, (U − M) y + ū − m] over Y
+            let hi = gap(&up, &mid, &yiv, ou, m0).hi;
+            let lo = gap(&low, &mid, &yiv, ol, m0).lo;
+            if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+                return Err(Cut::Overflow);
+            }
+            let u = integrate::combine(&mid, &refs, m0)
+                .and_then(|u| u.add_interval(Interval::new(lo, hi)))
+                .map_err(|_| Cut::Overflow)?;
+            debug_assert_eq!(u.g.len(), syms);
+            out.push(u);
+        }
+        Ok(out)
+    }
+
+    /// One simulated step of `count` samples stored coordinate-major
+    /// (`x[j·count + s]`): `(u, x⁺)`, in `f64`.
+    pub fn simulate_batch(
+        &self,
+        x: &[f64],
+        w: &[f64],
+        v: &[f64],
+        count: usize,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let (n, m) = (self.states(), self.plant.field.controls);
+        let (p, k) = (self.plant.w.dim(), self.plant.obs.ncols());
+        let mut u_all = vec![0.0; m * count];
+        let mut next_all = vec![0.0; n * count];
+        let pick = |a: &[f64], dim: usize, s: usize| -> Vec<f64> {
+            (0..dim)
+                .map(|j| a.get(j * count + s).copied().unwrap_or(0.0))
+                .collect()
+        };
+        let mut scratch = Vec::new();
+        for s in 0..count {
+            let (xs, ws, vs) = (pick(x, n, s), pick(w, p, s), pick(v, k, s));
+            let y: Vec<f64> = (0..k)
+                .map(|j| {
+                    let dot: f64 = (0..n).map(|i| self.plant.obs[(i, j)] * xs[i]).sum();
+                    dot + vs[j]
+                })
+                .collect();
+            let u = self.net.forward(&y);
+            let next = match self.plant.field.time {
+                Time::Continuous { period } => {
+                    integrate::simulate(&self.plant.field, &xs, &u, &ws, period)
+                }
+                Time::Discrete => self.plant.field.eval(&xs, &u, &ws, &mut scratch),
+            };
+            for (j, &ui) in u.iter().enumerate().take(m) {
+                u_all[j * count + s] = ui;
+            }
+            for (j, &xi) in next.iter().enumerate().take(n) {
+                next_all[j * count + s] = xi;
+            }
+        }
+        (u_all, next_all)
+    }
+
+    /// A rigorous enclosure of the next state from every state in `x`
+    /// with these noise values (interval bounds of the controller, the
+    /// validated flow of the plant); `None` when it cannot be bounded.
+    pub fn enclose_step(&self, x: &IBox, w: &[f64], v: &[f64]) -> Option<IBox> {
+        let syms = 0;
+        let xs: Vec<Tm> = (0..x.dim())
+            .map(|i| Tm::from_interval(Interval::new(x.lo[i], x.hi[i]), syms))
+            .collect();
+        let obs = &self.plant.obs;
+        let refs: Vec<&Tm> = xs.iter().collect();
+        let y: Vec<Tm> = (0..obs.ncols())
+            .map(|j| {
+                let col: Vec<f64> = obs.column(j).iter().copied().collect();
+                let vj = v.get(j).copied().unwrap_or(0.0);
+                integrate::combine(&col, &refs, 0.0)?.add_interval(Interval::new(vj, vj))
+            })
+            .collect::<Result<_, DomainError>>()
+            .ok()?;
+        let ybox = range_box(&y);
+        let rel = Relaxation::new(&self.net, &ybox, Mode::Crown);
+        if !(ybox.is_finite() && rel.is_finite()) {
+            return None;
+        }
+        let ubox = rel.output_box(Mode::Crown);
+        let u: Vec<Tm> = (0..ubox.dim())
+            .map(|i| Tm::from_interval(Interval::new(ubox.lo[i], ubox.hi[i]), syms))
+            .collect();
+        let ws: Vec<Tm> = w
+            .iter()
+            .map(|&wi| Tm::from_interval(Interval::new(wi, wi), syms))
+            .collect();
+        let field = &self.plant.field;
+        let next = match field.time {
+            Time::Continuous { period } => {
+                integrate::flow(field, &xs, &u, &ws, period, &self.settings)
+                    .ok()?
+                    .end
+            }
+            Time::Discrete => integrate::image(field, &xs, &u, &ws).ok()?,
+        };
+        let b = range_box(&next);
+        b.is_finite().then_some(b)
+    }
+}
+
+/// The bound `a − mid` applied to `y`, plus `off − m0`, in outward-rounded
+/// interval arithmetic over the box `y`.
+fn gap(a: &[f64], mid: &[f64], y: &[Interval], off: f64, m0: f64) -> Interval {
+    let mut s = Interval::point(off) - Interval::point(m0);
+    for ((&ai, &mi), &yi) in a.iter().zip(mid).zip(y) {
+        s = s + (Interval::point(ai) - Interval::point(mi)) * yi;
+    }
+    s
+}
+
+/// The cell's box as Taylor models: `x_i = centre_i + radius_i · z_i`,
+/// the radius rounded up so that the models contain the box; `None` when
+/// the box is not finite.
+fn symbols(b: &IBox) -> Option<Vec<Tm>> {
+    if !b.is_finite() {
+        return None;
+    }
+    let n = b.dim();
+    Some(
+        (0..n)
+            .map(|i| {
+                let (lo, hi) = (b.lo[i], b.hi[i]);
+                let c = 0.5 * lo + 0.5 * hi;
+                let r = (hi - c).max(c - lo).max(0.0).next_up();
+                Tm::symbol(i, c, r, n)
+            })
+            .collect(),
+    )
+}
+
+/// The box of the models' ranges.
+fn range_box(x: &[Tm]) -> IBox {
+    let r: Vec<Interval> = x.iter().map(Tm::range).collect();
+    interval_box(&r)
+}
+
+/// Intervals as a box (NaN ends become infinite: never a bound).
+fn interval_box(r: &[Interval]) -> IBox {
+    let lo = r
+        .iter()
+        .map(|i| {
+            if i.lo.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                i.lo
+            }
+        })
+        .collect();
+    let hi = r
+        .iter()
+        .map(|i| if i.hi.is_nan() { f64::INFINITY } else { i.hi })
+        .collect();
+    IBox::new(lo, hi)
+}
+
+/// The set of the models as a region of the boundary's shape: their box,
+/// and a sound support in each of the boundary's directions.
+fn region_of(x: &[Tm], boundary: &Boundary, t: usize) -> Region {
+    let bbox = range_box(x);
+    match boundary.directions(t) {
+        None => Region::Box(bbox),
+        Some(d) => Region::Polytope {
+            bbox,
+            rows: (0..d.nrows())
+                .map(|r| {
+                    let dir: Vec<f64> = d.row(r).iter().copied().collect();
+                    let s = integrate::support(&dir, x);
+                    (dir, s)
+                })
+                .collect(),
+        },
+    }
+}
+
+/// The cut a failed flow stands for.
+fn cut_of(e: FlowError) -> Cut {
+    match e {
+        FlowError::Domain(_) => Cut::Undefined,
+        FlowError::NoEnclosure => Cut::NoEnclosure,
+        FlowError::Overflow | FlowError::Malformed => Cut::Overflow,
+    }
+}

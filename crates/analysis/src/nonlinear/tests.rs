@@ -1,0 +1,180 @@
+//! The nonlinear closed loop against simulation: every simulated state
+//! inside its step's set, every intersample state inside the period's
+//! enclosure; and the linear double integrator run through the integrator
+//! against its closed form.
+
+use super::integrate;
+use super::{NonlinearLoop, NonlinearPlant};
+use crate::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
+use crate::sets::{IBox, Region};
+use nalgebra::{DMatrix, DVector};
+use ravel_base::expr::{Func, Node, Tape, Time, VectorField};
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
+
+/// A random `inputs → 8 tanh → 8 relu → 1` network, saturated to `[−1, 1]`.
+fn controller(inputs: usize, seed: u64, gain: f64) -> Network {
+    let mut rng = Rng::new(seed);
+    let mut m = |r: usize, c: usize, s: f64| DMatrix::from_fn(r, c, |_, _| rng.uniform(-s, s));
+    let layers = vec![
+        Layer::Affine {
+            w: m(8, inputs, 1.0),
+            b: DVector::from_element(8, 0.05),
+        },
+        Layer::Act(Activation::Tanh),
+        Layer::Affine {
+            w: m(8, 8, 0.6),
+            b: DVector::from_element(8, 0.1),
+        },
+        Layer::Act(Activation::Relu),
+        Layer::Affine {
+            w: m(1, 8, gain),
+            b: DVector::from_element(1, 0.0),
+        },
+    ];
+    Network::new(inputs, layers).with_saturation(&[-1.0], &[1.0])
+}
+
+/// `ẋ0 = x1`, `ẋ1 = u − sin(x0) − 0.2 x1 + w0` (a damped pendulum), or
+/// the double integrator `ẋ0 = x1`, `ẋ1 = u`.
+fn field(pendulum: bool, time: Time) -> VectorField {
+    let mut t = Tape::new();
+    let x0 = t.push(Node::Var(0));
+    let x1 = t.push(Node::Var(1));
+    let u = t.push(Node::Var(2));
+    let out1 = if pendulum {
+        let w = t.push(Node::Var(3));
+        let s = t.push(Node::Func(Func::Sin, x0));
+        let c = t.push(Node::Const(0.2));
+        let d = t.push(Node::Mul(c, x1));
+        let a = t.push(Node::Sub(u, s));
+        let b = t.push(Node::Sub(a, d));
+        t.push(Node::Add(b, w))
+    } else {
+        u
+    };
+    VectorField {
+        tape: t,
+        outputs: vec![x1, out1],
+        states: 2,
+        controls: 1,
+        disturbances: usize::from(pendulum),
+        time,
+    }
+}
+
+fn pendulum_loop(time: Time) -> NonlinearLoop {
+    NonlinearLoop::new(
+        NonlinearPlant {
+            field: field(true, time),
+            w: IBox::new(vec![-0.02], vec![0.02]),
+            obs: DMatrix::identity(2, 2),
+            v: IBox::new(vec![-0.01, 0.0], vec![0.01, 0.0]),
+        },
+        controller(2, 7, 0.8),
+    )
+}
+
+/// Sampled trajectories (corners of X0 and random points, extreme and
+/// random noise) stay inside every step's set and every period's enclosure.
+#[test]
+fn simulated_trajectories_stay_inside_the_reachable_sets() {
+    for (time, horizon) in [(Time::Continuous { period: 0.2 }, 8), (Time::Discrete, 6)] {
+        let nl = pendulum_loop(time);
+        let x0 = IBox::new(vec![0.4, -0.2], vec![0.6, 0.0]);
+        let boundary = Boundary::Polytope(DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, -1.0]));
+        let steps = nl.reach(&Region::Box(x0.clone()), horizon, &boundary, None, &|| {
+            false
+        });
+        assert_eq!(steps.len(), horizon + 1);
+        assert!(
+            steps.iter().all(|s| s.cut().is_none()),
+            "{time:?}: a step was cut"
+        );
+        let mut rng = Rng::new(3);
+        for k in 0..300 {
+            let mut x: Vec<f64> = (0..2)
+                .map(|i| match k {
+                    0..=3 => [x0.lo[i], x0.hi[i]][(k >> i) & 1],
+                    _ => rng.uniform(x0.lo[i], x0.hi[i]),
+                })
+                .collect();
+            for (t, step) in steps.iter().enumerate().skip(1) {
+                let w = [if k % 2 == 0 {
+                    0.02
+                } else {
+                    rng.uniform(-0.02, 0.02)
+                }];
+                let v = [rng.uniform(-0.01, 0.01), 0.0];
+                let y = [x[0] + v[0], x[1]];
+                let u = nl.net.forward(&y);
+                if let Time::Continuous { period } = time {
+                    let pipe = step.between.as_ref().expect("continuous time has a pipe");
+                    for j in 1..=9 {
+                        let at = integrate::simulate(
+                            &nl.plant.field,
+                            &x,
+                            &u,
+                            &w,
+                            period * j as f64 / 10.0,
+                        );
+                        assert!(
+                            pipe.contains_point(&at),
+                            "{time:?} step {t}: {at:?} leaves {pipe:?}"
+                        );
+                    }
+                }
+                let (_, next) = nl.simulate_batch(&x, &w, &v, 1);
+                x = next;
+                assert!(
+                    step.set.contains_point(&x),
+                    "{time:?} step {t}: {x:?} leaves {:?}",
+                    step.set
+                );
+            }
+        }
+    }
+}
+
+/// The continuous double integrator with dt = 1 is the discrete plant
+/// `A = [[1, 1], [0, 1]]`, `B = [0.5, 1]`: through the integrator, its sets
+/// hold every sample and are not much wider than the closed form's.
+#[test]
+fn the_double_integrator_through_the_integrator_is_close_to_its_closed_form() {
+    let net = controller(2, 11, 0.5);
+    let nl = NonlinearLoop::new(
+        NonlinearPlant {
+            field: field(false, Time::Continuous { period: 1.0 }),
+            w: IBox::new(vec![], vec![]),
+            obs: DMatrix::identity(2, 2),
+            v: IBox::new(vec![0.0, 0.0], vec![0.0, 0.0]),
+        },
+        net.clone(),
+    );
+    let plant = Plant {
+        a: DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]),
+        b: DMatrix::from_row_slice(2, 1, &[0.5, 1.0]),
+        c: DVector::zeros(2),
+        obs: DMatrix::identity(2, 2),
+        w: IBox::new(vec![0.0, 0.0], vec![0.0, 0.0]),
+        v: IBox::new(vec![0.0, 0.0], vec![0.0, 0.0]),
+        err: None,
+    };
+    let cl = ClosedLoop::new(plant, net);
+    let x0 = Region::Box(IBox::new(vec![2.5, -0.25], vec![3.0, 0.25]));
+    let ours = nl.reach(&x0, 5, &Boundary::Box, None, &|| false);
+    let mut theirs = x0.clone();
+    for (t, step) in ours.iter().enumerate().skip(1) {
+        theirs = cl
+            .step(t - 1, &theirs, Propagator::ReachLp, &Boundary::Box)
+            .set;
+        let (a, b) = (step.set.bbox(), theirs.bbox());
+        for i in 0..2 {
+            let (wa, wb) = (a.hi[i] - a.lo[i], b.hi[i] - b.lo[i]);
+            assert!(
+                wa <= 1.5 * wb + 1e-9,
+                "step {t}, x[{i}]: width {wa} against the closed form's {wb}"
+            );
+        }
+    }
+}

@@ -71,7 +71,7 @@ fn ineq_json(rows: &[(Vec<f64>, f64)]) -> Value {
 pub fn system_problem_json(plan: &SystemPlan) -> Value {
     let cl = match &plan.closed_loop {
         AnyLoop::Linear(cl) => cl,
-        AnyLoop::Nonlinear(nl) => return nonlinear_problem_json(plan, nl),
+        AnyLoop::Nonlinear(nl) => return nonlinear_problem_json(plan, nl.as_ref()),
     };
     let plants: Vec<Value> = cl
         .plants()
@@ -221,7 +221,7 @@ fn trajectory_json(tr: &Trajectory) -> Value {
 /// linear plants).
 fn linear(plan: &SystemPlan) -> Result<&ClosedLoop, String> {
     match &plan.closed_loop {
-        AnyLoop::Linear(cl) => Ok(cl),
+        AnyLoop::Linear(cl) => Ok(cl.as_ref()),
         AnyLoop::Nonlinear(_) => Err(NONLINEAR_UNSUPPORTED.into()),
     }
 }

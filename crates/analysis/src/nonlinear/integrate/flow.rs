@@ -87,7 +87,9 @@ impl FlowError {
                 "no a-priori enclosure of the flow, even with the smallest step"
             }
             FlowError::Overflow => "the enclosure overflowed or was not finite",
-            FlowError::Malformed => "the vector field does not fit the sets, or the period is invalid",
+            FlowError::Malformed => {
+                "the vector field does not fit the sets, or the period is invalid"
+            }
         }
     }
 }
@@ -294,7 +296,11 @@ fn apriori(
     for _ in 0..PICARD_ITERATIONS {
         let trial: Vec<Interval> = b.iter().map(|&bi| inflate(bi)).collect();
         let n = step(&trial)?;
-        if trial.iter().zip(&n).all(|(bt, ni)| bt.strictly_contains(*ni)) {
+        if trial
+            .iter()
+            .zip(&n)
+            .all(|(bt, ni)| bt.strictly_contains(*ni))
+        {
             return Ok(n);
         }
         b = n;

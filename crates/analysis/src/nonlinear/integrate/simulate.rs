@@ -25,7 +25,7 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
         && field.controls == u.len()
         && field.disturbances == w.len()
         && field.tape.is_well_formed(field.vars());
-    if !fits || !(period.is_finite() && period >= 0.0) {
+    if !(fits && period.is_finite() && period >= 0.0) {
         return vec![f64::NAN; x.len()];
     }
     let mut scratch = Vec::new();
@@ -41,17 +41,31 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
             .iter()
             .zip(&two)
             .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
-            .fold(0.0f64, |m, e| if e.is_nan() || m.is_nan() { f64::NAN } else { m.max(e) });
+            .fold(0.0f64, |m, e| {
+                if e.is_nan() || m.is_nan() {
+                    f64::NAN
+                } else {
+                    m.max(e)
+                }
+            });
         if err.is_nan() {
             return two.iter().map(|_| f64::NAN).collect();
         }
         steps += 1;
         let tiny = h <= period * 1e-12 || steps >= MAX_STEPS;
         if err <= TOL || tiny {
-            y = two.iter().zip(&whole).map(|(b, a)| b + (b - a) / 15.0).collect();
+            y = two
+                .iter()
+                .zip(&whole)
+                .map(|(b, a)| b + (b - a) / 15.0)
+                .collect();
             t += h;
         }
-        let factor = if err == 0.0 { 2.0 } else { 0.9 * (TOL / err).powf(0.2) };
+        let factor = if err == 0.0 {
+            2.0
+        } else {
+            0.9 * (TOL / err).powf(0.2)
+        };
         h *= factor.clamp(0.2, 2.0);
         if steps >= MAX_STEPS {
             h = h.max(period / MAX_STEPS as f64);
@@ -62,7 +76,8 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
 
 /// One classical Runge–Kutta step.
 fn rk4(f: &mut impl FnMut(&[f64]) -> Vec<f64>, y: &[f64], h: f64) -> Vec<f64> {
-    let axpy = |a: f64, k: &[f64]| -> Vec<f64> { y.iter().zip(k).map(|(y, k)| y + a * k).collect() };
+    let axpy =
+        |a: f64, k: &[f64]| -> Vec<f64> { y.iter().zip(k).map(|(y, k)| y + a * k).collect() };
     let k1 = f(y);
     let k2 = f(&axpy(0.5 * h, &k1));
     let k3 = f(&axpy(0.5 * h, &k2));

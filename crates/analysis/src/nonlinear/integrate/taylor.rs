@@ -133,12 +133,19 @@ impl Coeff for Tm {
 /// Whether `field` can be evaluated over `states` states and `params`
 /// parameters: a well-formed tape, one output per state, every output a
 /// node of the tape.
-pub(crate) fn check_field(field: &VectorField, states: usize, params: usize) -> Result<(), FlowError> {
+pub(crate) fn check_field(
+    field: &VectorField,
+    states: usize,
+    params: usize,
+) -> Result<(), FlowError> {
     let ok = field.states == states
         && field.outputs.len() == states
         && field.controls.checked_add(field.disturbances) == Some(params)
         && field.tape.is_well_formed(field.vars())
-        && field.outputs.iter().all(|&o| (o as usize) < field.tape.nodes.len());
+        && field
+            .outputs
+            .iter()
+            .all(|&o| (o as usize) < field.tape.nodes.len());
     if ok {
         Ok(())
     } else {
@@ -174,7 +181,11 @@ pub fn taylor_coefficients<T: Coeff>(
 }
 
 /// `f(x, p)` evaluated in `T` arithmetic (one value per state).
-pub fn eval_field<T: Coeff>(field: &VectorField, x: &[T], params: &[T]) -> Result<Vec<T>, FlowError> {
+pub fn eval_field<T: Coeff>(
+    field: &VectorField,
+    x: &[T],
+    params: &[T],
+) -> Result<Vec<T>, FlowError> {
     check_field(field, x.len(), params.len())?;
     let mut e = Engine::new(field, x, params);
     e.smooth = false;
@@ -226,7 +237,10 @@ impl<'a, T: Coeff> Engine<'a, T> {
 
     /// The series of node `id` (coefficients computed so far).
     pub(super) fn series(&self, id: u32) -> Result<&[T], FlowError> {
-        self.nodes.get(id as usize).map(|s| s.as_slice()).ok_or(FlowError::Malformed)
+        self.nodes
+            .get(id as usize)
+            .map(|s| s.as_slice())
+            .ok_or(FlowError::Malformed)
     }
 
     pub(super) fn zero(&self) -> Result<T, FlowError> {
@@ -324,7 +338,13 @@ pub(crate) fn cauchy<T: Coeff>(
 
 /// `Σ_{j=1}^{k} j·a_j·b_{k−j}` (the sum of the exp and sin/cos recurrences;
 /// `upto` may stop it at `k − 1`).
-pub(crate) fn weighted<T: Coeff>(a: &[T], b: &[T], k: usize, upto: usize, zero: &T) -> Result<T, FlowError> {
+pub(crate) fn weighted<T: Coeff>(
+    a: &[T],
+    b: &[T],
+    k: usize,
+    upto: usize,
+    zero: &T,
+) -> Result<T, FlowError> {
     let mut s: Option<T> = None;
     for j in 1..=upto.min(k) {
         let (Some(aj), Some(bk)) = (a.get(j), b.get(k - j)) else {
@@ -343,7 +363,13 @@ pub(crate) fn weighted<T: Coeff>(a: &[T], b: &[T], k: usize, upto: usize, zero: 
 }
 
 /// Coefficient `k` of `q = a/b` given `a_k`, `b` and `q_0..q_{k−1}`.
-pub(crate) fn divide<T: Coeff>(ak: &T, b: &[T], q: &[T], k: usize, zero: &T) -> Result<T, FlowError> {
+pub(crate) fn divide<T: Coeff>(
+    ak: &T,
+    b: &[T],
+    q: &[T],
+    k: usize,
+    zero: &T,
+) -> Result<T, FlowError> {
     let b0 = b.first().ok_or(FlowError::Malformed)?;
     if k == 0 {
         return Ok(ak.div(b0)?);

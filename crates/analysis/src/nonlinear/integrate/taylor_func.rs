@@ -55,7 +55,11 @@ impl<T: Coeff> Engine<'_, T> {
             return Ok(pk);
         }
         // 1 / aᵐ: the reciprocal of the power's series
-        let one_k = if k == 0 { self.lift(1.0)? } else { zero.clone() };
+        let one_k = if k == 0 {
+            self.lift(1.0)?
+        } else {
+            zero.clone()
+        };
         let q = self.series(id as u32)?;
         divide(&one_k, self.aux(id, result)?, q, k, &zero)
     }

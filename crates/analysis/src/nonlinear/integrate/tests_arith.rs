@@ -37,7 +37,10 @@ fn arithmetic_encloses_random_points() {
     let mut g = Rng::new(7);
     for round in 0..20_000 {
         let scale = [1e-3, 1.0, 1e3, 1e100][round % 4];
-        let ((a, x), (b, y)) = (random_interval(&mut g, scale), random_interval(&mut g, scale));
+        let ((a, x), (b, y)) = (
+            random_interval(&mut g, scale),
+            random_interval(&mut g, scale),
+        );
         assert!((a + b).contains(x + y));
         assert!((a - b).contains(x - y));
         assert!((a * b).contains(x * y));
@@ -93,7 +96,10 @@ fn trigonometric_extrema_are_included() {
     assert_eq!(c.lo, -1.0);
     let m = Interval::new(0.1, 0.2).sin().unwrap();
     assert!(m.hi < 0.2 && m.lo > 0.09);
-    assert_eq!(Interval::new(0.0, 100.0).sin().unwrap(), Interval::new(-1.0, 1.0));
+    assert_eq!(
+        Interval::new(0.0, 100.0).sin().unwrap(),
+        Interval::new(-1.0, 1.0)
+    );
 }
 
 #[test]
@@ -101,9 +107,15 @@ fn domain_errors() {
     let one = Interval::new(-1.0, 1.0);
     assert_eq!(one.log(), Err(DomainError::LogOfNonPositive));
     assert_eq!(one.recip(), Err(DomainError::DivisionByZero));
-    assert_eq!(Interval::point(2.0).div(one), Err(DomainError::DivisionByZero));
+    assert_eq!(
+        Interval::point(2.0).div(one),
+        Err(DomainError::DivisionByZero)
+    );
     assert_eq!(one.powi(-2), Err(DomainError::DivisionByZero));
-    assert_eq!(Interval::new(-2.0, -1.0).sqrt(), Err(DomainError::SqrtOfNegative));
+    assert_eq!(
+        Interval::new(-2.0, -1.0).sqrt(),
+        Err(DomainError::SqrtOfNegative)
+    );
     let half_pi = std::f64::consts::FRAC_PI_2;
     assert_eq!(Interval::new(1.5, 1.6).tan(), Err(DomainError::TanPole));
     assert_eq!(Interval::point(half_pi).tan(), Err(DomainError::TanPole));
@@ -150,7 +162,7 @@ fn non_finite_inputs_are_errors_never_bounds() {
     assert_eq!(huge.powi(2), Err(DomainError::NotFinite));
     let t = Tm::from_interval(huge, 1);
     assert!(t.mul(&t).is_err() && t.add(&t).is_err() && t.exp().is_err());
-    assert_eq!(support(&[1.0], &[t.scale(10.0).unwrap_or(t.clone())]), f64::INFINITY);
+    assert_eq!(support(&[10.0], &[t]), f64::INFINITY);
 }
 
 /// A random Taylor model over `n` symbols and a random point of it
@@ -197,7 +209,11 @@ fn taylor_models_enclose_their_functions_at_random_points() {
             assert!(holds(&a.sub(&b).unwrap(), &z, x - y));
             assert!(holds(&a.mul(&b).unwrap(), &z, x * y));
             assert!(holds(&a.scale(-1.7).unwrap(), &z, -1.7 * x));
-            assert!(holds(&a.mul_interval(Interval::new(0.5, 0.7)).unwrap(), &z, 0.5 * x));
+            assert!(holds(
+                &a.mul_interval(Interval::new(0.5, 0.7)).unwrap(),
+                &z,
+                0.5 * x
+            ));
             if let Ok(q) = a.div(&b) {
                 assert!(holds(&q, &z, x / y));
             }
@@ -228,9 +244,16 @@ fn a_symbol_keeps_its_dependency() {
     assert!((sq.g[0] - 0.2).abs() < 1e-15);
     assert!(sq.r.lo >= -1e-15 && sq.r.hi <= 0.01 + 1e-15);
     assert!(x.log().unwrap().range().width() < 0.21);
-    assert_eq!(Tm::symbol(0, 1.0, 0.1, 1).powi(0).unwrap(), Tm::constant(1.0, 1));
+    assert_eq!(
+        Tm::symbol(0, 1.0, 0.1, 1).powi(0).unwrap(),
+        Tm::constant(1.0, 1)
+    );
     assert!(Tm::symbol(0, 0.0, 1.0, 1).log().is_err());
     assert!(Tm::symbol(0, 0.0, 1.0, 1).recip().is_err());
-    assert!(Tm::symbol(0, 0.0, 1.0, 1).abs().unwrap().range().contains(1.0));
+    assert!(Tm::symbol(0, 0.0, 1.0, 1)
+        .abs()
+        .unwrap()
+        .range()
+        .contains(1.0));
     assert!(Tm::symbol(5, 0.0, 1.0, 1).range().contains(-1.0));
 }

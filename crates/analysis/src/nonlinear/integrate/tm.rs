@@ -218,7 +218,12 @@ impl Tm {
         if let Some(e) = err {
             return Err(e);
         }
-        Tm::build(c_iv, g.len(), |i| g.get(i).copied().unwrap_or(Interval::ZERO), r)
+        Tm::build(
+            c_iv,
+            g.len(),
+            |i| g.get(i).copied().unwrap_or(Interval::ZERO),
+            r,
+        )
     }
 
     /// `self + iv`.
@@ -289,10 +294,7 @@ fn quadratic(a: &Tm, b: &Tm, n: usize) -> Interval {
     if cross.is_nan() || !(neg.is_finite() && pos.is_finite()) {
         return super::interval::NAN;
     }
-    Interval::new(
-        (neg.lo - cross).next_down(),
-        (pos.hi + cross).next_up(),
-    )
+    Interval::new((neg.lo - cross).next_down(), (pos.hi + cross).next_up())
 }
 
 /// The linear combination `Σ aⱼ Tⱼ + offset` (coefficients and offset

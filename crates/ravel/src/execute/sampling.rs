@@ -83,7 +83,8 @@ pub fn simulate_states(
             }
         }
     }
-    let (mut w, mut v) = (vec![0.0; n * count], vec![0.0; p * count]);
+    let q = cl.w().dim();
+    let (mut w, mut v) = (vec![0.0; q * count], vec![0.0; p * count]);
     for t in 0..h {
         for (c, &s) in live.iter().enumerate() {
             pick_noise_into(&mut rngs[s], &cl.w(), &mut w[c..], count);

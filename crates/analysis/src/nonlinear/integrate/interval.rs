@@ -218,7 +218,9 @@ impl Interval {
         .checked()
     }
 
-    /// `self / other`; an error when `other` may contain zero.
+    /// `self / other`; an error when `other` may contain zero (fallible,
+    /// hence not `std::ops::Div`).
+    #[allow(clippy::should_implement_trait)]
     pub fn div(self, other: Interval) -> Result<Interval, DomainError> {
         let (a, b) = (self.checked()?, other.checked()?);
         if b.contains_zero() {

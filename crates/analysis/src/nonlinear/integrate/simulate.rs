@@ -25,7 +25,7 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
         && field.controls == u.len()
         && field.disturbances == w.len()
         && field.tape.is_well_formed(field.vars());
-    if !fits || !(period.is_finite() && period >= 0.0) {
+    if !(fits && period.is_finite() && period >= 0.0) {
         return vec![f64::NAN; x.len()];
     }
     let mut scratch = Vec::new();

@@ -245,6 +245,13 @@ fn cases() -> Vec<Case> {
             radius: vec![0.04, 0.04],
             period: 0.4,
         },
+        Case {
+            name: "oscillator",
+            field: oscillator(),
+            centre: vec![1.0, 0.0],
+            radius: vec![0.1, 0.1],
+            period: 0.5,
+        },
     ];
     for _ in 0..3 {
         let field = random_plant(&mut g, 3);
@@ -270,26 +277,58 @@ fn the_flow_contains_every_simulated_trajectory() {
         };
         check(&case, &low, 1.0, 8).unwrap();
     }
+    // one-dimensional plants over a wide box (order 2 through the default)
+    for (name, field) in one_dimensional() {
+        let case = Case {
+            name,
+            field,
+            centre: vec![1.0],
+            radius: vec![0.5],
+            period: 0.3,
+        };
+        for order in [2, 4, 6] {
+            let s = Settings { order, substeps: 2 };
+            check(&case, &s, 1.0, 16).unwrap();
+        }
+    }
 }
 
 /// The mutation check: every Lagrange remainder shrunk to 90 % of its
-/// width (around its midpoint) must make the soundness test fail on some
-/// plant. With order 2 and few substeps the remainders dominate the width
-/// of the end set, so a trajectory from a corner leaves the shrunk set.
+/// width (around its midpoint) must make the soundness test fail.
+///
+/// A 10 % shrink is caught where the true remainders fill the Lagrange
+/// remainder: `ẋ = −x` from the wide box `[0.5, 1.5]`, order 2, one substep
+/// of 0.05 (the a-priori box is then close to the initial box, and the
+/// corner `z = 1` has the largest remainder). On the multi-dimensional and
+/// nonlinear plants the interval remainder `hᵏ·x_[k](B)` over the whole
+/// a-priori box loses the dependency on the initial state, and its slack
+/// exceeds 5 % per side, so there a 10 % shrink goes unnoticed (measured:
+/// also for `−sin x` and `0.5 − x³`; a 50 % shrink is caught on the
+/// pendulum only); dropping the remainder altogether is caught on every
+/// plant.
 #[test]
 fn a_shrunk_remainder_is_caught() {
+    let s = Settings {
+        order: 2,
+        substeps: 1,
+    };
+    let case = Case {
+        name: "decay",
+        field: decay(),
+        centre: vec![1.0],
+        radius: vec![0.5],
+        period: 0.05,
+    };
+    assert!(check(&case, &s, 1.0, 8).is_ok());
+    assert!(check(&case, &s, 0.9, 8).is_err());
     let low = Settings {
         order: 2,
         substeps: 2,
     };
-    let mut caught = Vec::new();
     for case in cases() {
         assert!(check(&case, &low, 1.0, 8).is_ok(), "{}", case.name);
-        if let Err(e) = check(&case, &low, 0.9, 8) {
-            caught.push(e);
-        }
+        assert!(check(&case, &low, 0.0, 8).is_err(), "{}", case.name);
     }
-    assert!(!caught.is_empty(), "no plant caught the shrunk remainder");
 }
 
 /// Builds `ẋ = −x`.
@@ -298,6 +337,36 @@ fn decay() -> VectorField {
     let x = b.v(0);
     let f = b.cmul(-1.0, x);
     b.field(vec![f], 0, 0)
+}
+
+/// `ẋ0 = x1`, `ẋ1 = −x0 − 0.5·x1 + 0.2·x0·x1`.
+fn oscillator() -> VectorField {
+    let mut b = B::new();
+    let (x0, x1) = (b.v(0), b.v(1));
+    let a = b.cmul(-1.0, x0);
+    let d = b.cmul(0.5, x1);
+    let s = b.sub(a, d);
+    let p = b.mul(x0, x1);
+    let q = b.cmul(0.2, p);
+    let f1 = b.add(s, q);
+    b.field(vec![x1, f1], 0, 0)
+}
+
+/// One-dimensional plants: `ẋ = −x`, `ẋ = −sin x`, `ẋ = 0.5 − x³`.
+fn one_dimensional() -> Vec<(&'static str, VectorField)> {
+    let mut v = vec![("decay", decay())];
+    let mut b = B::new();
+    let x = b.v(0);
+    let s = b.f(Func::Sin, x);
+    let f = b.cmul(-1.0, s);
+    v.push(("-sin", b.field(vec![f], 0, 0)));
+    let mut b = B::new();
+    let x = b.v(0);
+    let c = b.pow(x, 3);
+    let h = b.c(0.5);
+    let f = b.sub(h, c);
+    v.push(("cubic", b.field(vec![f], 0, 0)));
+    v
 }
 
 #[test]
@@ -419,6 +488,6 @@ fn the_discrete_image_contains_every_point() {
     let a = b.f(Func::Abs, v);
     let absf = b.field(vec![a], 0, 0);
     let r = image(&absf, &[Tm::symbol(0, 0.0, 1.0, 1)], &[], &[]).unwrap();
-    assert!(r[0].range().contains(1.0) && r[0].range().lo >= -1e-300);
+    assert!(r[0].range().contains(1.0) && r[0].range().lo >= -1e-15);
     let _ = Interval::ZERO;
 }

@@ -28,6 +28,10 @@ use crate::sets::{IBox, Region};
 use nalgebra::DMatrix;
 use ravel_base::expr::Time;
 
+/// How many symbols beyond the cell's own `n` the state may carry, per
+/// state dimension (see [`resymbolize`]).
+const EXTRA_SYMBOLS: usize = 4;
+
 /// The state after one step, and the hull of the states in between.
 struct Advanced {
     /// The state at the next sampling instant.
@@ -80,7 +84,10 @@ impl NonlinearLoop {
                     if step.cut().is_some() {
                         state = None;
                     } else {
-                        state = Some(a.next);
+                        state = resymbolize(&a.next, n, EXTRA_SYMBOLS * n);
+                        if state.is_none() {
+                            step = Step::whole(n, Cut::Overflow);
+                        }
                     }
                     steps.push(step);
                 }
@@ -355,4 +362,61 @@ fn cut_of(e: FlowError) -> Cut {
         FlowError::NoEnclosure => Cut::NoEnclosure,
         FlowError::Overflow | FlowError::Malformed => Cut::Overflow,
     }
+}
+
+/// The same set with the remainders turned into symbols of their own, so
+/// that later steps carry them linearly instead of as boxes (whose
+/// wrapping would grow them every step): component `i`'s remainder becomes
+/// a new symbol on component `i` alone. When more than `cap` symbols follow
+/// the cell's own `keep`, the smallest of them (by `Σᵢ |gᵢⱼ|`) are merged
+/// into one new symbol per component with the sum of their magnitudes (a
+/// box around their zonotope, as in Girard's order reduction). `None` when
+/// a bound is not finite.
+fn resymbolize(x: &[Tm], keep: usize, cap: usize) -> Option<Vec<Tm>> {
+    let n = x.len();
+    let syms = x.iter().map(|t| t.g.len()).max().unwrap_or(0);
+    let mut out: Vec<Tm> = x
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let lo = (t.c + t.r.lo).next_down();
+            let hi = (t.c + t.r.hi).next_up();
+            let c = 0.5 * lo + 0.5 * hi;
+            let r = (hi - c).max(c - lo).next_up();
+            let mut g = t.g.clone();
+            g.resize(syms + n, 0.0);
+            g[syms + i] = r;
+            Tm {
+                c,
+                g,
+                r: Interval::ZERO,
+            }
+        })
+        .collect();
+    let total = syms + n;
+    if total > keep + cap {
+        // the extra symbols by size, smallest first; merge all but the largest `cap − n`
+        let mut extra: Vec<(f64, usize)> = (keep..total)
+            .map(|j| (out.iter().map(|t| t.g[j].abs()).sum::<f64>(), j))
+            .collect();
+        extra.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let merge = extra.len() - (cap.saturating_sub(n));
+        let mut gone = vec![false; total];
+        for &(_, j) in extra.iter().take(merge) {
+            gone[j] = true;
+        }
+        for (i, t) in out.iter_mut().enumerate() {
+            let s =
+                ravel_base::num::sum_upper((0..total).filter(|&j| gone[j]).map(|j| t.g[j].abs()));
+            let mut g: Vec<f64> = (0..total).filter(|&j| !gone[j]).map(|j| t.g[j]).collect();
+            g.resize(g.len() + n, 0.0);
+            let at = g.len() - n + i;
+            g[at] = s;
+            t.g = g;
+        }
+    }
+    let finite = out
+        .iter()
+        .all(|t| t.c.is_finite() && t.g.iter().all(|v| v.is_finite()));
+    finite.then_some(out)
 }

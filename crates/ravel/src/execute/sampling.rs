@@ -87,8 +87,19 @@ pub fn simulate_states(
     let (mut w, mut v) = (vec![0.0; q * count], vec![0.0; p * count]);
     for t in 0..h {
         for (c, &s) in live.iter().enumerate() {
-            pick_noise_into(&mut rngs[s], &cl.w(), &mut w[c..], count);
-            pick_noise_into(&mut rngs[s], &cl.v(), &mut v[c..], count);
+            // (a nonlinear plant may have no disturbance: an empty buffer)
+            pick_noise_into(
+                &mut rngs[s],
+                cl.w(),
+                w.get_mut(c..).unwrap_or_default(),
+                count,
+            );
+            pick_noise_into(
+                &mut rngs[s],
+                cl.v(),
+                v.get_mut(c..).unwrap_or_default(),
+                count,
+            );
         }
         let (_, next) = cl.simulate_batch(t, &x, &w, &v, count);
         x = next;

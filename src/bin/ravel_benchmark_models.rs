@@ -541,6 +541,27 @@ fn tora(x: &[f64], u: &[f64]) -> Vec<f64> {
     vec![x[1], -x[0] + 0.1 * x[2].sin(), x[3], u[0]]
 }
 
+/// The double pendulum of ARCH-COMP (m = 0.5, L = 0.5, c = 0, g = 1), in
+/// the closed form of the JuliaReach model: state [θ1, θ2, θ̇1, θ̇2], torques [T1, T2].
+fn double_pendulum_field(x: &[f64], t: &[f64]) -> Vec<f64> {
+    let d = x[0] - x[1];
+    let c = d.cos();
+    let x3sin = x[2] * x[2] * d.sin();
+    let x4sin = x[3] * x[3] * d.sin() / 2.0;
+    let g1 = 2.0 * x[0].sin();
+    let g2 = 2.0 * x[1].sin();
+    let t1 = 4.0 * t[0];
+    let t2 = 8.0 * t[1];
+    let big = x3sin - c * (g1 - x4sin + t1) + g2 + t2;
+    let den = c * c / 2.0 - 1.0;
+    vec![
+        x[2],
+        x[3],
+        c * big / (2.0 * den) - x4sin + g1 + t1,
+        -big / den,
+    ]
+}
+
 fn identity(x: &[f64]) -> Vec<f64> {
     x.to_vec()
 }
@@ -929,6 +950,68 @@ fn main() {
             );
             Box::new(move |x: &[f64]| fam(x, &p))
         }),
+    ));
+
+    // double pendulum (ARCH-COMP 2020–2022): every state in a box over 20
+    // steps; the less robust setting has period 0.05 and the box
+    // [−1, 1.7], the more robust one period 0.02 and [−0.5, 1.5]; T = net
+    let double_pendulum = |name: &'static str, dt: f64, lo: f64, hi: f64, seed: u64| Bench {
+        name,
+        f: double_pendulum_field,
+        dt,
+        sub: 10,
+        steps: 20,
+        x0: vec![(1.0, 1.3); 4],
+        props: vec![Prop::Always(
+            vec![(0, lo, hi), (1, lo, hi), (2, lo, hi), (3, lo, hi)],
+            0,
+            20,
+        )],
+        observe: identity,
+        scale: vec![1.0, 1.0],
+        offset: vec![0.0, 0.0],
+        hidden: vec![25, 25],
+        act: relu,
+        out_act: None,
+        seed,
+    };
+    fn double_pendulum_expert(b: &Bench) -> Expert {
+        // computed torque: the accelerations are affine in the torques, so
+        // a(x, T) = a0(x) + M(x) T is read off the vector field itself and
+        // inverted for the wanted accelerations −kp (θ − r) − kd θ̇
+        let fam = |x: &[f64], p: &[f64]| {
+            let a0 = double_pendulum_field(x, &[0.0, 0.0]);
+            let a1 = double_pendulum_field(x, &[1.0, 0.0]);
+            let a2 = double_pendulum_field(x, &[0.0, 1.0]);
+            let m =
+                nalgebra::Matrix2::new(a1[2] - a0[2], a2[2] - a0[2], a1[3] - a0[3], a2[3] - a0[3]);
+            let want = nalgebra::Vector2::new(
+                -p[0] * (x[0] - p[2]) - p[1] * x[2] - a0[2],
+                -p[0] * (x[1] - p[2]) - p[1] * x[3] - a0[3],
+            );
+            let t = m
+                .try_inverse()
+                .map_or(nalgebra::Vector2::zeros(), |mi| mi * want);
+            vec![t[0], t[1]]
+        };
+        let p = tune(
+            b,
+            &[
+                vec![0.0, 1.0, 4.0, 9.0, 16.0],
+                vec![2.0, 5.0, 10.0, 20.0],
+                range(0.8, 1.5, 0.05),
+            ],
+            &fam,
+        );
+        Box::new(move |x: &[f64]| fam(x, &p))
+    }
+    jobs.push((
+        double_pendulum("double_pendulum_less_robust", 0.05, -1.0, 1.7, 22),
+        Box::new(double_pendulum_expert),
+    ));
+    jobs.push((
+        double_pendulum("double_pendulum_more_robust", 0.02, -0.5, 1.5, 23),
+        Box::new(double_pendulum_expert),
     ));
 
     // unicycle (ARCH-COMP benchmark 10): 50 steps of 0.2; u_i = net_i − 20

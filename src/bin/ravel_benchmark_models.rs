@@ -35,6 +35,8 @@ use ravel_base::rng::Rng;
 type Field = fn(&[f64], &[f64]) -> Vec<f64>;
 /// A control law on the state.
 type Law<'a> = &'a dyn Fn(&[f64]) -> Vec<f64>;
+/// A family of control laws `u(x, p)` over parameters `p`.
+type Family<'a> = &'a dyn Fn(&[f64], &[f64]) -> Vec<f64>;
 /// A tuned expert law.
 type Expert = Box<dyn Fn(&[f64]) -> Vec<f64>>;
 /// Tunes a benchmark's expert law.
@@ -62,6 +64,8 @@ enum Prop {
     Always(Vec<(usize, f64, f64)>, usize, usize),
     /// `a · x + c ≥ 0` at every sub-step
     AlwaysLinear(Vec<f64>, f64),
+    /// the state stays out of the box at every sub-step
+    AlwaysOutside(Vec<(usize, f64, f64)>),
 }
 
 /// The distance inside the box (negative outside); a state that is not
@@ -118,6 +122,17 @@ impl Bench {
                 Prop::Always(b, from, to) => xs[from * self.sub..=to * self.sub]
                     .iter()
                     .map(|x| box_margin(x, b))
+                    .fold(f64::INFINITY, f64::min),
+                Prop::AlwaysOutside(b) => xs
+                    .iter()
+                    .map(|x| {
+                        if x.iter().any(|v| !v.is_finite()) {
+                            return f64::NEG_INFINITY;
+                        }
+                        b.iter()
+                            .map(|&(i, lo, hi)| (lo - x[i]).max(x[i] - hi))
+                            .fold(f64::NEG_INFINITY, f64::max)
+                    })
                     .fold(f64::INFINITY, f64::min),
                 Prop::AlwaysLinear(a, c) => xs
                     .iter()
@@ -202,7 +217,7 @@ impl Bench {
 
 /// Grid search of `family(x, p)` over the cartesian product of `grid`, for
 /// the largest smallest margin over the probe set.
-fn tune(b: &Bench, grid: &[Vec<f64>], family: &dyn Fn(&[f64], &[f64]) -> Vec<f64>) -> Vec<f64> {
+fn tune(b: &Bench, grid: &[Vec<f64>], family: Family) -> Vec<f64> {
     let probes = b.probes();
     let total: usize = grid.iter().map(Vec::len).product();
     let mut best = (f64::NEG_INFINITY, vec![]);
@@ -1012,6 +1027,59 @@ fn main() {
     jobs.push((
         double_pendulum("double_pendulum_more_robust", 0.02, -0.5, 1.5, 23),
         Box::new(double_pendulum_expert),
+    ));
+
+    // NAV (ARCH-COMP 2023–2024): 30 steps of 0.2; reach [−0.5, 0.5]² at
+    // t = 6, never touch the obstacle [1, 2]²; u = tanh output, unscaled
+    let nav = Bench {
+        name: "nav",
+        f: |x, u| vec![x[2] * x[3].cos(), x[2] * x[3].sin(), u[0], u[1]],
+        dt: 0.2,
+        sub: 10,
+        steps: 30,
+        x0: vec![(2.9, 3.1), (2.9, 3.1), (0.0, 0.0), (0.0, 0.0)],
+        props: vec![
+            Prop::Goal(vec![(0, -0.5, 0.5), (1, -0.5, 0.5)]),
+            Prop::AlwaysOutside(vec![(0, 1.0, 2.0), (1, 1.0, 2.0)]),
+        ],
+        observe: identity,
+        scale: vec![1.0, 1.0],
+        offset: vec![0.0, 0.0],
+        hidden: vec![64, 32],
+        act: relu,
+        out_act: Some(Activation::Tanh),
+        seed: 24,
+    };
+    jobs.push((
+        nav,
+        Box::new(|b: &Bench| {
+            // head for a waypoint right of the obstacle while high, for the
+            // origin once low (blended over y ∈ [p1, p1 + 0.6]); the speed
+            // is capped at p2 and slowed by the heading error
+            let fam = |x: &[f64], p: &[f64]| {
+                let s = ((x[1] - p[1]) / 0.6).clamp(0.0, 1.0);
+                let (tx, ty) = (s * p[0], s * 0.4);
+                let dist = x[0].hypot(x[1]);
+                let err = wrap((ty - x[1]).atan2(tx - x[0]) - x[3]);
+                let v = (p[2].min(p[4] * dist)) * err.cos().max(0.0);
+                vec![
+                    (2.0 * (v - x[2])).clamp(-0.95, 0.95),
+                    (p[3] * err).clamp(-0.95, 0.95),
+                ]
+            };
+            let p = tune(
+                b,
+                &[
+                    vec![2.4, 2.6, 2.8],
+                    vec![0.2, 0.5, 0.8, 1.1],
+                    vec![1.0, 1.3, 1.6, 2.0],
+                    vec![2.0, 4.0],
+                    vec![0.5, 1.0, 2.0],
+                ],
+                &fam,
+            );
+            Box::new(move |x: &[f64]| fam(x, &p))
+        }),
     ));
 
     // unicycle (ARCH-COMP benchmark 10): 50 steps of 0.2; u_i = net_i − 20

@@ -259,6 +259,24 @@ fn run(
             .with_junit_detail(&plain);
         }
     };
+    // merge: removed when Loop::Nonlinear executes — a nonlinear plant is
+    // checked and lowered, but not analysed yet: no verdict for it
+    if let ravel::check::Task::System(c) = task {
+        if matches!(c.plant, ravel::check::PlantSpec::Nonlinear(_)) {
+            let message = format!(
+                "{}: nonlinear plants are checked, but their analysis is not implemented yet",
+                l.display
+            );
+            return error_item(
+                index,
+                Some(path),
+                controller,
+                &message,
+                format!("error: {message}\n"),
+                json!({ "spec": l.name, "verdict": "ERROR", "errors": [{ "code": null, "message": message }] }),
+            );
+        }
+    }
     let started = Instant::now();
     let shown = match position {
         Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),

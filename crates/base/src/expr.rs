@@ -125,7 +125,9 @@ impl Tape {
     /// Append a node and return its id. Operands must be earlier nodes
     /// (checked in debug builds; the builders in `check` guarantee it).
     pub fn push(&mut self, node: Node) -> Id {
-        debug_assert!(operands(&node).iter().all(|&o| (o as usize) < self.nodes.len()));
+        debug_assert!(operands(&node)
+            .iter()
+            .all(|&o| (o as usize) < self.nodes.len()));
         let id = self.nodes.len() as Id;
         self.nodes.push(node);
         id
@@ -249,7 +251,10 @@ mod tests {
         assert!(f.tape.is_well_formed(3));
         assert!(!f.tape.is_well_formed(2));
         let mut scratch = Vec::new();
-        assert_eq!(f.eval(&[1.0, 2.0], &[0.5], &[], &mut scratch), vec![2.0, 1.0]);
+        assert_eq!(
+            f.eval(&[1.0, 2.0], &[0.5], &[], &mut scratch),
+            vec![2.0, 1.0]
+        );
     }
 
     #[test]

@@ -209,8 +209,7 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
         controller_sha256: c.controller_sha256.clone(),
         controller_resolved: c.controller_resolved.clone(),
         network_summary: summary(c),
-        closed_loop: ClosedLoop::time_varying(plants, net)
-            .with_slope_steps(c.slope_steps),
+        closed_loop: ClosedLoop::time_varying(plants, net).with_slope_steps(c.slope_steps),
         dt: c.dt,
         limits: c.limits.clone(),
         initial: c.initial.1.clone(),

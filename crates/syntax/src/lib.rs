@@ -171,7 +171,10 @@ fn too_deep(source: &str) -> Option<Diagnostic> {
             }
             b'"' => {
                 i += 1;
-                while bytes.get(i).is_some_and(|d| !matches!(d, b'"' | b'\n' | b'\r')) {
+                while bytes
+                    .get(i)
+                    .is_some_and(|d| !matches!(d, b'"' | b'\n' | b'\r'))
+                {
                     i += 1;
                 }
             }
@@ -601,7 +604,13 @@ impl Builder {
                     .hint("write shorter expressions"),
                 );
             }
-            return (Spanned { node: Expr::Number(0.0), span }, 1);
+            return (
+                Spanned {
+                    node: Expr::Number(0.0),
+                    span,
+                },
+                1,
+            );
         }
         if depth > MAX_EXPR_DEPTH {
             if !self.too_deep {
@@ -616,7 +625,13 @@ impl Builder {
                     .hint("simplify the expression, or name parts of it with `const`"),
                 );
             }
-            return (Spanned { node: Expr::Number(0.0), span }, 1);
+            return (
+                Spanned {
+                    node: Expr::Number(0.0),
+                    span,
+                },
+                1,
+            );
         }
         (Spanned { node, span }, depth)
     }

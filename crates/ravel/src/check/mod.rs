@@ -988,7 +988,8 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     if let Some(h) = horizon {
         per_step_lengths(cx, &pp.per_step_lists, h);
     }
-    if let (Ok(Some(dt)), Some(plants), true) = (sp.time, pp.plant.as_mut(), pp.nonlinear.is_none()) {
+    if let (Ok(Some(dt)), Some(plants), true) = (sp.time, pp.plant.as_mut(), pp.nonlinear.is_none())
+    {
         discretise(cx, plants, dt, sp.time_span.unwrap_or(WHOLE));
     }
     if let (Some(h), Some((_, n))) = (horizon, &sp.state) {
@@ -1015,7 +1016,14 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             sp.state.as_ref().map_or("x", |s| s.0.as_str()),
             sp.control.as_ref().map_or("u", |c| c.0.as_str()),
         );
-        nonlinear::defined_at_points(cx, &nl.field, &init.bbox(), pp.limits.as_ref(), &nl.w, names);
+        nonlinear::defined_at_points(
+            cx,
+            &nl.field,
+            &init.bbox(),
+            pp.limits.as_ref(),
+            &nl.w,
+            names,
+        );
     }
 
     if !cx.diags.is_empty() {
@@ -1086,8 +1094,20 @@ fn actuate(
         );
     }
     let why = "the control is computed from the network's outputs `net[j]` only";
-    let forbidden = vec![(xn.as_str(), why), (un.as_str(), why), ("w", why), ("v", why)];
-    let map = nonlinear::affine(cx, exprs, &pp.consts, ("net", c.outputs), forbidden, "an `actuate` entry");
+    let forbidden = vec![
+        (xn.as_str(), why),
+        (un.as_str(), why),
+        ("w", why),
+        ("v", why),
+    ];
+    let map = nonlinear::affine(
+        cx,
+        exprs,
+        &pp.consts,
+        ("net", c.outputs),
+        forbidden,
+        "an `actuate` entry",
+    );
     map.filter(|_| exprs.len() == *m)
 }
 

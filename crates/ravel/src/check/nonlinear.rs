@@ -130,7 +130,9 @@ impl Builder {
             }
             Expr::Pow { base, exp } => {
                 let b = self.build(cx, scope, base);
-                let n = self.build(cx, scope, exp).and_then(|x| exponent(cx, x, exp.span));
+                let n = self
+                    .build(cx, scope, exp)
+                    .and_then(|x| exponent(cx, x, exp.span));
                 let (b, n) = (b?, n?);
                 match b {
                     Val::Const(c) => {
@@ -151,11 +153,7 @@ impl Builder {
                             Diagnostic::new(
                                 Code::Arity,
                                 e.span,
-                                format!(
-                                    "`{}` takes one argument, not {}",
-                                    f.name(),
-                                    args.len()
-                                ),
+                                format!("`{}` takes one argument, not {}", f.name(), args.len()),
                             )
                             .label(format!("{} argument(s)", args.len()))
                             .hint(format!("write `{}(…)` with one expression", f.name())),
@@ -240,10 +238,21 @@ fn domain_hint(f: Func) -> &'static str {
 /// The integer an exponent folds to.
 fn exponent(cx: &mut Ctx, v: Val, span: Span) -> Option<i32> {
     let (msg, label) = match v {
-        Val::Const(c) if c.fract() == 0.0 && c.abs() <= f64::from(i32::MAX) => return Some(c as i32),
-        Val::Const(c) if c.fract() == 0.0 => (format!("the exponent {} is too large", compact(c)), "beyond ±2147483647"),
-        Val::Const(c) => (format!("the exponent {} is not an integer", compact(c)), "not an integer"),
-        Val::Node(_) => ("the exponent is not a constant".to_string(), "depends on a variable"),
+        Val::Const(c) if c.fract() == 0.0 && c.abs() <= f64::from(i32::MAX) => {
+            return Some(c as i32)
+        }
+        Val::Const(c) if c.fract() == 0.0 => (
+            format!("the exponent {} is too large", compact(c)),
+            "beyond ±2147483647",
+        ),
+        Val::Const(c) => (
+            format!("the exponent {} is not an integer", compact(c)),
+            "not an integer",
+        ),
+        Val::Node(_) => (
+            "the exponent is not a constant".to_string(),
+            "depends on a variable",
+        ),
     };
     cx.err(
         Diagnostic::new(Code::Exponent, span, msg)
@@ -316,7 +325,14 @@ fn variable(cx: &mut Ctx, scope: &Scope, c: &Component) -> Option<u32> {
     if let Some((v, dim, at)) = scope.vectors.iter().find(|(v, _, _)| *v == name) {
         if c.index.node >= *dim as u64 {
             let hint = if *dim == 0 {
-                format!("`{v}` has no components here{}", if *v == "w" { ": declare the disturbance with `w in box([lo, hi], …)`" } else { "" })
+                format!(
+                    "`{v}` has no components here{}",
+                    if *v == "w" {
+                        ": declare the disturbance with `w in box([lo, hi], …)`"
+                    } else {
+                        ""
+                    }
+                )
             } else {
                 format!("indices run from 0 to {}", dim - 1)
             };
@@ -372,7 +388,7 @@ fn variable(cx: &mut Ctx, scope: &Scope, c: &Component) -> Option<u32> {
 pub(super) fn constants(
     cx: &mut Ctx,
     consts: &[(&Spanned<String>, &Spanned<Expr>)],
-    vectors: &[(&str, Span)],
+    vectors: &[(&str, Option<Span>)],
 ) -> BTreeMap<String, f64> {
     let mut values = BTreeMap::new();
     values.insert("pi".to_string(), std::f64::consts::PI);
@@ -388,16 +404,17 @@ pub(super) fn constants(
             continue;
         }
         if let Some((v, at)) = vectors.iter().find(|(v, _)| *v == key) {
-            cx.err(
-                Diagnostic::new(
-                    Code::Duplicate,
-                    name.span,
-                    format!("the constant `{key}` shadows the vector `{v}`"),
-                )
-                .label("a vector's name")
-                .related(*at, "the vector is declared here")
-                .hint("choose another name for this constant"),
-            );
+            let mut d = Diagnostic::new(
+                Code::Duplicate,
+                name.span,
+                format!("the constant `{key}` shadows the vector `{v}`"),
+            )
+            .label("a vector's name")
+            .hint("choose another name for this constant");
+            if let Some(at) = at {
+                d = d.related(*at, "the vector is declared here");
+            }
+            cx.err(d);
             continue;
         }
         if let Some(first) = seen.get(key) {
@@ -558,7 +575,11 @@ pub(super) fn field(
         .map(|(k, _)| format!("{xn}[{k}]"))
         .collect();
     if let Some(first) = missing.first() {
-        let kw = if first_kind == EquationKind::Der { "der" } else { "next" };
+        let kw = if first_kind == EquationKind::Der {
+            "der"
+        } else {
+            "next"
+        };
         cx.err(
             Diagnostic::new(
                 Code::Missing,
@@ -566,17 +587,15 @@ pub(super) fn field(
                 format!("no equation defines {}", super::name_list(&missing)),
             )
             .label("in this system")
-            .hint(format!("add `{kw} {first} = …`: every state component needs one line")),
+            .hint(format!(
+                "add `{kw} {first} = …`: every state component needs one line"
+            )),
         );
         ok = false;
     }
     let scope = Scope {
         consts,
-        vectors: vec![
-            (xn, n, 0),
-            (un, m, n as u32),
-            ("w", p, (n + m) as u32),
-        ],
+        vectors: vec![(xn, n, 0), (un, m, n as u32), ("w", p, (n + m) as u32)],
         forbidden: Vec::new(),
     };
     let mut b = Builder::new();
@@ -683,7 +702,11 @@ fn affine_form(cx: &mut Ctx, b: &Builder, root: Id, what: &str, var: &str) -> Op
                 (co, -c)
             }
             Node::Add(a, b2) | Node::Sub(a, b2) => {
-                let sign = if matches!(node, Node::Add(..)) { 1.0 } else { -1.0 };
+                let sign = if matches!(node, Node::Add(..)) {
+                    1.0
+                } else {
+                    -1.0
+                };
                 let (mut co, c) = take(&mut forms, a);
                 let (co2, c2) = take(&mut forms, b2);
                 for (j, v) in co2 {
@@ -740,7 +763,13 @@ fn affine_form(cx: &mut Ctx, b: &Builder, root: Id, what: &str, var: &str) -> Op
 /// (when there are few enough) the corners of `x0` (the initial set's
 /// bounding box), with the control at the centre of `limits` (0 without)
 /// and the disturbance at the centre of `w`.
-fn sample_points(x0: &IBox, limits: Option<&IBox>, m: usize, w: &IBox, nodes: usize) -> Vec<Vec<f64>> {
+fn sample_points(
+    x0: &IBox,
+    limits: Option<&IBox>,
+    m: usize,
+    w: &IBox,
+    nodes: usize,
+) -> Vec<Vec<f64>> {
     let mid = |lo: f64, hi: f64| {
         let c = 0.5 * lo + 0.5 * hi;
         if c.is_finite() {
@@ -772,7 +801,12 @@ fn sample_points(x0: &IBox, limits: Option<&IBox>, m: usize, w: &IBox, nodes: us
         }
     }
     xs.into_iter()
-        .map(|x| x.into_iter().chain(u.iter().copied()).chain(wc.iter().copied()).collect())
+        .map(|x| {
+            x.into_iter()
+                .chain(u.iter().copied())
+                .chain(wc.iter().copied())
+                .collect()
+        })
         .collect()
 }
 

@@ -409,7 +409,11 @@ fn nonlinear_plant(
             BoxSet::Positional(ivs) => ivs.len(),
             BoxSet::Named(items) => items
                 .iter()
-                .map(|(c, _)| usize::try_from(c.index.node).unwrap_or(usize::MAX).saturating_add(1))
+                .map(|(c, _)| {
+                    usize::try_from(c.index.node)
+                        .unwrap_or(usize::MAX)
+                        .saturating_add(1)
+                })
                 .max()
                 .unwrap_or(0)
                 .min(ravel_base::limits::MAX_DIM as usize),

@@ -569,7 +569,7 @@ fn tightness() {
     ];
     for (name, spec, prop, k, steps) in rows {
         let c = checked(spec);
-        let dims = c.plants[0].a.nrows();
+        let dims = c.state.1;
         for &st in steps {
             let mut plan = plan_of(&c, prop, grid(k, dims), 1000);
             plan.closed_loop

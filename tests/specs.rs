@@ -272,3 +272,107 @@ fn invalid_specs() {
         insta::assert_snapshot!("diagnostics", render(&diags, &name, &source, 100, false));
     });
 }
+
+/// Valid specs with nonlinear plants, `observe` and `actuate`
+/// (`tests/nonlinear/`; not under `specs/`, whose specs are all executed,
+/// while the analysis of nonlinear plants is not built yet): they check
+/// and lower; snapshots of the syntax tree and of what check and lowering
+/// made of them (the tape, the observation, the folded network's layers).
+#[test]
+fn nonlinear_fixtures() {
+    use ravel::check::PlantSpec;
+    insta::glob!("nonlinear", "*.ravel", |path| {
+        let source = std::fs::read_to_string(path).expect("spec is readable");
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let checked = match ravel::front_end(
+            &source,
+            path.parent().expect("spec has a folder"),
+            &ravel_cli::read_request,
+        ) {
+            Ok(c) => c,
+            Err(d) => panic!(
+                "{name} has diagnostics:\n{}",
+                render(&d, &name, &source, 100, false)
+            ),
+        };
+        // formatting keeps the meaning and is idempotent
+        let once = ravel_syntax::fmt::format(&source).expect("formats");
+        assert_eq!(ravel_syntax::fmt::format(&once).expect("formats"), once);
+        insta::assert_snapshot!("parse", parse_snapshot(&name, &source));
+        let net = ravel::lower::folded_network(&checked);
+        let mut s = String::new();
+        match &checked.plant {
+            PlantSpec::Nonlinear(p) => {
+                let l = ravel::lower::nonlinear_loop(&checked).expect("a nonlinear loop");
+                assert_eq!(l.net, net);
+                assert_eq!(l.states(), checked.state.1);
+                assert!(p.field.tape.is_well_formed(p.field.vars()));
+                s += &format!("field: {:?}\n", p.field.time);
+                s += &format!(
+                    "n m p: {} {} {}\n",
+                    p.field.states, p.field.controls, p.field.disturbances
+                );
+                for (i, node) in p.field.tape.nodes.iter().enumerate() {
+                    s += &format!("  {i}: {node:?}\n");
+                }
+                s += &format!("outputs: {:?}\n", p.field.outputs);
+                s += &format!("w: {:?} .. {:?}\n", p.w.lo, p.w.hi);
+                s += &format!(
+                    "obs (n × k): {:?}\n",
+                    p.obs
+                        .row_iter()
+                        .map(|r| r.iter().copied().collect::<Vec<_>>())
+                        .collect::<Vec<_>>()
+                );
+                s += &format!("v: {:?} .. {:?}\n", p.v.lo, p.v.hi);
+            }
+            PlantSpec::Linear(plants) => {
+                assert!(ravel::lower::nonlinear_loop(&checked).is_none());
+                let plan = ravel::lower::lower_system(&checked);
+                assert_eq!(plan.closed_loop.net(), &net);
+                let obs = &plants[0].obs;
+                s += &format!("linear, {} plant(s)\n", plants.len());
+                s += &format!(
+                    "obs (n × k): {:?}\n",
+                    obs.row_iter()
+                        .map(|r| r.iter().copied().collect::<Vec<_>>())
+                        .collect::<Vec<_>>()
+                );
+                s += &format!("v: {:?} .. {:?}\n", plants[0].v.lo, plants[0].v.hi);
+            }
+        }
+        s += &format!(
+            "observe offset: {:?}\n",
+            checked
+                .observe_offset
+                .as_ref()
+                .map(|d| d.iter().copied().collect::<Vec<_>>())
+        );
+        s += &format!(
+            "network: {} inputs, {} layers, {} outputs\n",
+            net.inputs,
+            net.layers.len(),
+            net.outputs()
+        );
+        for layer in &net.layers {
+            match layer {
+                ravel_base::nn::Layer::Affine { w, b } => {
+                    s += &format!("  affine {} × {}", w.nrows(), w.ncols());
+                    if w.nrows() * w.ncols() <= 4 {
+                        s += &format!(
+                            " w {:?} b {:?}",
+                            w.iter().collect::<Vec<_>>(),
+                            b.iter().collect::<Vec<_>>()
+                        );
+                    }
+                    s += "\n";
+                }
+                ravel_base::nn::Layer::Act(a) => s += &format!("  {}\n", a.name()),
+            }
+        }
+        insta::assert_snapshot!("checked", s);
+    });
+}

@@ -654,8 +654,133 @@ fn specs(dir: &Path) -> usize {
             .replace("horizon 5", "horizon 10000")
             .replace("samples     100", "samples     10"),
     );
+    // malformed expressions of a nonlinear plant
+    let nl = |rhs: &str| NONLINEAR.replace("RHS", rhs);
+    let big = |unit: &str, n: usize| unit.repeat(n);
+    let cases: Vec<(&str, &str, &str, String)> = vec![
+        (
+            "expr_parens_40",
+            "E0216",
+            "parentheses nested 40 deep",
+            format!("{}x[0]{}", big("(", 40), big(")", 40)),
+        ),
+        (
+            "expr_parens_deep",
+            "E0216",
+            "parentheses nested 100000 deep",
+            format!("{}x[0]{}", big("(", 100_000), big(")", 100_000)),
+        ),
+        (
+            "expr_neg_deep",
+            "E0216",
+            "100000 unary minus signs",
+            format!("{}x[0]", big("-", 100_000)),
+        ),
+        (
+            "expr_pow_chain",
+            "E0216",
+            "a chain of 100000 powers",
+            format!("{}2", big("x[0]^", 100_000)),
+        ),
+        (
+            "expr_literal_overflow",
+            "E0205",
+            "a literal that overflows f64",
+            "1e999 * x[0]".to_string(),
+        ),
+        (
+            "expr_index_too_wide",
+            "E0002",
+            "an index that does not fit in 64 bits",
+            "x[99999999999999999999]".to_string(),
+        ),
+        (
+            "expr_index_far",
+            "E0104",
+            "an index far out of range",
+            "x[99999] + w[3]".to_string(),
+        ),
+        (
+            "expr_call_empty",
+            "E0222",
+            "a function called without an argument",
+            "sin()".to_string(),
+        ),
+        (
+            "expr_call_unknown",
+            "E0221",
+            "an unknown function",
+            "sinh(x[0])".to_string(),
+        ),
+        (
+            "expr_fractional_exponent",
+            "E0223",
+            "a non-integer exponent",
+            "x[0]^0.5".to_string(),
+        ),
+        (
+            "expr_huge_exponent",
+            "E0223",
+            "an exponent beyond i32",
+            "x[0]^99999999999".to_string(),
+        ),
+        (
+            "expr_divide_by_zero",
+            "E0224",
+            "a division by the constant 0",
+            "1/0".to_string(),
+        ),
+        (
+            "expr_sqrt_negative",
+            "E0225",
+            "sqrt of a negative constant",
+            "sqrt(-1) + x[0]".to_string(),
+        ),
+        (
+            "expr_log_at_zero",
+            "E0225",
+            "log of 0 at the initial set's centre",
+            "log(x[1])".to_string(),
+        ),
+        (
+            "expr_exp_overflow",
+            "E0205",
+            "a constant that overflows when folded",
+            "exp(1000) * x[0]".to_string(),
+        ),
+        (
+            "expr_megabyte_sum",
+            "E0216",
+            "a 1 MB sum: more expression nodes than the limit",
+            format!("x[0]{}", big(" + 0.5 * x[1]", 80_000)),
+        ),
+        (
+            "expr_unknown_name",
+            "E0101",
+            "an unknown name",
+            "epsilon * x[0]".to_string(),
+        ),
+    ];
+    for (name, code, why, rhs) in cases {
+        put(name, code, why, &nl(&rhs));
+    }
     count
 }
+
+/// A nonlinear plant whose second equation is `RHS`.
+const NONLINEAR: &str = r#"system corpus {
+    state   x[2]
+    control u[1]
+    time    continuous dt 0.1
+    der x[0] = x[1]
+    der x[1] = RHS
+    u in box([-1.0, 1.0])
+}
+controller "../../../models/double_integrator.onnx"
+initial X0 = box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])
+goal    G  = box(x[0] in [-1.5, 2.0], x[1] in [-1.5, 0.5])
+horizon 5
+"#;
 
 fn net() -> Network {
     Network::new(

@@ -80,6 +80,16 @@ pub const MAX_POLYTOPE_ROWS: usize = 1000;
 /// linear programs in `n` variables).
 pub const MAX_POLYTOPE_DIM: usize = 100;
 
+/// Deepest nesting of brackets `(`, `[`, `{` in a spec (the parser
+/// recurses once per level: the limit keeps its stack small).
+pub const MAX_NESTING: usize = 32;
+/// Deepest expression tree of a nonlinear plant, a constant, `observe` or
+/// `actuate` (unary minus signs and powers count one level each).
+pub const MAX_EXPR_DEPTH: usize = 64;
+/// Most expression nodes in a spec, all expressions together (numbers,
+/// names, components, operators and calls count one each).
+pub const MAX_EXPR_NODES: usize = 100_000;
+
 /// `a × b × …` if it does not overflow `u64`.
 pub fn product(factors: &[u64]) -> Option<u64> {
     factors.iter().try_fold(1u64, |acc, f| acc.checked_mul(*f))

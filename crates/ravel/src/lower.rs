@@ -6,12 +6,14 @@
 //! themselves are made by [`crate::execute`], which may refine them), and
 //! turns goal and avoid sets into properties over the steps they constrain.
 
-use crate::check::{Checked, NetworkChecked, Task};
+use crate::check::{Checked, NetworkChecked, PlantSpec, Task};
 pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
+use nalgebra::DMatrix;
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
 use ravel_analysis::feedback::Loop;
+use ravel_analysis::nonlinear::NonlinearLoop;
 use ravel_analysis::sets::{IBox, Region};
-use ravel_base::nn::Layer;
+use ravel_base::nn::{Layer, Network};
 
 /// Everything the executor needs to run a task, as plain data: one variant
 /// per kind of spec (a third kind of plant is a third variant).
@@ -123,11 +125,54 @@ fn describe(c: &crate::onnx::Controller) -> String {
     }
 }
 
+/// The network of the closed loop, for either kind of plant: the
+/// controller with `observe`'s offsets prepended (`h ↦ h + d`, an identity
+/// affine layer; none when `d = 0`), `actuate`'s map appended
+/// (`u = S · net + o`), then the control saturation.
+pub fn folded_network(c: &Checked) -> Network {
+    let net = &c.controller.net;
+    let mut layers = Vec::with_capacity(net.layers.len() + 6);
+    if let Some(d) = &c.observe_offset {
+        layers.push(Layer::Affine {
+            w: DMatrix::identity(net.inputs, net.inputs),
+            b: d.clone(),
+        });
+    }
+    layers.extend(net.layers.iter().cloned());
+    if let Some((w, b)) = &c.actuate {
+        layers.push(Layer::Affine {
+            w: w.clone(),
+            b: b.clone(),
+        });
+    }
+    let folded = if c.observe_offset.is_none() && c.actuate.is_none() {
+        net.clone()
+    } else {
+        Network::new(net.inputs, layers).with_input_type(net.input_type)
+    };
+    match &c.limits {
+        Some(l) => folded.with_saturation(&l.lo, &l.hi),
+        None => folded,
+    }
+}
+
+/// The closed loop of a nonlinear plant: the plant and the
+/// [`folded_network`]; `None` for a linear plant.
+pub fn nonlinear_loop(c: &Checked) -> Option<NonlinearLoop> {
+    match &c.plant {
+        PlantSpec::Nonlinear(p) => Some(NonlinearLoop::new(p.clone(), folded_network(c))),
+        PlantSpec::Linear(_) => None,
+    }
+}
+
 /// Lower a checked closed-loop spec to its plan.
 pub fn lower_system(c: &Checked) -> SystemPlan {
-    let net = match &c.limits {
-        Some(l) => c.controller.net.with_saturation(&l.lo, &l.hi),
-        None => c.controller.net.clone(),
+    let net = folded_network(c);
+    let closed_loop = match &c.plant {
+        PlantSpec::Linear(plants) => Loop::Linear(Box::new(
+            ClosedLoop::time_varying(plants.clone(), net).with_slope_steps(c.slope_steps),
+        )),
+        PlantSpec::Nonlinear(p) => Loop::Nonlinear(Box::new(NonlinearLoop::new(p.clone(), net))),
     };
     let mut properties = Vec::new();
     if let Some(g) = &c.goal {
@@ -153,9 +198,7 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
         controller_sha256: c.controller_sha256.clone(),
         controller_resolved: c.controller_resolved.clone(),
         network_summary: summary(c),
-        closed_loop: Loop::Linear(Box::new(
-            ClosedLoop::time_varying(c.plants.clone(), net).with_slope_steps(c.slope_steps),
-        )),
+        closed_loop,
         dt: c.dt,
         limits: c.limits.clone(),
         initial: c.initial.1.clone(),

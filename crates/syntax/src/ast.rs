@@ -203,6 +203,99 @@ pub enum SystemStmt {
         /// The whole statement.
         span: Span,
     },
+    /// `const NAME = expr`
+    Const {
+        /// The constant's name.
+        name: Spanned<String>,
+        /// Its value.
+        value: Spanned<Expr>,
+        /// The whole statement.
+        span: Span,
+    },
+    /// `der x[i] = expr` (continuous time) or `next x[i] = expr` (discrete time)
+    Equation {
+        /// `der` or `next`.
+        kind: Spanned<EquationKind>,
+        /// The state component it defines.
+        target: Component,
+        /// The right-hand side.
+        expr: Spanned<Expr>,
+        /// The whole statement.
+        span: Span,
+    },
+    /// `observe [e, …]`: the controller's inputs
+    Observe {
+        /// One expression per network input.
+        exprs: Vec<Spanned<Expr>>,
+        /// The whole statement.
+        span: Span,
+    },
+    /// `actuate [e, …]`: the control from the network's outputs
+    Actuate {
+        /// One expression per control component.
+        exprs: Vec<Spanned<Expr>>,
+        /// The whole statement.
+        span: Span,
+    },
+}
+
+/// Which kind of equation defines a state component.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EquationKind {
+    /// `der x[i] = …`: the derivative (continuous time).
+    Der,
+    /// `next x[i] = …`: the value one step later (discrete time).
+    Next,
+}
+
+/// A binary operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BinOp {
+    /// `+`
+    Add,
+    /// `-`
+    Sub,
+    /// `*`
+    Mul,
+    /// `/`
+    Div,
+}
+
+/// An expression of a nonlinear plant, a constant, `observe` or `actuate`.
+/// Every sub-expression carries its span; operators of one precedence level
+/// are kept as one chain, so a long sum is a flat list, not a deep tree.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Expr {
+    /// A number as written (without sign: `-` is an operator).
+    Number(f64),
+    /// A name: a constant or `pi`.
+    Name(String),
+    /// `x[i]`: a component of a vector.
+    Component(Component),
+    /// `-a`
+    Neg(Box<Spanned<Expr>>),
+    /// `a op b op c …`: operators of one precedence level (`+ -` or `* /`),
+    /// applied left to right.
+    Chain {
+        /// The first operand.
+        first: Box<Spanned<Expr>>,
+        /// Each operator with its right operand, in order.
+        rest: Vec<(BinOp, Spanned<Expr>)>,
+    },
+    /// `a ^ b`
+    Pow {
+        /// The base.
+        base: Box<Spanned<Expr>>,
+        /// The exponent (an integer once folded).
+        exp: Box<Spanned<Expr>>,
+    },
+    /// `f(a, …)`
+    Call {
+        /// The function's name.
+        func: Spanned<String>,
+        /// The arguments.
+        args: Vec<Spanned<Expr>>,
+    },
 }
 
 /// A literal value.

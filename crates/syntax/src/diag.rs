@@ -68,6 +68,20 @@ pub enum Code {
     Observations,
     /// E0220: slope optimisation with a propagator that has no slopes to optimise.
     SlopeSteps,
+    /// E0221: a call of a function the language does not have.
+    UnknownFunction,
+    /// E0222: a function called with other than one argument.
+    Arity,
+    /// E0223: an exponent that is not a constant integer.
+    Exponent,
+    /// E0224: a divisor that is the constant 0.
+    ZeroDivisor,
+    /// E0225: a nonlinear plant undefined at a point of the initial set (a division by 0, `sqrt` of a negative, `log` of a non-positive number).
+    Undefined,
+    /// E0226: an `observe` or `actuate` entry that is not affine.
+    NotAffine,
+    /// E0227: a mix of plant forms: `der` with `next`, with the wrong time, or with `A`, `B`, `c`; `C` with `observe`.
+    PlantKind,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -88,7 +102,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 36] = [
+    pub const ALL: [Code; 43] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -117,6 +131,13 @@ impl Code {
         Code::Radius,
         Code::Observations,
         Code::SlopeSteps,
+        Code::UnknownFunction,
+        Code::Arity,
+        Code::Exponent,
+        Code::ZeroDivisor,
+        Code::Undefined,
+        Code::NotAffine,
+        Code::PlantKind,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -158,6 +179,13 @@ impl Code {
             Code::Radius => "E0218",
             Code::Observations => "E0219",
             Code::SlopeSteps => "E0220",
+            Code::UnknownFunction => "E0221",
+            Code::Arity => "E0222",
+            Code::Exponent => "E0223",
+            Code::ZeroDivisor => "E0224",
+            Code::Undefined => "E0225",
+            Code::NotAffine => "E0226",
+            Code::PlantKind => "E0227",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

@@ -39,6 +39,8 @@ enum Tok {
     Str(String),
     /// Punctuation or an operator.
     Punct(String),
+    /// A unary minus before a name or a bracket (printed against it: `-x[0]`).
+    Neg,
     /// `// …` (text without trailing spaces).
     Line(String),
     /// `/* … */`.
@@ -54,14 +56,21 @@ fn lex(src: &str) -> Vec<Tok> {
     let chars: Vec<char> = src.chars().collect();
     let mut out = Vec::new();
     let mut i = 0;
-    // a minus right before a digit is unary unless it follows a `]`: in
-    // the grammar only a term of a linear expression (ending in `x[i]`) is
-    // followed by a binary minus
-    let operand = |out: &[Tok]| {
-        matches!(
-            out.iter().rev().find(|t| !matches!(t, Tok::Newline | Tok::Line(_) | Tok::Block(_))),
-            Some(Tok::Punct(p)) if p == "]"
-        )
+    // a minus right before a digit is unary unless it follows a `]` or a
+    // `)`: in the grammar only a term of a linear expression (ending in
+    // `x[i]`) or an operand of an expression is followed by a binary minus
+    // (a name before `-1` stays as written: `dt -1` is a signed number)
+    let last = |out: &[Tok]| -> Option<Tok> {
+        out.iter()
+            .rev()
+            .find(|t| !matches!(t, Tok::Newline | Tok::Line(_) | Tok::Block(_)))
+            .cloned()
+    };
+    let operand = |out: &[Tok]| matches!(last(out), Some(Tok::Punct(p)) if p == "]" || p == ")");
+    // any other minus is binary after an operand (a name, a number, `]` or `)`)
+    let binary = |out: &[Tok]| {
+        matches!(last(out), Some(Tok::Word(_) | Tok::Num(_)))
+            || matches!(last(out), Some(Tok::Punct(p)) if p == "]" || p == ")")
     };
     // the character at `k`, and the characters `a..b` (`a ≤ b ≤ len`) as text
     let at = |k: usize| chars.get(k).copied();
@@ -133,6 +142,9 @@ fn lex(src: &str) -> Vec<Tok> {
                 }
             }
             out.push(Tok::Num(between(start, i)));
+        } else if c == '-' && !binary(&out) {
+            out.push(Tok::Neg);
+            i += 1;
         } else if (c == '<' || c == '>') && chars.get(i + 1) == Some(&'=') {
             out.push(Tok::Punct(format!("{c}=")));
             i += 2;
@@ -168,12 +180,17 @@ fn is_keyword(w: &str) -> bool {
             | "seed"
             | "optimise_slopes"
             | "norm"
+            | "observe"
+            | "actuate"
     )
 }
 
 /// Whether a space goes between `a` and `b` on one line.
 fn space(a: &Tok, b: &Tok) -> bool {
     let p = |t: &Tok, s: &str| matches!(t, Tok::Punct(x) if x == s);
+    if *a == Tok::Neg || p(a, "^") || p(b, "^") {
+        return false;
+    }
     if p(b, ",") || p(b, ")") || p(b, "]") || p(a, "(") || p(a, "[") {
         return false;
     }
@@ -236,6 +253,7 @@ fn layout(toks: &[Tok]) -> String {
             | Tok::Punct(s)
             | Tok::Line(s)
             | Tok::Block(s) => s.as_str(),
+            Tok::Neg => "-",
             Tok::Newline => "",
         };
         line.push_str(text);
@@ -322,6 +340,17 @@ mod tests {
         assert_eq!(
             out,
             "system s {\n    state x[2]  // two\n\n    A = [[1, 1],\n         [0, 1]]\n}\navoid a = { x[0] - 2 * x[1] <= -1 } at steps [1, 2]\n"
+        );
+        assert_eq!(format(&out).expect("formats"), out);
+    }
+
+    #[test]
+    fn expressions_take_their_canonical_spacing() {
+        let src = "system s {\n state x[2]\n const  k=2*pi\n der x[0]=-x[1]^-2 +k*sin( x[0] )/(1+x[1]^2)\n der x[1] = - -x[0]-1\n observe [ x[0] , 30]\n}\n";
+        let out = format(src).expect("formats");
+        assert_eq!(
+            out,
+            "system s {\n    state x[2]\n    const k = 2 * pi\n    der x[0] = -x[1]^-2 + k * sin(x[0]) / (1 + x[1]^2)\n    der x[1] = --x[0] - 1\n    observe [x[0], 30]\n}\n"
         );
         assert_eq!(format(&out).expect("formats"), out);
     }

@@ -17,6 +17,7 @@ use pest::Parser;
 
 use crate::diag::{Code, Diagnostic};
 use ast::*;
+use ravel_base::limits::{MAX_EXPR_DEPTH, MAX_EXPR_NODES, MAX_NESTING};
 
 /// The pest parser generated from the grammar (its generated items carry no docs).
 #[allow(missing_docs)]
@@ -97,6 +98,20 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::boundary_polytope => "`polytope K` or `polytope [[…], …]`",
         Rule::per_step => "`per_step(value, …)`",
         Rule::time_decl | Rule::time_kw => "`time continuous dt …` or `time discrete`",
+        Rule::const_decl | Rule::const_kw => "`const NAME = …`",
+        Rule::der_decl | Rule::der_kw => "`der x[i] = …`",
+        Rule::next_decl | Rule::next_kw => "`next x[i] = …`",
+        Rule::observe_decl | Rule::observe_kw => "`observe […]`",
+        Rule::actuate_decl | Rule::actuate_kw => "`actuate […]`",
+        Rule::expr_list => "a list of expressions `[…]`",
+        Rule::expr
+        | Rule::product
+        | Rule::unary
+        | Rule::power
+        | Rule::exponent
+        | Rule::neg
+        | Rule::call => "an expression",
+        Rule::mul_op => "`*` or `/`",
         Rule::add_op => "`+` or `-`",
         Rule::close => "`]`",
         _ => return None,
@@ -106,13 +121,21 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
 /// Parse a spec. Fails with one diagnostic on a syntax error, or with one per
 /// oversized integer literal.
 pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
+    if let Some(d) = too_deep(source) {
+        return Err(vec![d]);
+    }
     let mut pairs =
         Grammar::parse(Rule::spec, source).map_err(|e| vec![syntax_error(e, source)])?;
     let spec = child(
         &mut pairs,
         "the grammar's `spec` rule always yields one pair",
     );
-    let mut b = Builder { errors: Vec::new() };
+    let mut b = Builder {
+        errors: Vec::new(),
+        expr_nodes: 0,
+        too_deep: false,
+        too_many: false,
+    };
     let items = spec
         .into_inner()
         .filter(|p| p.as_rule() != Rule::EOI)
@@ -123,6 +146,58 @@ pub fn parse(source: &str) -> Result<Spec, Vec<Diagnostic>> {
     } else {
         Err(b.errors)
     }
+}
+
+/// Brackets nested deeper than [`MAX_NESTING`] (outside comments and
+/// strings), reported at the first bracket beyond the limit before the
+/// parser (which recurses once per level) sees them.
+fn too_deep(source: &str) -> Option<Diagnostic> {
+    let bytes = source.as_bytes();
+    let mut depth = 0usize;
+    let mut i = 0;
+    while let Some(&c) = bytes.get(i) {
+        match c {
+            b'/' if bytes.get(i + 1) == Some(&b'/') => {
+                while bytes.get(i).is_some_and(|d| *d != b'\n' && *d != b'\r') {
+                    i += 1;
+                }
+            }
+            b'/' if bytes.get(i + 1) == Some(&b'*') => {
+                i += 2;
+                while bytes.get(i).is_some() && bytes.get(i..i + 2) != Some(b"*/".as_slice()) {
+                    i += 1;
+                }
+                i += 1;
+            }
+            b'"' => {
+                i += 1;
+                while bytes
+                    .get(i)
+                    .is_some_and(|d| !matches!(d, b'"' | b'\n' | b'\r'))
+                {
+                    i += 1;
+                }
+            }
+            b'(' | b'[' | b'{' => {
+                depth += 1;
+                if depth > MAX_NESTING {
+                    return Some(
+                        Diagnostic::new(
+                            Code::Limit,
+                            Span::new(i, i + 1),
+                            format!("brackets are nested more than {MAX_NESTING} deep"),
+                        )
+                        .label("too deep")
+                        .hint("simplify the expression, or name parts of it with `const`"),
+                    );
+                }
+            }
+            b')' | b']' | b'}' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+        i += 1;
+    }
+    None
 }
 
 fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
@@ -197,7 +272,16 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
 
 struct Builder {
     errors: Vec<Diagnostic>,
+    /// Expression nodes built so far (see [`MAX_EXPR_NODES`]).
+    expr_nodes: usize,
+    /// Whether an expression deeper than [`MAX_EXPR_DEPTH`] was reported.
+    too_deep: bool,
+    /// Whether [`MAX_EXPR_NODES`] was reported.
+    too_many: bool,
 }
+
+/// An expression and the depth of its tree.
+type Built = (Spanned<Expr>, usize);
 
 impl Builder {
     fn integer(&mut self, p: P) -> Spanned<u64> {
@@ -400,6 +484,52 @@ impl Builder {
             let dt = inner.next().map(|d| self.number(d));
             return SystemStmt::Time { kind, dt, span: s };
         }
+        match rule {
+            Rule::const_decl => {
+                let _keyword = inner.next();
+                let name = self.ident(child(&mut inner, "constant name"));
+                let value = self.expr(child(&mut inner, "constant value"));
+                return SystemStmt::Const {
+                    name,
+                    value,
+                    span: s,
+                };
+            }
+            Rule::der_decl | Rule::next_decl => {
+                let keyword = child(&mut inner, "keyword");
+                let kind = Spanned {
+                    node: if rule == Rule::der_decl {
+                        EquationKind::Der
+                    } else {
+                        EquationKind::Next
+                    },
+                    span: span(&keyword),
+                };
+                let target = self.component(child(&mut inner, "equation target"));
+                let expr = self.expr(child(&mut inner, "equation"));
+                return SystemStmt::Equation {
+                    kind,
+                    target,
+                    expr,
+                    span: s,
+                };
+            }
+            Rule::observe_decl | Rule::actuate_decl => {
+                let _keyword = inner.next();
+                let list = child(&mut inner, "expression list");
+                let exprs = list
+                    .into_inner()
+                    .filter(|e| e.as_rule() == Rule::expr)
+                    .map(|e| self.expr(e))
+                    .collect();
+                return if rule == Rule::observe_decl {
+                    SystemStmt::Observe { exprs, span: s }
+                } else {
+                    SystemStmt::Actuate { exprs, span: s }
+                };
+            }
+            _ => {}
+        }
         let name = self.ident(child(&mut inner, "statement name"));
         match rule {
             Rule::state_decl => SystemStmt::State {
@@ -449,6 +579,147 @@ impl Builder {
                 }
             }
             other => unreachable!("grammar system rule {other:?}"),
+        }
+    }
+
+    /// A whole expression (a `Rule::expr` pair), its depth and size limited.
+    fn expr(&mut self, p: P) -> Spanned<Expr> {
+        self.operand(p).0
+    }
+
+    /// A node of `depth` levels at `span`: the node itself, or a
+    /// placeholder `0` once a limit is passed (reported once each).
+    fn node(&mut self, node: Expr, span: Span, depth: usize) -> Built {
+        self.expr_nodes += 1;
+        if self.expr_nodes > MAX_EXPR_NODES {
+            if !self.too_many {
+                self.too_many = true;
+                self.errors.push(
+                    Diagnostic::new(
+                        Code::Limit,
+                        span,
+                        format!("the spec's expressions have more than {MAX_EXPR_NODES} terms"),
+                    )
+                    .label("the limit is passed here")
+                    .hint("write shorter expressions"),
+                );
+            }
+            return (
+                Spanned {
+                    node: Expr::Number(0.0),
+                    span,
+                },
+                1,
+            );
+        }
+        if depth > MAX_EXPR_DEPTH {
+            if !self.too_deep {
+                self.too_deep = true;
+                self.errors.push(
+                    Diagnostic::new(
+                        Code::Limit,
+                        span,
+                        format!("an expression is nested more than {MAX_EXPR_DEPTH} levels deep"),
+                    )
+                    .label("too deep")
+                    .hint("simplify the expression, or name parts of it with `const`"),
+                );
+            }
+            return (
+                Spanned {
+                    node: Expr::Number(0.0),
+                    span,
+                },
+                1,
+            );
+        }
+        (Spanned { node, span }, depth)
+    }
+
+    /// Any pair of the expression grammar: a chain (`expr`, `product`), a
+    /// `unary` or `exponent` (minus signs, then a power or an atom), a
+    /// `power`, or an atom.
+    fn operand(&mut self, p: P) -> Built {
+        let s = span(&p);
+        match p.as_rule() {
+            Rule::expr | Rule::product => {
+                let mut it = p.into_inner();
+                let (first, mut depth) = self.operand(child(&mut it, "operand"));
+                let mut rest = Vec::new();
+                while let Some(op) = it.next() {
+                    let op = match op.as_str() {
+                        "+" => BinOp::Add,
+                        "-" => BinOp::Sub,
+                        "*" => BinOp::Mul,
+                        _ => BinOp::Div,
+                    };
+                    let (e, d) = self.operand(child(&mut it, "operand"));
+                    depth = depth.max(d);
+                    rest.push((op, e));
+                }
+                if rest.is_empty() {
+                    return (first, depth);
+                }
+                let first = Box::new(first);
+                self.node(Expr::Chain { first, rest }, s, depth + 1)
+            }
+            Rule::unary | Rule::exponent => {
+                let parts: Vec<P> = p.into_inner().collect();
+                let negs: Vec<Span> = parts
+                    .iter()
+                    .filter(|q| q.as_rule() == Rule::neg)
+                    .map(span)
+                    .collect();
+                let Some(last) = parts.into_iter().next_back() else {
+                    unreachable!("a unary expression ends in an operand")
+                };
+                let (mut e, mut depth) = self.operand(last);
+                for n in negs.iter().rev() {
+                    let at = Span::new(n.start, e.span.end);
+                    (e, depth) = self.node(Expr::Neg(Box::new(e)), at, depth + 1);
+                }
+                (e, depth)
+            }
+            Rule::power => {
+                let mut items: Vec<Built> = p.into_inner().map(|q| self.operand(q)).collect();
+                let Some(mut acc) = items.pop() else {
+                    unreachable!("a power has a base")
+                };
+                // right-associative: a ^ (b ^ (c …))
+                while let Some((base, bd)) = items.pop() {
+                    let at = Span::new(base.span.start, acc.0.span.end);
+                    let depth = bd.max(acc.1) + 1;
+                    let node = Expr::Pow {
+                        base: Box::new(base),
+                        exp: Box::new(acc.0),
+                    };
+                    acc = self.node(node, at, depth);
+                }
+                acc
+            }
+            Rule::unsigned => {
+                let v = p.as_str().parse::<f64>().unwrap_or(f64::NAN);
+                self.node(Expr::Number(v), s, 1)
+            }
+            Rule::ident => self.node(Expr::Name(p.as_str().to_string()), s, 1),
+            Rule::component => {
+                let c = self.component(p);
+                self.node(Expr::Component(c), s, 1)
+            }
+            Rule::call => {
+                let mut it = p.into_inner();
+                let func = self.ident(child(&mut it, "function name"));
+                let mut depth = 0;
+                let args = it
+                    .map(|a| {
+                        let (e, d) = self.operand(a);
+                        depth = depth.max(d);
+                        e
+                    })
+                    .collect();
+                self.node(Expr::Call { func, args }, s, depth + 1)
+            }
+            other => unreachable!("grammar expression rule {other:?}"),
         }
     }
 

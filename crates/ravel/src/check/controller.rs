@@ -7,15 +7,27 @@ use ravel_base::nn::{Activation, Layer};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{Code, Diagnostic};
 
+/// Where the controller's inputs come from.
+#[derive(Clone, Copy)]
+pub(super) enum Observed {
+    /// The whole state.
+    State,
+    /// `Cᵀ x`.
+    C,
+    /// `observe […]`, written at the span.
+    Observe(Span),
+}
+
 /// Load the controller named at `path` from `controller` (the caller's
 /// read), and check its input size against the observation size `p_dim`
-/// (`has_c`: whether the spec gave `C`) and its outputs against the control.
+/// and its outputs against the control (unless `actuate` maps them:
+/// `actuated`).
 pub(super) fn controller(
     cx: &mut Ctx,
     path: Option<&Spanned<String>>,
     controller: Option<&ControllerFile>,
-    p_dim: Option<usize>,
-    has_c: bool,
+    (p_dim, observed): (Option<usize>, Observed),
+    actuated: bool,
     control: &Option<(String, usize)>,
 ) -> Option<Controller> {
     let mut ctrl = None;
@@ -54,9 +66,18 @@ pub(super) fn controller(
                             .hint(e.hint),
                     ),
                     Ok(c) => {
-                        if let Some(p) = p_dim {
+                        if let (Some(p), Observed::Observe(span)) = (p_dim, observed) {
                             if c.inputs != p {
-                                let what = if has_c {
+                                cx.err(
+                                    Diagnostic::new(Code::ControllerInputs, span, format!("`observe` lists {p} inputs but the controller takes {}", c.inputs))
+                                        .label(format!("{p} entries"))
+                                        .related(path.span, format!("{} inputs", c.inputs))
+                                        .hint("write one `observe` entry per network input"),
+                                );
+                            }
+                        } else if let Some(p) = p_dim {
+                            if c.inputs != p {
+                                let what = if matches!(observed, Observed::C) {
                                     format!("C has {p} columns")
                                 } else {
                                     format!("without C the controller sees the full state ({p})")
@@ -68,7 +89,7 @@ pub(super) fn controller(
                                 );
                             }
                         }
-                        if let Some((un, m)) = &control {
+                        if let (Some((un, m)), false) = (&control, actuated) {
                             if c.outputs != *m {
                                 cx.err(
                                     Diagnostic::new(Code::ControllerOutputs, path.span, format!("the controller has {} outputs but `{un}` has {m} components", c.outputs))

@@ -16,6 +16,7 @@ use nalgebra::{DMatrix, DVector};
 mod analysis_block;
 mod controller;
 mod network;
+mod nonlinear;
 mod regions;
 mod select;
 mod sets;
@@ -29,6 +30,7 @@ use analysis_block::AnalysisPart;
 pub use analysis_block::DEFAULT_BUDGET;
 pub use network::{is_network_spec, NetworkChecked, MAX_OBSERVATIONS};
 use ravel_analysis::closed_loop::{Boundary, Plant, Propagator};
+use ravel_analysis::nonlinear::NonlinearPlant;
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::limits::{
     within, MAX_DIM, MAX_HORIZON, MAX_MAGNITUDE, MAX_POLYTOPE_ROWS, MAX_SDP_DIM,
@@ -132,6 +134,17 @@ pub struct AvoidSpec {
     pub steps: (usize, usize),
 }
 
+/// A checked plant: linear (one per step) or nonlinear.
+#[derive(Clone, Debug)]
+pub enum PlantSpec {
+    /// `A`, `B`, `c`: the plant per step (one entry when time-invariant),
+    /// discretised if the spec gave continuous time.
+    Linear(Vec<Plant>),
+    /// `der`/`next` lines: the vector field, its disturbance, observation
+    /// and sensor noise.
+    Nonlinear(NonlinearPlant),
+}
+
 /// A spec that passed every check: all names resolved, all shapes consistent.
 #[derive(Clone, Debug)]
 pub struct Checked {
@@ -141,10 +154,17 @@ pub struct Checked {
     pub state: (String, usize),
     /// The control vector's name and dimension.
     pub control: (String, usize),
-    /// The plant per step (one entry when time-invariant), discretised if
-    /// the spec gave continuous time.
-    pub plants: Vec<Plant>,
-    /// The time step of a continuous-time plant.
+    /// The plant. Its observation matrix already folds `observe`'s matrix
+    /// `M` (as `Mᵀ`: the controller sees `Mᵀᵀ x + v`).
+    pub plant: PlantSpec,
+    /// `observe`'s offsets `d` (the controller sees `M x + d + v`): lowering
+    /// prepends the layer `h ↦ h + d` to the network; `None` without
+    /// `observe` or when `d = 0`.
+    pub observe_offset: Option<DVector<f64>>,
+    /// `actuate`: the control is `S · net + o` (`S` is `m × outputs`);
+    /// lowering appends this affine layer before the saturation.
+    pub actuate: Option<(DMatrix<f64>, DVector<f64>)>,
+    /// The time step (the control period) of a continuous-time plant.
     pub dt: Option<f64>,
     /// Control limits, if any.
     pub limits: Option<IBox>,
@@ -942,14 +962,20 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     let controller_sha256 = file_sha256(controller);
     let sp = system::system(cx, &it.systems);
     let mut pp = system::plant(cx, &sp);
+    let observed = match (sp.observe, sp.assigns.contains_key("C")) {
+        (Some((_, span)), _) => controller::Observed::Observe(span),
+        (None, true) => controller::Observed::C,
+        (None, false) => controller::Observed::State,
+    };
     let ctrl = controller::controller(
         cx,
         path.as_ref(),
         controller,
-        pp.p_dim,
-        sp.assigns.contains_key("C"),
+        (pp.p_dim, observed),
+        sp.actuate.is_some(),
         &sp.control,
     );
+    let actuate = actuate(cx, &sp, &pp, ctrl.as_ref());
     let horizon = horizon(cx, it.horizons.first().copied());
     let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
     let an = analysis_block::analysis_block(cx, &it.analyses, &sp.state, None);
@@ -962,7 +988,8 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     if let Some(h) = horizon {
         per_step_lengths(cx, &pp.per_step_lists, h);
     }
-    if let (Ok(Some(dt)), Some(plants)) = (sp.time, pp.plant.as_mut()) {
+    if let (Ok(Some(dt)), Some(plants), true) = (sp.time, pp.plant.as_mut(), pp.nonlinear.is_none())
+    {
         discretise(cx, plants, dt, sp.time_span.unwrap_or(WHOLE));
     }
     if let (Some(h), Some((_, n))) = (horizon, &sp.state) {
@@ -983,9 +1010,34 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         );
     }
 
+    // a nonlinear plant is defined where the analysis starts
+    if let (Some(nl), Some((_, init)), true) = (&pp.nonlinear, &sets.initial, cx.diags.is_empty()) {
+        let names = (
+            sp.state.as_ref().map_or("x", |s| s.0.as_str()),
+            sp.control.as_ref().map_or("u", |c| c.0.as_str()),
+        );
+        nonlinear::defined_at_points(
+            cx,
+            &nl.field,
+            &init.bbox(),
+            pp.limits.as_ref(),
+            &nl.w,
+            names,
+        );
+    }
+
     if !cx.diags.is_empty() {
         return Err(cx.sorted_diags());
     }
+    let plant = match pp.nonlinear {
+        Some(nl) => Some(PlantSpec::Nonlinear(NonlinearPlant {
+            field: nl.field.field,
+            w: nl.w,
+            obs: nl.obs,
+            v: nl.v,
+        })),
+        None => pp.plant.map(PlantSpec::Linear),
+    };
     // Every part was produced without diagnostics, so each one is present;
     // a missing one here would be a checker bug, reported rather than a panic.
     let assembled = (|| {
@@ -993,7 +1045,9 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             system: sp.sys?.name.node.clone(),
             state: sp.state?,
             control: sp.control?,
-            plants: pp.plant?,
+            plant: plant?,
+            observe_offset: pp.observe_offset,
+            actuate,
             dt: sp.time.ok().flatten(),
             limits: pp.limits,
             controller_path: path?.node,
@@ -1013,6 +1067,48 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
         })
     })();
     assembled.ok_or_else(|| vec![incomplete()])
+}
+
+/// `actuate […]`: affine in the network's outputs `net[j]`, one entry per
+/// control component; `None` without `actuate` or on an error.
+fn actuate(
+    cx: &mut Ctx,
+    sp: &system::SystemPart,
+    pp: &system::PlantPart,
+    ctrl: Option<&Controller>,
+) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    let (exprs, span) = sp.actuate?;
+    let ((xn, _), (un, m), c) = (sp.state.as_ref()?, sp.control.as_ref()?, ctrl?);
+    if exprs.len() != *m {
+        cx.err(
+            Diagnostic::new(
+                Code::Shape,
+                span,
+                format!(
+                    "`actuate` lists {} entries but `{un}` has {m} components",
+                    exprs.len()
+                ),
+            )
+            .label(format!("{} entries", exprs.len()))
+            .hint(format!("write one `actuate` entry per component of `{un}`")),
+        );
+    }
+    let why = "the control is computed from the network's outputs `net[j]` only";
+    let forbidden = vec![
+        (xn.as_str(), why),
+        (un.as_str(), why),
+        ("w", why),
+        ("v", why),
+    ];
+    let map = nonlinear::affine(
+        cx,
+        exprs,
+        &pp.consts,
+        ("net", c.outputs),
+        forbidden,
+        "an `actuate` entry",
+    );
+    map.filter(|_| exprs.len() == *m)
 }
 
 /// The propagator can take the controller: Reach-SDP needs a ReLU network

@@ -309,7 +309,14 @@ fn model(
     file: Option<&ControllerFile>,
     vectors: &Vectors,
 ) -> Option<Controller> {
-    let net = controller::controller(cx, path, file, None, false, &None);
+    let net = controller::controller(
+        cx,
+        path,
+        file,
+        (None, controller::Observed::State),
+        false,
+        &None,
+    );
     if let (Some(c), Some(path)) = (&net, path) {
         for (role, have, decl, code) in [
             ("inputs", c.inputs, &vectors.input, Code::ControllerInputs),

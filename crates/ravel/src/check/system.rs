@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
+use super::nonlinear::{self, Field};
 use super::{per_step, Ctx};
 use ravel_analysis::closed_loop::Plant;
 use ravel_analysis::sets::IBox;
@@ -21,6 +22,16 @@ pub(super) struct SystemPart<'a> {
     pub bounds: Vec<(&'a Spanned<String>, &'a Spanned<BoxSet>)>,
     pub time_span: Option<Span>,
     pub time: Result<Option<f64>, ()>,
+    /// `const NAME = expr`, in order.
+    pub consts: Vec<(&'a Spanned<String>, &'a Spanned<Expr>)>,
+    /// `der`/`next` lines, in order (empty for a linear plant).
+    pub equations: Vec<(&'a Spanned<EquationKind>, &'a Component, &'a Spanned<Expr>)>,
+    /// `observe […]` and its span.
+    pub observe: Option<(&'a [Spanned<Expr>], Span)>,
+    /// `actuate […]` and its span.
+    pub actuate: Option<(&'a [Spanned<Expr>], Span)>,
+    /// Where the state and the control are declared.
+    pub decl_spans: (Option<Span>, Option<Span>),
 }
 
 /// Check the declarations of the (first) system block.
@@ -34,6 +45,11 @@ pub(super) fn system<'a>(cx: &mut Ctx, systems: &[&'a System]) -> SystemPart<'a>
         bounds: Vec::new(),
         time_span: None,
         time: Ok(None),
+        consts: Vec::new(),
+        equations: Vec::new(),
+        observe: None,
+        actuate: None,
+        decl_spans: (None, None),
     };
     let Some(sys) = sys else {
         return part;
@@ -74,12 +90,26 @@ pub(super) fn system<'a>(cx: &mut Ctx, systems: &[&'a System]) -> SystemPart<'a>
                     part.time = cx.time_decl(kind, dt, *span);
                 }
             }
+            SystemStmt::Const { name, value, .. } => part.consts.push((name, value)),
+            SystemStmt::Equation {
+                kind, target, expr, ..
+            } => part.equations.push((kind, target, expr)),
+            SystemStmt::Observe { exprs, span } => match part.observe {
+                Some((_, first)) => cx.duplicate("`observe`", first, *span),
+                None => part.observe = Some((exprs, *span)),
+            },
+            SystemStmt::Actuate { exprs, span } => match part.actuate {
+                Some((_, first)) => cx.duplicate("`actuate`", first, *span),
+                None => part.actuate = Some((exprs, *span)),
+            },
         }
     }
+    part.decl_spans = (state_span, control_span);
     let state = part.state.as_ref().zip(state_span);
     let control = part.control.as_ref().zip(control_span);
     vector_names(cx, state, control);
-    declared(cx, sys, state_span, control_span, &part.assigns);
+    let linear = part.equations.is_empty();
+    declared(cx, sys, state_span, control_span, &part.assigns, linear);
     part
 }
 
@@ -140,14 +170,29 @@ fn vector_names(
     }
 }
 
-/// The system declares its state, its control, `A` and `B`.
+/// The system declares its state, its control, and (a linear plant, when
+/// `linear`) `A` and `B`; a nonlinear plant defines none of `A`, `B`, `c`.
 fn declared(
     cx: &mut Ctx,
     sys: &System,
     state_span: Option<Span>,
     control_span: Option<Span>,
     assigns: &BTreeMap<&str, (&Spanned<Value>, Span)>,
+    linear: bool,
 ) {
+    if !linear {
+        for (key, (_, span)) in assigns.iter().filter(|(k, _)| ["A", "B", "c"].contains(k)) {
+            cx.err(
+                Diagnostic::new(
+                    Code::PlantKind,
+                    *span,
+                    format!("`{key}` belongs to a linear plant, but this system's state is defined by `der`/`next` lines"),
+                )
+                .label("a linear plant's parameter")
+                .hint("write the plant either as A, B, c or as one `der`/`next` line per state component (`C` and `observe` work with both)"),
+            );
+        }
+    }
     if state_span.is_none() {
         cx.err(
             Diagnostic::new(Code::Missing, sys.name.span, "the system declares no state")
@@ -167,7 +212,7 @@ fn declared(
         );
     }
     for req in ["A", "B"] {
-        if !assigns.contains_key(req) {
+        if linear && !assigns.contains_key(req) {
             cx.err(
                 Diagnostic::new(
                     Code::Missing,
@@ -181,9 +226,27 @@ fn declared(
     }
 }
 
+/// A checked nonlinear plant, before it is assembled.
+pub(super) struct NonlinearPart {
+    /// The right-hand side and the span of each tape node.
+    pub field: Field,
+    /// The disturbance box.
+    pub w: IBox,
+    /// The observation matrix (`n × k`).
+    pub obs: DMatrix<f64>,
+    /// The sensor noise box.
+    pub v: IBox,
+}
+
 /// The plant per step, its noise boxes and control limits.
 pub(super) struct PlantPart {
     pub plant: Option<Vec<Plant>>,
+    /// The nonlinear plant (when the system has `der`/`next` lines).
+    pub nonlinear: Option<NonlinearPart>,
+    /// The named constants, with `pi`.
+    pub consts: BTreeMap<String, f64>,
+    /// `observe`'s offsets `d` (the controller sees `M x + d`).
+    pub observe_offset: Option<DVector<f64>>,
     /// Lengths and spans of `per_step(…)` lists (checked against the horizon).
     pub per_step_lists: Vec<(usize, Span)>,
     pub limits: Option<IBox>,
@@ -199,6 +262,9 @@ type PerStep<T> = (Vec<T>, Option<Span>);
 pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
     let mut part = PlantPart {
         plant: None,
+        nonlinear: None,
+        consts: BTreeMap::new(),
+        observe_offset: None,
         per_step_lists: Vec::new(),
         limits: None,
         p_dim: None,
@@ -207,6 +273,49 @@ pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
         return part;
     };
     let (n, m, assigns) = (*n, *m, &sp.assigns);
+    let vectors = [
+        (xn.as_str(), sp.decl_spans.0),
+        (un.as_str(), sp.decl_spans.1),
+        ("w", None),
+        ("v", None),
+        ("net", None),
+    ];
+    part.consts = nonlinear::constants(cx, &sp.consts, &vectors);
+    // `observe`: the observation matrix is Mᵀ, the offsets go to the network
+    let observed = sp.observe.map(|(exprs, span)| {
+        if let Some((_, c_span)) = assigns.get("C") {
+            cx.err(
+                Diagnostic::new(
+                    Code::PlantKind,
+                    span,
+                    "`observe` and `C` both define what the controller sees",
+                )
+                .label("the controller's inputs")
+                .related(*c_span, "`C` is given here")
+                .hint("keep one: `observe [x[0], …]` (affine, any constants) or `C` (the controller sees Cᵀ x + v)"),
+            );
+        }
+        let forbidden = vec![
+            (un.as_str(), "the controller's inputs depend on the state only"),
+            ("w", "the controller's inputs depend on the state only"),
+            ("v", "sensor noise is added to every input: bound it with `v in box(…)`"),
+        ];
+        nonlinear::affine(cx, exprs, &part.consts, (xn, n), forbidden, "an `observe` entry")
+    });
+    if !sp.equations.is_empty() {
+        nonlinear_plant(cx, sp, &mut part, observed, (xn, n), (un, m));
+        return part;
+    }
+    let observed = match observed {
+        Some(o) => match o {
+            Some((mat, d)) if !assigns.contains_key("C") => {
+                part.observe_offset = Some(d).filter(|d| d.iter().any(|v| *v != 0.0));
+                Some(Some(mat.transpose()))
+            }
+            _ => Some(None),
+        },
+        None => None,
+    };
     let a = assigns.get("A").and_then(|(v, _)| {
         per_step(cx, v, &mut |cx, v| {
             cx.matrix(
@@ -235,15 +344,16 @@ pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
         }),
         None => Some((vec![DVector::zeros(n)], None)),
     };
-    let obs = match assigns.get("C") {
-        Some((v, _)) => cx.matrix(
+    let obs = match (observed, assigns.get("C")) {
+        (Some(o), _) => o,
+        (None, Some((v, _))) => cx.matrix(
             v,
             "C",
             n,
             None,
             &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
         ),
-        None => Some(DMatrix::identity(n, n)),
+        (None, None) => Some(DMatrix::identity(n, n)),
     };
     let p = obs.as_ref().map(|o| o.ncols());
     part.p_dim = p;
@@ -262,6 +372,67 @@ pub(super) fn plant(cx: &mut Ctx, sp: &SystemPart) -> PlantPart {
     part
 }
 
+/// The nonlinear plant of `der`/`next` lines: its vector field, the
+/// disturbance box (of the dimension the box gives), the observation (from
+/// `observed`, `C`, or the whole state) and the sensor noise box.
+fn nonlinear_plant(
+    cx: &mut Ctx,
+    sp: &SystemPart,
+    part: &mut PlantPart,
+    observed: Option<Option<(DMatrix<f64>, DVector<f64>)>>,
+    (xn, n): (&str, usize),
+    (un, m): (&str, usize),
+) {
+    let obs = match (observed, sp.assigns.get("C")) {
+        (Some(Some((mat, d))), None) => {
+            part.observe_offset = Some(d).filter(|d| d.iter().any(|v| *v != 0.0));
+            Some(mat.transpose())
+        }
+        (Some(_), _) => None,
+        (None, Some((v, _))) => cx.matrix(
+            v,
+            "C",
+            n,
+            None,
+            &format!("C is n × p with n = {n}: the controller sees y = Cᵀ x + v"),
+        ),
+        (None, None) => Some(DMatrix::identity(n, n)),
+    };
+    let p = obs.as_ref().map(|o| o.ncols());
+    part.p_dim = p;
+    // the disturbance has the dimension of its box
+    let p_w = sp
+        .bounds
+        .iter()
+        .find(|(name, _)| name.node == "w")
+        .map_or(0, |(_, set)| match &set.node {
+            BoxSet::Positional(ivs) => ivs.len(),
+            BoxSet::Named(items) => items
+                .iter()
+                .map(|(c, _)| {
+                    usize::try_from(c.index.node)
+                        .unwrap_or(usize::MAX)
+                        .saturating_add(1)
+                })
+                .max()
+                .unwrap_or(0)
+                .min(ravel_base::limits::MAX_DIM as usize),
+        });
+    let bounds = bounds(cx, &sp.bounds, p_w, (un, m), p);
+    part.limits = bounds.limits;
+    let sys_span = sp.sys.map_or(Span::default(), |s| s.name.span);
+    let dims = nonlinear::Dims {
+        state: (xn, n),
+        control: (un, m),
+        p: p_w,
+    };
+    let time = (sp.time.ok().flatten(), sp.time.is_ok(), sp.time_span);
+    let field = nonlinear::field(cx, &sp.equations, &part.consts, &dims, time, sys_span);
+    if let (Some(field), Some(w), Some(obs), Some(v)) = (field, bounds.w, obs, bounds.v) {
+        part.nonlinear = Some(NonlinearPart { field, w, obs, v });
+    }
+}
+
 /// The noise boxes and the control limits, from the bound statements.
 struct Bounds {
     /// The process noise box (zero when not given).
@@ -271,8 +442,8 @@ struct Bounds {
     limits: Option<IBox>,
 }
 
-/// Check the bounds on `w` (`n` states), `v` (`p` observations) and the
-/// control `un` (`m` components).
+/// Check the bounds on `w` (`n` components: the states of a linear plant),
+/// `v` (`p` observations) and the control `un` (`m` components).
 fn bounds(
     cx: &mut Ctx,
     bounds: &[(&Spanned<String>, &Spanned<BoxSet>)],

@@ -142,8 +142,8 @@ pub(super) fn simulate_from(
         sensor_noise: Vec::with_capacity(h),
     };
     for t in 0..plan.horizon {
-        let w = pick_noise(&mut rng, &cl.w());
-        let v = pick_noise(&mut rng, &cl.v());
+        let w = pick_noise(&mut rng, cl.w());
+        let v = pick_noise(&mut rng, cl.v());
         let (u, next) = cl.simulate(t, &tr.states[t], &w, &v);
         tr.controls.push(u);
         tr.process_noise.push(w);

@@ -96,7 +96,7 @@ fn header_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
     );
     s += &format!(
         "  analysis    {}{}, {}, {}, {} Monte Carlo samples (seed {})\n\n",
-        plan.propagator.name(),
+        method_name(plan),
         slopes_text(plan.closed_loop.slope_steps()),
         partition_text(&plan.partitioner, out.partition.len(), out.partition_stop),
         boundary_text(&plan.boundary),
@@ -370,7 +370,7 @@ pub fn json(
             Loop::Nonlinear(_) => None,
         },
         "analysis": {
-            "propagator": plan.propagator.name(),
+            "propagator": method_name(plan),
             "partitioner": partitioner_name(&plan.partitioner),
             "partition": partition_grid(&plan.partitioner),
             "partition_stop": out.partition_stop.as_str(),
@@ -406,5 +406,15 @@ fn cut_reason(cut: Cut) -> &'static str {
         Cut::NoEnclosure => "the validated integrator found no enclosure of the flow over the control period",
         Cut::Overflow => "bounds overflowed",
         Cut::TimeLimit => "the time limit stopped the analysis",
+    }
+}
+
+/// The analysis method's name: the propagator of a linear plant;
+/// `taylor_crown` (first-order Taylor models composed with CROWN, validated
+/// integration) for a nonlinear one, which has no other.
+fn method_name(plan: &SystemPlan) -> &'static str {
+    match &plan.closed_loop {
+        Loop::Linear(_) => plan.propagator.name(),
+        Loop::Nonlinear(_) => "taylor_crown",
     }
 }

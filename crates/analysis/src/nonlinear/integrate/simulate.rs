@@ -12,13 +12,16 @@ use ravel_base::expr::VectorField;
 /// The local error tolerance, relative to `1 + |x|`.
 const TOL: f64 = 1e-13;
 
-/// The most steps one simulation takes (beyond it the step is no longer
-/// shrunk for accuracy).
-const MAX_STEPS: usize = 1 << 21;
+/// The most steps one simulation of a period takes: a trajectory that
+/// needs more (a stiff or blowing-up flow, a singularity on the way) is not
+/// simulated at all (NaN), rather than simulated inaccurately or for
+/// minutes.
+const MAX_STEPS: usize = 1 << 16;
 
 /// `x(period)` from `x` with `u` and `w` held constant, in `f64`. A field
-/// that does not fit the vectors, or a negative or non-finite period, gives
-/// NaN in every component.
+/// that does not fit the vectors, a negative or non-finite period, or a
+/// flow that needs more than [`MAX_STEPS`] steps or a step below
+/// `10⁻¹²·period` gives NaN in every component.
 pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f64) -> Vec<f64> {
     let fits = field.states == x.len()
         && field.outputs.len() == x.len()
@@ -52,8 +55,10 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
             return two.iter().map(|_| f64::NAN).collect();
         }
         steps += 1;
-        let tiny = h <= period * 1e-12 || steps >= MAX_STEPS;
-        if err <= TOL || tiny {
+        if h <= period * 1e-12 || steps >= MAX_STEPS {
+            return vec![f64::NAN; x.len()];
+        }
+        if err <= TOL {
             y = two
                 .iter()
                 .zip(&whole)
@@ -67,9 +72,6 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
             0.9 * (TOL / err).powf(0.2)
         };
         h *= factor.clamp(0.2, 2.0);
-        if steps >= MAX_STEPS {
-            h = h.max(period / MAX_STEPS as f64);
-        }
     }
     y
 }

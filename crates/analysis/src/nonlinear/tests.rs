@@ -5,7 +5,7 @@
 
 use super::integrate;
 use super::{NonlinearLoop, NonlinearPlant};
-use crate::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
+use crate::closed_loop::{Boundary, ClosedLoop, Cut, Plant, Propagator};
 use crate::sets::{IBox, Region};
 use nalgebra::{DMatrix, DVector};
 use ravel_base::expr::{Func, Node, Tape, Time, VectorField};
@@ -177,4 +177,69 @@ fn the_double_integrator_through_the_integrator_is_close_to_its_closed_form() {
             );
         }
     }
+}
+
+/// A plant `ẋ0 = first, ẋ1 = second` over `[x0, x1, u]`.
+fn plant_with(
+    first: impl Fn(&mut Tape, u32, u32, u32) -> u32,
+    second: impl Fn(&mut Tape, u32, u32, u32) -> u32,
+) -> NonlinearLoop {
+    let mut t = Tape::new();
+    let x0 = t.push(Node::Var(0));
+    let x1 = t.push(Node::Var(1));
+    let u = t.push(Node::Var(2));
+    let out0 = first(&mut t, x0, x1, u);
+    let out1 = second(&mut t, x0, x1, u);
+    NonlinearLoop::new(
+        NonlinearPlant {
+            field: VectorField {
+                tape: t,
+                outputs: vec![out0, out1],
+                states: 2,
+                controls: 1,
+                disturbances: 0,
+                time: Time::Continuous { period: 1.0 },
+            },
+            w: IBox::new(vec![], vec![]),
+            obs: DMatrix::identity(2, 2),
+            v: IBox::new(vec![0.0, 0.0], vec![0.0, 0.0]),
+        },
+        controller(2, 5, 0.5),
+    )
+}
+
+/// A flow that blows up within the period (`ẋ0 = x0²` from `x0 ≥ 1`
+/// escapes before t = 1) and a right-hand side that becomes undefined
+/// (`ẋ0 = −1`, `ẋ1 = 10⁻⁶ / x0`: `x0` reaches 0 in the first period) cut
+/// the cell: that step and every later one are the whole space, never a
+/// bound.
+#[test]
+fn blow_up_and_undefined_plants_cut_the_cell() {
+    let x0 = Region::Box(IBox::new(vec![1.0, -0.1], vec![1.1, 0.1]));
+    let blow = plant_with(|t, x0, _, _| t.push(Node::Powi(x0, 2)), |_, _, _, u| u);
+    let steps = blow.reach(&x0, 3, &Boundary::Box, None, &|| false);
+    assert!(steps
+        .iter()
+        .skip(1)
+        .all(|s| s.cut().is_some() && !s.set.is_finite()));
+
+    let x0 = Region::Box(IBox::new(vec![0.5, -0.1], vec![0.6, 0.1]));
+    let undefined = plant_with(
+        |t, _, _, _| t.push(Node::Const(-1.0)),
+        |t, x0, _, _| {
+            let r = t.push(Node::Powi(x0, -1));
+            let c = t.push(Node::Const(1e-6));
+            t.push(Node::Mul(c, r))
+        },
+    );
+    let steps = undefined.reach(&x0, 3, &Boundary::Box, None, &|| false);
+    assert!(steps
+        .iter()
+        .skip(1)
+        .all(|s| s.cut().is_some() && !s.set.is_finite()));
+    assert!(
+        matches!(steps[1].cut(), Some(Cut::Undefined | Cut::NoEnclosure)),
+        "{:?}",
+        steps[1].cut()
+    );
 }

@@ -11,10 +11,14 @@
 //!   LP solver could not certify (see [`ravel_analysis::lp`]) never yields VERIFIED.
 //! * Monte Carlo runs first, so the property-guided partitioner knows which
 //!   properties are already decided before it spends any propagator call.
+//! * A property still UNSURE after the analysis gets an optimising search
+//!   for a counterexample (`search`); like a Monte Carlo one, it counts only
+//!   when a validated enclosure of its trajectory confirms it.
 
 mod cells;
 pub mod network;
 mod sampling;
+mod search;
 
 use cells::{partition_guided, partition_uniform, Gathered};
 
@@ -332,6 +336,31 @@ fn verdicts(plan: &SystemPlan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<Prop
         .collect()
 }
 
+/// Search for a counterexample to every UNSURE property ([`search`]); a
+/// confirmed one makes it FALSIFIED. Not with `samples 0` (no simulation
+/// asked for).
+fn falsify_unsure(plan: &SystemPlan, properties: &mut [PropertyResult], ctl: &Control) {
+    if plan.samples == 0 {
+        return;
+    }
+    for (prop, r) in plan.properties.iter().zip(properties.iter_mut()) {
+        if r.status != Verdict::Unsure {
+            continue;
+        }
+        if let Some((depth, tr, t)) = search::search(plan, prop, ctl) {
+            *r = PropertyResult {
+                name: r.name.clone(),
+                kind: r.kind,
+                status: Verdict::Falsified,
+                margin: -depth,
+                step: t,
+                counterexample: Some(tr),
+                cut: None,
+            };
+        }
+    }
+}
+
 /// Execute a plan under a [`Control`]: Monte Carlo, then the partition and
 /// propagation, then the verdicts.
 pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
@@ -351,7 +380,8 @@ pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
         .into_iter()
         .map(|c| c.into_iter().map(|s| (s.set, s.between)).unzip())
         .unzip();
-    let properties = verdicts(plan, &part.gathered, &mc);
+    let mut properties = verdicts(plan, &part.gathered, &mc);
+    falsify_unsure(plan, &mut properties, ctl);
     let Gathered {
         reach,
         issues: solver_issues,

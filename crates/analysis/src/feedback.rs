@@ -87,12 +87,11 @@ impl Loop {
         }
     }
 
-    /// Projected-gradient steps on CROWN's lower ReLU slopes (0 for a
-    /// nonlinear loop, which takes CROWN's own slopes).
+    /// Projected-gradient steps on CROWN's lower ReLU slopes.
     pub fn slope_steps(&self) -> usize {
         match self {
             Loop::Linear(cl) => cl.slope_steps,
-            Loop::Nonlinear(_) => 0,
+            Loop::Nonlinear(nl) => nl.slope_steps,
         }
     }
 

@@ -172,7 +172,9 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
         PlantSpec::Linear(plants) => Loop::Linear(Box::new(
             ClosedLoop::time_varying(plants.clone(), net).with_slope_steps(c.slope_steps),
         )),
-        PlantSpec::Nonlinear(p) => Loop::Nonlinear(Box::new(NonlinearLoop::new(p.clone(), net))),
+        PlantSpec::Nonlinear(p) => Loop::Nonlinear(Box::new(
+            NonlinearLoop::new(p.clone(), net).with_slope_steps(c.slope_steps),
+        )),
     };
     let mut properties = Vec::new();
     if let Some(g) = &c.goal {

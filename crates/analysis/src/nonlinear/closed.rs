@@ -161,7 +161,7 @@ impl NonlinearLoop {
             (true, _) => -1.0,
             _ => 0.0,
         });
-        let b = rel.upper(&spec);
+        let b = rel.upper_optimised(&spec, self.slope_steps, None);
         let refs: Vec<&Tm> = y.iter().collect();
         let yiv: Vec<Interval> = (0..ybox.dim())
             .map(|j| Interval::new(ybox.lo[j], ybox.hi[j]))

@@ -42,6 +42,10 @@ pub struct NonlinearLoop {
     pub net: Network,
     /// The validated integrator's settings.
     pub settings: integrate::Settings,
+    /// Projected-gradient steps on CROWN's lower ReLU slopes of every
+    /// control bound (0: CROWN's own slopes; see
+    /// [`crate::crown::Relaxation::upper_optimised`]).
+    pub slope_steps: usize,
 }
 
 impl NonlinearLoop {
@@ -51,7 +55,14 @@ impl NonlinearLoop {
             plant,
             net,
             settings: integrate::Settings::default(),
+            slope_steps: 0,
         }
+    }
+
+    /// The loop with this many slope-optimisation steps per control bound.
+    pub fn with_slope_steps(mut self, steps: usize) -> NonlinearLoop {
+        self.slope_steps = steps;
+        self
     }
 
     /// The state dimension.

@@ -130,7 +130,7 @@ fn system_spec(path: &std::path::Path) {
 }
 
 /// The certificate of a result, checked: the category guard (every shipped
-/// spec's certificate is VALID), then a summary for the snapshot.
+/// spec's certificate is VALID, nonlinear plants' too), then a summary for the snapshot.
 fn certificate_summary(
     name: &str,
     plan: &ravel::lower::SystemPlan,
@@ -147,20 +147,12 @@ fn certificate_summary(
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
     assert_eq!(back, cert, "{name}: certificate does not round-trip");
     let report = ravel_certify::check(&back, plan.closed_loop.net());
-    if plan.closed_loop.linear().is_some() {
-        assert_eq!(
-            report.answer,
-            Answer::Valid,
-            "{name}: certificate not VALID"
-        );
-    } else {
-        // the checker does not re-derive nonlinear plants yet: never VALID
-        assert!(
-            matches!(report.answer, Answer::Unsupported(_)),
-            "{name}: a nonlinear certificate is {:?}",
-            report.answer
-        );
-    }
+    // linear and nonlinear plants alike: the checker re-derives every claim
+    assert_eq!(
+        report.answer,
+        Answer::Valid,
+        "{name}: certificate not VALID"
+    );
     let mut s = format!("answer: {:?}\n", report.answer);
     s += &format!("evidence: {}\n", cert["evidence"]["status"]);
     s += &format!("cells × steps: {} × {}\n", report.cells, report.steps);

@@ -698,6 +698,37 @@ impl<'a> NetBounds<'a> {
         out
     }
 
+    /// Linear bounds of every output over the input box, `L y + l ≤ f(y) ≤
+    /// U y + ū` for every `y` in it: `(U, ū, L, l)`, by back-substitution
+    /// (with `slopes` steps of the checker's own slope search).
+    pub fn output_lines(&self, slopes: usize) -> (DMatrix<f64>, Vec<f64>, DMatrix<f64>, Vec<f64>) {
+        let m = self.net.outputs();
+        let spec = plus_minus(m);
+        let lin = match self.boxes.first() {
+            Some(input) if slopes > 0 => {
+                let input = input.clone();
+                let measure = move |_: usize, cand: &Linear| -> (f64, Vec<f64>) {
+                    let corner = cand
+                        .coef
+                        .row(0)
+                        .iter()
+                        .zip(input.lo.iter().zip(&input.hi))
+                        .map(|(c, (&lo, &hi))| if *c >= 0.0 { hi } else { lo })
+                        .collect();
+                    let value = cand.over(&input).first().copied().unwrap_or(f64::NAN);
+                    (value, corner)
+                };
+                self.linear_optimised(spec, slopes, &measure)
+            }
+            _ => self.linear(spec),
+        };
+        let upper = lin.coef.rows(0, m).into_owned();
+        let lower = -lin.coef.rows(m, m).into_owned();
+        let up_off = lin.off.iter().take(m).copied().collect();
+        let low_off = lin.off.iter().skip(m).map(|v| -v).collect();
+        (upper, up_off, lower, low_off)
+    }
+
     /// Upper bounds of `s·f(y)` over the input box for every row `s` of
     /// `spec`: back-substitution (with `slopes` steps of the checker's own
     /// slope search, measured over the input box), intersected with the

@@ -49,6 +49,7 @@
 pub mod bounds;
 mod cover;
 pub mod network;
+pub mod nonlinear;
 
 /// Exact sums of `f64` values for the property tests of directed rounding
 /// (the same file serves the integration tests; each crate uses part of it).
@@ -406,61 +407,8 @@ impl Problem {
                 })
             })
             .collect::<R<Vec<_>>>()?;
-        let init = get(p, "initial")?;
-        let initial = if let Some(b) = init.get("box") {
-            Initial::Box(boxed(b, n, "initial")?)
-        } else if let Some(p) = init.get("polytope") {
-            Initial::Polytope {
-                bbox: boxed(get(p, "bbox")?, n, "initial bbox")?,
-                rows: rows(get(p, "rows")?, n, "initial rows")?,
-            }
-        } else if let Some(b) = init.get("ball") {
-            let norm = get(b, "norm")?.as_str().unwrap_or("").to_string();
-            if !matches!(norm.as_str(), "1" | "2" | "inf") {
-                return Err("the ball's norm must be \"1\", \"2\" or \"inf\"".into());
-            }
-            let radius = vector(get(b, "radius")?, n, "initial radius")?;
-            if radius.iter().any(|r| *r < 0.0) {
-                return Err("a ball radius is negative".into());
-            }
-            Initial::Ball {
-                center: vector(get(b, "center")?, n, "initial center")?,
-                radius,
-                norm,
-            }
-        } else {
-            return Err("`initial` must be a box, a polytope or a ball".into());
-        };
-        let props = get(p, "properties")?
-            .as_array()
-            .ok_or("`properties` must be an array")?
-            .iter()
-            .map(|pr| {
-                let name = get(pr, "name")?
-                    .as_str()
-                    .ok_or("`name` must be a string")?
-                    .to_string();
-                let kind = match get(pr, "kind")?.as_str() {
-                    Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
-                    Some("avoid") => {
-                        let s = get(pr, "steps")?;
-                        let steps = (
-                            uint(get(s, "first")?, "steps.first")?,
-                            uint(get(s, "last")?, "steps.last")?,
-                        );
-                        let members = get(pr, "members")?
-                            .as_array()
-                            .ok_or("`members` must be an array")?
-                            .iter()
-                            .map(|mb| rows(mb, n, "avoid rows"))
-                            .collect::<R<Vec<_>>>()?;
-                        Prop::Avoid { members, steps }
-                    }
-                    _ => return Err("`kind` must be \"goal\" or \"avoid\"".to_string()),
-                };
-                Ok((name, kind))
-            })
-            .collect::<R<Vec<_>>>()?;
+        let initial = read_initial(p, n)?;
+        let props = read_properties(p, n)?;
         Ok(Problem {
             n,
             horizon,
@@ -496,6 +444,70 @@ impl Problem {
     }
 }
 
+/// The initial set of a problem over `n` states.
+fn read_initial(p: &Value, n: usize) -> R<Initial> {
+    let init = get(p, "initial")?;
+    let initial = if let Some(b) = init.get("box") {
+        Initial::Box(boxed(b, n, "initial")?)
+    } else if let Some(p) = init.get("polytope") {
+        Initial::Polytope {
+            bbox: boxed(get(p, "bbox")?, n, "initial bbox")?,
+            rows: rows(get(p, "rows")?, n, "initial rows")?,
+        }
+    } else if let Some(b) = init.get("ball") {
+        let norm = get(b, "norm")?.as_str().unwrap_or("").to_string();
+        if !matches!(norm.as_str(), "1" | "2" | "inf") {
+            return Err("the ball's norm must be \"1\", \"2\" or \"inf\"".into());
+        }
+        let radius = vector(get(b, "radius")?, n, "initial radius")?;
+        if radius.iter().any(|r| *r < 0.0) {
+            return Err("a ball radius is negative".into());
+        }
+        Initial::Ball {
+            center: vector(get(b, "center")?, n, "initial center")?,
+            radius,
+            norm,
+        }
+    } else {
+        return Err("`initial` must be a box, a polytope or a ball".into());
+    };
+    Ok(initial)
+}
+
+/// The properties of a problem over `n` states.
+fn read_properties(p: &Value, n: usize) -> R<Vec<(String, Prop)>> {
+    get(p, "properties")?
+        .as_array()
+        .ok_or("`properties` must be an array")?
+        .iter()
+        .map(|pr| {
+            let name = get(pr, "name")?
+                .as_str()
+                .ok_or("`name` must be a string")?
+                .to_string();
+            let kind = match get(pr, "kind")?.as_str() {
+                Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
+                Some("avoid") => {
+                    let s = get(pr, "steps")?;
+                    let steps = (
+                        uint(get(s, "first")?, "steps.first")?,
+                        uint(get(s, "last")?, "steps.last")?,
+                    );
+                    let members = get(pr, "members")?
+                        .as_array()
+                        .ok_or("`members` must be an array")?
+                        .iter()
+                        .map(|mb| rows(mb, n, "avoid rows"))
+                        .collect::<R<Vec<_>>>()?;
+                    Prop::Avoid { members, steps }
+                }
+                _ => return Err("`kind` must be \"goal\" or \"avoid\"".to_string()),
+            };
+            Ok((name, kind))
+        })
+        .collect::<R<Vec<_>>>()
+}
+
 /// The name of coordinate `i`'s upper or lower facet, for messages.
 fn facet(i: usize, upper: bool) -> String {
     format!(
@@ -522,52 +534,13 @@ pub fn check(cert: &Value, net: &Network) -> Report {
         .and_then(Value::as_str)
         == Some("nonlinear")
     {
-        return nonlinear(cert);
+        return nonlinear::check(cert, net);
     }
     let mut report = Report::empty();
     match check_inner(cert, net, &mut report) {
         Ok(answer) => report.answer = answer,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
-    report
-}
-
-/// Why no claim about a nonlinear plant is checked.
-const NONLINEAR: &str = "the checker does not yet re-derive the steps of a nonlinear plant (it has no validated integrator of its own), so no claim about one is checked";
-
-/// A nonlinear plant's certificate: readable, never VALID. Every verdict
-/// that claims something (VERIFIED or FALSIFIED) is reported not checked.
-fn nonlinear(cert: &Value) -> Report {
-    let mut report = Report::empty();
-    let mut read = || -> R<Answer> {
-        if get(cert, "format")?.as_str() != Some(FORMAT) {
-            return Err(format!("`format` must be {FORMAT}"));
-        }
-        let verdicts = get(cert, "verdicts")?
-            .as_array()
-            .ok_or("`verdicts` must be an array")?;
-        let mut lines = Vec::new();
-        for v in verdicts {
-            let name = get(v, "property")?
-                .as_str()
-                .ok_or("`property` must be a string")?;
-            let status = get(v, "status")?
-                .as_str()
-                .ok_or("`status` must be a string")?;
-            let shown = ravel_base::text::sanitize(name);
-            lines.push(match status {
-                "VERIFIED" | "FALSIFIED" => {
-                    format!("{shown}: {status} — not checkable: {NONLINEAR}")
-                }
-                "UNSURE" => format!("{shown}: UNSURE (no claim)"),
-                _ => return Err("`status` must be VERIFIED, FALSIFIED or UNSURE".into()),
-            });
-        }
-        report.properties = lines;
-        Ok(Answer::Unsupported(NONLINEAR.into()))
-    };
-    let answer = read();
-    report.answer = answer.unwrap_or_else(Answer::Unreadable);
     report
 }
 

@@ -226,32 +226,74 @@ fn linear(plan: &SystemPlan) -> Result<&ClosedLoop, String> {
     }
 }
 
-/// Why a nonlinear loop's VERIFIED evidence is not checkable yet.
-const NONLINEAR_UNSUPPORTED: &str = "the checker does not yet re-derive the steps of a nonlinear plant (its own validated integration is not built); the analysis's per-step claims are recorded as `claims`";
+/// Why a linear plant's chain of boxes does not apply.
+const NONLINEAR_UNSUPPORTED: &str =
+    "a nonlinear plant's evidence is a chain of zonotopes, not of boxes";
 
-/// A nonlinear loop's evidence: unsupported (the checker cannot re-derive
-/// it yet), with the analysis's claims: per cell, the box of every step up
-/// to `steps` and of every period between steps (continuous time).
-fn nonlinear_claims(outcome: &SystemOutcome, steps: usize) -> Value {
-    let cells: Vec<Value> = outcome
+/// The relative widenings of the analysis's remainders tried, in order,
+/// for a nonlinear loop's claims: the checker re-derives every claim with
+/// its own arithmetic, which needs some room beyond the analysis's.
+const INFLATIONS: [f64; 4] = [0.01, 0.1, 0.5, 2.0];
+
+/// A nonlinear loop's evidence: per cell, the zonotope the analysis carries
+/// at every step up to `steps` (with its remainders widened), checkable by
+/// `ravel_certify::nonlinear`; the first widening the checker accepts, or
+/// `unsupported` with the checker's reason.
+fn nonlinear_evidence(
+    plan: &SystemPlan,
+    nl: &NonlinearLoop,
+    outcome: &SystemOutcome,
+    cert: &Value,
+    steps: usize,
+) -> Value {
+    let boxes: Vec<IBox> = outcome
         .cells
         .iter()
-        .zip(&outcome.between)
-        .map(|(sets, between)| {
-            let at: Vec<Value> = sets
-                .iter()
-                .take(steps + 1)
-                .map(|r| box_json(&r.bbox()))
-                .collect();
-            let pipes: Vec<Value> = between
-                .iter()
-                .take(steps + 1)
-                .map(|b| b.as_ref().map_or(Value::Null, box_json))
-                .collect();
-            json!({ "steps": at, "between": pipes })
-        })
+        .filter_map(|sets| sets.first().map(Region::bbox))
         .collect();
-    json!({ "status": "unsupported", "reason": NONLINEAR_UNSUPPORTED, "claims": cells })
+    let mut failure = String::from("no cells");
+    for inflate in INFLATIONS {
+        let mut cells = Vec::with_capacity(boxes.len());
+        for (c, b) in boxes.iter().enumerate() {
+            let Some(claims) = nl.claims(b, steps, inflate) else {
+                // a wider chain would be cut too
+                return json!({
+                    "status": "unsupported",
+                    "reason": format!(
+                        "cell {c}: the analysis's chain of claims (remainders widened by {inflate}) is cut before step {steps}; the last failure of the checker: {failure}"
+                    ),
+                });
+            };
+            let claims: Vec<Value> = claims
+                .iter()
+                .map(|z| json!({ "c": z.c, "ids": z.ids, "g": z.g }))
+                .collect();
+            cells.push(json!({ "box": box_json(b), "claims": claims }));
+        }
+        let evidence = json!({
+            "status": "checkable",
+            "steps": steps,
+            "slope_steps": nl.slope_steps,
+            "inflation": inflate,
+            "cells": cells,
+        });
+        let mut candidate = cert.clone();
+        candidate["evidence"] = evidence;
+        let report = certify::check(&candidate, plan.closed_loop.net());
+        match (report.evidence_failure, report.answer) {
+            (Some(why), _) => failure = why,
+            (None, Answer::Unreadable(e)) => {
+                return json!({ "status": "unsupported", "reason": format!("internal: {e}") })
+            }
+            (None, _) => return candidate["evidence"].take(),
+        }
+    }
+    json!({
+        "status": "unsupported",
+        "reason": format!(
+            "the checker's own integration does not re-derive the analysis's claims ({failure})"
+        ),
+    })
 }
 
 /// The closed loop's plants and noise boxes in the checker's types.
@@ -558,8 +600,8 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
     let Some(steps) = needed else {
         return cert;
     };
-    if let AnyLoop::Nonlinear(_) = &plan.closed_loop {
-        cert["evidence"] = nonlinear_claims(outcome, steps);
+    if let AnyLoop::Nonlinear(nl) = &plan.closed_loop {
+        cert["evidence"] = nonlinear_evidence(plan, nl, outcome, &cert, steps);
         return cert;
     }
     let header = evidence_header(plan, steps);

@@ -28,6 +28,34 @@ use crate::sets::{IBox, Region};
 use nalgebra::DMatrix;
 use ravel_base::expr::Time;
 
+/// One claimed set of a certificate: `{c + G s : s ∈ [−1, 1]ᵏ}`, the
+/// columns named by symbol ids (see `ravel_certify::nonlinear`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Claim {
+    /// The centre.
+    pub c: Vec<f64>,
+    /// One row per state, one entry per symbol.
+    pub g: Vec<Vec<f64>>,
+    /// The symbols' ids.
+    pub ids: Vec<u64>,
+}
+
+impl Claim {
+    /// The models (without remainders, as [`resymbolize`] leaves them).
+    fn of(x: &[Tm], ids: &[u64]) -> Option<Claim> {
+        if x.iter()
+            .any(|t| t.r != Interval::ZERO || t.g.len() != ids.len())
+        {
+            return None;
+        }
+        Some(Claim {
+            c: x.iter().map(|t| t.c).collect(),
+            g: x.iter().map(|t| t.g.clone()).collect(),
+            ids: ids.to_vec(),
+        })
+    }
+}
+
 /// How many symbols beyond the cell's own `n` the state may carry, per
 /// state dimension (see [`resymbolize`]).
 const EXTRA_SYMBOLS: usize = 4;
@@ -57,6 +85,7 @@ impl NonlinearLoop {
         let mut steps = Vec::with_capacity(horizon + 1);
         steps.push(Step::new(cell.clone(), Vec::new()));
         let mut state = symbols(&cell.bbox());
+        let mut ids = Ids::cell(n, 0.0);
         for t in 0..horizon {
             let Some(x) = state.as_ref() else {
                 let cut = steps.last().and_then(Step::cut).unwrap_or(Cut::Overflow);
@@ -84,7 +113,7 @@ impl NonlinearLoop {
                     if step.cut().is_some() {
                         state = None;
                     } else {
-                        state = resymbolize(&a.next, n, EXTRA_SYMBOLS * n);
+                        state = resymbolize(&a.next, n, EXTRA_SYMBOLS * n, &mut ids);
                         if state.is_none() {
                             step = Step::whole(n, Cut::Overflow);
                         }
@@ -98,6 +127,26 @@ impl NonlinearLoop {
             }
         }
         steps
+    }
+
+    /// The chain of claimed sets of one cell for a certificate: the states
+    /// the analysis carries from step to step (`c + G s`, remainders made
+    /// symbols), steps `0..=steps`, with every fresh remainder widened by
+    /// the relative `inflate` so that the checker's own arithmetic, which
+    /// re-derives each claim from the previous one, has room. `None` when
+    /// the cell is cut before `steps`.
+    pub fn claims(&self, cell: &IBox, steps: usize, inflate: f64) -> Option<Vec<Claim>> {
+        let n = self.states();
+        let mut ids = Ids::cell(n, inflate);
+        let mut state = symbols(cell)?;
+        let mut out = Vec::with_capacity(steps + 1);
+        out.push(Claim::of(&state, &ids.ids)?);
+        for _ in 0..steps {
+            let a = self.advance(&state).ok()?;
+            state = resymbolize(&a.next, n, EXTRA_SYMBOLS * n, &mut ids)?;
+            out.push(Claim::of(&state, &ids.ids)?);
+        }
+        Some(out)
     }
 
     /// One closed-loop step of the Taylor-model state `x`.
@@ -364,6 +413,44 @@ fn cut_of(e: FlowError) -> Cut {
     }
 }
 
+/// The ids of the state's symbols (what a certificate's claims name them
+/// by) and the widening of fresh remainders for certificates.
+#[derive(Clone, Debug, Default)]
+struct Ids {
+    ids: Vec<u64>,
+    next: u64,
+    /// Relative widening of every remainder made a symbol (0 in the analysis).
+    inflate: f64,
+}
+
+impl Ids {
+    /// The cell's own `n` symbols.
+    fn cell(n: usize, inflate: f64) -> Ids {
+        Ids {
+            ids: (0..n as u64).collect(),
+            next: n as u64,
+            inflate,
+        }
+    }
+
+    /// `n` new symbols after the others.
+    fn fresh(&mut self, n: usize) {
+        let first = self.next;
+        self.ids.extend(first..first + n as u64);
+        self.next = first + n as u64;
+    }
+
+    /// Forget the symbols marked `gone`.
+    fn drop_where(&mut self, gone: &[bool]) {
+        let mut k = 0;
+        self.ids.retain(|_| {
+            let keep = !gone.get(k).copied().unwrap_or(false);
+            k += 1;
+            keep
+        });
+    }
+}
+
 /// The same set with the remainders turned into symbols of their own, so
 /// that later steps carry them linearly instead of as boxes (whose
 /// wrapping would grow them every step): component `i`'s remainder becomes
@@ -372,7 +459,7 @@ fn cut_of(e: FlowError) -> Cut {
 /// into one new symbol per component with the sum of their magnitudes (a
 /// box around their zonotope, as in Girard's order reduction). `None` when
 /// a bound is not finite.
-fn resymbolize(x: &[Tm], keep: usize, cap: usize) -> Option<Vec<Tm>> {
+fn resymbolize(x: &[Tm], keep: usize, cap: usize, ids: &mut Ids) -> Option<Vec<Tm>> {
     let n = x.len();
     let syms = x.iter().map(|t| t.g.len()).max().unwrap_or(0);
     let mut out: Vec<Tm> = x
@@ -383,6 +470,12 @@ fn resymbolize(x: &[Tm], keep: usize, cap: usize) -> Option<Vec<Tm>> {
             let hi = (t.c + t.r.hi).next_up();
             let c = 0.5 * lo + 0.5 * hi;
             let r = (hi - c).max(c - lo).next_up();
+            let r = if ids.inflate > 0.0 {
+                let scale = t.c.abs() + t.g.iter().map(|v| v.abs()).sum::<f64>();
+                (r * (1.0 + ids.inflate) + ids.inflate * 1e-9 * scale).next_up()
+            } else {
+                r
+            };
             let mut g = t.g.clone();
             g.resize(syms + n, 0.0);
             g[syms + i] = r;
@@ -394,6 +487,7 @@ fn resymbolize(x: &[Tm], keep: usize, cap: usize) -> Option<Vec<Tm>> {
         })
         .collect();
     let total = syms + n;
+    ids.fresh(n);
     if total > keep + cap {
         // the extra symbols by size, smallest first; merge all but the largest `cap − n`
         let mut extra: Vec<(f64, usize)> = (keep..total)
@@ -405,6 +499,8 @@ fn resymbolize(x: &[Tm], keep: usize, cap: usize) -> Option<Vec<Tm>> {
         for &(_, j) in extra.iter().take(merge) {
             gone[j] = true;
         }
+        ids.drop_where(&gone);
+        ids.fresh(n);
         for (i, t) in out.iter_mut().enumerate() {
             let s =
                 ravel_base::num::sum_upper((0..total).filter(|&j| gone[j]).map(|j| t.g[j].abs()));

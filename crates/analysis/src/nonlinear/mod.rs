@@ -9,6 +9,7 @@
 //!   bounds, step after step, keeping the dependency on the initial cell.
 
 mod closed;
+pub use closed::Claim;
 pub mod integrate;
 #[cfg(test)]
 mod tests;

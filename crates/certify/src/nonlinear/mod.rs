@@ -1,0 +1,758 @@
+//! Certificates of nonlinear plants: the checker re-derives every claimed
+//! step from the previous one with its own validated integration
+//! ([`flow`], in its own arithmetic [`arith`]) and answers VALID only for
+//! what that arithmetic proved.
+//!
+//! # The claims
+//!
+//! The evidence lists, per cell, its box and one claimed set per step
+//! `0..=S`: a zonotope `{c + G s : s ∈ [−1, 1]ᵏ}` whose columns carry
+//! symbol ids. Step `t + 1`'s columns are either *kept* (an id of step
+//! `t`: the same symbol, the same value along every trajectory) or
+//! *fresh* (any other id). Fresh columns must be axis-aligned (one non-zero
+//! entry): together they span a box `[−F, F]`.
+//!
+//! # The check of one step
+//!
+//! The checker writes the state of step `t` as affine forms over step
+//! `t`'s symbols, bounds the controller over the observation box with its
+//! own back-substitution (`bounds.rs`), composes the middle of the two
+//! linear bounds with the state (the distance to either bound an interval)
+//! and integrates the plant over the period (or applies the map). The
+//! image `c' + A s + ε` is inside the claim of step `t + 1` when, in every
+//! component `i`,
+//! `|c'ᵢ − cᵢ| + Σ_kept |Aᵢⱼ − Gᵢⱼ| + Σ_dropped |Aᵢⱼ| + eᵢ ≤ Fᵢ`
+//! (outward-rounded; then for every value of the old symbols the kept ones
+//! keep their values and the fresh ones take up the rest). Step 0 is the
+//! same check with the cell's box as the image. By induction every
+//! trajectory from the cell is in every claimed set.
+//!
+//! Goals are checked on the claimed set of the horizon, avoid sets on the
+//! claimed sets of their steps and, for continuous time, on the checker's
+//! own enclosures of the periods in the window (the period ending at step
+//! `t` when `t − 1` is in it), as the analysis does. A FALSIFIED verdict is
+//! replayed: the recorded initial state and noise are checked against
+//! their sets and the single trajectory is enclosed by the same
+//! integration.
+
+pub mod arith;
+pub mod flow;
+
+use nalgebra::DMatrix;
+use serde_json::Value;
+
+use super::{
+    decide, evidence_cells, get, read_initial, read_properties, slope_steps, uint, vector, Answer,
+    Initial, Prop, Report, FORMAT, R,
+};
+use crate::bounds::{network_box, Bx, NetBounds};
+use crate::cover;
+use arith::{Af, Fail, Iv, Num};
+use flow::Field;
+use ravel_base::nn::Network;
+use ravel_base::num::{dot_box_lower, sum_lower, sum_upper};
+use ravel_base::text::sanitize;
+
+/// A nonlinear problem as the checker reads it.
+struct Problem {
+    field: Field,
+    horizon: usize,
+    /// `n × q`: `y = Cᵀ x + v`.
+    obs: DMatrix<f64>,
+    /// Disturbance box (`d`).
+    w: Vec<Iv>,
+    /// Sensor noise box (`q`).
+    v: Vec<Iv>,
+    initial: Initial,
+    props: Vec<(String, Prop)>,
+}
+
+fn iv_box(v: &Value, len: usize, what: &str) -> R<Vec<Iv>> {
+    let lo = vector(get(v, "lo")?, len, what)?;
+    let hi = vector(get(v, "hi")?, len, what)?;
+    if lo.iter().zip(&hi).any(|(l, h)| l > h) {
+        return Err(format!("`{what}` is not a box (lo > hi somewhere)"));
+    }
+    Ok(lo.iter().zip(&hi).map(|(&l, &h)| Iv::new(l, h)).collect())
+}
+
+impl Problem {
+    fn read(p: &Value, net: &Network) -> R<Problem> {
+        let n = uint(get(p, "states")?, "states")?;
+        let m = uint(get(p, "controls")?, "controls")?;
+        let d = uint(get(p, "disturbances")?, "disturbances")?;
+        let q = uint(get(p, "observations")?, "observations")?;
+        let horizon = uint(get(p, "horizon")?, "horizon")?;
+        let max = ravel_base::limits::MAX_DIM as usize;
+        if n == 0 || n > max || m > max || q > max || d > max {
+            return Err("dimensions out of range".into());
+        }
+        if horizon > ravel_base::limits::MAX_HORIZON as usize {
+            return Err("horizon out of range".into());
+        }
+        if net.inputs != q || net.outputs() != m {
+            return Err(format!(
+                "the controller maps {} inputs to {} outputs; the problem needs {q} → {m}",
+                net.inputs,
+                net.outputs()
+            ));
+        }
+        Ok(Problem {
+            field: Field::read(p, n, m, d)?,
+            horizon,
+            obs: super::matrix(get(p, "observation")?, n, q, "observation")?,
+            w: iv_box(get(p, "disturbance")?, d, "disturbance")?,
+            v: iv_box(get(p, "sensor_noise")?, q, "sensor_noise")?,
+            initial: read_initial(p, n)?,
+            props: read_properties(p, n)?,
+        })
+    }
+
+    fn n(&self) -> usize {
+        self.field.n
+    }
+
+    /// The last step a property constrains.
+    fn last_step(&self, p: &Prop) -> usize {
+        match p {
+            Prop::Goal(_) => self.horizon,
+            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+        }
+    }
+
+    /// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.
+    fn observe<T: Num>(&self, x: &[T], v: &[Iv]) -> Vec<T> {
+        let Some(zero) = x.first().map(|e| e.cst(0.0)) else {
+            return Vec::new();
+        };
+        self.obs
+            .column_iter()
+            .zip(v)
+            .map(|(col, v)| {
+                col.iter()
+                    .zip(x)
+                    .fold(zero.clone(), |s, (a, xi)| s.add(&xi.scale(*a)))
+                    .add_iv(v)
+            })
+            .collect()
+    }
+}
+
+/// The checker's answer about a nonlinear plant's certificate.
+pub fn check(cert: &Value, net: &Network) -> Report {
+    let mut report = Report::empty();
+    match check_inner(cert, net, &mut report) {
+        Ok(answer) => report.answer = answer,
+        Err(e) => report.answer = Answer::Unreadable(e),
+    }
+    report
+}
+
+fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
+    if get(cert, "format")?.as_str() != Some(FORMAT) {
+        return Err(format!("`format` must be {FORMAT}"));
+    }
+    let problem = Problem::read(get(cert, "problem")?, net).map_err(|e| format!("problem: {e}"))?;
+    let verdicts = get(cert, "verdicts")?
+        .as_array()
+        .ok_or("`verdicts` must be an array")?;
+    if verdicts.len() != problem.props.len() {
+        return Err(format!(
+            "{} verdicts for {} properties",
+            verdicts.len(),
+            problem.props.len()
+        ));
+    }
+    let mut invalid: Option<String> = None;
+    let mut unsupported: Option<String> = None;
+    let mut verified = Vec::new();
+    for (i, (v, named)) in verdicts.iter().zip(&problem.props).enumerate() {
+        let (name, prop) = named;
+        if get(v, "property")?.as_str() != Some(name.as_str()) {
+            return Err(format!(
+                "verdict {i} is not about property `{}`",
+                sanitize(name)
+            ));
+        }
+        let shown = sanitize(name);
+        match get(v, "status")?.as_str() {
+            Some("VERIFIED") => verified.push(named),
+            Some("UNSURE") => report
+                .properties
+                .push(format!("{shown}: UNSURE (no claim)")),
+            Some("FALSIFIED") => {
+                let step = uint(get(v, "step")?, "step")?;
+                match replay(&problem, net, prop, step, get(v, "trajectory")?)? {
+                    Ok(()) => report.properties.push(format!(
+                        "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
+                    )),
+                    Err(why) => {
+                        report
+                            .properties
+                            .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
+                        invalid
+                            .get_or_insert(format!("property `{shown}`: the counterexample {why}"));
+                    }
+                }
+            }
+            _ => {
+                return Err(format!(
+                    "verdict {i}: `status` must be VERIFIED, FALSIFIED or UNSURE"
+                ))
+            }
+        }
+    }
+    if !verified.is_empty() {
+        let ev = get(cert, "evidence")?;
+        let names = |tail: &str| -> Vec<String> {
+            verified
+                .iter()
+                .map(|(name, _)| format!("{}: VERIFIED{tail}", sanitize(name)))
+                .collect()
+        };
+        match get(ev, "status")?.as_str() {
+            Some("checkable") => {
+                let needed = verified
+                    .iter()
+                    .map(|(_, p)| problem.last_step(p))
+                    .max()
+                    .unwrap_or(0);
+                match evidence(&problem, net, ev, needed, &verified, report)? {
+                    Ok(()) => report.properties.extend(names(" (checked)")),
+                    Err(msg) => {
+                        report.properties.extend(names(" — not established"));
+                        report.evidence_failure = Some(msg.clone());
+                        invalid.get_or_insert(msg);
+                    }
+                }
+            }
+            Some("unsupported") => {
+                let why = get(ev, "reason")?.as_str().unwrap_or("no reason given");
+                let why = ravel_base::text::sanitize_to(why, 600);
+                report
+                    .properties
+                    .extend(names(&format!(" — not checkable: {why}")));
+                unsupported.get_or_insert(why);
+            }
+            _ => return Err("`evidence.status` must be \"checkable\" or \"unsupported\"".into()),
+        }
+    }
+    Ok(decide(invalid, unsupported))
+}
+
+/// One claimed zonotope.
+struct Zono {
+    c: Vec<f64>,
+    /// `n` rows of `ids.len()` coefficients.
+    g: Vec<Vec<f64>>,
+    ids: Vec<u64>,
+}
+
+impl Zono {
+    fn read(v: &Value, n: usize) -> R<Zono> {
+        let c = vector(get(v, "c")?, n, "claim centre")?;
+        let ids: Vec<u64> = get(v, "ids")?
+            .as_array()
+            .ok_or("`ids` must be an array")?
+            .iter()
+            .map(|i| i.as_u64().ok_or("an id must be a non-negative integer"))
+            .collect::<Result<_, _>>()?;
+        let mut sorted = ids.clone();
+        sorted.sort_unstable();
+        if sorted.windows(2).any(|w| w.first() == w.get(1)) {
+            return Err("a claim names one symbol twice".into());
+        }
+        if ids.len() > 64 * n + 64 {
+            return Err("a claim has more symbols than any analysis keeps".into());
+        }
+        let rows = get(v, "g")?.as_array().ok_or("`g` must be an array")?;
+        if rows.len() != n {
+            return Err(format!("`g` has {} rows, expected {n}", rows.len()));
+        }
+        let g = rows
+            .iter()
+            .map(|r| vector(r, ids.len(), "claim coefficients"))
+            .collect::<R<Vec<_>>>()?;
+        Ok(Zono { c, g, ids })
+    }
+
+    /// The set as affine forms over its own symbols.
+    fn forms(&self) -> Vec<Af> {
+        self.c
+            .iter()
+            .zip(&self.g)
+            .map(|(&c, g)| Af::exact(c, g.clone()))
+            .collect()
+    }
+
+    /// An upper bound of `a·x` over the set.
+    fn support(&self, a: &[f64]) -> f64 {
+        let forms = self.forms();
+        let mut acc: Option<Af> = None;
+        for (ai, f) in a.iter().zip(&forms) {
+            let t = f.scale(*ai);
+            acc = Some(match acc {
+                None => t,
+                Some(s) => s.add(&t),
+            });
+        }
+        acc.map_or(f64::INFINITY, |s| s.range().hi)
+    }
+
+    /// A lower bound of `a·x` over the set.
+    fn support_lower(&self, a: &[f64]) -> f64 {
+        let neg: Vec<f64> = a.iter().map(|v| -v).collect();
+        -self.support(&neg)
+    }
+}
+
+/// Whether `image` (forms over the symbols `prev`) lies in `claim` (see the
+/// module's doc); why not, for people.
+fn inside(image: &[Af], prev: &[u64], claim: &Zono) -> Result<(), String> {
+    let n = claim.c.len();
+    // each fresh column: axis-aligned
+    let mut room = vec![Vec::new(); n];
+    let mut kept: Vec<(usize, usize)> = Vec::new(); // (claim column, image position)
+    for (j, id) in claim.ids.iter().enumerate() {
+        if let Some(p) = prev.iter().position(|q| q == id) {
+            kept.push((j, p));
+            continue;
+        }
+        let nonzero: Vec<usize> = (0..n)
+            .filter(|&i| {
+                claim
+                    .g
+                    .get(i)
+                    .and_then(|r| r.get(j))
+                    .is_some_and(|v| *v != 0.0)
+            })
+            .collect();
+        match nonzero.as_slice() {
+            [] => {}
+            [i] => {
+                if let (Some(r), Some(v)) =
+                    (room.get_mut(*i), claim.g.get(*i).and_then(|r| r.get(j)))
+                {
+                    r.push(v.abs());
+                }
+            }
+            _ => return Err(format!("fresh symbol {id} is not axis-aligned")),
+        }
+    }
+    for (i, ((f, c), g)) in image.iter().zip(&claim.c).zip(&claim.g).enumerate() {
+        let mut used_kept = vec![false; f.g.len()];
+        let mut terms = Vec::new();
+        for &(j, p) in &kept {
+            let a = f.g.get(p).copied().unwrap_or(0.0);
+            let b = g.get(j).copied().unwrap_or(0.0);
+            if a != b {
+                terms.push((a - b).abs().next_up());
+            }
+            if let Some(u) = used_kept.get_mut(p) {
+                *u = true;
+            }
+        }
+        for (p, a) in f.g.iter().enumerate() {
+            if !used_kept.get(p).copied().unwrap_or(false) {
+                terms.push(a.abs());
+            }
+        }
+        // (a sum with a zero term is exact; otherwise one step up)
+        let up_add = |a: f64, t: f64| {
+            if t == 0.0 {
+                a
+            } else if a == 0.0 {
+                t
+            } else {
+                (a + t).next_up()
+            }
+        };
+        let spread = terms.iter().fold(0.0, |a, &t| up_add(a, t));
+        // the residual c' − c + (A − G)s + ε ∈ [lo, hi]
+        let (d_lo, d_hi) = if f.c == *c {
+            (0.0, 0.0)
+        } else {
+            ((f.c - c).next_down(), (f.c - c).next_up())
+        };
+        // (signed sums rounded up: one step up after any inexact addition)
+        let need = up_add(up_add(d_hi, f.hi), spread).max(up_add(up_add(-d_lo, -f.lo), spread));
+        let have = room.get(i).into_iter().flatten().fold(0.0, |a: f64, &t| {
+            if a == 0.0 {
+                t
+            } else {
+                (a + t).next_down()
+            }
+        });
+        if need.is_nan() || have.is_nan() || need > have {
+            return Err(format!(
+                "x[{i}]: the checker's image needs a room of {}, the claim leaves {}",
+                ravel_base::text::compact(need),
+                ravel_base::text::compact(have)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// One cell's checked claims and the checker's own period enclosures
+/// (`between[t]`: the period ending at step `t`; none at step 0).
+struct CellChain {
+    start: Bx,
+    claims: Vec<Zono>,
+    between: Vec<Option<Vec<Iv>>>,
+}
+
+/// Check the evidence; `Ok(Err(msg))` is the first false claim.
+fn evidence(
+    problem: &Problem,
+    net: &Network,
+    ev: &Value,
+    needed: usize,
+    verified: &[&(String, Prop)],
+    report: &mut Report,
+) -> R<Result<(), String>> {
+    let steps = uint(get(ev, "steps")?, "evidence.steps")?;
+    if steps < needed || steps > problem.horizon {
+        return Ok(Err(format!(
+            "the evidence covers steps 0..={steps}, the verified properties need 0..={needed}"
+        )));
+    }
+    let slopes = slope_steps(ev)?;
+    let cells_json = evidence_cells(ev)?;
+    let mut chains = Vec::with_capacity(cells_json.len());
+    for (c, cell) in cells_json.iter().enumerate() {
+        match cell_chain(problem, net, cell, steps, slopes)? {
+            Ok(ch) => chains.push(ch),
+            Err(why) => return Ok(Err(format!("cell {c}, {why}"))),
+        }
+    }
+    let cells: Vec<Bx> = chains.iter().map(|ch| ch.start.clone()).collect();
+    let x0 = &problem.initial;
+    match cover::covers(&cells, &x0.bbox(), &|b| x0.misses(b)) {
+        Ok(()) => {}
+        Err(Some(p)) => {
+            return Ok(Err(format!(
+                "the cells do not cover the initial set: {p:?} is in no cell"
+            )))
+        }
+        Err(None) => {
+            return Err(
+                "the cells' coverage of the initial set could not be decided within the work limit"
+                    .into(),
+            )
+        }
+    }
+    for (name, prop) in verified {
+        for (c, chain) in chains.iter().enumerate() {
+            if let Err(why) = proves(problem, prop, chain) {
+                return Ok(Err(format!(
+                    "property `{}`, cell {c}: {why}",
+                    sanitize(name)
+                )));
+            }
+        }
+    }
+    report.cells = cells.len();
+    report.steps = steps;
+    Ok(Ok(()))
+}
+
+/// Read and check one cell's chain: `Ok(Err(why))` for a false claim.
+fn cell_chain(
+    problem: &Problem,
+    net: &Network,
+    cell: &Value,
+    steps: usize,
+    slopes: usize,
+) -> R<Result<CellChain, String>> {
+    let n = problem.n();
+    let start = super::claimed_box(get(cell, "box")?, n, "cell box")?;
+    if !start.is_proper() {
+        return Ok(Err("its box is empty".into()));
+    }
+    let claims_json = get(cell, "claims")?
+        .as_array()
+        .ok_or("`claims` must be an array")?;
+    if claims_json.len() != steps + 1 {
+        return Err(format!(
+            "a cell has {} claims, expected {}",
+            claims_json.len(),
+            steps + 1
+        ));
+    }
+    let claims = claims_json
+        .iter()
+        .map(|z| Zono::read(z, n))
+        .collect::<R<Vec<_>>>()?;
+    let Some(first) = claims.first() else {
+        return Err("a cell has no claims".into());
+    };
+    // step 0: the cell's box, as forms without symbols around the claim's centre
+    let cell_forms: Vec<Af> = start
+        .lo
+        .iter()
+        .zip(&start.hi)
+        .zip(&first.c)
+        .map(|((&lo, &hi), &c)| Af {
+            c,
+            g: Vec::new(),
+            lo: if lo == c {
+                0.0
+            } else {
+                (lo - c).next_down().min(0.0)
+            },
+            hi: if hi == c {
+                0.0
+            } else {
+                (hi - c).next_up().max(0.0)
+            },
+        })
+        .collect();
+    if let Err(why) = inside(&cell_forms, &[], first) {
+        return Ok(Err(format!("step 0: {why}")));
+    }
+    let mut between = vec![None];
+    for (t, pair) in claims.windows(2).enumerate() {
+        let (Some(now), Some(next)) = (pair.first(), pair.get(1)) else {
+            continue;
+        };
+        let mut last = String::new();
+        let mut proven = None;
+        for substeps in flow::SUBSTEPS {
+            match advance(problem, net, now, slopes, substeps) {
+                Ok(s) => match inside(&s.end, &now.ids, next) {
+                    Ok(()) => {
+                        proven = Some(s);
+                        break;
+                    }
+                    Err(why) => last = why,
+                },
+                Err(why) => last = format!("the checker cannot re-derive it ({why})"),
+            }
+        }
+        let Some(stepped) = proven else {
+            return Ok(Err(format!("step {}: {last}", t + 1)));
+        };
+        between.push(stepped.between);
+    }
+    Ok(Ok(CellChain {
+        start,
+        claims,
+        between,
+    }))
+}
+
+/// The checker's image of one claimed set over one period.
+fn advance(
+    problem: &Problem,
+    net: &Network,
+    now: &Zono,
+    slopes: usize,
+    substeps: u32,
+) -> Result<flow::Period<Af>, String> {
+    let k = now.ids.len();
+    let x = now.forms();
+    let y = problem.observe(&x, &problem.v);
+    let ybox = Bx {
+        lo: y.iter().map(|v| v.range().lo).collect(),
+        hi: y.iter().map(|v| v.range().hi).collect(),
+    };
+    if !ybox.lo.iter().chain(&ybox.hi).all(|v| v.is_finite()) {
+        return Err("the observation is not finite".into());
+    }
+    let nb = NetBounds::new(net, &ybox, None).map_err(|t| t.to_string())?;
+    let (up, up_off, low, low_off) = nb.output_lines(slopes);
+    let yiv: Vec<Iv> = ybox
+        .lo
+        .iter()
+        .zip(&ybox.hi)
+        .map(|(&l, &h)| Iv::new(l, h))
+        .collect();
+    let mut u = Vec::with_capacity(up.nrows());
+    for r in 0..up.nrows() {
+        let (ou, ol) = (up_off.get(r).copied(), low_off.get(r).copied());
+        let (Some(ou), Some(ol)) = (ou, ol) else {
+            return Err("malformed controller bounds".into());
+        };
+        let mid: Vec<f64> = up
+            .row(r)
+            .iter()
+            .zip(low.row(r).iter())
+            .map(|(a, b)| 0.5 * a + 0.5 * b)
+            .collect();
+        let m0 = 0.5 * ou + 0.5 * ol;
+        // u − (M y + m₀) ∈ [(L − M) y + l − m₀, (U − M) y + ū − m₀] over Y
+        let hi = gap(up.row(r).iter(), &mid, &yiv, ou, m0).hi;
+        let lo = gap(low.row(r).iter(), &mid, &yiv, ol, m0).lo;
+        if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+            return Err("the controller's bounds are not finite".into());
+        }
+        let mut ur = Af::constant(m0, k);
+        for (a, yj) in mid.iter().zip(&y) {
+            ur = ur.add(&yj.scale(*a));
+        }
+        u.push(ur.add_iv(&Iv::new(lo, hi)));
+    }
+    let w: Vec<Af> = problem.w.iter().map(|i| Af::of_iv(i, k)).collect();
+    flow::period(&problem.field, &x, &u, &w, substeps).map_err(|e: Fail| e.to_string())
+}
+
+/// `(A − M)·Y + a − m₀` as an outward-rounded interval.
+fn gap<'a>(a: impl Iterator<Item = &'a f64>, mid: &[f64], y: &[Iv], off: f64, m0: f64) -> Iv {
+    let mut acc = Iv::point(off).sub(&Iv::point(m0));
+    for ((a, m), yj) in a.zip(mid).zip(y) {
+        let d = Iv::point(*a).sub(&Iv::point(*m));
+        acc = acc.add(&d.mul(yj));
+    }
+    acc
+}
+
+/// Whether one cell's chain proves the property; why not.
+fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), String> {
+    match prop {
+        Prop::Goal(rows) => {
+            let last = chain
+                .claims
+                .get(problem.horizon)
+                .ok_or("no claim at the horizon")?;
+            for (r, (a, b)) in rows.iter().enumerate() {
+                let s = last.support(a);
+                if s.is_nan() || s > *b {
+                    return Err(format!(
+                        "goal inequality {r}: the claim at the horizon reaches {s}, beyond {b}"
+                    ));
+                }
+            }
+            Ok(())
+        }
+        Prop::Avoid { members, steps } => {
+            let last = steps.1.min(problem.horizon);
+            for t in steps.0..=last {
+                let claim = chain.claims.get(t).ok_or("a step without a claim")?;
+                for (k, member) in members.iter().enumerate() {
+                    let apart = member.iter().any(|(a, b)| claim.support_lower(a) > *b);
+                    if !apart {
+                        return Err(format!("step {t}: the claim may meet avoid member {k}"));
+                    }
+                }
+                // the period ending at step t, when t − 1 is in the window
+                if t > steps.0 {
+                    if let Some(Some(pipe)) = chain.between.get(t) {
+                        let lo: Vec<f64> = pipe.iter().map(|i| i.lo).collect();
+                        let hi: Vec<f64> = pipe.iter().map(|i| i.hi).collect();
+                        for (k, member) in members.iter().enumerate() {
+                            let apart = member
+                                .iter()
+                                .any(|(a, b)| sum_lower([dot_box_lower(a, &lo, &hi), -b]) > 0.0);
+                            if !apart {
+                                return Err(format!(
+                                    "between steps {} and {t}: the checker's enclosure may meet avoid member {k}",
+                                    t - 1
+                                ));
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Replay a recorded trajectory with the checker's own enclosure.
+fn replay(
+    problem: &Problem,
+    net: &Network,
+    prop: &Prop,
+    step: usize,
+    tr: &Value,
+) -> R<Result<(), String>> {
+    let n = problem.n();
+    let (d, q) = (problem.w.len(), problem.v.len());
+    if step > problem.horizon {
+        return Ok(Err(format!(
+            "names step {step}, beyond the horizon {}",
+            problem.horizon
+        )));
+    }
+    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < step || vs.len() < step {
+        return Err(format!(
+            "the trajectory has noise for fewer than {step} steps"
+        ));
+    }
+    if !problem.initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+        let w = vector(w, d, "process_noise")?;
+        let v = vector(v, q, "sensor_noise")?;
+        if !w
+            .iter()
+            .zip(&problem.w)
+            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
+        {
+            return Ok(Err(format!(
+                "has a disturbance outside its box at step {t}"
+            )));
+        }
+        if !v
+            .iter()
+            .zip(&problem.v)
+            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
+        {
+            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+        }
+        // y = Cᵀx + v (the recorded noise, as a point)
+        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
+        let y = problem.observe(&x, &noise);
+        let ybox = Bx {
+            lo: y.iter().map(|i| i.lo).collect(),
+            hi: y.iter().map(|i| i.hi).collect(),
+        };
+        let ub = network_box(net, &ybox);
+        let u: Vec<Iv> = ub
+            .lo
+            .iter()
+            .zip(&ub.hi)
+            .map(|(&l, &h)| Iv::new(l, h))
+            .collect();
+        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+        match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
+            Ok(p) => x = p.end,
+            Err(e) => return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1))),
+        }
+    }
+    let lo: Vec<f64> = x.iter().map(|i| i.lo).collect();
+    let hi: Vec<f64> = x.iter().map(|i| i.hi).collect();
+    let violated = match prop {
+        Prop::Goal(g) => {
+            step == problem.horizon
+                && g.iter()
+                    .any(|(a, b)| sum_lower([dot_box_lower(a, &lo, &hi), -b]) > 0.0)
+        }
+        Prop::Avoid { members, steps } => {
+            steps.0 <= step
+                && step <= problem.last_step(prop)
+                && members.iter().any(|mb| {
+                    mb.iter().all(|(a, b)| {
+                        sum_upper([ravel_base::num::dot_box_upper(a, &lo, &hi), -b]) <= 0.0
+                    })
+                })
+        }
+    };
+    Ok(if violated {
+        Ok(())
+    } else {
+        Err(format!(
+            "does not certainly violate the property at step {step} (enclosure {lo:?} … {hi:?})"
+        ))
+    })
+}

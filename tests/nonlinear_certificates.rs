@@ -1,0 +1,203 @@
+//! Certificates of nonlinear plants: the checker re-derives every claimed
+//! step with its own validated integration. A valid certificate is VALID;
+//! any claim made smaller than the true reachable set needs (a fresh
+//! symbol shrunk, a centre moved, a cell dropped, a symbol made
+//! non-axis-aligned), a forged counterexample or a hostile number is
+//! rejected — never VALID.
+
+use std::path::Path;
+
+use ravel_certify::{check, Answer};
+use serde_json::Value;
+
+fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
+    let source = std::fs::read_to_string(spec).expect("spec readable");
+    let dir = Path::new(spec).parent().expect("folder");
+    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
+    let plan = ravel::lower::lower_system(&checked);
+    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+    let id = ravel::certificate_writer::Identity {
+        spec_path: spec.to_string(),
+        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
+    };
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
+    (plan, cert)
+}
+
+fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
+    check(cert, plan.closed_loop.net()).answer
+}
+
+fn not_valid(cert: &Value, plan: &ravel::lower::SystemPlan, what: &str) -> Answer {
+    let a = answer(cert, plan);
+    assert!(
+        matches!(a, Answer::Invalid(_) | Answer::Unreadable(_)),
+        "{what}: expected INVALID or UNREADABLE, got {a:?}"
+    );
+    a
+}
+
+/// The fresh columns of a claim (ids not in the previous step's claim),
+/// with their one non-zero row.
+fn fresh_columns(cert: &Value, cell: usize, step: usize) -> Vec<(usize, usize)> {
+    let claims = &cert["evidence"]["cells"][cell]["claims"];
+    let prev: Vec<u64> = if step == 0 {
+        Vec::new()
+    } else {
+        claims[step - 1]["ids"]
+            .as_array()
+            .expect("ids")
+            .iter()
+            .map(|v| v.as_u64().expect("id"))
+            .collect()
+    };
+    let claim = &claims[step];
+    let mut out = Vec::new();
+    for (j, id) in claim["ids"].as_array().expect("ids").iter().enumerate() {
+        if prev.contains(&id.as_u64().expect("id")) {
+            continue;
+        }
+        for (i, row) in claim["g"].as_array().expect("g").iter().enumerate() {
+            if row[j].as_f64().expect("number") != 0.0 {
+                out.push((i, j));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn valid_nonlinear_certificates_are_valid() {
+    for spec in [
+        "specs/damped_pendulum.ravel",
+        "specs/double_integrator_ode.ravel",
+        "benchmarks/reachnn_b2.ravel",
+    ] {
+        let (plan, cert) = run(spec);
+        assert_eq!(cert["evidence"]["status"], "checkable", "{spec}");
+        assert_eq!(answer(&cert, &plan), Answer::Valid, "{spec}");
+    }
+}
+
+#[test]
+fn shrunk_claims_are_rejected() {
+    let (plan, cert) = run("specs/damped_pendulum.ravel");
+    let steps = cert["evidence"]["steps"].as_u64().expect("steps") as usize;
+    let mut tried = 0;
+    for step in [1, steps / 2, steps] {
+        // every fresh symbol of a claim is a remainder (or a merged box):
+        // the room the next step needs; shrinking them all by a tenth of
+        // the margin the writer added leaves no room for the true set
+        let inflation = cert["evidence"]["inflation"].as_f64().expect("inflation");
+        let mut bad = cert.clone();
+        for (i, j) in fresh_columns(&cert, 0, step) {
+            let v = &mut bad["evidence"]["cells"][0]["claims"][step]["g"][i][j];
+            let x = v.as_f64().expect("number");
+            *v = Value::from(x / (1.0 + inflation) * 0.5);
+        }
+        not_valid(&bad, &plan, &format!("fresh symbols of step {step} halved"));
+        tried += 1;
+    }
+    assert_eq!(tried, 3);
+}
+
+#[test]
+fn moved_centres_and_tilted_symbols_are_rejected() {
+    let (plan, cert) = run("specs/damped_pendulum.ravel");
+    // a centre moved by a whole radius of its component
+    let mut bad = cert.clone();
+    let claim = &cert["evidence"]["cells"][0]["claims"][2];
+    let radius: f64 = claim["g"][0]
+        .as_array()
+        .expect("row")
+        .iter()
+        .map(|v| v.as_f64().expect("number").abs())
+        .sum();
+    let c = claim["c"][0].as_f64().expect("number");
+    bad["evidence"]["cells"][0]["claims"][2]["c"][0] = Value::from(c + radius);
+    not_valid(&bad, &plan, "centre moved");
+    // a fresh symbol made to act on two components
+    let mut bad = cert.clone();
+    let (i, j) = fresh_columns(&cert, 0, 3)[0];
+    let other = 1 - i;
+    bad["evidence"]["cells"][0]["claims"][3]["g"][other][j] = Value::from(1e-3);
+    match not_valid(&bad, &plan, "tilted fresh symbol") {
+        Answer::Invalid(m) => assert!(m.contains("axis-aligned"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    // a kept symbol's coefficient changed
+    let mut bad = cert.clone();
+    let g = &mut bad["evidence"]["cells"][0]["claims"][3]["g"][0][0];
+    let x = g.as_f64().expect("number");
+    *g = Value::from(x + 0.5 * (x.abs() + 0.01));
+    not_valid(&bad, &plan, "kept coefficient changed");
+    // an id named twice is unreadable
+    let mut bad = cert.clone();
+    let ids = bad["evidence"]["cells"][0]["claims"][1]["ids"]
+        .as_array_mut()
+        .expect("ids");
+    let first = ids[0].clone();
+    ids[1] = first;
+    assert!(matches!(answer(&bad, &plan), Answer::Unreadable(_)));
+}
+
+#[test]
+fn dropped_cells_and_short_chains_are_rejected() {
+    let (plan, cert) = run("benchmarks/reachnn_b2.ravel");
+    let mut bad = cert.clone();
+    bad["evidence"]["cells"]
+        .as_array_mut()
+        .expect("cells")
+        .pop();
+    match not_valid(&bad, &plan, "a cell dropped") {
+        Answer::Invalid(m) => assert!(m.contains("cover"), "{m}"),
+        other => panic!("{other:?}"),
+    }
+    let mut bad = cert.clone();
+    bad["evidence"]["steps"] = Value::from(3);
+    not_valid(&bad, &plan, "fewer steps than the goal needs");
+}
+
+#[test]
+fn hostile_numbers_are_unreadable() {
+    let (plan, cert) = run("specs/damped_pendulum.ravel");
+    for (pointer, v) in [
+        ("/evidence/cells/0/claims/1/c/0", Value::from(f64::MAX)),
+        ("/evidence/cells/0/claims/1/g/0/0", Value::from("NaN")),
+        ("/evidence/cells/0/claims/1/ids/0", Value::from(-1)),
+        ("/problem/tape/0", Value::from("bogus")),
+        ("/evidence/cells/0/claims/1/g", Value::from(vec![1.0])),
+    ] {
+        let mut bad = cert.clone();
+        *bad.pointer_mut(pointer).expect("pointer") = v;
+        not_valid(&bad, &plan, pointer);
+    }
+    // a huge claim is readable and proves nothing it should not: it is
+    // VALID only if every property still holds on it, which a goal cannot
+    let mut bad = cert.clone();
+    let steps = bad["evidence"]["steps"].as_u64().expect("steps") as usize;
+    for (i, j) in fresh_columns(&cert, 0, steps) {
+        bad["evidence"]["cells"][0]["claims"][steps]["g"][i][j] = Value::from(1e300);
+    }
+    not_valid(&bad, &plan, "a huge final claim");
+}
+
+#[test]
+fn counterexamples_are_replayed_by_the_checkers_own_integration() {
+    let (plan, cert) = run("specs/pendulum_discrete_falsified.ravel");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let i = cert["verdicts"]
+        .as_array()
+        .expect("verdicts")
+        .iter()
+        .position(|v| v["status"] == "FALSIFIED")
+        .expect("a falsified property");
+    // another step: the trajectory does not violate there
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["step"] = Value::from(0);
+    not_valid(&bad, &plan, "step 0 named");
+    // an initial state outside X0
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["trajectory"]["initial"][0] = Value::from(1e3);
+    not_valid(&bad, &plan, "initial state outside X0");
+}

@@ -35,9 +35,12 @@
 //! evidence it searches its own lower ReLU slopes (`bounds.rs`); any slope
 //! in [0, 1] is sound, so the search is not trusted either.
 //!
+//! Nonlinear plants are checked by [`nonlinear`]: claimed zonotopes,
+//! re-derived step by step with the checker's own validated integration.
+//!
 //! # What it does not check yet
 //!
-//! Claimed sets are boxes. When the checker's box chain does not prove a
+//! Claimed sets of linear plants are boxes. When the checker's box chain does not prove a
 //! verdict that the analysis proved with tighter sets (polytope or hull
 //! boundaries, unrolled CROWN), the certificate says so and the answer is
 //! UNSUPPORTED (never VALID).

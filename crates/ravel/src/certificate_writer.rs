@@ -15,7 +15,9 @@
 //! other (coverage included). When that fails within the refinement's
 //! budget, or the evidence is of a kind the checker does not handle yet,
 //! the evidence is marked `unsupported` with the reason, and `ravel
-//! certify` answers UNSUPPORTED, never VALID. See `docs/certificates.md`.
+//! certify` answers UNSUPPORTED, never VALID. A nonlinear plant's evidence
+//! is a chain of zonotopes per cell (`nonlinear_evidence`). See
+//! `docs/certificates.md`.
 
 use serde_json::{json, Value};
 

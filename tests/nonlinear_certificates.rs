@@ -201,3 +201,30 @@ fn counterexamples_are_replayed_by_the_checkers_own_integration() {
     bad["verdicts"][i]["trajectory"]["initial"][0] = Value::from(1e3);
     not_valid(&bad, &plan, "initial state outside X0");
 }
+
+#[test]
+fn linear_plants_in_continuous_time_are_checked_between_samples() {
+    let (plan, cert) = run("specs/double_integrator_continuous.ravel");
+    assert!(cert["problem"]["intersample"].is_object());
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let i = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "avoid")
+        .expect("an avoid property");
+    // x[0] ≤ −0.7: clear of every sampled set (they reach −0.54), not of
+    // the states between the samples (they reach about −0.98)
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][i]["members"][0] =
+        serde_json::json!([{ "a": [1.0, 0.0], "b": -0.7 }]);
+    match answer(&bad, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("between steps"), "{m}"),
+        other => panic!("expected INVALID, got {other:?}"),
+    }
+    // x[0] ≤ −1.1 is clear of both
+    let mut ok = cert.clone();
+    ok["problem"]["properties"][i]["members"][0] =
+        serde_json::json!([{ "a": [1.0, 0.0], "b": -1.1 }]);
+    assert_eq!(answer(&ok, &plan), Answer::Valid);
+}

@@ -575,6 +575,7 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 network_summary: String::new(),
                 closed_loop: ravel_analysis::feedback::Loop::Linear(Box::new(case.cl.clone())),
                 dt: None,
+                intersample: None,
                 limits: None,
                 initial: x0.clone(),
                 initial_name: "X0".into(),

@@ -366,6 +366,9 @@ struct Problem {
     v: Bx,
     initial: Initial,
     props: Vec<(String, Prop)>,
+    /// A linear plant in continuous time: its flow per step, for the
+    /// states between the sampling instants.
+    intersample: Option<Vec<nonlinear::flow::Field>>,
 }
 
 impl Problem {
@@ -412,6 +415,30 @@ impl Problem {
             .collect::<R<Vec<_>>>()?;
         let initial = read_initial(p, n)?;
         let props = read_properties(p, n)?;
+        let intersample = match p.get("intersample") {
+            None | Some(Value::Null) => None,
+            Some(v) => {
+                let period = num(get(v, "period")?)?;
+                if period <= 0.0 {
+                    return Err("`intersample.period` must be positive".into());
+                }
+                let fields = get(v, "plants")?
+                    .as_array()
+                    .filter(|a| !a.is_empty())
+                    .ok_or("`intersample.plants` must be a non-empty array")?
+                    .iter()
+                    .map(|pl| {
+                        Ok(nonlinear::flow::Field::linear(
+                            &matrix(get(pl, "A")?, n, n, "intersample A")?,
+                            &matrix(get(pl, "B")?, n, m, "intersample B")?,
+                            &vector(get(pl, "c")?, n, "intersample c")?,
+                            period,
+                        ))
+                    })
+                    .collect::<R<Vec<_>>>()?;
+                Some(fields)
+            }
+        };
         Ok(Problem {
             n,
             horizon,
@@ -421,6 +448,7 @@ impl Problem {
             v: boxed(get(p, "sensor_noise")?, q, "sensor_noise")?,
             initial,
             props,
+            intersample,
         })
     }
 
@@ -754,7 +782,7 @@ fn evidence(
     }
     for property in verified {
         for (c, chain) in chains.iter().enumerate() {
-            cell_proves(problem, property, chain, c)?;
+            cell_proves(problem, net, property, chain, c)?;
         }
     }
     report.cells = cells.len();
@@ -1028,6 +1056,7 @@ fn vectors(v: Option<&Value>, what: &str) -> R<Vec<Vec<f64>>> {
 /// prop)`; [`Error::Invalid`] names the first row that fails.
 fn cell_proves(
     problem: &Problem,
+    net: &Network,
     (name, prop): &(String, Prop),
     chain: &CellChain,
     c: usize,
@@ -1079,6 +1108,29 @@ fn cell_proves(
                         return Err(Error::Invalid(format!(
                             "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
                         )));
+                    }
+                }
+                // continuous time: the period ending at step t, when t − 1
+                // is in the window, by the checker's own flow
+                let before = t.checked_sub(1).and_then(|p| sets.get(p));
+                if let (Some(flows), Some(before), true) = (&problem.intersample, before, t > s.0) {
+                    let pipe = nonlinear::intersample(flows, t - 1, &problem.obs, &problem.v, net, before)
+                        .ok_or_else(|| {
+                            Error::Invalid(format!(
+                                "avoid `{shown}`: the checker cannot enclose cell {c}'s states between steps {} and {t}",
+                                t - 1
+                            ))
+                        })?;
+                    for (k, mb) in members.iter().enumerate() {
+                        let separated = mb.iter().any(|(a, b)| {
+                            sum_lower([dot_box_lower(a, &pipe.lo, &pipe.hi), -b]) > 0.0
+                        });
+                        if !separated {
+                            return Err(Error::Invalid(format!(
+                                "avoid `{shown}`: no inequality of member {k} separates cell {c}'s states between steps {} and {t} from it",
+                                t - 1
+                            )));
+                        }
                     }
                 }
             }
@@ -1147,7 +1199,7 @@ impl<'a> CellCheck<'a> {
             .iter()
             .filter_map(|&i| self.problem.props.get(i))
         {
-            cell_proves(&self.problem, property, &chain, 0)?;
+            cell_proves(&self.problem, self.net, property, &chain, 0)?;
         }
         Ok(())
     }

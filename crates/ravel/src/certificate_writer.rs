@@ -86,7 +86,7 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
             json!({ "A": rows_json(&p.a), "B": rows_json(&p.b), "c": p.c.as_slice(), "error": error })
         })
         .collect();
-    json!({
+    let mut problem = json!({
         "states": cl.states(),
         "controls": cl.plant.b.ncols(),
         "observations": cl.plant.obs.ncols(),
@@ -98,7 +98,19 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
         "control_limits": plan.limits.as_ref().map(box_json),
         "initial": initial_json(&plan.initial),
         "properties": properties_json(plan),
-    })
+    });
+    // (only for continuous time: older certificates have no such field)
+    if let Some(i) = &plan.intersample {
+        problem["intersample"] = json!({
+            "period": i.period,
+            "plants": i.plants.iter().map(|p| json!({
+                "A": rows_json(&p.a),
+                "B": rows_json(&p.b),
+                "c": p.c.as_slice(),
+            })).collect::<Vec<_>>(),
+        });
+    }
+    problem
 }
 
 /// A nonlinear loop's problem: the plant's tape instead of matrices.

@@ -9,10 +9,12 @@
 use crate::check::{Checked, NetworkChecked, PlantSpec, Task};
 pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
 use nalgebra::DMatrix;
-use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
+use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
 use ravel_analysis::feedback::Loop;
+use ravel_analysis::nonlinear::linear_field;
 use ravel_analysis::nonlinear::NonlinearLoop;
 use ravel_analysis::sets::{IBox, Region};
+use ravel_base::expr::VectorField;
 use ravel_base::nn::{Layer, Network};
 
 /// Everything the executor needs to run a task, as plain data: one variant
@@ -79,6 +81,11 @@ pub struct SystemPlan {
     pub network_summary: String,
     /// The closed loop (saturation already part of the network).
     pub closed_loop: Loop,
+    /// A linear plant in continuous time: its vector field per step
+    /// (`ẋ = A x + B u + c`, the control held), whose validated flow
+    /// encloses the states between the sampling instants (avoid windows
+    /// are checked there too); `None` otherwise.
+    pub intersample: Option<Intersample>,
     /// The time step when the spec's plant was continuous-time (already discretised).
     pub dt: Option<f64>,
     /// Control limits, if any (for reports).
@@ -165,6 +172,18 @@ pub fn nonlinear_loop(c: &Checked) -> Option<NonlinearLoop> {
     }
 }
 
+/// A linear plant in continuous time, kept beside its discretisation for
+/// the states between the sampling instants.
+#[derive(Clone, Debug)]
+pub struct Intersample {
+    /// The sampling period.
+    pub period: f64,
+    /// The plants before discretisation (one per step, or one).
+    pub plants: Vec<Plant>,
+    /// Their vector fields `ẋ = A x + B u + c`.
+    pub fields: Vec<VectorField>,
+}
+
 /// Lower a checked closed-loop spec to its plan.
 pub fn lower_system(c: &Checked) -> SystemPlan {
     let net = folded_network(c);
@@ -192,7 +211,19 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
             },
         });
     }
+    let intersample = match (&c.continuous, c.dt) {
+        (Some(plants), Some(dt)) => Some(Intersample {
+            period: dt,
+            fields: plants
+                .iter()
+                .map(|p| linear_field(&p.a, &p.b, p.c.as_slice(), dt))
+                .collect(),
+            plants: plants.clone(),
+        }),
+        _ => None,
+    };
     SystemPlan {
+        intersample,
         system: c.system.clone(),
         state_name: c.state.0.clone(),
         control_name: c.control.0.clone(),

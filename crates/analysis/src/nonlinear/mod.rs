@@ -71,3 +71,70 @@ impl NonlinearLoop {
         self.plant.field.states
     }
 }
+
+/// `ẋ = A x + B u + c` as a vector field over `[x, u]` (no disturbances),
+/// the control held over periods `period`: what the intersample enclosure
+/// of a linear plant in continuous time integrates (zero coefficients are
+/// left out of the tape).
+pub fn linear_field(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &[f64], period: f64) -> VectorField {
+    use ravel_base::expr::{Node, Tape, Time};
+    let (n, m) = (a.nrows(), b.ncols());
+    let mut tape = Tape::new();
+    let vars: Vec<_> = (0..n + m).map(|i| tape.push(Node::Var(i as u32))).collect();
+    let mut outputs = Vec::with_capacity(n);
+    for i in 0..n {
+        let mut acc = tape.push(Node::Const(c.get(i).copied().unwrap_or(0.0)));
+        let coefs = (0..n).map(|j| a[(i, j)]).chain((0..m).map(|k| b[(i, k)]));
+        for (coef, &v) in coefs.zip(&vars) {
+            if coef != 0.0 {
+                let k = tape.push(Node::Const(coef));
+                let t = tape.push(Node::Mul(k, v));
+                acc = tape.push(Node::Add(acc, t));
+            }
+        }
+        outputs.push(acc);
+    }
+    VectorField {
+        tape,
+        outputs,
+        states: n,
+        controls: m,
+        disturbances: 0,
+        time: Time::Continuous { period },
+    }
+}
+
+/// A box holding every state of `field`'s flow over one period from the
+/// box `x` with the controls in `u` held (the validated integrator over
+/// Taylor models of `x`'s box); `None` when the flow cannot be enclosed.
+pub fn pipe(
+    field: &VectorField,
+    x: &IBox,
+    u: &IBox,
+    settings: &integrate::Settings,
+) -> Option<IBox> {
+    use integrate::{Interval, Tm};
+    let ravel_base::expr::Time::Continuous { period } = field.time else {
+        return None;
+    };
+    if !(x.is_finite() && u.is_finite()) {
+        return None;
+    }
+    let n = x.dim();
+    let xs: Vec<Tm> = (0..n)
+        .map(|i| {
+            let (lo, hi) = (x.lo[i], x.hi[i]);
+            let c = 0.5 * lo + 0.5 * hi;
+            let r = (hi - c).max(c - lo).max(0.0).next_up();
+            Tm::symbol(i, c, r, n)
+        })
+        .collect();
+    let us: Vec<Tm> = (0..u.dim())
+        .map(|k| Tm::from_interval(Interval::new(u.lo[k], u.hi[k]), n))
+        .collect();
+    let out = integrate::flow(field, &xs, &us, &[], period, settings).ok()?;
+    let lo: Vec<f64> = out.pipe.iter().map(|i| i.lo).collect();
+    let hi: Vec<f64> = out.pipe.iter().map(|i| i.hi).collect();
+    let b = IBox::new(lo, hi);
+    b.is_finite().then_some(b)
+}

@@ -166,6 +166,47 @@ impl Field {
         })
     }
 
+    /// `ẋ = A x + B u + c` over `[x, u]`, the control held over periods
+    /// `period` (a linear plant in continuous time, for the states between
+    /// its sampling instants).
+    pub fn linear(
+        a: &nalgebra::DMatrix<f64>,
+        b: &nalgebra::DMatrix<f64>,
+        c: &[f64],
+        period: f64,
+    ) -> Field {
+        let (n, m) = (a.nrows(), b.ncols());
+        let mut ops: Vec<Op> = (0..n + m).map(Op::Var).collect();
+        let mut outputs = Vec::with_capacity(n);
+        for i in 0..n {
+            ops.push(Op::Const(c.get(i).copied().unwrap_or(0.0)));
+            let mut acc = ops.len() - 1;
+            let row = a
+                .row(i)
+                .iter()
+                .copied()
+                .chain(b.row(i).iter().copied())
+                .collect::<Vec<_>>();
+            for (v, coef) in row.into_iter().enumerate() {
+                if coef != 0.0 {
+                    ops.push(Op::Const(coef));
+                    ops.push(Op::Mul(ops.len() - 1, v));
+                    ops.push(Op::Add(acc, ops.len() - 1));
+                    acc = ops.len() - 1;
+                }
+            }
+            outputs.push(acc);
+        }
+        Field {
+            n,
+            m,
+            d: 0,
+            ops,
+            outputs,
+            period: Some(period),
+        }
+    }
+
     /// The right-hand side (or map) at `x`, `u`, `w`, order 0 only.
     pub fn eval<T: Num>(&self, x: &[T], u: &[T], w: &[T]) -> Result<Vec<T>, Fail> {
         let xs: Vec<Vec<T>> = x.iter().map(|v| vec![v.clone()]).collect();

@@ -138,6 +138,75 @@ impl Problem {
     }
 }
 
+/// A box of the states of a linear plant in continuous time over the
+/// period after step `t`, from the claimed box `x` of step `t` (its own
+/// symbols) with the controls in the checker's bound of the network over
+/// the observation box (sensor noise `v`); `None` when the flow cannot be
+/// enclosed.
+pub(crate) fn intersample(
+    flows: &[Field],
+    t: usize,
+    obs: &DMatrix<f64>,
+    v: &Bx,
+    net: &Network,
+    x: &Bx,
+) -> Option<Bx> {
+    let field = flows.get(t.min(flows.len().checked_sub(1)?))?;
+    let n = x.lo.len();
+    let xs: Vec<Af> =
+        x.lo.iter()
+            .zip(&x.hi)
+            .enumerate()
+            .map(|(i, (&lo, &hi))| {
+                let c = 0.5 * lo + 0.5 * hi;
+                let mut g = vec![0.0; n];
+                if let Some(gi) = g.get_mut(i) {
+                    *gi = (hi - c).max(c - lo).max(0.0).next_up();
+                }
+                Af::exact(c, g)
+            })
+            .collect();
+    let xi: Vec<Iv> = xs.iter().map(Num::range).collect();
+    let noise: Vec<Iv> =
+        v.lo.iter()
+            .zip(&v.hi)
+            .map(|(&l, &h)| Iv::new(l, h))
+            .collect();
+    let y: Vec<Iv> = obs
+        .column_iter()
+        .zip(&noise)
+        .map(|(col, nz)| {
+            col.iter()
+                .zip(&xi)
+                .fold(Iv::point(0.0), |s, (a, x)| s.add(&x.scale(*a)))
+                .add(nz)
+        })
+        .collect();
+    let ybox = Bx {
+        lo: y.iter().map(|i| i.lo).collect(),
+        hi: y.iter().map(|i| i.hi).collect(),
+    };
+    if !y.iter().all(Iv::is_finite) {
+        return None;
+    }
+    let ub = NetBounds::new(net, &ybox, None).ok()?.output();
+    let u: Vec<Af> = ub
+        .lo
+        .iter()
+        .zip(&ub.hi)
+        .map(|(&l, &h)| Af::of_iv(&Iv::new(l, h), n))
+        .collect();
+    if !u.iter().all(Num::finite) {
+        return None;
+    }
+    let out = flow::period(field, &xs, &u, &[], flow::SUBSTEPS[0]).ok()?;
+    let pipe = out.between?;
+    Some(Bx {
+        lo: pipe.iter().map(|i| i.lo).collect(),
+        hi: pipe.iter().map(|i| i.hi).collect(),
+    })
+}
+
 /// The checker's answer about a nonlinear plant's certificate.
 pub fn check(cert: &Value, net: &Network) -> Report {
     let mut report = Report::empty();

@@ -157,6 +157,10 @@ pub struct Checked {
     /// The plant. Its observation matrix already folds `observe`'s matrix
     /// `M` (as `Mᵀ`: the controller sees `Mᵀᵀ x + v`).
     pub plant: PlantSpec,
+    /// A linear plant in continuous time: its plants before the
+    /// discretisation (`ẋ = A x + B u + c` per step), for the enclosures
+    /// between the sampling instants.
+    pub continuous: Option<Vec<Plant>>,
     /// `observe`'s offsets `d` (the controller sees `M x + d + v`): lowering
     /// prepends the layer `h ↦ h + d` to the network; `None` without
     /// `observe` or when `d = 0`.
@@ -988,8 +992,10 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     if let Some(h) = horizon {
         per_step_lengths(cx, &pp.per_step_lists, h);
     }
+    let mut continuous = None;
     if let (Ok(Some(dt)), Some(plants), true) = (sp.time, pp.plant.as_mut(), pp.nonlinear.is_none())
     {
+        continuous = Some(plants.clone());
         discretise(cx, plants, dt, sp.time_span.unwrap_or(WHOLE));
     }
     if let (Some(h), Some((_, n))) = (horizon, &sp.state) {
@@ -1046,6 +1052,7 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
             state: sp.state?,
             control: sp.control?,
             plant: plant?,
+            continuous,
             observe_offset: pp.observe_offset,
             actuate,
             dt: sp.time.ok().flatten(),

@@ -4,7 +4,7 @@
 //! cell order.
 
 use crate::lower::{Guide, Property, PropertyKind, SystemPlan};
-use ravel_analysis::closed_loop::{Cut, Propagator, Step};
+use ravel_analysis::closed_loop::{ClosedLoop, Cut, Propagator, Step};
 use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
@@ -39,7 +39,9 @@ pub fn propagate_cell_until(
     let n = cl.states();
     if plan.propagator == Propagator::CrownUnrolled {
         let parent: Option<Vec<Region>> = parent.map(|p| p.iter().map(|s| s.set.clone()).collect());
-        return cl.unrolled(cell, plan.horizon, &plan.boundary, parent.as_deref(), stop);
+        let mut steps = cl.unrolled(cell, plan.horizon, &plan.boundary, parent.as_deref(), stop);
+        intersample(plan, cl, &mut steps);
+        return steps;
     }
     let mut steps = Vec::with_capacity(plan.horizon + 1);
     steps.push(Step::new(cell.clone(), Vec::new()));
@@ -68,7 +70,54 @@ pub fn propagate_cell_until(
         }
         steps.push(next);
     }
+    intersample(plan, cl, &mut steps);
     steps
+}
+
+/// A linear plant in continuous time: the states over every control period
+/// that an avoid window covers (the period ending at step `t`, for
+/// `a < t ≤ b`), from the box of step `t − 1` and its controls' box
+/// (CROWN over the observation box) by the validated flow of
+/// `ẋ = A x + B u + c`. A period that cannot be enclosed is the whole
+/// space (it proves nothing).
+fn intersample(plan: &SystemPlan, cl: &ClosedLoop, steps: &mut [Step]) {
+    use ravel_analysis::crown::{Mode, Relaxation};
+    let Some(fields) = plan.intersample.as_ref().map(|i| &i.fields) else {
+        return;
+    };
+    let windows: Vec<(usize, usize)> = plan
+        .properties
+        .iter()
+        .filter_map(|p| match &p.kind {
+            PropertyKind::Avoid { steps, .. } => Some(*steps),
+            PropertyKind::Goal(_) => None,
+        })
+        .collect();
+    let settings = ravel_analysis::nonlinear::integrate::Settings::default();
+    let n = cl.states();
+    for t in 1..steps.len() {
+        if !windows.iter().any(|&(a, b)| a < t && t <= b) {
+            continue;
+        }
+        let Some(field) = fields.get((t - 1).min(fields.len().saturating_sub(1))) else {
+            continue;
+        };
+        let before = &steps[t - 1];
+        let pipe = if before.cut().is_some() {
+            None
+        } else {
+            let x = before.set.bbox();
+            let y = cl.observation_box(&x);
+            let rel = Relaxation::new(&cl.net, &y, Mode::Crown);
+            if y.is_finite() && rel.is_finite() {
+                let u = rel.output_box(Mode::Crown);
+                ravel_analysis::nonlinear::pipe(field, &x, &u, &settings)
+            } else {
+                None
+            }
+        };
+        steps[t].between = Some(pipe.unwrap_or_else(|| IBox::whole(n)));
+    }
 }
 
 /// The first step whose set is not a computed bound, and why.

@@ -49,6 +49,7 @@
 pub mod bounds;
 mod cover;
 pub mod network;
+pub mod tape;
 
 /// Exact sums of `f64` values for the property tests of directed rounding
 /// (the same file serves the integration tests; each crate uses part of it).
@@ -223,11 +224,83 @@ fn rows(v: &Value, n: usize, what: &str) -> R<Vec<(Vec<f64>, f64)>> {
 
 /// A property as the checker reads it.
 enum Prop {
-    Goal(Vec<(Vec<f64>, f64)>),
+    /// The claimed sets lie in the goal at every step of `steps` (a plain
+    /// goal: the horizon alone), or at some step (`eventually`).
+    Goal {
+        set: CSet,
+        steps: (usize, usize),
+        eventually: bool,
+    },
     Avoid {
-        members: Vec<Vec<(Vec<f64>, f64)>>,
+        members: Vec<CSet>,
         steps: (usize, usize),
     },
+}
+
+/// A goal's or avoid member's set: rows `a·x ≤ b` and constraints
+/// `g(x) ≤ 0` (evaluated by [`tape::range`]).
+struct CSet {
+    rows: Rows,
+    nonlinear: Vec<ravel_base::expr::Tape>,
+}
+
+impl CSet {
+    /// Read `{ "rows": …, "nonlinear": [tape, …] }` or a bare array of rows.
+    fn read(v: &Value, n: usize, what: &str) -> R<CSet> {
+        if v.is_array() {
+            return Ok(CSet {
+                rows: rows(v, n, what)?,
+                nonlinear: Vec::new(),
+            });
+        }
+        CSet::read_fields(v, n, what)
+    }
+
+    /// Read the fields `rows` and (optional) `nonlinear` of an object.
+    fn read_fields(v: &Value, n: usize, what: &str) -> R<CSet> {
+        let nonlinear = match v.get("nonlinear") {
+            None => Vec::new(),
+            Some(t) => t
+                .as_array()
+                .ok_or("`nonlinear` must be an array of tapes")?
+                .iter()
+                .map(|t| tape::read(t, n))
+                .collect::<R<Vec<_>>>()?,
+        };
+        Ok(CSet {
+            rows: rows(get(v, "rows")?, n, what)?,
+            nonlinear,
+        })
+    }
+
+    /// Whether the box certainly lies in the set (every row's and every
+    /// constraint's upper bound at most 0; a constraint without an
+    /// enclosure proves nothing).
+    fn holds_on(&self, b: &Bx) -> bool {
+        self.rows
+            .iter()
+            .all(|(a, c)| sum_upper([dot_box_upper(a, &b.lo, &b.hi), -c]) <= 0.0)
+            && self.constraints_hold_on(b)
+    }
+
+    /// Whether every constraint's upper bound over the box is at most 0.
+    fn constraints_hold_on(&self, b: &Bx) -> bool {
+        self.nonlinear
+            .iter()
+            .all(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.hi <= 0.0))
+    }
+
+    /// Whether the box certainly misses the set (one row or one
+    /// constraint has a positive lower bound over it).
+    fn missed_by(&self, b: &Bx) -> bool {
+        self.rows
+            .iter()
+            .any(|(a, c)| sum_lower([dot_box_lower(a, &b.lo, &b.hi), -c]) > 0.0)
+            || self
+                .nonlinear
+                .iter()
+                .any(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.lo > 0.0))
+    }
 }
 
 /// Inequalities `a·x ≤ b`.
@@ -440,19 +513,42 @@ impl Problem {
                     .as_str()
                     .ok_or("`name` must be a string")?
                     .to_string();
+                let steps_of = |s: &Value| -> R<(usize, usize)> {
+                    let steps = (
+                        uint(get(s, "first")?, "steps.first")?,
+                        uint(get(s, "last")?, "steps.last")?,
+                    );
+                    if steps.0 > steps.1 {
+                        return Err("`steps.first` is after `steps.last`".into());
+                    }
+                    Ok(steps)
+                };
                 let kind = match get(pr, "kind")?.as_str() {
-                    Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
+                    Some("goal") => Prop::Goal {
+                        set: CSet::read_fields(pr, n, "goal rows")?,
+                        steps: match pr.get("steps") {
+                            None => (horizon, horizon),
+                            Some(s) => {
+                                let steps = steps_of(s)?;
+                                if steps.1 > horizon {
+                                    return Err("a goal's steps go beyond the horizon".into());
+                                }
+                                steps
+                            }
+                        },
+                        eventually: match pr.get("mode").map(Value::as_str) {
+                            None | Some(Some("always")) => false,
+                            Some(Some("eventually")) => true,
+                            _ => return Err("`mode` must be \"always\" or \"eventually\"".into()),
+                        },
+                    },
                     Some("avoid") => {
-                        let s = get(pr, "steps")?;
-                        let steps = (
-                            uint(get(s, "first")?, "steps.first")?,
-                            uint(get(s, "last")?, "steps.last")?,
-                        );
+                        let steps = steps_of(get(pr, "steps")?)?;
                         let members = get(pr, "members")?
                             .as_array()
                             .ok_or("`members` must be an array")?
                             .iter()
-                            .map(|mb| rows(mb, n, "avoid rows"))
+                            .map(|mb| CSet::read(mb, n, "avoid rows"))
                             .collect::<R<Vec<_>>>()?;
                         Prop::Avoid { members, steps }
                     }
@@ -490,8 +586,7 @@ impl Problem {
     /// The last step a property constrains.
     fn last_step(&self, p: &Prop) -> usize {
         match p {
-            Prop::Goal(_) => self.horizon,
-            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+            Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
         }
     }
 }
@@ -1059,7 +1154,11 @@ fn cell_proves(
     let shown = ravel_base::text::sanitize(name);
     let sets = &chain.sets;
     match prop {
-        Prop::Goal(g) => {
+        Prop::Goal {
+            set,
+            steps,
+            eventually: false,
+        } if *steps == (problem.horizon, problem.horizon) => {
             // the evidence covers the horizon when a goal is verified
             let Some(last) = sets.get(problem.horizon) else {
                 return Err(Error::Invalid(format!(
@@ -1072,7 +1171,7 @@ fn cell_proves(
                 rows: &chain.last_rows,
                 duals: &duals,
             };
-            for (r, (a, b)) in g.iter().enumerate() {
+            for (r, (a, b)) in set.rows.iter().enumerate() {
                 let top = if chain.last_rows.is_empty() {
                     dot_box_upper(a, &last.lo, &last.hi)
                 } else {
@@ -1087,6 +1186,42 @@ fn cell_proves(
                     )));
                 }
             }
+            if !set.constraints_hold_on(last) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: the checker cannot show that a nonlinear constraint holds on cell {c}'s set at step {}",
+                    problem.horizon
+                )));
+            }
+        }
+        Prop::Goal {
+            set,
+            steps: s,
+            eventually,
+        } => {
+            let window = || {
+                sets.iter()
+                    .enumerate()
+                    .take(problem.last_step(prop) + 1)
+                    .skip(s.0)
+            };
+            if window().count() != s.1.min(problem.horizon) + 1 - s.0.min(s.1) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: cell {c} has no set at some step of {}..={}",
+                    s.0, s.1
+                )));
+            }
+            if *eventually {
+                if !window().any(|(_, b)| set.holds_on(b)) {
+                    return Err(Error::Invalid(format!(
+                        "goal `{shown}`: no set of cell {c} at steps {}..={} lies in the goal",
+                        s.0, s.1
+                    )));
+                }
+            } else if let Some((t, _)) = window().find(|(_, b)| !set.holds_on(b)) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: cell {c}'s set at step {t} is not shown to lie in the goal"
+                )));
+            }
         }
         Prop::Avoid { members, steps: s } => {
             for (t, set) in sets
@@ -1096,10 +1231,7 @@ fn cell_proves(
                 .skip(s.0)
             {
                 for (k, mb) in members.iter().enumerate() {
-                    let separated = mb
-                        .iter()
-                        .any(|(a, b)| sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0);
-                    if !separated {
+                    if !mb.missed_by(set) {
                         return Err(Error::Invalid(format!(
                             "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
                         )));
@@ -1209,9 +1341,35 @@ fn replay(
     if !problem.initial.contains(&x0) {
         return Ok(Err("starts outside the initial set".into()));
     }
+    let (first, eventually) = match prop {
+        Prop::Goal {
+            steps, eventually, ..
+        } => (steps.0, *eventually),
+        Prop::Avoid { steps, .. } => (steps.0, false),
+    };
+    // an "eventually" goal is violated only outside at every step of its window
+    let last = if eventually {
+        problem.last_step(prop)
+    } else {
+        step
+    };
+    if !(first <= step && step <= problem.last_step(prop)) {
+        return Ok(Err(format!(
+            "does not certainly violate the property at step {step}: the property does not apply there"
+        )));
+    }
+    if ws.len() < last || vs.len() < last {
+        return Err(format!(
+            "the trajectory has noise for fewer than {last} steps"
+        ));
+    }
     let mut x = Bx::point(&x0);
-    // (both lists have at least `step` entries)
-    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+    let mut window = Vec::new();
+    // (both lists have at least `last` entries)
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
+        if t >= first {
+            window.push(x.clone());
+        }
         let w = vector(w, n, "process_noise")?;
         let v = vector(v, q, "sensor_noise")?;
         if !problem.w.contains(&w) {
@@ -1227,20 +1385,11 @@ fn replay(
             None => return Ok(Err(format!("overflows at step {}", t + 1))),
         }
     }
+    window.push(x.clone());
     let violated = match prop {
-        Prop::Goal(g) => {
-            step == problem.horizon
-                && g.iter()
-                    .any(|(a, b)| sum_lower([dot_box_lower(a, &x.lo, &x.hi), -b]) > 0.0)
-        }
-        Prop::Avoid { members, steps } => {
-            steps.0 <= step
-                && step <= problem.last_step(prop)
-                && members.iter().any(|mb| {
-                    mb.iter()
-                        .all(|(a, b)| sum_upper([dot_box_upper(a, &x.lo, &x.hi), -b]) <= 0.0)
-                })
-        }
+        Prop::Goal { set, .. } if eventually => window.iter().all(|b| set.missed_by(b)),
+        Prop::Goal { set, .. } => set.missed_by(&x),
+        Prop::Avoid { members, .. } => members.iter().any(|mb| mb.holds_on(&x)),
     };
     Ok(if violated {
         Ok(())

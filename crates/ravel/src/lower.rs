@@ -7,7 +7,7 @@
 //! turns goal and avoid sets into properties over the steps they constrain.
 
 use crate::check::{Checked, NetworkChecked, PlantSpec, Task};
-pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
+pub use crate::ir::{GoalMode, Guide, Partitioner, Property, PropertyKind, StateSet, Window};
 use nalgebra::DMatrix;
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Propagator};
 use ravel_analysis::feedback::Loop;
@@ -180,7 +180,11 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
     if let Some(g) = &c.goal {
         properties.push(Property {
             name: g.name.clone(),
-            kind: PropertyKind::Goal(g.set.clone()),
+            kind: PropertyKind::Goal {
+                set: g.set.clone(),
+                window: clipped(g.window, c.horizon),
+                mode: g.mode,
+            },
         });
     }
     for a in &c.avoids {
@@ -188,7 +192,7 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
             name: a.name.clone(),
             kind: PropertyKind::Avoid {
                 members: a.members.clone(),
-                steps: (a.steps.0, a.steps.1.min(c.horizon)),
+                window: clipped(a.window, c.horizon),
             },
         });
     }
@@ -284,5 +288,13 @@ pub fn lower_network(c: &NetworkChecked) -> NetworkPlan {
         samples: c.samples,
         seed: c.seed,
         slope_steps: c.slope_steps,
+    }
+}
+
+/// A window clipped to the horizon `h`.
+fn clipped(w: Window, h: usize) -> Window {
+    Window {
+        steps: (w.steps.0.min(h), w.steps.1.min(h)),
+        periods: (w.periods.0, w.periods.1.min(h)),
     }
 }

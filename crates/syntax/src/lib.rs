@@ -83,6 +83,12 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
         Rule::interval => "an interval `[lo, hi]`",
         Rule::constraint | Rule::lin_expr | Rule::first_term | Rule::term => "a linear inequality",
+        Rule::inequality => "an inequality `expr <= expr`",
+        Rule::at_time => "`at time T`",
+        Rule::always_during | Rule::eventually_during => {
+            "`always during [t0, t1]` or `eventually during [t0, t1]`"
+        }
+        Rule::during => "`during [t0, t1]`",
         Rule::cmp => "`<=` or `>=`",
         Rule::component => "a component such as `x[0]`",
         Rule::ident => "a name",
@@ -386,7 +392,32 @@ impl Builder {
     fn set_def(&mut self, s: Span, inner: &mut Children) -> SetDef {
         let name = self.ident(child(inner, "set name"));
         let set = self.set_expr(child(inner, "set"));
-        SetDef { name, set, span: s }
+        let when = inner.next().map(|w| {
+            let ws = span(&w);
+            let rule = w.as_rule();
+            let arg = child(&mut w.into_inner(), "time clause");
+            let node = match rule {
+                Rule::at_time => GoalWhen::AtTime(self.number(arg)),
+                Rule::always_during => GoalWhen::Always(self.window(arg)),
+                _ => GoalWhen::Eventually(self.window(arg)),
+            };
+            Spanned { node, span: ws }
+        });
+        SetDef {
+            name,
+            set,
+            span: s,
+            when,
+        }
+    }
+
+    /// `during [t0, t1]`.
+    fn window(&mut self, p: P) -> Window {
+        let ws = span(&p);
+        let mut it = p.into_inner();
+        let t0 = self.number(child(&mut it, "window start"));
+        let t1 = self.number(child(&mut it, "window end"));
+        Window { t0, t1, span: ws }
     }
 
     /// An `avoid` item spanning `s`: `NAME = set`, then optionally the
@@ -394,12 +425,20 @@ impl Builder {
     fn avoid(&mut self, s: Span, mut inner: Children) -> AvoidDef {
         let name = self.ident(child(&mut inner, "set name"));
         let set = self.set_expr(child(&mut inner, "set"));
-        let steps = inner.next().map(|st| self.steps(st));
+        let (mut steps, mut during) = (None, None);
+        if let Some(st) = inner.next() {
+            if st.as_rule() == Rule::during {
+                during = Some(self.window(st));
+            } else {
+                steps = Some(self.steps(st));
+            }
+        }
         AvoidDef {
             name,
             set,
             steps,
             span: s,
+            during,
         }
     }
 
@@ -772,7 +811,25 @@ impl Builder {
                 let node = match a.as_rule() {
                     Rule::box_set => SetAtom::Box(self.box_set(a)),
                     Rule::polytope => {
-                        SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect())
+                        let rows: Vec<SetRow> = a
+                            .into_inner()
+                            .map(|c| match c.as_rule() {
+                                Rule::constraint => SetRow::Linear(self.constraint(c)),
+                                _ => SetRow::General(self.inequality(c)),
+                            })
+                            .collect();
+                        if rows.iter().all(|r| matches!(r, SetRow::Linear(_))) {
+                            SetAtom::Polytope(
+                                rows.into_iter()
+                                    .filter_map(|r| match r {
+                                        SetRow::Linear(c) => Some(c),
+                                        SetRow::General(_) => None,
+                                    })
+                                    .collect(),
+                            )
+                        } else {
+                            SetAtom::Inequalities(rows)
+                        }
                     }
                     Rule::ball => {
                         let mut it = a.into_inner();
@@ -892,6 +949,24 @@ impl Builder {
         }
         Constraint {
             terms,
+            cmp,
+            rhs,
+            span: s,
+        }
+    }
+
+    /// `lhs (<= | >=) rhs` between two expressions.
+    fn inequality(&mut self, p: P) -> Inequality {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let lhs = self.expr(child(&mut it, "left-hand side"));
+        let cmp = match child(&mut it, "comparison").as_str() {
+            "<=" => Cmp::Le,
+            _ => Cmp::Ge,
+        };
+        let rhs = self.expr(child(&mut it, "right-hand side"));
+        Inequality {
+            lhs,
             cmp,
             rhs,
             span: s,

@@ -1059,6 +1059,55 @@ mod tests {
     }
 
     #[test]
+    fn inequalities_between_expressions_and_time_clauses() {
+        // the linear form stays a polytope, spans as before (no trailing space)
+        let set = avoid_set("avoid A = { x[0] <= 2 , x[1] >= -1 }\n");
+        let SetAtom::Polytope(cs) = &set.members[0].node else {
+            panic!("polytope expected: {set:?}")
+        };
+        assert_eq!((cs[0].span.start, cs[0].span.end), (12, 21));
+        // an expression on either side makes the whole set general, row by row
+        let set =
+            avoid_set("avoid A = { (x[0] - 1)^2 + x[1]^2 <= 0.25, x[0] <= 2, y[1] >= y[0] }\n");
+        let SetAtom::Inequalities(rows) = &set.members[0].node else {
+            panic!("inequalities expected: {set:?}")
+        };
+        assert!(matches!(rows[0], SetRow::General(_)));
+        assert!(matches!(rows[1], SetRow::Linear(_)));
+        let SetRow::General(g) = &rows[2] else {
+            panic!("{rows:?}")
+        };
+        assert_eq!(g.cmp, Cmp::Ge);
+        assert!(matches!(g.rhs.node, Expr::Component(_)));
+        // time clauses
+        let spec = parse(
+            "goal G = box([0, 1]) eventually during [0.5, 2e0]\navoid A = box([0, 1]) during [0, 3]\n",
+        )
+        .unwrap_or_else(|d| panic!("{d:?}"));
+        let Item::Goal(g) = &spec.items[0] else {
+            panic!("{spec:?}")
+        };
+        let Some(GoalWhen::Eventually(w)) = g.when.as_ref().map(|w| &w.node) else {
+            panic!("{g:?}")
+        };
+        assert_eq!((w.t0.node, w.t1.node), (0.5, 2.0));
+        let Item::Avoid(a) = &spec.items[1] else {
+            panic!("{spec:?}")
+        };
+        assert!(a.steps.is_none() && a.during.as_ref().is_some_and(|w| w.t1.node == 3.0));
+        let spec = parse("goal G = box([0, 1]) at time 4\n").unwrap_or_else(|d| panic!("{d:?}"));
+        let Item::Goal(g) = &spec.items[0] else {
+            panic!("{spec:?}")
+        };
+        assert!(
+            matches!(g.when.as_ref().map(|w| &w.node), Some(GoalWhen::AtTime(t)) if t.node == 4.0)
+        );
+        // a goal without a clause prints as it always did
+        let spec = parse("goal G = box([0, 1])\n").unwrap_or_else(|d| panic!("{d:?}"));
+        assert!(!format!("{spec:?}").contains("when"));
+    }
+
+    #[test]
     fn linear_terms_keep_their_signs_and_coefficients() {
         let set = avoid_set(
             "avoid A = { -x[0] + 2 x[1] - 0.5*x[0] >= -1e-1 } | box([0, 1]) /* block */ // line\n",

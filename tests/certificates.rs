@@ -595,8 +595,8 @@ fn optimised_slopes_are_checked_by_the_checkers_own_search() {
             .expect("a linear plant")
             .slope_steps = steps;
         for q in &mut plan.properties {
-            if let PropertyKind::Goal(g) = &mut q.kind {
-                for (a, b) in &mut g.rows {
+            if let PropertyKind::Goal { set: g, .. } = &mut q.kind {
+                for (a, b) in &mut g.poly.rows {
                     if a[..] == [0.0, 1.0] {
                         *b = if steps == 5 { 0.23 } else { -0.03 };
                     }
@@ -860,4 +860,63 @@ fn older_certificates_read_paths_from_the_working_folder() {
     assert!(!out.contains('\u{1b}'), "{out:?}");
     assert!(out.contains("\\u{1b}[2Jdi.ravel"), "{out}");
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A certificate whose nonlinear set claim is false is never VALID: the
+/// checker bounds each constraint `g(x) ≤ 0` with its own interval
+/// arithmetic over its claimed boxes.
+#[test]
+fn a_false_nonlinear_set_claim_is_never_valid() {
+    let spec = "specs/double_integrator_disc_obstacle.ravel";
+    let (plan, cert) = run(spec);
+    assert_eq!(
+        answer(&cert, &plan),
+        Answer::Valid,
+        "the honest certificate"
+    );
+    let props = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties");
+    assert!(
+        props[0]["nonlinear"].is_array(),
+        "the goal's constraint is recorded"
+    );
+    assert!(props[1]["members"][0]["nonlinear"].is_array());
+    // the obstacle moved onto the final reachable set (a disc of radius 5
+    // around the origin): the avoid claim is false
+    let mut moved = cert.clone();
+    let g = &mut moved["problem"]["properties"][1]["members"][0]["nonlinear"][0];
+    let last = g.as_array().expect("tape").len() - 2;
+    g[last] = serde_json::json!(["const", 25.0]);
+    let g = &mut moved["problem"]["properties"][1]["members"][0]["nonlinear"][0];
+    for node in g.as_array_mut().expect("tape") {
+        if node[0] == "const" && node[1] == 1.0 {
+            node[1] = serde_json::json!(0.0);
+        }
+    }
+    match answer(&moved, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("member 0"), "{m}"),
+        other => panic!("a false avoid claim: {other:?}"),
+    }
+    // the goal disc shrunk to radius 0.1 around the origin: the goal claim is false
+    let mut shrunk = cert.clone();
+    let g = &mut shrunk["problem"]["properties"][0]["nonlinear"][0];
+    let n = g.as_array().expect("tape").len();
+    g[n - 2] = serde_json::json!(["const", 0.01]);
+    match answer(&shrunk, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("nonlinear constraint"), "{m}"),
+        other => panic!("a false goal claim: {other:?}"),
+    }
+    // a constraint undefined on the boxes (log of a range through 0) proves nothing
+    let mut undefined = cert.clone();
+    undefined["problem"]["properties"][0]["nonlinear"][0] =
+        serde_json::json!([["var", 1], ["log", 0]]);
+    assert!(
+        matches!(answer(&undefined, &plan), Answer::Invalid(_)),
+        "an undefined constraint"
+    );
+    // a malformed tape is unreadable, not valid
+    let mut malformed = cert;
+    malformed["problem"]["properties"][0]["nonlinear"][0] = serde_json::json!([["add", 3, 4]]);
+    assert!(matches!(answer(&malformed, &plan), Answer::Unreadable(_)));
 }

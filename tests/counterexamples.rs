@@ -389,3 +389,67 @@ fn the_command_line_reports_float32_inputs() {
     assert!(check.status.success() && text.contains("VALID"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The closed loop of a spec text (in `specs/`), executed.
+fn run_system_text(text: &str) -> (ravel::lower::SystemPlan, ravel::execute::SystemOutcome) {
+    let checked = ravel::front_end(
+        text,
+        std::path::Path::new("specs"),
+        &ravel_cli::read_request,
+    )
+    .expect("valid spec");
+    let plan = ravel::lower::lower_system(&checked);
+    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+    (plan, outcome)
+}
+
+/// A simulated state inside a nonlinear avoid set falsifies it only
+/// through confirmation: the validated enclosure of its trajectory must lie
+/// wholly inside the set. A set that contains the simulated state but no
+/// enclosure of it (a constraint defined at that one value only) is UNSURE,
+/// never FALSIFIED; a tiny disc around the same state is FALSIFIED.
+#[test]
+fn a_nonlinear_avoid_set_is_entered_only_through_confirmation() {
+    let text =
+        std::fs::read_to_string("specs/double_integrator_disc_falsified.ravel").expect("spec");
+    let (_, out) = run_system_text(&text);
+    let p = &out.properties[0];
+    assert_eq!(p.status, Verdict::Falsified);
+    let tr = p.counterexample.as_ref().expect("a counterexample");
+    let x = &tr.states[p.step];
+    let (a, b) = (format!("{:?}", x[0]), format!("{:?}", x[1]));
+    let avoid_line = text
+        .lines()
+        .find(|l| l.starts_with("avoid"))
+        .expect("an avoid line");
+    // defined only where x[0] equals the simulated value exactly: the f64
+    // simulation is deep inside (depth 1), no enclosure of positive width is
+    let only_there = format!(
+        "avoid   puck = {{ sqrt(x[0] - {a}) + sqrt({a} - x[0]) <= 1 }} at step {}",
+        p.step
+    );
+    let (_, out) = run_system_text(&text.replace(avoid_line, &only_there));
+    assert_eq!(
+        out.properties[0].status,
+        Verdict::Unsure,
+        "{:?}",
+        out.properties[0]
+    );
+    // a disc of radius 10⁻³ around the simulated state: confirmed
+    let tiny = format!(
+        "avoid   puck = {{ (x[0] - {a})^2 + (x[1] - {b})^2 <= 1e-6 }} at step {}",
+        p.step
+    );
+    let (plan, out) = run_system_text(&text.replace(avoid_line, &tiny));
+    assert_eq!(out.properties[0].status, Verdict::Falsified);
+    let tr = out.properties[0]
+        .counterexample
+        .as_ref()
+        .expect("trajectory");
+    assert!(ravel::execute::certainly_violates(
+        &plan,
+        tr,
+        &plan.properties[0],
+        out.properties[0].step
+    ));
+}

@@ -496,7 +496,9 @@ fn open_loop_output_sets_contain_every_output_and_partitions_only_tighten() {
 #[test]
 fn every_trajectory_stays_inside_what_execute_reports() {
     use ravel::execute::{execute_system, Control};
-    use ravel::lower::{Guide, Partitioner, Property, PropertyKind, SystemPlan};
+    use ravel::lower::{
+        GoalMode, Guide, Partitioner, Property, PropertyKind, StateSet, SystemPlan, Window,
+    };
     use ravel_analysis::partition::Budget;
     use ravel_analysis::sets::Polytope;
 
@@ -586,14 +588,18 @@ fn every_trajectory_stays_inside_what_execute_reports() {
                 properties: vec![
                     Property {
                         name: "G".into(),
-                        kind: PropertyKind::Goal(goal.clone()),
+                        kind: PropertyKind::Goal {
+                            set: StateSet::linear(goal.clone()),
+                            window: Window::at(case.horizon),
+                            mode: GoalMode::Always,
+                        },
                     },
                     // far away: usually VERIFIED, so certificates have evidence
                     Property {
                         name: "far".into(),
                         kind: PropertyKind::Avoid {
-                            members: vec![far.clone()],
-                            steps: (0, case.horizon),
+                            members: vec![StateSet::linear(far.clone())],
+                            window: Window::steps(0, case.horizon),
                         },
                     },
                 ],

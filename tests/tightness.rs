@@ -225,8 +225,8 @@ fn optimised_slopes_tighten_the_double_integrator() {
             .slope_steps = steps;
         if let Some(h) = goal_x1 {
             for q in &mut p.properties {
-                if let PropertyKind::Goal(g) = &mut q.kind {
-                    for (a, b) in &mut g.rows {
+                if let PropertyKind::Goal { set: g, .. } = &mut q.kind {
+                    for (a, b) in &mut g.poly.rows {
                         if a[..] == [0.0, 1.0] {
                             *b = h;
                         }

@@ -764,6 +764,116 @@ fn specs(dir: &Path) -> usize {
     for (name, code, why, rhs) in cases {
         put(name, code, why, &nl(&rhs));
     }
+    // malformed nonlinear sets and time windows (the plant is linear in x)
+    let with = |item: &str| {
+        NONLINEAR
+            .replace("RHS", "-x[0]")
+            .replace("horizon 5", &format!("{item}\nhorizon 5"))
+    };
+    let sets: Vec<(&str, &str, &str, String)> = vec![
+        (
+            "set_parens_deep",
+            "E0216",
+            "a set's inequality nested 100000 deep",
+            with(&format!(
+                "avoid A = {{ {}x[0]{}^2 <= 1 }}",
+                big("(", 100_000),
+                big(")", 100_000)
+            )),
+        ),
+        (
+            "set_pow_chain",
+            "E0216",
+            "a set's inequality with a chain of 100000 powers",
+            with(&format!("avoid A = {{ {}2 <= 1 }}", big("x[0]^", 100_000))),
+        ),
+        (
+            "set_literal_overflow",
+            "E0205",
+            "a literal that overflows f64 in a set",
+            with("avoid A = { x[0]^2 + x[1]^2 <= 1e999 }"),
+        ),
+        (
+            "set_nan_constant",
+            "E0225",
+            "a constant that is NaN (sqrt of a negative) in a set",
+            with("avoid A = { x[0]^2 + sqrt(-1) <= 1 }"),
+        ),
+        (
+            "set_inf_minus_inf",
+            "E0205",
+            "a constant folding to infinity in a set",
+            with("avoid B = { x[0]^2 <= exp(1000) - exp(1000) }"),
+        ),
+        (
+            "set_zero_divisor",
+            "E0224",
+            "a division by the constant 0 in a set",
+            with("avoid A = { x[0]^2 / (1 - 1) <= 1 }"),
+        ),
+        (
+            "set_unknown_vector",
+            "E0101",
+            "a set over the control",
+            with("avoid A = { x[0]^2 + u[0] <= 1 }"),
+        ),
+        (
+            "set_fractional_exponent",
+            "E0223",
+            "a non-integer exponent in a set",
+            with("avoid A = { x[0]^0.5 <= 1 }"),
+        ),
+        (
+            "set_huge_coefficient",
+            "E0216",
+            "an affine inequality whose folded coefficient is beyond the limits",
+            with("avoid A = { 1e10 * 1e10 * x[0] <= 1 }"),
+        ),
+        (
+            "set_nonlinear_initial",
+            "E0228",
+            "a nonlinear initial set",
+            NONLINEAR.replace("RHS", "-x[0]").replace(
+                "initial X0 = box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])",
+                "initial X0 = { x[0]^2 + x[1]^2 <= 1 }",
+            ),
+        ),
+        (
+            "window_overflow",
+            "E0205",
+            "a time window that overflows f64",
+            with("avoid A = { x[0] >= 10 } during [0, 1e999]"),
+        ),
+        (
+            "window_huge",
+            "E0216",
+            "a time window beyond the limits",
+            with("avoid A = { x[0] >= 10 } during [0, 1e308]"),
+        ),
+        (
+            "window_inverted",
+            "E0229",
+            "an inverted time window",
+            with("avoid A = { x[0] >= 10 } during [0.4, 0.1]"),
+        ),
+        (
+            "window_past_horizon",
+            "E0229",
+            "a time beyond the horizon",
+            with("avoid A = { x[0] >= 10 } during [0, 1000000]"),
+        ),
+        (
+            "window_between_instants",
+            "E0229",
+            "a goal at a time between two sampling instants",
+            NONLINEAR
+                .replace("RHS", "-x[0]")
+                .replace("x[1] in [-1.5, 0.5])", "x[1] in [-1.5, 0.5]) at time 0.25"),
+        ),
+    ];
+    for (name, code, why, text) in sets {
+        put(name, code, why, &text);
+    }
     count
 }
 

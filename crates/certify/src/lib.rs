@@ -53,6 +53,7 @@ pub mod bounds;
 mod cover;
 pub mod network;
 pub mod nonlinear;
+pub mod tape;
 
 /// Exact sums of `f64` values for the property tests of directed rounding
 /// (the same file serves the integration tests; each crate uses part of it).
@@ -227,11 +228,88 @@ fn rows(v: &Value, n: usize, what: &str) -> R<Vec<(Vec<f64>, f64)>> {
 
 /// A property as the checker reads it.
 enum Prop {
-    Goal(Vec<(Vec<f64>, f64)>),
-    Avoid {
-        members: Vec<Vec<(Vec<f64>, f64)>>,
+    /// The claimed sets lie in the goal at every step of `steps` (a plain
+    /// goal: the horizon alone), or at some step (`eventually`).
+    Goal {
+        set: CSet,
         steps: (usize, usize),
+        eventually: bool,
+        /// The control periods (the period `p` ends at step `p`) a plant in
+        /// continuous time must spend in the goal too (an always goal).
+        periods: (usize, usize),
     },
+    Avoid {
+        members: Vec<CSet>,
+        steps: (usize, usize),
+        /// The control periods that must miss the set too (continuous time).
+        periods: (usize, usize),
+    },
+}
+
+/// A goal's or avoid member's set: rows `a·x ≤ b` and constraints
+/// `g(x) ≤ 0` (evaluated by [`tape::range`]).
+struct CSet {
+    rows: Rows,
+    nonlinear: Vec<ravel_base::expr::Tape>,
+}
+
+impl CSet {
+    /// Read `{ "rows": …, "nonlinear": [tape, …] }` or a bare array of rows.
+    fn read(v: &Value, n: usize, what: &str) -> R<CSet> {
+        if v.is_array() {
+            return Ok(CSet {
+                rows: rows(v, n, what)?,
+                nonlinear: Vec::new(),
+            });
+        }
+        CSet::read_fields(v, n, what)
+    }
+
+    /// Read the fields `rows` and (optional) `nonlinear` of an object.
+    fn read_fields(v: &Value, n: usize, what: &str) -> R<CSet> {
+        let nonlinear = match v.get("nonlinear") {
+            None => Vec::new(),
+            Some(t) => t
+                .as_array()
+                .ok_or("`nonlinear` must be an array of tapes")?
+                .iter()
+                .map(|t| tape::read(t, n))
+                .collect::<R<Vec<_>>>()?,
+        };
+        Ok(CSet {
+            rows: rows(get(v, "rows")?, n, what)?,
+            nonlinear,
+        })
+    }
+
+    /// Whether the box certainly lies in the set (every row's and every
+    /// constraint's upper bound at most 0; a constraint without an
+    /// enclosure proves nothing).
+    fn holds_on(&self, b: &Bx) -> bool {
+        self.rows
+            .iter()
+            .all(|(a, c)| sum_upper([dot_box_upper(a, &b.lo, &b.hi), -c]) <= 0.0)
+            && self.constraints_hold_on(b)
+    }
+
+    /// Whether every constraint's upper bound over the box is at most 0.
+    fn constraints_hold_on(&self, b: &Bx) -> bool {
+        self.nonlinear
+            .iter()
+            .all(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.hi <= 0.0))
+    }
+
+    /// Whether the box certainly misses the set (one row or one
+    /// constraint has a positive lower bound over it).
+    fn missed_by(&self, b: &Bx) -> bool {
+        self.rows
+            .iter()
+            .any(|(a, c)| sum_lower([dot_box_lower(a, &b.lo, &b.hi), -c]) > 0.0)
+            || self
+                .nonlinear
+                .iter()
+                .any(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.lo > 0.0))
+    }
 }
 
 /// Inequalities `a·x ≤ b`.
@@ -414,7 +492,7 @@ impl Problem {
             })
             .collect::<R<Vec<_>>>()?;
         let initial = read_initial(p, n)?;
-        let props = read_properties(p, n)?;
+        let props = read_properties(p, n, horizon)?;
         let intersample = match p.get("intersample") {
             None | Some(Value::Null) => None,
             Some(v) => {
@@ -469,8 +547,7 @@ impl Problem {
     /// The last step a property constrains.
     fn last_step(&self, p: &Prop) -> usize {
         match p {
-            Prop::Goal(_) => self.horizon,
-            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+            Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
         }
     }
 }
@@ -505,8 +582,8 @@ fn read_initial(p: &Value, n: usize) -> R<Initial> {
     Ok(initial)
 }
 
-/// The properties of a problem over `n` states.
-fn read_properties(p: &Value, n: usize) -> R<Vec<(String, Prop)>> {
+/// The properties of a problem over `n` states and `horizon` steps.
+fn read_properties(p: &Value, n: usize, horizon: usize) -> R<Vec<(String, Prop)>> {
     get(p, "properties")?
         .as_array()
         .ok_or("`properties` must be an array")?
@@ -516,23 +593,81 @@ fn read_properties(p: &Value, n: usize) -> R<Vec<(String, Prop)>> {
                 .as_str()
                 .ok_or("`name` must be a string")?
                 .to_string();
+            let steps_of = |s: &Value| -> R<(usize, usize)> {
+                let steps = (
+                    uint(get(s, "first")?, "steps.first")?,
+                    uint(get(s, "last")?, "steps.last")?,
+                );
+                if steps.0 > steps.1 {
+                    return Err("`steps.first` is after `steps.last`".into());
+                }
+                Ok(steps)
+            };
+            // the periods: recorded when not those between the first and
+            // the last step
+            let periods = |steps: (usize, usize)| -> R<(usize, usize)> {
+                match pr.get("periods") {
+                    None => Ok((steps.0 + 1, steps.1)),
+                    Some(s) => Ok((
+                        uint(get(s, "first")?, "periods.first")?,
+                        uint(get(s, "last")?, "periods.last")?,
+                    )),
+                }
+            };
             let kind = match get(pr, "kind")?.as_str() {
-                Some("goal") => Prop::Goal(rows(get(pr, "rows")?, n, "goal rows")?),
+                Some("goal") => Prop::Goal {
+                    set: CSet::read_fields(pr, n, "goal rows")?,
+                    steps: match pr.get("steps") {
+                        None => (horizon, horizon),
+                        Some(s) => {
+                            let steps = steps_of(s)?;
+                            if steps.1 > horizon {
+                                return Err("a goal's steps go beyond the horizon".into());
+                            }
+                            steps
+                        }
+                    },
+                    eventually: match pr.get("mode").map(Value::as_str) {
+                        None | Some(Some("always")) => false,
+                        Some(Some("eventually")) => true,
+                        _ => return Err("`mode` must be \"always\" or \"eventually\"".into()),
+                    },
+                    periods: (0, 0),
+                },
                 Some("avoid") => {
-                    let s = get(pr, "steps")?;
-                    let steps = (
-                        uint(get(s, "first")?, "steps.first")?,
-                        uint(get(s, "last")?, "steps.last")?,
-                    );
+                    let steps = steps_of(get(pr, "steps")?)?;
                     let members = get(pr, "members")?
                         .as_array()
                         .ok_or("`members` must be an array")?
                         .iter()
-                        .map(|mb| rows(mb, n, "avoid rows"))
+                        .map(|mb| CSet::read(mb, n, "avoid rows"))
                         .collect::<R<Vec<_>>>()?;
-                    Prop::Avoid { members, steps }
+                    Prop::Avoid {
+                        members,
+                        steps,
+                        periods: periods(steps)?,
+                    }
                 }
                 _ => return Err("`kind` must be \"goal\" or \"avoid\"".to_string()),
+            };
+            // a goal's periods follow its steps
+            let kind = match kind {
+                Prop::Goal {
+                    set,
+                    steps,
+                    eventually,
+                    ..
+                } => Prop::Goal {
+                    set,
+                    steps,
+                    eventually,
+                    periods: if eventually || pr.get("steps").is_none() {
+                        (1, 0)
+                    } else {
+                        periods(steps)?
+                    },
+                },
+                avoid => avoid,
             };
             Ok((name, kind))
         })
@@ -1064,7 +1199,12 @@ fn cell_proves(
     let shown = ravel_base::text::sanitize(name);
     let sets = &chain.sets;
     match prop {
-        Prop::Goal(g) => {
+        Prop::Goal {
+            set,
+            steps,
+            eventually: false,
+            ..
+        } if *steps == (problem.horizon, problem.horizon) => {
             // the evidence covers the horizon when a goal is verified
             let Some(last) = sets.get(problem.horizon) else {
                 return Err(Error::Invalid(format!(
@@ -1077,7 +1217,7 @@ fn cell_proves(
                 rows: &chain.last_rows,
                 duals: &duals,
             };
-            for (r, (a, b)) in g.iter().enumerate() {
+            for (r, (a, b)) in set.rows.iter().enumerate() {
                 let top = if chain.last_rows.is_empty() {
                     dot_box_upper(a, &last.lo, &last.hi)
                 } else {
@@ -1092,8 +1232,47 @@ fn cell_proves(
                     )));
                 }
             }
+            if !set.constraints_hold_on(last) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: the checker cannot show that a nonlinear constraint holds on cell {c}'s set at step {}",
+                    problem.horizon
+                )));
+            }
         }
-        Prop::Avoid { members, steps: s } => {
+        Prop::Goal {
+            set,
+            steps: s,
+            eventually,
+            ..
+        } => {
+            let window = || {
+                sets.iter()
+                    .enumerate()
+                    .take(problem.last_step(prop) + 1)
+                    .skip(s.0)
+            };
+            if window().count() != s.1.min(problem.horizon) + 1 - s.0.min(s.1) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: cell {c} has no set at some step of {}..={}",
+                    s.0, s.1
+                )));
+            }
+            if *eventually {
+                if !window().any(|(_, b)| set.holds_on(b)) {
+                    return Err(Error::Invalid(format!(
+                        "goal `{shown}`: no set of cell {c} at steps {}..={} lies in the goal",
+                        s.0, s.1
+                    )));
+                }
+            } else if let Some((t, _)) = window().find(|(_, b)| !set.holds_on(b)) {
+                return Err(Error::Invalid(format!(
+                    "goal `{shown}`: cell {c}'s set at step {t} is not shown to lie in the goal"
+                )));
+            }
+        }
+        Prop::Avoid {
+            members, steps: s, ..
+        } => {
             for (t, set) in sets
                 .iter()
                 .enumerate()
@@ -1101,39 +1280,42 @@ fn cell_proves(
                 .skip(s.0)
             {
                 for (k, mb) in members.iter().enumerate() {
-                    let separated = mb
-                        .iter()
-                        .any(|(a, b)| sum_lower([dot_box_lower(a, &set.lo, &set.hi), -b]) > 0.0);
-                    if !separated {
+                    if !mb.missed_by(set) {
                         return Err(Error::Invalid(format!(
                             "avoid `{shown}`: no inequality of member {k} separates cell {c}'s set at step {t} from it"
                         )));
                     }
                 }
-                // continuous time: the period ending at step t, when t − 1
-                // is in the window, by the checker's own flow
-                let before = t.checked_sub(1).and_then(|p| sets.get(p));
-                if let (Some(flows), Some(before), true) = (&problem.intersample, before, t > s.0) {
-                    let pipe = nonlinear::intersample(flows, t - 1, &problem.obs, &problem.v, net, before)
-                        .ok_or_else(|| {
-                            Error::Invalid(format!(
-                                "avoid `{shown}`: the checker cannot enclose cell {c}'s states between steps {} and {t}",
-                                t - 1
-                            ))
-                        })?;
-                    for (k, mb) in members.iter().enumerate() {
-                        let separated = mb.iter().any(|(a, b)| {
-                            sum_lower([dot_box_lower(a, &pipe.lo, &pipe.hi), -b]) > 0.0
-                        });
-                        if !separated {
-                            return Err(Error::Invalid(format!(
-                                "avoid `{shown}`: no inequality of member {k} separates cell {c}'s states between steps {} and {t} from it",
-                                t - 1
-                            )));
-                        }
-                    }
-                }
             }
+        }
+    }
+    // continuous time: the control periods of the window, by the
+    // checker's own flow from the claimed box before each
+    let (Some(flows), Prop::Goal { periods, .. } | Prop::Avoid { periods, .. }) =
+        (&problem.intersample, prop)
+    else {
+        return Ok(());
+    };
+    for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
+        let Some(before) = sets.get(p - 1) else {
+            continue;
+        };
+        let pipe = nonlinear::intersample(flows, p - 1, &problem.obs, &problem.v, net, before)
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "`{shown}`: the checker cannot enclose cell {c}'s states between steps {} and {p}",
+                    p - 1
+                ))
+            })?;
+        let fine = match prop {
+            Prop::Goal { set, .. } => set.holds_on(&pipe),
+            Prop::Avoid { members, .. } => members.iter().all(|mb| mb.missed_by(&pipe)),
+        };
+        if !fine {
+            return Err(Error::Invalid(format!(
+                "`{shown}`: cell {c}'s states between steps {} and {p} are not shown to satisfy it",
+                p - 1
+            )));
         }
     }
     Ok(())
@@ -1237,9 +1419,35 @@ fn replay(
     if !problem.initial.contains(&x0) {
         return Ok(Err("starts outside the initial set".into()));
     }
+    let (first, eventually) = match prop {
+        Prop::Goal {
+            steps, eventually, ..
+        } => (steps.0, *eventually),
+        Prop::Avoid { steps, .. } => (steps.0, false),
+    };
+    // an "eventually" goal is violated only outside at every step of its window
+    let last = if eventually {
+        problem.last_step(prop)
+    } else {
+        step
+    };
+    if !(first <= step && step <= problem.last_step(prop)) {
+        return Ok(Err(format!(
+            "does not certainly violate the property at step {step}: the property does not apply there"
+        )));
+    }
+    if ws.len() < last || vs.len() < last {
+        return Err(format!(
+            "the trajectory has noise for fewer than {last} steps"
+        ));
+    }
     let mut x = Bx::point(&x0);
-    // (both lists have at least `step` entries)
-    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+    let mut window = Vec::new();
+    // (both lists have at least `last` entries)
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
+        if t >= first {
+            window.push(x.clone());
+        }
         let w = vector(w, n, "process_noise")?;
         let v = vector(v, q, "sensor_noise")?;
         if !problem.w.contains(&w) {
@@ -1255,20 +1463,11 @@ fn replay(
             None => return Ok(Err(format!("overflows at step {}", t + 1))),
         }
     }
+    window.push(x.clone());
     let violated = match prop {
-        Prop::Goal(g) => {
-            step == problem.horizon
-                && g.iter()
-                    .any(|(a, b)| sum_lower([dot_box_lower(a, &x.lo, &x.hi), -b]) > 0.0)
-        }
-        Prop::Avoid { members, steps } => {
-            steps.0 <= step
-                && step <= problem.last_step(prop)
-                && members.iter().any(|mb| {
-                    mb.iter()
-                        .all(|(a, b)| sum_upper([dot_box_upper(a, &x.lo, &x.hi), -b]) <= 0.0)
-                })
-        }
+        Prop::Goal { set, .. } if eventually => window.iter().all(|b| set.missed_by(b)),
+        Prop::Goal { set, .. } => set.missed_by(&x),
+        Prop::Avoid { members, .. } => members.iter().any(|mb| mb.holds_on(&x)),
     };
     Ok(if violated {
         Ok(())

@@ -27,7 +27,7 @@ use ravel_analysis::feedback::Loop as AnyLoop;
 use ravel_analysis::nonlinear::NonlinearLoop;
 
 use crate::execute::{Run, SystemOutcome, Trajectory, Verdict};
-use crate::lower::{Plan, PropertyKind, SystemPlan};
+use crate::lower::{GoalMode, Plan, PropertyKind, StateSet, SystemPlan, Window};
 use ravel_analysis::lp;
 use ravel_analysis::sets::{IBox, Region};
 use ravel_base::nn::{Layer, Network};
@@ -115,24 +115,9 @@ pub fn system_problem_json(plan: &SystemPlan) -> Value {
 
 /// A nonlinear loop's problem: the plant's tape instead of matrices.
 fn nonlinear_problem_json(plan: &SystemPlan, nl: &NonlinearLoop) -> Value {
-    use ravel_base::expr::{Node, Time};
+    use ravel_base::expr::Time;
     let f = &nl.plant.field;
-    let nodes: Vec<Value> = f
-        .tape
-        .nodes
-        .iter()
-        .map(|n| match *n {
-            Node::Const(c) => json!(["const", c]),
-            Node::Var(i) => json!(["var", i]),
-            Node::Neg(a) => json!(["neg", a]),
-            Node::Add(a, b) => json!(["add", a, b]),
-            Node::Sub(a, b) => json!(["sub", a, b]),
-            Node::Mul(a, b) => json!(["mul", a, b]),
-            Node::Div(a, b) => json!(["div", a, b]),
-            Node::Powi(a, k) => json!(["powi", a, k]),
-            Node::Func(g, a) => json!([g.name(), a]),
-        })
-        .collect();
+    let nodes = tape_json(&f.tape);
     let time = match f.time {
         Time::Continuous { period } => json!({ "continuous": period }),
         Time::Discrete => json!("discrete"),
@@ -171,21 +156,80 @@ fn initial_json(initial: &Region) -> Value {
     }
 }
 
-/// The properties as a certificate records them.
+/// A tape's nodes as a certificate records them: `["const", c]`,
+/// `["var", i]`, `["neg", a]`, `["add", a, b]` (likewise `sub`, `mul`,
+/// `div`), `["powi", a, k]`, `["sin", a]` (any function by its name).
+fn tape_json(tape: &ravel_base::expr::Tape) -> Value {
+    use ravel_base::expr::Node;
+    Value::Array(
+        tape.nodes
+            .iter()
+            .map(|n| match *n {
+                Node::Const(c) => json!(["const", c]),
+                Node::Var(i) => json!(["var", i]),
+                Node::Neg(a) => json!(["neg", a]),
+                Node::Add(a, b) => json!(["add", a, b]),
+                Node::Sub(a, b) => json!(["sub", a, b]),
+                Node::Mul(a, b) => json!(["mul", a, b]),
+                Node::Div(a, b) => json!(["div", a, b]),
+                Node::Powi(a, k) => json!(["powi", a, k]),
+                Node::Func(g, a) => json!([g.name(), a]),
+            })
+            .collect(),
+    )
+}
+
+/// A goal's or avoid member's set: its rows; with nonlinear constraints,
+/// `{ "rows": …, "nonlinear": [tape, …] }` (each `g(x) ≤ 0`, `g` the
+/// tape's last node).
+fn set_json(set: &StateSet) -> Value {
+    if set.nonlinear.is_empty() {
+        ineq_json(&set.poly.rows)
+    } else {
+        json!({
+            "rows": ineq_json(&set.poly.rows),
+            "nonlinear": set.nonlinear.iter().map(tape_json).collect::<Vec<_>>(),
+        })
+    }
+}
+
+/// The properties as a certificate records them. A goal records its
+/// steps and mode only when it is not the plain goal at the horizon, and
+/// a property its periods (between instants, for continuous-time
+/// nonlinear plants) only when they are not the ones between its steps.
 fn properties_json(plan: &SystemPlan) -> Value {
     let properties: Vec<Value> = plan
         .properties
         .iter()
-        .map(|p| match &p.kind {
-            PropertyKind::Goal(g) => {
-                json!({ "name": p.name, "kind": "goal", "rows": ineq_json(&g.rows) })
+        .map(|p| {
+            let window = p.window();
+            let mut v = match &p.kind {
+                PropertyKind::Goal { set, mode, .. } => {
+                    let mut v = json!({ "name": p.name, "kind": "goal" });
+                    v["rows"] = ineq_json(&set.poly.rows);
+                    if !set.nonlinear.is_empty() {
+                        v["nonlinear"] =
+                            json!(set.nonlinear.iter().map(tape_json).collect::<Vec<_>>());
+                    }
+                    if window != Window::at(plan.horizon) {
+                        v["steps"] = json!({ "first": window.steps.0, "last": window.steps.1 });
+                    }
+                    if *mode == GoalMode::Eventually {
+                        v["mode"] = json!("eventually");
+                    }
+                    v
+                }
+                PropertyKind::Avoid { members, .. } => json!({
+                    "name": p.name,
+                    "kind": "avoid",
+                    "steps": { "first": window.steps.0, "last": window.steps.1 },
+                    "members": members.iter().map(set_json).collect::<Vec<_>>(),
+                }),
+            };
+            if window.periods != Window::steps(window.steps.0, window.steps.1).periods {
+                v["periods"] = json!({ "first": window.periods.0, "last": window.periods.1 });
             }
-            PropertyKind::Avoid { members, steps } => json!({
-                "name": p.name,
-                "kind": "avoid",
-                "steps": { "first": steps.0, "last": steps.1 },
-                "members": members.iter().map(|m| ineq_json(&m.rows)).collect::<Vec<_>>(),
-            }),
+            v
         })
         .collect();
     Value::Array(properties)
@@ -557,10 +601,10 @@ fn derive_cell(
             .properties
             .iter()
             .filter_map(|p| match &p.kind {
-                PropertyKind::Goal(g) => Some(g),
+                PropertyKind::Goal { set, .. } => Some(set),
                 PropertyKind::Avoid { .. } => None,
             })
-            .flat_map(|g| g.rows.iter())
+            .flat_map(|g| g.poly.rows.iter())
             .map(|(a, _)| lp::maximize_dual(a, &prev_rows, &set.lo, &set.hi).unwrap_or_default())
             .collect();
         cell["goal_duals"] = json!(goal_duals);

@@ -6,6 +6,7 @@
 
 use ravel_analysis::partition::Budget;
 use ravel_analysis::sets::{Norm, Polytope};
+use ravel_base::expr::Tape;
 
 /// What guides a refining partitioner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -90,17 +91,98 @@ impl NetPropagator {
     }
 }
 
+/// A set of states a property refers to: the intersection of linear rows
+/// `H x ≤ h` and nonlinear constraints `g(x) ≤ 0`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StateSet {
+    /// The linear rows (every affine inequality of the spec).
+    pub poly: Polytope,
+    /// The constraints `g(x) ≤ 0`: `g` is the last node of each tape, over
+    /// the state `x` (variables `0 … n−1`).
+    pub nonlinear: Vec<Tape>,
+}
+
+impl StateSet {
+    /// A set of linear rows only.
+    pub fn linear(poly: Polytope) -> StateSet {
+        StateSet {
+            poly,
+            nonlinear: Vec::new(),
+        }
+    }
+}
+
+/// When a property applies: sampling instants, and the control periods
+/// between them where a plant has intersample enclosures (continuous-time
+/// nonlinear plants; period `p` runs from step `p − 1` to step `p`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    /// First and last step (inclusive, clipped to the horizon).
+    pub steps: (usize, usize),
+    /// First and last period (inclusive); empty when the first is larger.
+    pub periods: (usize, usize),
+}
+
+impl Window {
+    /// Steps `a` to `b` and the periods between them (`a + 1 … b`).
+    pub fn steps(a: usize, b: usize) -> Window {
+        Window {
+            steps: (a, b),
+            periods: (a + 1, b),
+        }
+    }
+
+    /// Step `k` alone (no period).
+    pub fn at(k: usize) -> Window {
+        Window {
+            steps: (k, k),
+            periods: (k + 1, k),
+        }
+    }
+
+    /// Whether period `p` (ending at step `p`) lies in the window.
+    pub fn has_period(&self, p: usize) -> bool {
+        self.periods.0 <= p && p <= self.periods.1
+    }
+
+    /// The last step the window needs (a period ends at its step).
+    pub fn last(&self) -> usize {
+        if self.periods.0 <= self.periods.1 {
+            self.steps.1.max(self.periods.1)
+        } else {
+            self.steps.1
+        }
+    }
+}
+
+/// Whether a goal holds at every instant of its window or at some instant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GoalMode {
+    /// `goal` (at the horizon), `at time T`, `always during […]`.
+    Always,
+    /// `eventually during […]`.
+    Eventually,
+}
+
 /// What a property demands.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PropertyKind {
-    /// The final reachable set lies in this set.
-    Goal(Polytope),
-    /// No reachable set at these steps touches any member.
+    /// The reachable set lies in this set at every step of the window
+    /// (and over every period of it), or at some step of it.
+    Goal {
+        /// The goal set.
+        set: StateSet,
+        /// When (a plain goal: the horizon alone).
+        window: Window,
+        /// Always or eventually.
+        mode: GoalMode,
+    },
+    /// No reachable set in the window touches any member.
     Avoid {
         /// The union's members.
-        members: Vec<Polytope>,
-        /// First and last step (inclusive, clipped to the horizon).
-        steps: (usize, usize),
+        members: Vec<StateSet>,
+        /// When.
+        window: Window,
     },
 }
 
@@ -114,11 +196,15 @@ pub struct Property {
 }
 
 impl Property {
-    /// The last step the property constrains (the horizon for a goal).
+    /// The last step the property constrains.
     pub fn last_step(&self) -> usize {
+        self.window().last()
+    }
+
+    /// When the property applies.
+    pub fn window(&self) -> Window {
         match &self.kind {
-            PropertyKind::Goal(_) => usize::MAX,
-            PropertyKind::Avoid { steps, .. } => steps.1,
+            PropertyKind::Goal { window, .. } | PropertyKind::Avoid { window, .. } => *window,
         }
     }
 }

@@ -7,14 +7,13 @@
 //! turns goal and avoid sets into properties over the steps they constrain.
 
 use crate::check::{Checked, NetworkChecked, PlantSpec, Task};
-pub use crate::ir::{Guide, Partitioner, Property, PropertyKind};
+pub use crate::ir::{GoalMode, Guide, Partitioner, Property, PropertyKind, StateSet, Window};
 use nalgebra::DMatrix;
 use ravel_analysis::closed_loop::{Boundary, ClosedLoop, Plant, Propagator};
 use ravel_analysis::feedback::Loop;
 use ravel_analysis::nonlinear::linear_field;
-use ravel_analysis::nonlinear::NonlinearLoop;
+use ravel_analysis::nonlinear::{NonlinearLoop, NonlinearPlant};
 use ravel_analysis::sets::{IBox, Region};
-use ravel_base::expr::VectorField;
 use ravel_base::nn::{Layer, Network};
 
 /// Everything the executor needs to run a task, as plain data: one variant
@@ -180,8 +179,9 @@ pub struct Intersample {
     pub period: f64,
     /// The plants before discretisation (one per step, or one).
     pub plants: Vec<Plant>,
-    /// Their vector fields `ẋ = A x + B u + c`.
-    pub fields: Vec<VectorField>,
+    /// Their loops `ẋ = A x + B u + c` with the controller (no
+    /// disturbance: the noise `w` arrives at the next instant).
+    pub loops: Vec<NonlinearLoop>,
 }
 
 /// Lower a checked closed-loop spec to its plan.
@@ -189,17 +189,21 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
     let net = folded_network(c);
     let closed_loop = match &c.plant {
         PlantSpec::Linear(plants) => Loop::Linear(Box::new(
-            ClosedLoop::time_varying(plants.clone(), net).with_slope_steps(c.slope_steps),
+            ClosedLoop::time_varying(plants.clone(), net.clone()).with_slope_steps(c.slope_steps),
         )),
         PlantSpec::Nonlinear(p) => Loop::Nonlinear(Box::new(
-            NonlinearLoop::new(p.clone(), net).with_slope_steps(c.slope_steps),
+            NonlinearLoop::new(p.clone(), net.clone()).with_slope_steps(c.slope_steps),
         )),
     };
     let mut properties = Vec::new();
     if let Some(g) = &c.goal {
         properties.push(Property {
             name: g.name.clone(),
-            kind: PropertyKind::Goal(g.set.clone()),
+            kind: PropertyKind::Goal {
+                set: g.set.clone(),
+                window: clipped(g.window, c.horizon),
+                mode: g.mode,
+            },
         });
     }
     for a in &c.avoids {
@@ -207,16 +211,24 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
             name: a.name.clone(),
             kind: PropertyKind::Avoid {
                 members: a.members.clone(),
-                steps: (a.steps.0, a.steps.1.min(c.horizon)),
+                window: clipped(a.window, c.horizon),
             },
         });
     }
     let intersample = match (&c.continuous, c.dt) {
         (Some(plants), Some(dt)) => Some(Intersample {
             period: dt,
-            fields: plants
+            loops: plants
                 .iter()
-                .map(|p| linear_field(&p.a, &p.b, p.c.as_slice(), dt))
+                .map(|p| {
+                    let plant = NonlinearPlant {
+                        field: linear_field(&p.a, &p.b, p.c.as_slice(), dt),
+                        w: IBox::new(Vec::new(), Vec::new()),
+                        obs: p.obs.clone(),
+                        v: p.v.clone(),
+                    };
+                    NonlinearLoop::new(plant, net.clone()).with_slope_steps(c.slope_steps)
+                })
                 .collect(),
             plants: plants.clone(),
         }),
@@ -315,5 +327,13 @@ pub fn lower_network(c: &NetworkChecked) -> NetworkPlan {
         samples: c.samples,
         seed: c.seed,
         slope_steps: c.slope_steps,
+    }
+}
+
+/// A window clipped to the horizon `h`.
+fn clipped(w: Window, h: usize) -> Window {
+    Window {
+        steps: (w.steps.0.min(h), w.steps.1.min(h)),
+        periods: (w.periods.0, w.periods.1.min(h)),
     }
 }

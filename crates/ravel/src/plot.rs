@@ -268,8 +268,8 @@ fn properties(v: &View, plan: &SystemPlan, (i, j): (usize, usize)) -> (String, b
     let mut dropped = false;
     for p in &plan.properties {
         let (members, style) = match &p.kind {
-            PropertyKind::Goal(g) => (
-                vec![g],
+            PropertyKind::Goal { set, .. } => (
+                vec![set],
                 "fill=\"#2e7d32\" fill-opacity=\"0.15\" stroke=\"#2e7d32\"",
             ),
             PropertyKind::Avoid { members, .. } => (
@@ -278,8 +278,9 @@ fn properties(v: &View, plan: &SystemPlan, (i, j): (usize, usize)) -> (String, b
             ),
         };
         for m in members {
-            let (rows, d) = planar(&m.rows, i, j);
-            dropped |= d;
+            let (rows, d) = planar(&m.poly.rows, i, j);
+            // nonlinear constraints are not drawn: the shape shown contains the set
+            dropped |= d || !m.nonlinear.is_empty();
             let poly = clip(&window, &rows);
             if poly.len() >= 3 {
                 s += &format!("<!-- {} -->\n", xml(&p.name));

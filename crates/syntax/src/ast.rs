@@ -316,7 +316,7 @@ pub enum Value {
 }
 
 /// A named set definition.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct SetDef {
     /// The set's name.
     pub name: Spanned<String>,
@@ -324,10 +324,51 @@ pub struct SetDef {
     pub set: Spanned<SetExpr>,
     /// The whole item.
     pub span: Span,
+    /// A goal's time clause (`at time T`, `always during […]`,
+    /// `eventually during […]`); absent: at the horizon (and always for
+    /// other sets).
+    pub when: Option<Spanned<GoalWhen>>,
+}
+
+// Written out so that a set without a time clause prints as it did before
+// the clause existed (the parse snapshots of every spec stay the same).
+impl fmt::Debug for SetDef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut d = f.debug_struct("SetDef");
+        d.field("name", &self.name)
+            .field("set", &self.set)
+            .field("span", &self.span);
+        if let Some(w) = &self.when {
+            d.field("when", w);
+        }
+        d.finish()
+    }
+}
+
+/// When a goal applies, in seconds of the plant's time.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GoalWhen {
+    /// `at time T`: at the sampling instant `T`.
+    AtTime(Spanned<f64>),
+    /// `always during [t0, t1]`: at every instant of the window.
+    Always(Window),
+    /// `eventually during [t0, t1]`: at some instant of the window.
+    Eventually(Window),
+}
+
+/// `during [t0, t1]`: a window of time in seconds, both ends included.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Window {
+    /// The first time.
+    pub t0: Spanned<f64>,
+    /// The last time.
+    pub t1: Spanned<f64>,
+    /// The whole `during [t0, t1]`.
+    pub span: Span,
 }
 
 /// An avoid-set definition.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct AvoidDef {
     /// The set's name.
     pub name: Spanned<String>,
@@ -337,6 +378,23 @@ pub struct AvoidDef {
     pub steps: Option<Spanned<(u64, u64)>>,
     /// The whole item.
     pub span: Span,
+    /// `during [t0, t1]`: the window of time in seconds instead of steps.
+    pub during: Option<Window>,
+}
+
+// Written out so that an avoid set without `during` prints as before.
+impl fmt::Debug for AvoidDef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut d = f.debug_struct("AvoidDef");
+        d.field("name", &self.name)
+            .field("set", &self.set)
+            .field("steps", &self.steps)
+            .field("span", &self.span);
+        if let Some(w) = &self.during {
+            d.field("during", w);
+        }
+        d.finish()
+    }
 }
 
 /// A union of basic sets (one member for a plain set).
@@ -355,6 +413,31 @@ pub enum SetAtom {
     Polytope(Vec<Constraint>),
     /// `ball(center […], radius …, norm p)`
     Ball(BallSet),
+    /// `{ … }` with at least one inequality between expressions (a set
+    /// whose rows are all linear in the written form is a `Polytope`).
+    Inequalities(Vec<SetRow>),
+}
+
+/// One inequality of a set `{ … }`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SetRow {
+    /// `Σ coef·x[i] (<= | >=) rhs`
+    Linear(Constraint),
+    /// `expr (<= | >=) expr`
+    General(Inequality),
+}
+
+/// `lhs (<= | >=) rhs` between two expressions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Inequality {
+    /// The left-hand side.
+    pub lhs: Spanned<Expr>,
+    /// The comparison.
+    pub cmp: Cmp,
+    /// The right-hand side.
+    pub rhs: Spanned<Expr>,
+    /// The whole inequality.
+    pub span: Span,
 }
 
 /// An ℓp ball as written.

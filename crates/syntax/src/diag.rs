@@ -82,6 +82,10 @@ pub enum Code {
     NotAffine,
     /// E0227: a mix of plant forms: `der` with `next`, with the wrong time, or with `A`, `B`, `c`; `C` with `observe`.
     PlantKind,
+    /// E0228: an inequality that is not affine in a set that must be linear (initial sets, network specs).
+    NonlinearSet,
+    /// E0229: a time window or time that cannot be used (no time step, not finite, inverted, beyond the horizon, not a sampling instant, no sampling instant inside).
+    TimeWindow,
     /// E0301: the controller file cannot be read.
     ControllerUnreadable,
     /// E0302: the controller file is not an ONNX model.
@@ -102,7 +106,7 @@ pub enum Code {
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 43] = [
+    pub const ALL: [Code; 45] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -138,6 +142,8 @@ impl Code {
         Code::Undefined,
         Code::NotAffine,
         Code::PlantKind,
+        Code::NonlinearSet,
+        Code::TimeWindow,
         Code::ControllerUnreadable,
         Code::NotOnnx,
         Code::UnsupportedOnnx,
@@ -186,6 +192,8 @@ impl Code {
             Code::Undefined => "E0225",
             Code::NotAffine => "E0226",
             Code::PlantKind => "E0227",
+            Code::NonlinearSet => "E0228",
+            Code::TimeWindow => "E0229",
             Code::ControllerUnreadable => "E0301",
             Code::NotOnnx => "E0302",
             Code::UnsupportedOnnx => "E0303",

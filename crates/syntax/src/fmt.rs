@@ -50,7 +50,9 @@ enum Tok {
 }
 
 /// Words after which a `[` is a list, not an index.
-const LIST_WORDS: [&str; 6] = ["in", "steps", "uniform", "polytope", "center", "radius"];
+const LIST_WORDS: [&str; 7] = [
+    "in", "steps", "uniform", "polytope", "center", "radius", "during",
+];
 
 fn lex(src: &str) -> Vec<Tok> {
     let chars: Vec<char> = src.chars().collect();

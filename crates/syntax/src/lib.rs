@@ -83,6 +83,12 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::named_intervals | Rule::named_interval | Rule::intervals => "an interval",
         Rule::interval => "an interval `[lo, hi]`",
         Rule::constraint | Rule::lin_expr | Rule::first_term | Rule::term => "a linear inequality",
+        Rule::inequality => "an inequality `expr <= expr`",
+        Rule::at_time => "`at time T`",
+        Rule::always_during | Rule::eventually_during => {
+            "`always during [t0, t1]` or `eventually during [t0, t1]`"
+        }
+        Rule::during => "`during [t0, t1]`",
         Rule::cmp => "`<=` or `>=`",
         Rule::component => "a component such as `x[0]`",
         Rule::ident => "a name",
@@ -386,7 +392,32 @@ impl Builder {
     fn set_def(&mut self, s: Span, inner: &mut Children) -> SetDef {
         let name = self.ident(child(inner, "set name"));
         let set = self.set_expr(child(inner, "set"));
-        SetDef { name, set, span: s }
+        let when = inner.next().map(|w| {
+            let ws = span(&w);
+            let rule = w.as_rule();
+            let arg = child(&mut w.into_inner(), "time clause");
+            let node = match rule {
+                Rule::at_time => GoalWhen::AtTime(self.number(arg)),
+                Rule::always_during => GoalWhen::Always(self.window(arg)),
+                _ => GoalWhen::Eventually(self.window(arg)),
+            };
+            Spanned { node, span: ws }
+        });
+        SetDef {
+            name,
+            set,
+            span: s,
+            when,
+        }
+    }
+
+    /// `during [t0, t1]`.
+    fn window(&mut self, p: P) -> Window {
+        let ws = span(&p);
+        let mut it = p.into_inner();
+        let t0 = self.number(child(&mut it, "window start"));
+        let t1 = self.number(child(&mut it, "window end"));
+        Window { t0, t1, span: ws }
     }
 
     /// An `avoid` item spanning `s`: `NAME = set`, then optionally the
@@ -394,12 +425,20 @@ impl Builder {
     fn avoid(&mut self, s: Span, mut inner: Children) -> AvoidDef {
         let name = self.ident(child(&mut inner, "set name"));
         let set = self.set_expr(child(&mut inner, "set"));
-        let steps = inner.next().map(|st| self.steps(st));
+        let (mut steps, mut during) = (None, None);
+        if let Some(st) = inner.next() {
+            if st.as_rule() == Rule::during {
+                during = Some(self.window(st));
+            } else {
+                steps = Some(self.steps(st));
+            }
+        }
         AvoidDef {
             name,
             set,
             steps,
             span: s,
+            during,
         }
     }
 
@@ -772,7 +811,25 @@ impl Builder {
                 let node = match a.as_rule() {
                     Rule::box_set => SetAtom::Box(self.box_set(a)),
                     Rule::polytope => {
-                        SetAtom::Polytope(a.into_inner().map(|c| self.constraint(c)).collect())
+                        let rows: Vec<SetRow> = a
+                            .into_inner()
+                            .map(|c| match c.as_rule() {
+                                Rule::constraint => SetRow::Linear(self.constraint(c)),
+                                _ => SetRow::General(self.inequality(c)),
+                            })
+                            .collect();
+                        if rows.iter().all(|r| matches!(r, SetRow::Linear(_))) {
+                            SetAtom::Polytope(
+                                rows.into_iter()
+                                    .filter_map(|r| match r {
+                                        SetRow::Linear(c) => Some(c),
+                                        SetRow::General(_) => None,
+                                    })
+                                    .collect(),
+                            )
+                        } else {
+                            SetAtom::Inequalities(rows)
+                        }
                     }
                     Rule::ball => {
                         let mut it = a.into_inner();
@@ -898,6 +955,24 @@ impl Builder {
         }
     }
 
+    /// `lhs (<= | >=) rhs` between two expressions.
+    fn inequality(&mut self, p: P) -> Inequality {
+        let s = span(&p);
+        let mut it = p.into_inner();
+        let lhs = self.expr(child(&mut it, "left-hand side"));
+        let cmp = match child(&mut it, "comparison").as_str() {
+            "<=" => Cmp::Le,
+            _ => Cmp::Ge,
+        };
+        let rhs = self.expr(child(&mut it, "right-hand side"));
+        Inequality {
+            lhs,
+            cmp,
+            rhs,
+            span: s,
+        }
+    }
+
     /// `(name value, …)` budget items.
     fn budget(&mut self, b: P) -> Vec<(Spanned<String>, Spanned<f64>)> {
         b.into_inner()
@@ -981,6 +1056,55 @@ mod tests {
             Item::Avoid(a) => a.set.node.clone(),
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn inequalities_between_expressions_and_time_clauses() {
+        // the linear form stays a polytope, spans as before (no trailing space)
+        let set = avoid_set("avoid A = { x[0] <= 2 , x[1] >= -1 }\n");
+        let SetAtom::Polytope(cs) = &set.members[0].node else {
+            panic!("polytope expected: {set:?}")
+        };
+        assert_eq!((cs[0].span.start, cs[0].span.end), (12, 21));
+        // an expression on either side makes the whole set general, row by row
+        let set =
+            avoid_set("avoid A = { (x[0] - 1)^2 + x[1]^2 <= 0.25, x[0] <= 2, y[1] >= y[0] }\n");
+        let SetAtom::Inequalities(rows) = &set.members[0].node else {
+            panic!("inequalities expected: {set:?}")
+        };
+        assert!(matches!(rows[0], SetRow::General(_)));
+        assert!(matches!(rows[1], SetRow::Linear(_)));
+        let SetRow::General(g) = &rows[2] else {
+            panic!("{rows:?}")
+        };
+        assert_eq!(g.cmp, Cmp::Ge);
+        assert!(matches!(g.rhs.node, Expr::Component(_)));
+        // time clauses
+        let spec = parse(
+            "goal G = box([0, 1]) eventually during [0.5, 2e0]\navoid A = box([0, 1]) during [0, 3]\n",
+        )
+        .unwrap_or_else(|d| panic!("{d:?}"));
+        let Item::Goal(g) = &spec.items[0] else {
+            panic!("{spec:?}")
+        };
+        let Some(GoalWhen::Eventually(w)) = g.when.as_ref().map(|w| &w.node) else {
+            panic!("{g:?}")
+        };
+        assert_eq!((w.t0.node, w.t1.node), (0.5, 2.0));
+        let Item::Avoid(a) = &spec.items[1] else {
+            panic!("{spec:?}")
+        };
+        assert!(a.steps.is_none() && a.during.as_ref().is_some_and(|w| w.t1.node == 3.0));
+        let spec = parse("goal G = box([0, 1]) at time 4\n").unwrap_or_else(|d| panic!("{d:?}"));
+        let Item::Goal(g) = &spec.items[0] else {
+            panic!("{spec:?}")
+        };
+        assert!(
+            matches!(g.when.as_ref().map(|w| &w.node), Some(GoalWhen::AtTime(t)) if t.node == 4.0)
+        );
+        // a goal without a clause prints as it always did
+        let spec = parse("goal G = box([0, 1])\n").unwrap_or_else(|d| panic!("{d:?}"));
+        assert!(!format!("{spec:?}").contains("when"));
     }
 
     #[test]

@@ -149,6 +149,15 @@ impl NonlinearLoop {
         Some(out)
     }
 
+    /// A box holding every state over one control period from the box `x`
+    /// (the controls composed with the state as in [`NonlinearLoop::reach`],
+    /// so that they keep their dependency on it); `None` when the period
+    /// cannot be enclosed or the plant is in discrete time.
+    pub fn pipe(&self, x: &IBox) -> Option<IBox> {
+        let state = symbols(x)?;
+        self.advance(&state).ok()?.pipe.filter(IBox::is_finite)
+    }
+
     /// One closed-loop step of the Taylor-model state `x`.
     fn advance(&self, x: &[Tm]) -> Result<Advanced, Cut> {
         let syms = x.first().map_or(0, |t| t.g.len());

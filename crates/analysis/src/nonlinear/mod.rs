@@ -103,38 +103,3 @@ pub fn linear_field(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &[f64], period: f64) 
         time: Time::Continuous { period },
     }
 }
-
-/// A box holding every state of `field`'s flow over one period from the
-/// box `x` with the controls in `u` held (the validated integrator over
-/// Taylor models of `x`'s box); `None` when the flow cannot be enclosed.
-pub fn pipe(
-    field: &VectorField,
-    x: &IBox,
-    u: &IBox,
-    settings: &integrate::Settings,
-) -> Option<IBox> {
-    use integrate::{Interval, Tm};
-    let ravel_base::expr::Time::Continuous { period } = field.time else {
-        return None;
-    };
-    if !(x.is_finite() && u.is_finite()) {
-        return None;
-    }
-    let n = x.dim();
-    let xs: Vec<Tm> = (0..n)
-        .map(|i| {
-            let (lo, hi) = (x.lo[i], x.hi[i]);
-            let c = 0.5 * lo + 0.5 * hi;
-            let r = (hi - c).max(c - lo).max(0.0).next_up();
-            Tm::symbol(i, c, r, n)
-        })
-        .collect();
-    let us: Vec<Tm> = (0..u.dim())
-        .map(|k| Tm::from_interval(Interval::new(u.lo[k], u.hi[k]), n))
-        .collect();
-    let out = integrate::flow(field, &xs, &us, &[], period, settings).ok()?;
-    let lo: Vec<f64> = out.pipe.iter().map(|i| i.lo).collect();
-    let hi: Vec<f64> = out.pipe.iter().map(|i| i.hi).collect();
-    let b = IBox::new(lo, hi);
-    b.is_finite().then_some(b)
-}

@@ -43,14 +43,13 @@ use serde_json::Value;
 
 use super::{
     decide, evidence_cells, get, read_initial, read_properties, slope_steps, uint, vector, Answer,
-    Initial, Prop, Report, FORMAT, R,
+    CSet, Initial, Prop, Report, FORMAT, R,
 };
 use crate::bounds::{network_box, Bx, NetBounds};
 use crate::cover;
 use arith::{Af, Fail, Iv, Num};
 use flow::Field;
 use ravel_base::nn::Network;
-use ravel_base::num::{dot_box_lower, sum_lower, sum_upper};
 use ravel_base::text::sanitize;
 
 /// A nonlinear problem as the checker reads it.
@@ -104,7 +103,7 @@ impl Problem {
             w: iv_box(get(p, "disturbance")?, d, "disturbance")?,
             v: iv_box(get(p, "sensor_noise")?, q, "sensor_noise")?,
             initial: read_initial(p, n)?,
-            props: read_properties(p, n)?,
+            props: read_properties(p, n, horizon)?,
         })
     }
 
@@ -115,26 +114,13 @@ impl Problem {
     /// The last step a property constrains.
     fn last_step(&self, p: &Prop) -> usize {
         match p {
-            Prop::Goal(_) => self.horizon,
-            Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
+            Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
         }
     }
 
     /// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.
     fn observe<T: Num>(&self, x: &[T], v: &[Iv]) -> Vec<T> {
-        let Some(zero) = x.first().map(|e| e.cst(0.0)) else {
-            return Vec::new();
-        };
-        self.obs
-            .column_iter()
-            .zip(v)
-            .map(|(col, v)| {
-                col.iter()
-                    .zip(x)
-                    .fold(zero.clone(), |s, (a, xi)| s.add(&xi.scale(*a)))
-                    .add_iv(v)
-            })
-            .collect()
+        observe(&self.obs, x, v)
     }
 }
 
@@ -166,45 +152,40 @@ pub(crate) fn intersample(
                 Af::exact(c, g)
             })
             .collect();
-    let xi: Vec<Iv> = xs.iter().map(Num::range).collect();
     let noise: Vec<Iv> =
         v.lo.iter()
             .zip(&v.hi)
             .map(|(&l, &h)| Iv::new(l, h))
             .collect();
-    let y: Vec<Iv> = obs
-        .column_iter()
-        .zip(&noise)
-        .map(|(col, nz)| {
-            col.iter()
-                .zip(&xi)
-                .fold(Iv::point(0.0), |s, (a, x)| s.add(&x.scale(*a)))
-                .add(nz)
-        })
-        .collect();
-    let ybox = Bx {
-        lo: y.iter().map(|i| i.lo).collect(),
-        hi: y.iter().map(|i| i.hi).collect(),
+    let parts = Parts {
+        field,
+        obs,
+        v: &noise,
+        w: &[],
     };
-    if !y.iter().all(Iv::is_finite) {
-        return None;
-    }
-    let ub = NetBounds::new(net, &ybox, None).ok()?.output();
-    let u: Vec<Af> = ub
-        .lo
-        .iter()
-        .zip(&ub.hi)
-        .map(|(&l, &h)| Af::of_iv(&Iv::new(l, h), n))
-        .collect();
-    if !u.iter().all(Num::finite) {
-        return None;
-    }
-    let out = flow::period(field, &xs, &u, &[], flow::SUBSTEPS[0]).ok()?;
+    let out = compose(&parts, net, xs, 0, flow::SUBSTEPS[0]).ok()?;
     let pipe = out.between?;
-    Some(Bx {
+    let b = Bx {
         lo: pipe.iter().map(|i| i.lo).collect(),
         hi: pipe.iter().map(|i| i.hi).collect(),
-    })
+    };
+    b.lo.iter().chain(&b.hi).all(|v| v.is_finite()).then_some(b)
+}
+
+/// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.
+fn observe<T: Num>(obs: &DMatrix<f64>, x: &[T], v: &[Iv]) -> Vec<T> {
+    let Some(zero) = x.first().map(|e| e.cst(0.0)) else {
+        return Vec::new();
+    };
+    obs.column_iter()
+        .zip(v)
+        .map(|(col, v)| {
+            col.iter()
+                .zip(x)
+                .fold(zero.clone(), |s, (a, xi)| s.add(&xi.scale(*a)))
+                .add_iv(v)
+        })
+        .collect()
 }
 
 /// The checker's answer about a nonlinear plant's certificate.
@@ -372,6 +353,15 @@ impl Zono {
     fn support_lower(&self, a: &[f64]) -> f64 {
         let neg: Vec<f64> = a.iter().map(|v| -v).collect();
         -self.support(&neg)
+    }
+
+    /// A box holding the set.
+    fn bbox(&self) -> Bx {
+        let r: Vec<Iv> = self.forms().iter().map(Num::range).collect();
+        Bx {
+            lo: r.iter().map(|i| i.lo).collect(),
+            hi: r.iter().map(|i| i.hi).collect(),
+        }
     }
 }
 
@@ -619,9 +609,37 @@ fn advance(
     slopes: usize,
     substeps: u32,
 ) -> Result<flow::Period<Af>, String> {
-    let k = now.ids.len();
-    let x = now.forms();
-    let y = problem.observe(&x, &problem.v);
+    let parts = Parts {
+        field: &problem.field,
+        obs: &problem.obs,
+        v: &problem.v,
+        w: &problem.w,
+    };
+    compose(&parts, net, now.forms(), slopes, substeps)
+}
+
+/// What one period of a loop needs besides the controller.
+struct Parts<'a> {
+    field: &'a Field,
+    /// `n × q`: `y = Cᵀ x + v`.
+    obs: &'a DMatrix<f64>,
+    v: &'a [Iv],
+    w: &'a [Iv],
+}
+
+/// The state `x` (forms over its symbols) over one period: the controls
+/// the middle of the checker's two linear bounds of the network over the
+/// observation box composed with `x` (the distance to either bound an
+/// interval), the plant integrated (or mapped) with them held.
+fn compose(
+    parts: &Parts,
+    net: &Network,
+    x: Vec<Af>,
+    slopes: usize,
+    substeps: u32,
+) -> Result<flow::Period<Af>, String> {
+    let k = x.first().map_or(0, |f| f.g.len());
+    let y = observe(parts.obs, &x, parts.v);
     let ybox = Bx {
         lo: y.iter().map(|v| v.range().lo).collect(),
         hi: y.iter().map(|v| v.range().hi).collect(),
@@ -662,8 +680,8 @@ fn advance(
         }
         u.push(ur.add_iv(&Iv::new(lo, hi)));
     }
-    let w: Vec<Af> = problem.w.iter().map(|i| Af::of_iv(i, k)).collect();
-    flow::period(&problem.field, &x, &u, &w, substeps).map_err(|e: Fail| e.to_string())
+    let w: Vec<Af> = parts.w.iter().map(|i| Af::of_iv(i, k)).collect();
+    flow::period(parts.field, &x, &u, &w, substeps).map_err(|e: Fail| e.to_string())
 }
 
 /// `(A − M)·Y + a − m₀` as an outward-rounded interval.
@@ -676,56 +694,88 @@ fn gap<'a>(a: impl Iterator<Item = &'a f64>, mid: &[f64], y: &[Iv], off: f64, m0
     acc
 }
 
+/// Whether one claimed set lies in the set `s` (rows by the zonotope's
+/// support, constraints over its box).
+fn claim_in(z: &Zono, s: &CSet) -> bool {
+    s.rows.iter().all(|(a, b)| {
+        let top = z.support(a);
+        !top.is_nan() && top <= *b
+    }) && s.constraints_hold_on(&z.bbox())
+}
+
+/// Whether one claimed set misses the set `s` (a row by the zonotope's
+/// support, or anything [`CSet::missed_by`] shows over its box).
+fn claim_misses(z: &Zono, s: &CSet) -> bool {
+    s.rows.iter().any(|(a, b)| z.support_lower(a) > *b) || s.missed_by(&z.bbox())
+}
+
 /// Whether one cell's chain proves the property; why not.
 fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), String> {
+    let (first, last) = match prop {
+        Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => {
+            (steps.0, steps.1.min(problem.horizon))
+        }
+    };
+    let claim = |t: usize| chain.claims.get(t).ok_or("a step without a claim");
     match prop {
-        Prop::Goal(rows) => {
-            let last = chain
-                .claims
-                .get(problem.horizon)
-                .ok_or("no claim at the horizon")?;
-            for (r, (a, b)) in rows.iter().enumerate() {
-                let s = last.support(a);
-                if s.is_nan() || s > *b {
+        Prop::Goal {
+            set,
+            eventually: true,
+            ..
+        } => {
+            let mut any = false;
+            for t in first..=last {
+                any |= claim_in(claim(t)?, set);
+            }
+            if !any {
+                return Err(format!(
+                    "no claim at steps {first}..={last} is shown to lie in the goal"
+                ));
+            }
+        }
+        Prop::Goal { set, .. } => {
+            for t in first..=last {
+                if !claim_in(claim(t)?, set) {
                     return Err(format!(
-                        "goal inequality {r}: the claim at the horizon reaches {s}, beyond {b}"
+                        "the claim at step {t} is not shown to lie in the goal"
                     ));
                 }
             }
-            Ok(())
         }
-        Prop::Avoid { members, steps } => {
-            let last = steps.1.min(problem.horizon);
-            for t in steps.0..=last {
-                let claim = chain.claims.get(t).ok_or("a step without a claim")?;
-                for (k, member) in members.iter().enumerate() {
-                    let apart = member.iter().any(|(a, b)| claim.support_lower(a) > *b);
-                    if !apart {
-                        return Err(format!("step {t}: the claim may meet avoid member {k}"));
-                    }
-                }
-                // the period ending at step t, when t − 1 is in the window
-                if t > steps.0 {
-                    if let Some(Some(pipe)) = chain.between.get(t) {
-                        let lo: Vec<f64> = pipe.iter().map(|i| i.lo).collect();
-                        let hi: Vec<f64> = pipe.iter().map(|i| i.hi).collect();
-                        for (k, member) in members.iter().enumerate() {
-                            let apart = member
-                                .iter()
-                                .any(|(a, b)| sum_lower([dot_box_lower(a, &lo, &hi), -b]) > 0.0);
-                            if !apart {
-                                return Err(format!(
-                                    "between steps {} and {t}: the checker's enclosure may meet avoid member {k}",
-                                    t - 1
-                                ));
-                            }
-                        }
-                    }
+        Prop::Avoid { members, .. } => {
+            for t in first..=last {
+                let z = claim(t)?;
+                if let Some(k) = members.iter().position(|m| !claim_misses(z, m)) {
+                    return Err(format!("step {t}: the claim may meet avoid member {k}"));
                 }
             }
-            Ok(())
         }
     }
+    // continuous time: the periods of the window, by the checker's own
+    // enclosures (the period p ends at step p)
+    let periods = match prop {
+        Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
+    };
+    for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
+        let Some(Some(pipe)) = chain.between.get(p) else {
+            continue;
+        };
+        let b = Bx {
+            lo: pipe.iter().map(|i| i.lo).collect(),
+            hi: pipe.iter().map(|i| i.hi).collect(),
+        };
+        let fine = match prop {
+            Prop::Goal { set, .. } => set.holds_on(&b),
+            Prop::Avoid { members, .. } => members.iter().all(|m| m.missed_by(&b)),
+        };
+        if !fine {
+            return Err(format!(
+                "between steps {} and {p}: the checker's enclosure is not shown to satisfy the property",
+                p - 1
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Replay a recorded trajectory with the checker's own enclosure.
@@ -738,12 +788,24 @@ fn replay(
 ) -> R<Result<(), String>> {
     let n = problem.n();
     let (d, q) = (problem.w.len(), problem.v.len());
-    if step > problem.horizon {
+    let (first, last_step, eventually, periods) = match prop {
+        Prop::Goal {
+            steps,
+            eventually,
+            periods,
+            ..
+        } => (steps.0, steps.1.min(problem.horizon), *eventually, *periods),
+        Prop::Avoid { steps, periods, .. } => {
+            (steps.0, steps.1.min(problem.horizon), false, *periods)
+        }
+    };
+    if !(first <= step && step <= last_step) {
         return Ok(Err(format!(
-            "names step {step}, beyond the horizon {}",
-            problem.horizon
+            "does not certainly violate the property at step {step}: the property does not apply there"
         )));
     }
+    // an eventually goal is violated only by the whole window
+    let last = if eventually { last_step } else { step };
     let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
     let ws = get(tr, "process_noise")?
         .as_array()
@@ -751,16 +813,25 @@ fn replay(
     let vs = get(tr, "sensor_noise")?
         .as_array()
         .ok_or("`sensor_noise` must be an array")?;
-    if ws.len() < step || vs.len() < step {
+    if ws.len() < last || vs.len() < last {
         return Err(format!(
-            "the trajectory has noise for fewer than {step} steps"
+            "the trajectory has noise for fewer than {last} steps"
         ));
     }
     if !problem.initial.contains(&x0) {
         return Ok(Err("starts outside the initial set".into()));
     }
+    let to_box = |x: &[Iv]| Bx {
+        lo: x.iter().map(|i| i.lo).collect(),
+        hi: x.iter().map(|i| i.hi).collect(),
+    };
     let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
-    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+    // the enclosures at the window's instants and over its periods
+    let mut window: Vec<Bx> = Vec::new();
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
+        if t >= first {
+            window.push(to_box(&x));
+        }
         let w = vector(w, d, "process_noise")?;
         let v = vector(v, q, "sensor_noise")?;
         if !w
@@ -782,11 +853,7 @@ fn replay(
         // y = Cᵀx + v (the recorded noise, as a point)
         let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
         let y = problem.observe(&x, &noise);
-        let ybox = Bx {
-            lo: y.iter().map(|i| i.lo).collect(),
-            hi: y.iter().map(|i| i.hi).collect(),
-        };
-        let ub = network_box(net, &ybox);
+        let ub = network_box(net, &to_box(&y));
         let u: Vec<Iv> = ub
             .lo
             .iter()
@@ -795,35 +862,97 @@ fn replay(
             .collect();
         let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
         match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
-            Ok(p) => x = p.end,
+            Ok(p) => {
+                x = p.end;
+                // the period ending at step t + 1
+                if let Some(pipe) = p.between {
+                    if (periods.0..=periods.1).contains(&(t + 1)) {
+                        window.push(to_box(&pipe));
+                    }
+                }
+            }
             Err(e) => return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1))),
         }
     }
-    let lo: Vec<f64> = x.iter().map(|i| i.lo).collect();
-    let hi: Vec<f64> = x.iter().map(|i| i.hi).collect();
+    let xb = to_box(&x);
+    window.push(xb.clone());
     let violated = match prop {
-        Prop::Goal(g) => {
-            step == problem.horizon
-                && g.iter()
-                    .any(|(a, b)| sum_lower([dot_box_lower(a, &lo, &hi), -b]) > 0.0)
+        Prop::Goal { set, .. } if eventually => {
+            // continuous time: the periods of the window count too
+            let mut all = window;
+            if problem.field.period.is_some() {
+                if let Some(extra) =
+                    eventually_periods(problem, net, &x0, ws, vs, first, last_step)?
+                {
+                    all.extend(extra);
+                } else {
+                    return Ok(Err("cannot be enclosed between the instants".into()));
+                }
+            }
+            all.iter().all(|b| set.missed_by(b))
         }
-        Prop::Avoid { members, steps } => {
-            steps.0 <= step
-                && step <= problem.last_step(prop)
-                && members.iter().any(|mb| {
-                    mb.iter().all(|(a, b)| {
-                        sum_upper([ravel_base::num::dot_box_upper(a, &lo, &hi), -b]) <= 0.0
-                    })
-                })
-        }
+        Prop::Goal { set, .. } => set.missed_by(&xb),
+        Prop::Avoid { members, .. } => members.iter().any(|mb: &CSet| mb.holds_on(&xb)),
     };
     Ok(if violated {
         Ok(())
     } else {
         Err(format!(
-            "does not certainly violate the property at step {step} (enclosure {lo:?} … {hi:?})"
+            "does not certainly violate the property at step {step} (enclosure {:?} … {:?})",
+            xb.lo, xb.hi
         ))
     })
+}
+
+/// The enclosures of one trajectory over every control period between
+/// steps `first` and `last` (continuous time), for an eventually goal;
+/// `None` when one cannot be enclosed.
+fn eventually_periods(
+    problem: &Problem,
+    net: &Network,
+    x0: &[f64],
+    ws: &[Value],
+    vs: &[Value],
+    first: usize,
+    last: usize,
+) -> R<Option<Vec<Bx>>> {
+    let (d, q) = (problem.w.len(), problem.v.len());
+    let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
+    let mut out = Vec::new();
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
+        let w = vector(w, d, "process_noise")?;
+        let v = vector(v, q, "sensor_noise")?;
+        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
+        let y = problem.observe(&x, &noise);
+        let ub = network_box(
+            net,
+            &Bx {
+                lo: y.iter().map(|i| i.lo).collect(),
+                hi: y.iter().map(|i| i.hi).collect(),
+            },
+        );
+        let u: Vec<Iv> = ub
+            .lo
+            .iter()
+            .zip(&ub.hi)
+            .map(|(&l, &h)| Iv::new(l, h))
+            .collect();
+        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+        let Ok(p) = flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) else {
+            return Ok(None);
+        };
+        x = p.end;
+        if t >= first {
+            let Some(pipe) = p.between else {
+                return Ok(None);
+            };
+            out.push(Bx {
+                lo: pipe.iter().map(|i| i.lo).collect(),
+                hi: pipe.iter().map(|i| i.hi).collect(),
+            });
+        }
+    }
+    Ok(Some(out))
 }
 
 #[cfg(test)]

@@ -24,7 +24,7 @@ mod system;
 mod time;
 
 use crate::ir::SelectSpec;
-use crate::ir::{Guide, Partitioner};
+use crate::ir::{GoalMode, Guide, Partitioner, StateSet, Window};
 use crate::onnx::{Controller, ExternalFiles, OnnxErrorKind};
 use analysis_block::AnalysisPart;
 pub use analysis_block::DEFAULT_BUDGET;
@@ -120,7 +120,11 @@ pub struct GoalDef {
     /// Its name.
     pub name: String,
     /// The goal set.
-    pub set: Polytope,
+    pub set: StateSet,
+    /// When it applies (a plain goal: the horizon).
+    pub window: Window,
+    /// At every step of the window, or at some step.
+    pub mode: GoalMode,
 }
 
 /// An avoid property.
@@ -129,9 +133,9 @@ pub struct AvoidSpec {
     /// Its name.
     pub name: String,
     /// The union's members.
-    pub members: Vec<Polytope>,
-    /// First and last step at which it applies (inclusive).
-    pub steps: (usize, usize),
+    pub members: Vec<StateSet>,
+    /// When it applies.
+    pub window: Window,
 }
 
 /// A checked plant: linear (one per step) or nonlinear.
@@ -772,6 +776,7 @@ impl Ctx {
                     .map(|b| Polytope::from_box(&b))
             }
             SetAtom::Polytope(cs) => self.polytope(cs, name, dim),
+            SetAtom::Inequalities(rows) => self.linear_rows(rows, name, dim, role),
             SetAtom::Ball(_) => {
                 self.err(
                     Diagnostic::new(Code::SetKind, a.span, format!("{role} cannot be a ball"))
@@ -781,6 +786,114 @@ impl Ctx {
                 None
             }
         }
+    }
+}
+
+impl Ctx {
+    /// The inequalities of a set over `name` (dimension `dim`): linear
+    /// rows, and nonlinear constraints `g ≤ 0` (each with the span of its
+    /// first non-affine node). `consts`: the named constants in scope.
+    fn set_rows(
+        &mut self,
+        rows: &[SetRow],
+        name: &str,
+        dim: usize,
+        consts: &BTreeMap<String, f64>,
+    ) -> Option<(Polytope, Vec<(ravel_base::expr::Tape, Span)>)> {
+        if rows.len() > MAX_POLYTOPE_ROWS {
+            let span = match (rows.first(), rows.last()) {
+                (Some(a), Some(b)) => Span::new(row_span(a).start, row_span(b).end),
+                _ => WHOLE,
+            };
+            self.err(
+                Diagnostic::new(
+                    Code::Limit,
+                    span,
+                    format!(
+                        "a set of {} inequalities, beyond the limit of {MAX_POLYTOPE_ROWS}",
+                        rows.len()
+                    ),
+                )
+                .label("too many inequalities")
+                .hint("describe the set with fewer inequalities"),
+            );
+            return None;
+        }
+        let mut poly = Polytope { rows: Vec::new() };
+        let mut nonlinear = Vec::new();
+        let mut ok = true;
+        for r in rows {
+            match r {
+                SetRow::Linear(c) => match self.polytope(std::slice::from_ref(c), name, dim) {
+                    Some(p) => poly.rows.extend(p.rows),
+                    None => ok = false,
+                },
+                SetRow::General(ineq) => {
+                    match nonlinear::set_inequality(self, ineq, consts, (name, dim)) {
+                        Some(nonlinear::SetIneq::Row(a, b)) => {
+                            let fits = |v: &f64| v.is_finite() && v.abs() <= MAX_MAGNITUDE;
+                            if fits(&b) && a.iter().all(fits) {
+                                poly.rows.push((a, b));
+                            } else {
+                                self.err(
+                                    Diagnostic::new(
+                                        Code::Limit,
+                                        ineq.span,
+                                        "the inequality's coefficients or constant are beyond ±1e15",
+                                    )
+                                    .label("too large to analyse")
+                                    .hint("the numbers of an affine inequality, once its constants are folded, must lie within ±1e15; rescale the units"),
+                                );
+                                ok = false;
+                            }
+                        }
+                        Some(nonlinear::SetIneq::Nonlinear(tape, span)) => {
+                            nonlinear.push((tape, span))
+                        }
+                        None => ok = false,
+                    }
+                }
+            }
+        }
+        ok.then_some((poly, nonlinear))
+    }
+
+    /// A set `{ … }` that must be linear (`role`: "the initial set", "the
+    /// input set", …): its rows, or E0228 at the first nonlinear one.
+    fn linear_rows(
+        &mut self,
+        rows: &[SetRow],
+        name: &str,
+        dim: usize,
+        role: &str,
+    ) -> Option<Polytope> {
+        let consts = BTreeMap::from([("pi".to_string(), std::f64::consts::PI)]);
+        let (poly, nonlinear) = self.set_rows(rows, name, dim, &consts)?;
+        if let Some((_, span)) = nonlinear.first() {
+            self.err(
+                Diagnostic::new(
+                    Code::NonlinearSet,
+                    *span,
+                    format!("{role} must be given by linear inequalities"),
+                )
+                .label("not affine")
+                .hint(if role.contains("initial") {
+                    "use a box, a polytope or a ball enclosing the set; nonlinear inequalities are for goal and avoid sets of systems"
+                } else {
+                    "nonlinear inequalities are for goal and avoid sets of systems; write this set with linear inequalities"
+                }),
+            );
+            return None;
+        }
+        Some(poly)
+    }
+}
+
+/// The span of a set's inequality.
+fn row_span(r: &SetRow) -> Span {
+    match r {
+        SetRow::Linear(c) => c.span,
+        SetRow::General(i) => i.span,
     }
 }
 
@@ -981,7 +1094,19 @@ pub fn check(spec: &Spec, controller: Option<&ControllerFile>) -> Result<Checked
     );
     let actuate = actuate(cx, &sp, &pp, ctrl.as_ref());
     let horizon = horizon(cx, it.horizons.first().copied());
-    let sets = sets::sets(cx, &it.initials, &it.goals, &it.avoids, &sp.state, horizon);
+    let scope = sets::SetScope {
+        consts: &pp.consts,
+        time: sp.time,
+    };
+    let sets = sets::sets(
+        cx,
+        &it.initials,
+        &it.goals,
+        &it.avoids,
+        &sp.state,
+        horizon,
+        &scope,
+    );
     let an = analysis_block::analysis_block(cx, &it.analyses, &sp.state, None);
 
     // ---- checks that combine sections ----

@@ -883,3 +883,59 @@ pub(super) fn defined_at_points(
         }
     }
 }
+
+/// One inequality of a set, checked: a linear row `a·z ≤ b`, or a
+/// constraint `g(z) ≤ 0` (the last node of its tape) that is not affine,
+/// with the span of its first non-affine node.
+pub(super) enum SetIneq {
+    /// `a·z ≤ b`.
+    Row(Vec<f64>, f64),
+    /// `g(z) ≤ 0`.
+    Nonlinear(Tape, Span),
+}
+
+/// An inequality `lhs ≤ rhs` (or `≥`) over the vector `(name, dim)`, as
+/// `lhs − rhs ≤ 0` (or `rhs − lhs ≤ 0`): a row when it is affine (its
+/// constants folded in `f64`, as in a plant's expressions), else a
+/// nonlinear constraint. Names, arities, exponents and constants are
+/// checked exactly as in a plant's expressions.
+pub(super) fn set_inequality(
+    cx: &mut Ctx,
+    ineq: &Inequality,
+    consts: &BTreeMap<String, f64>,
+    (name, dim): (&str, usize),
+) -> Option<SetIneq> {
+    let scope = Scope {
+        consts,
+        vectors: vec![(name, dim, 0)],
+        forbidden: Vec::new(),
+    };
+    let mut b = Builder::new();
+    let lhs = b.root(cx, &scope, &ineq.lhs);
+    let rhs = b.root(cx, &scope, &ineq.rhs);
+    let (lhs, rhs) = (lhs?, rhs?);
+    let g = match ineq.cmp {
+        Cmp::Le => b.push(Node::Sub(lhs, rhs), ineq.span),
+        Cmp::Ge => b.push(Node::Sub(rhs, lhs), ineq.span),
+    };
+    // affine? (asked quietly: a non-affine inequality is not an error here)
+    let mut quiet = Ctx::new();
+    if let Some((coef, c)) = affine_form(&mut quiet, &b, g, "an inequality", name) {
+        let mut row = vec![0.0; dim];
+        for (j, v) in coef {
+            if let Some(x) = row.get_mut(j) {
+                *x = v;
+            }
+        }
+        // a·z + c ≤ 0  ⇔  a·z ≤ −c
+        return Some(SetIneq::Row(row, -c));
+    }
+    let span = quiet
+        .diags
+        .iter()
+        .find(|d| d.code == Code::NotAffine)
+        .and_then(|d| d.span)
+        .unwrap_or(ineq.span);
+    // the tape ends in `g`
+    Some(SetIneq::Nonlinear(b.tape, span))
+}

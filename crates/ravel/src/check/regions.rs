@@ -28,7 +28,7 @@ impl Ctx {
                 };
                 self.box_set(&sb, name, dim, true, &role).map(Region::Box)
             }
-            SetAtom::Polytope(_) if dim > MAX_POLYTOPE_DIM => {
+            SetAtom::Polytope(_) | SetAtom::Inequalities(_) if dim > MAX_POLYTOPE_DIM => {
                 self.err(
                     Diagnostic::new(
                         Code::Limit,
@@ -42,6 +42,9 @@ impl Ctx {
             }
             SetAtom::Polytope(cs) => self
                 .polytope(cs, name, dim)
+                .and_then(|p| self.bounded_polytope(p, atom.span, &role)),
+            SetAtom::Inequalities(rows) => self
+                .linear_rows(rows, name, dim, &role)
                 .and_then(|p| self.bounded_polytope(p, atom.span, &role)),
             SetAtom::Ball(b) => self.ball(b, atom.span, name, dim),
         }

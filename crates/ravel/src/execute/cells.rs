@@ -3,7 +3,7 @@
 //! partitions whose cells' shares of the report (`Gathered`) are merged in
 //! cell order.
 
-use crate::lower::{Guide, Property, PropertyKind, SystemPlan};
+use crate::lower::{GoalMode, Guide, Property, PropertyKind, SystemPlan, Window};
 use ravel_analysis::closed_loop::{ClosedLoop, Cut, Propagator, Step};
 use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
@@ -12,6 +12,7 @@ use ravel_analysis::partition::{refine_parallel, Budget, Stop, Strategy};
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_analysis::shape::excess;
 
+use super::constraints;
 use super::sampling::{offsets, Sampled};
 use super::*;
 
@@ -75,46 +76,30 @@ pub fn propagate_cell_until(
 }
 
 /// A linear plant in continuous time: the states over every control period
-/// that an avoid window covers (the period ending at step `t`, for
-/// `a < t ≤ b`), from the box of step `t − 1` and its controls' box
-/// (CROWN over the observation box) by the validated flow of
-/// `ẋ = A x + B u + c`. A period that cannot be enclosed is the whole
+/// that a property's window covers (the period `t` ends at step `t`), from
+/// the box of step `t − 1` by the validated flow of `ẋ = A x + B u + c`,
+/// the controls composed with the state through CROWN's linear bounds over
+/// the observation box (`NonlinearLoop::pipe`). A period that cannot be enclosed is the whole
 /// space (it proves nothing).
 fn intersample(plan: &SystemPlan, cl: &ClosedLoop, steps: &mut [Step]) {
-    use ravel_analysis::crown::{Mode, Relaxation};
-    let Some(fields) = plan.intersample.as_ref().map(|i| &i.fields) else {
+    let Some(loops) = plan.intersample.as_ref().map(|i| &i.loops) else {
         return;
     };
-    let windows: Vec<(usize, usize)> = plan
-        .properties
-        .iter()
-        .filter_map(|p| match &p.kind {
-            PropertyKind::Avoid { steps, .. } => Some(*steps),
-            PropertyKind::Goal(_) => None,
-        })
-        .collect();
-    let settings = ravel_analysis::nonlinear::integrate::Settings::default();
+    // the periods some property constrains (the period `t` ends at step `t`)
+    let windows: Vec<(usize, usize)> = plan.properties.iter().map(|p| p.window().periods).collect();
     let n = cl.states();
     for t in 1..steps.len() {
-        if !windows.iter().any(|&(a, b)| a < t && t <= b) {
+        if !windows.iter().any(|&(a, b)| a <= t && t <= b) {
             continue;
         }
-        let Some(field) = fields.get((t - 1).min(fields.len().saturating_sub(1))) else {
+        let Some(lp) = loops.get((t - 1).min(loops.len().saturating_sub(1))) else {
             continue;
         };
         let before = &steps[t - 1];
         let pipe = if before.cut().is_some() {
             None
         } else {
-            let x = before.set.bbox();
-            let y = cl.observation_box(&x);
-            let rel = Relaxation::new(&cl.net, &y, Mode::Crown);
-            if y.is_finite() && rel.is_finite() {
-                let u = rel.output_box(Mode::Crown);
-                ravel_analysis::nonlinear::pipe(field, &x, &u, &settings)
-            } else {
-                None
-            }
+            lp.pipe(&before.set.bbox())
         };
         steps[t].between = Some(pipe.unwrap_or_else(|| IBox::whole(n)));
     }
@@ -151,62 +136,124 @@ pub(super) fn certainly_empty(cell: &Region) -> bool {
 /// refers to and whether an LP solver issue weakened it. A set that
 /// overflowed gives the margin `−∞` at its step (never a proof); so does a
 /// margin computation that produced NaN.
+///
+/// A goal that must hold always and an avoid set take the least margin over
+/// the window's instants and the periods between them (a continuous-time
+/// nonlinear plant's intersample enclosures); a goal that must hold
+/// eventually takes the largest containment margin over the window's
+/// instants: one instant whose set lies inside proves it on the cell.
 pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
     match &prop.kind {
-        PropertyKind::Goal(g) => {
-            let t = sets.len() - 1;
-            if sets[t].cut().is_some() {
-                return Margin::cut(t, false);
+        PropertyKind::Goal {
+            set,
+            window,
+            mode: GoalMode::Always,
+        } => worst_over(window, sets, &|instant, pipe, out| {
+            for r in [instant, pipe].into_iter().flatten() {
+                out.push(constraints::containment(set, r));
             }
-            let (m, issue) = containment_margin(g, &sets[t].set);
-            Margin {
-                value: sane(m),
-                step: t,
-                issue: issue || !sets[t].issues.is_empty(),
-            }
-        }
-        PropertyKind::Avoid { members, steps } => {
-            let mut best = Margin {
-                value: f64::INFINITY,
-                step: steps.0,
-                issue: false,
-            };
-            for (t, step) in sets.iter().enumerate().take(steps.1 + 1).skip(steps.0) {
-                if step.cut().is_some() {
-                    if best.value > f64::NEG_INFINITY {
-                        best = Margin::cut(t, best.issue);
-                    }
-                    break;
-                }
-                // a continuous-time nonlinear plant: the period that ends
-                // at step t lies in the window too
-                let pipe = step
-                    .between
-                    .as_ref()
-                    .filter(|_| t > steps.0)
-                    .map(|b| Region::Box(b.clone()));
-                for (m, set) in members
-                    .iter()
-                    .flat_map(|m| [(m, Some(&step.set)), (m, pipe.as_ref())])
-                    .filter_map(|(m, s)| s.map(|s| (m, s)))
-                {
-                    let (s, issue) = separation_margin(m, set);
-                    let s = sane(s);
-                    let issue = issue || !step.issues.is_empty();
-                    if s < best.value || (issue && !best.issue && s <= best.value) {
-                        best = Margin {
-                            value: s,
-                            step: t,
-                            issue: issue || best.issue,
-                        };
-                    } else if issue {
-                        best.issue = true;
+        }),
+        PropertyKind::Goal {
+            set,
+            window,
+            mode: GoalMode::Eventually,
+        } => best_over(window, sets, &|r| constraints::containment(set, r)),
+        PropertyKind::Avoid { members, window } => {
+            worst_over(window, sets, &|instant, pipe, out| {
+                for m in members {
+                    for r in [instant, pipe].into_iter().flatten() {
+                        out.push(constraints::separation(m, r));
                     }
                 }
-            }
-            best
+            })
         }
     }
+}
+
+/// The margins of one step: the instant's set (when the step is one of
+/// the window's instants) and the period's intersample enclosure (when
+/// the period ending at the step is one of the window's), pushed in order.
+type StepMargins<'a> = dyn Fn(Option<&Region>, Option<&Region>, &mut Vec<(f64, bool)>) + 'a;
+
+/// The least margin over a window (see [`cell_margin`]): the first cut
+/// step in the window ends the scan with `−∞`.
+fn worst_over(window: &Window, sets: &[Step], margins: &StepMargins) -> Margin {
+    let mut best = Margin {
+        value: f64::INFINITY,
+        step: window.steps.0,
+        issue: false,
+    };
+    let first = if window.periods.0 <= window.periods.1 {
+        window.steps.0.min(window.periods.0)
+    } else {
+        window.steps.0
+    };
+    let mut found = Vec::new();
+    for (t, step) in sets.iter().enumerate().take(window.last() + 1).skip(first) {
+        let at_instant = (window.steps.0..=window.steps.1).contains(&t);
+        let at_period = window.has_period(t) && step.between.is_some();
+        if !at_instant && !at_period {
+            continue;
+        }
+        if step.cut().is_some() {
+            if best.value > f64::NEG_INFINITY {
+                best = Margin::cut(t, best.issue);
+            }
+            break;
+        }
+        // a continuous-time nonlinear plant: the period that ends at step
+        // t lies in the window too
+        let pipe = step
+            .between
+            .as_ref()
+            .filter(|_| at_period)
+            .map(|b| Region::Box(b.clone()));
+        found.clear();
+        margins(at_instant.then_some(&step.set), pipe.as_ref(), &mut found);
+        for &(s, issue) in &found {
+            let s = sane(s);
+            let issue = issue || !step.issues.is_empty();
+            if s < best.value || (issue && !best.issue && s <= best.value) {
+                best = Margin {
+                    value: s,
+                    step: t,
+                    issue: issue || best.issue,
+                };
+            } else if issue {
+                best.issue = true;
+            }
+        }
+    }
+    best
+}
+
+/// The largest margin over a window's instants (see [`cell_margin`]); a
+/// solver issue at any instant of the window weakens it; the scan stops at
+/// the first cut step.
+fn best_over(window: &Window, sets: &[Step], margin: &dyn Fn(&Region) -> (f64, bool)) -> Margin {
+    let mut best = Margin {
+        value: f64::NEG_INFINITY,
+        step: window.steps.0,
+        issue: false,
+    };
+    for (t, step) in sets
+        .iter()
+        .enumerate()
+        .take(window.steps.1 + 1)
+        .skip(window.steps.0)
+    {
+        if step.cut().is_some() {
+            break;
+        }
+        let (m, issue) = margin(&step.set);
+        let m = sane(m);
+        best.issue |= issue || !step.issues.is_empty();
+        if m > best.value {
+            best.value = m;
+            best.step = t;
+        }
+    }
+    best
 }
 
 /// `min_r (hᵣ − max_{x∈S} Hᵣ x)`: non-negative means `S ⊆ P`.

@@ -16,6 +16,7 @@
 //!   when a validated enclosure of its trajectory confirms it.
 
 mod cells;
+mod constraints;
 pub mod network;
 mod sampling;
 mod search;
@@ -151,7 +152,7 @@ fn tolerance(x: &[f64], rhs_scale: f64) -> f64 {
 /// Whether a margin proves the property.
 fn proves(prop: &Property, margin: f64) -> bool {
     match &prop.kind {
-        PropertyKind::Goal(_) => margin >= 0.0,
+        PropertyKind::Goal { .. } => margin >= 0.0,
         PropertyKind::Avoid { .. } => margin > 0.0,
     }
 }
@@ -292,13 +293,10 @@ fn verdicts(plan: &SystemPlan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<Prop
         .zip(&gathered.least)
         .map(|((prop, worst), l)| {
             let kind = match prop.kind {
-                PropertyKind::Goal(_) => Kind::Goal,
+                PropertyKind::Goal { .. } => Kind::Goal,
                 PropertyKind::Avoid { .. } => Kind::Avoid,
             };
-            let (margin, step) = l.margin(match &prop.kind {
-                PropertyKind::Goal(_) => plan.horizon,
-                PropertyKind::Avoid { steps, .. } => steps.0,
-            });
+            let (margin, step) = l.margin(prop.window().steps.0);
             let (issue, cut) = (l.issue, l.cut.map(|(t, _, c)| (t, c)));
             // no cell proves nothing
             let proven = gathered.cells > 0 && proves(prop, margin) && !issue && cut.is_none();

@@ -5,7 +5,7 @@
 
 use nalgebra::DMatrix;
 
-use crate::lower::{Property, PropertyKind, SystemPlan};
+use crate::lower::{GoalMode, Property, PropertyKind, SystemPlan};
 use ravel_analysis::closed_loop::Boundary;
 use ravel_analysis::sets::{IBox, Region};
 use ravel_analysis::shape::{
@@ -13,6 +13,7 @@ use ravel_analysis::shape::{
 };
 use ravel_base::rng::Rng;
 
+use super::constraints;
 use super::*;
 
 /// Per-sample random stream: sample `k` of seed `s` is reproducible on its own.
@@ -316,38 +317,7 @@ pub(super) fn sample_range(
             }
         }
         for (i, prop) in plan.properties.iter().enumerate() {
-            let found = match &prop.kind {
-                PropertyKind::Goal(_) if valid <= plan.horizon => None,
-                PropertyKind::Goal(g) => {
-                    let x = states[plan.horizon];
-                    let rhs = g.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
-                    let outside = -g.depth(x);
-                    (outside.is_finite() && outside > tolerance(x, rhs))
-                        .then_some((outside, plan.horizon))
-                }
-                PropertyKind::Avoid { members, steps } => {
-                    let mut best: Option<(f64, usize)> = None;
-                    let window = states
-                        .iter()
-                        .enumerate()
-                        .take(valid)
-                        .take(steps.1 + 1)
-                        .skip(steps.0);
-                    for (t, &x) in window {
-                        for m in members {
-                            let rhs = m.rows.iter().fold(0.0f64, |a, r| a.max(r.1.abs()));
-                            let inside = m.depth(x);
-                            if inside.is_finite()
-                                && inside > tolerance(x, rhs)
-                                && best.is_none_or(|b| inside > b.0)
-                            {
-                                best = Some((inside, t));
-                            }
-                        }
-                    }
-                    best
-                }
-            };
+            let found = violation_of(plan, prop, &states[..valid]);
             if let Some((d, t)) = found {
                 if worst[i].is_none_or(|w| d > w.0) {
                     worst[i] = Some((d, k, t));
@@ -387,14 +357,105 @@ pub(super) fn offsets(r: &Region) -> Vec<f64> {
     v
 }
 
+/// How deeply the simulated states `x_0 …` (finite ones only: a
+/// trajectory cut short overflowed) violate `prop`, beyond the simulation
+/// tolerance, and the step: the deepest instant outside an "always" goal or
+/// inside an avoid member; for an "eventually" goal, every instant of the
+/// window outside (the shallowest of them), never for a continuous-time
+/// nonlinear plant (whose trajectory may enter the goal between instants).
+/// Instants only: a violation between them is not seen.
+pub(super) fn violation_of(
+    plan: &SystemPlan,
+    prop: &Property,
+    states: &[&[f64]],
+) -> Option<(f64, usize)> {
+    let w = prop.window();
+    let window = || {
+        states
+            .iter()
+            .enumerate()
+            .take(w.steps.1 + 1)
+            .skip(w.steps.0)
+    };
+    match &prop.kind {
+        PropertyKind::Goal { set, mode, .. } => {
+            let rhs = constraints::rhs_scale(set);
+            let outside = |x: &[f64]| {
+                let d = -constraints::depth(set, x);
+                (d.is_finite() && d > tolerance(x, rhs)).then_some(d)
+            };
+            match mode {
+                GoalMode::Always => {
+                    let mut best: Option<(f64, usize)> = None;
+                    for (t, &x) in window() {
+                        if let Some(d) = outside(x) {
+                            if best.is_none_or(|b| d > b.0) {
+                                best = Some((d, t));
+                            }
+                        }
+                    }
+                    best
+                }
+                GoalMode::Eventually => {
+                    if states.len() <= w.steps.1 || has_between(plan) {
+                        return None;
+                    }
+                    let mut least: Option<(f64, usize)> = None;
+                    for (t, &x) in window() {
+                        let d = outside(x)?;
+                        if least.is_none_or(|b| d < b.0) {
+                            least = Some((d, t));
+                        }
+                    }
+                    least
+                }
+            }
+        }
+        PropertyKind::Avoid { members, .. } => {
+            let mut best: Option<(f64, usize)> = None;
+            for (t, &x) in window() {
+                for m in members {
+                    let rhs = constraints::rhs_scale(m);
+                    let inside = constraints::depth(m, x);
+                    if inside.is_finite()
+                        && inside > tolerance(x, rhs)
+                        && best.is_none_or(|b| inside > b.0)
+                    {
+                        best = Some((inside, t));
+                    }
+                }
+            }
+            best
+        }
+    }
+}
+
+/// Whether the plant has intersample enclosures (continuous time,
+/// nonlinear): properties then cover the periods between instants.
+pub(super) fn has_between(plan: &SystemPlan) -> bool {
+    match &plan.closed_loop {
+        ravel_analysis::feedback::Loop::Nonlinear(nl) => {
+            matches!(
+                nl.plant.field.time,
+                ravel_base::expr::Time::Continuous { .. }
+            )
+        }
+        ravel_analysis::feedback::Loop::Linear(_) => false,
+    }
+}
+
 /// Whether a simulated trajectory certainly violates `prop` at `step`: its
 /// initial state and noise values lie in their sets, and the rigorous
 /// enclosure of the true trajectory from them (outward-rounded interval
 /// arithmetic, [`ravel_analysis::closed_loop::ClosedLoop::enclose_step`])
-/// lies outside the goal (some goal row is violated by every point of the
-/// enclosure) or inside the avoid set at that step. The f64 simulation
-/// alone could be off by more than any fixed tolerance in an unstable or
-/// high-gain loop; this check makes FALSIFIED independent of it.
+/// lies outside the goal (some goal row or constraint is violated by every
+/// point of the enclosure) or inside an avoid member (every row and every
+/// constraint holds on all of it) at that step. An "eventually" goal is
+/// violated only when the enclosure lies outside at every instant of its
+/// window (and never for a continuous-time nonlinear plant, see
+/// [`violation_of`]). The f64 simulation alone could be off by more than
+/// any fixed tolerance in an unstable or high-gain loop; this check makes
+/// FALSIFIED independent of it.
 pub fn certainly_violates(
     plan: &SystemPlan,
     tr: &Trajectory,
@@ -402,6 +463,21 @@ pub fn certainly_violates(
     step: usize,
 ) -> bool {
     let cl = &plan.closed_loop;
+    let w = prop.window();
+    let eventually = matches!(
+        prop.kind,
+        PropertyKind::Goal {
+            mode: GoalMode::Eventually,
+            ..
+        }
+    );
+    if eventually && has_between(plan) {
+        return false;
+    }
+    if !(w.steps.0..=w.steps.1).contains(&step) {
+        return false;
+    }
+    let last = if eventually { w.steps.1 } else { step };
     let Some(x0) = tr.states.first() else {
         return false;
     };
@@ -409,22 +485,39 @@ pub fn certainly_violates(
         return false;
     }
     let mut x = IBox::point(x0);
-    for t in 0..step {
-        let (Some(w), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+    // the enclosures at the window's instants up to `last`
+    let mut at = Vec::new();
+    for t in 0..=last {
+        if t >= w.steps.0 {
+            at.push(x.clone());
+        }
+        if t == last {
+            break;
+        }
+        let (Some(wn), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
             return false;
         };
-        if !(cl.w().contains_point(w) && cl.v().contains_point(v)) {
+        if !(cl.w().contains_point(wn) && cl.v().contains_point(v)) {
             return false;
         }
-        match cl.enclose_step(t, &x, w, v) {
+        match cl.enclose_step(t, &x, wn, v) {
             Some(next) => x = next,
             None => return false,
         }
     }
     match &prop.kind {
-        PropertyKind::Goal(g) => g.separation_margin(&x) > 0.0,
+        PropertyKind::Goal {
+            set,
+            mode: GoalMode::Always,
+            ..
+        } => constraints::box_outside(set, &x),
+        PropertyKind::Goal {
+            set,
+            mode: GoalMode::Eventually,
+            ..
+        } => at.iter().all(|b| constraints::box_outside(set, b)),
         PropertyKind::Avoid { members, .. } => {
-            members.iter().any(|m| m.containment_margin(&x) >= 0.0)
+            members.iter().any(|m| constraints::box_inside(m, &x))
         }
     }
 }

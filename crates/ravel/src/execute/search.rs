@@ -10,8 +10,10 @@
 //! points, [`BUDGET`] simulations each), so its cost is bounded, and it is
 //! deterministic.
 
-use super::sampling::{certainly_violates, simulate};
+use super::constraints;
+use super::sampling::{certainly_violates, has_between, simulate};
 use super::{tolerance, Control, Property, PropertyKind, SystemPlan, Trajectory};
+use crate::lower::GoalMode;
 use ravel_analysis::sets::IBox;
 
 /// Starting points per property.
@@ -70,24 +72,55 @@ impl Space {
 }
 
 /// How deeply a trajectory violates the property (positive: violated),
-/// and at which step; `None` when no state in the window is finite.
+/// and at which step; `None` when no state in the window is finite (for
+/// an "eventually" goal: when some state of the window is not, or the
+/// plant is a continuous-time nonlinear one, see
+/// [`super::sampling::violation_of`]).
 fn violation(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64, usize)> {
     let finite = |x: &Vec<f64>| x.iter().all(|v| v.is_finite());
-    match &prop.kind {
-        PropertyKind::Goal(g) => {
-            let x = tr.states.get(plan.horizon).filter(|x| finite(x))?;
-            Some((-g.depth(x), plan.horizon))
-        }
-        PropertyKind::Avoid { members, steps } => tr
-            .states
+    let w = prop.window();
+    let window = || {
+        tr.states
             .iter()
             .enumerate()
-            .take(steps.1 + 1)
-            .skip(steps.0)
+            .take(w.steps.1 + 1)
+            .skip(w.steps.0)
             .take_while(|(_, x)| finite(x))
-            .flat_map(|(t, x)| members.iter().map(move |m| (m.depth(x), t)))
-            .filter(|(d, _)| !d.is_nan())
-            .max_by(|a, b| a.0.total_cmp(&b.0)),
+    };
+    let deepest = |it: &mut dyn Iterator<Item = (f64, usize)>| {
+        it.filter(|(d, _)| !d.is_nan())
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+    };
+    match &prop.kind {
+        PropertyKind::Goal {
+            set,
+            mode: GoalMode::Always,
+            ..
+        } => deepest(&mut window().map(|(t, x)| (-constraints::depth(set, x), t))),
+        PropertyKind::Goal {
+            set,
+            mode: GoalMode::Eventually,
+            ..
+        } => {
+            if has_between(plan) || window().count() != w.steps.1 + 1 - w.steps.0 {
+                return None;
+            }
+            let mut least: Option<(f64, usize)> = None;
+            for (t, x) in window() {
+                let d = -constraints::depth(set, x);
+                if d.is_nan() {
+                    return None;
+                }
+                if least.is_none_or(|b| d < b.0) {
+                    least = Some((d, t));
+                }
+            }
+            least
+        }
+        PropertyKind::Avoid { members, .. } => deepest(
+            &mut window()
+                .flat_map(|(t, x)| members.iter().map(move |m| (constraints::depth(m, x), t))),
+        ),
     }
 }
 

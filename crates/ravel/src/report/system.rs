@@ -9,7 +9,7 @@ use super::{
     f, interval, num, partition_grid, partition_text, partitioner_name, slopes_text, vector,
 };
 use crate::execute::{Kind, PropertyResult, SystemOutcome, Trajectory, Verdict};
-use crate::lower::SystemPlan;
+use crate::lower::{GoalMode, PropertyKind, SystemPlan, Window};
 use ravel_analysis::closed_loop::{Boundary, Cut, ModelError};
 use ravel_analysis::sets::{IBox, Region};
 
@@ -211,7 +211,60 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             format!("no sampled trajectory {what}")
         }
     };
+    let prop = plan.properties.iter().find(|q| q.name == p.name);
+    let window = prop.map(|q| q.window()).unwrap_or(Window::at(plan.horizon));
+    let (a, b) = window.steps;
+    let eventually = matches!(
+        prop.map(|q| &q.kind),
+        Some(PropertyKind::Goal {
+            mode: GoalMode::Eventually,
+            ..
+        })
+    );
+    let nonlinear = prop.is_some_and(|q| match &q.kind {
+        PropertyKind::Goal { set, .. } => !set.nonlinear.is_empty(),
+        PropertyKind::Avoid { members, .. } => members.iter().any(|m| !m.nonlinear.is_empty()),
+    });
+    // a margin of −∞ without a cut: a constraint had no enclosure
+    let unbounded = if nonlinear && p.margin == f64::NEG_INFINITY && p.cut.is_none() {
+        " (a nonlinear constraint could not be bounded there: it may be undefined on the box, or overflow)"
+    } else {
+        ""
+    };
+    let windowed = p.kind == Kind::Goal && window != Window::at(plan.horizon);
     match (p.status, p.kind) {
+        (Verdict::Verified, Kind::Goal) if eventually => format!(
+            "on every cell a reachable box at some step of {a}..={b} is inside, least margin {}",
+            num(p.margin)
+        ),
+        (Verdict::Verified, Kind::Goal) if windowed && a == b => format!(
+            "every reachable box at step {a} is inside, margin {}",
+            num(p.margin)
+        ),
+        (Verdict::Verified, Kind::Goal) if windowed => format!(
+            "every reachable box at steps {a}..={b} is inside, least margin {} at step {}",
+            num(p.margin),
+            p.step
+        ),
+        (Verdict::Unsure, Kind::Goal) if eventually && p.cut.is_none() => format!(
+            "on some cell no reachable box at steps {a}..={b} is shown inside (its best margin {} at step {}){unbounded}; {}",
+            num(p.margin),
+            p.step,
+            if plan.samples == 0 {
+                "no Monte Carlo samples were drawn".to_string()
+            } else {
+                "no sampled trajectory stays outside at every step".to_string()
+            }
+        ),
+        (Verdict::Falsified, Kind::Goal) if eventually => format!(
+            "a trajectory is at least {} outside at every step of {a}..={b}",
+            num(-p.margin)
+        ),
+        (Verdict::Falsified, Kind::Goal) if windowed => format!(
+            "a trajectory is {} outside at step {}",
+            num(-p.margin),
+            p.step
+        ),
         (Verdict::Verified, Kind::Goal) => format!(
             "every reachable box at step {} is inside, margin {}",
             p.step,
@@ -239,13 +292,13 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             )
         }
         (Verdict::Unsure, Kind::Goal) => format!(
-            "the reachable box at step {} sticks out by {}; {}",
+            "the reachable box at step {} sticks out by {}{unbounded}; {}",
             p.step,
             num(-p.margin),
             no_witness("misses")
         ),
         (Verdict::Unsure, _) => format!(
-            "a reachable box at step {} may touch it (separation {}); {}",
+            "a reachable box at step {} may touch it (separation {}){unbounded}; {}",
             p.step,
             num(p.margin),
             no_witness("enters")
@@ -345,7 +398,7 @@ pub fn json(
         .properties
         .iter()
         .map(|p| {
-            json!({
+            let mut v = json!({
                 "name": p.name,
                 "kind": p.kind.as_str(),
                 "status": p.status.as_str(),
@@ -353,7 +406,26 @@ pub fn json(
                 "step": p.step,
                 "counterexample": p.counterexample.as_ref().map(traj_json),
                 "unfinished": p.cut.map(cut_json),
-            })
+            });
+            // a goal not at the horizon alone: its steps and mode
+            if let Some(PropertyKind::Goal { window, mode, .. }) = plan
+                .properties
+                .iter()
+                .find(|q| q.name == p.name)
+                .map(|q| &q.kind)
+            {
+                if *window != Window::at(plan.horizon) {
+                    v["window"] = json!({
+                        "first": window.steps.0,
+                        "last": window.steps.1,
+                        "mode": match mode {
+                            GoalMode::Always => "always",
+                            GoalMode::Eventually => "eventually",
+                        },
+                    });
+                }
+            }
+            v
         })
         .collect();
     let mut v = json!({

@@ -153,3 +153,107 @@ impl Interval {
         }
     }
 }
+
+/// An enclosure of the range of a tape's last node over the box of
+/// variables `vars` (every node in outward-rounded interval arithmetic):
+/// how a set's constraint `g(x) ≤ 0` is bounded over a reachable set. A
+/// node that may be undefined on the box (a divisor that may be 0, `log` or
+/// `sqrt` outside its domain, a pole of `tan`) or that overflows is an
+/// error, never a bound; so is an empty tape or a malformed one.
+pub fn tape_range(
+    tape: &ravel_base::expr::Tape,
+    vars: &[Interval],
+) -> Result<Interval, DomainError> {
+    use ravel_base::expr::Node;
+    let mut values: Vec<Interval> = Vec::with_capacity(tape.nodes.len());
+    let at = |values: &[Interval], id: u32| {
+        values
+            .get(id as usize)
+            .copied()
+            .ok_or(DomainError::NotFinite)
+    };
+    for node in &tape.nodes {
+        let v = match *node {
+            Node::Const(c) => Interval::point(c),
+            Node::Var(i) => vars
+                .get(i as usize)
+                .copied()
+                .ok_or(DomainError::NotFinite)?,
+            Node::Neg(a) => -at(&values, a)?,
+            Node::Add(a, b) => at(&values, a)? + at(&values, b)?,
+            Node::Sub(a, b) => at(&values, a)? - at(&values, b)?,
+            Node::Mul(a, b) => at(&values, a)? * at(&values, b)?,
+            Node::Div(a, b) => at(&values, a)?.div(at(&values, b)?)?,
+            Node::Powi(a, n) => at(&values, a)?.powi(n)?,
+            Node::Func(f, a) => at(&values, a)?.apply(f)?,
+        };
+        values.push(v.checked()?);
+    }
+    values.last().copied().ok_or(DomainError::NotFinite)
+}
+
+#[cfg(test)]
+mod tape_range_tests {
+    use super::*;
+    use ravel_base::expr::{Func, Node, Tape};
+
+    fn tape(nodes: &[Node]) -> Tape {
+        let mut t = Tape::new();
+        for n in nodes {
+            t.push(*n);
+        }
+        t
+    }
+
+    #[test]
+    fn a_disc_is_bounded_outward_and_contains_every_sampled_value() {
+        // g = (x0 − 1)² + (x1 − 1)² − 0.25
+        let t = tape(&[
+            Node::Var(0),
+            Node::Const(1.0),
+            Node::Sub(0, 1),
+            Node::Powi(2, 2),
+            Node::Var(1),
+            Node::Sub(4, 1),
+            Node::Powi(5, 2),
+            Node::Add(3, 6),
+            Node::Const(0.25),
+            Node::Sub(7, 8),
+        ]);
+        let b = [Interval::new(0.1, 0.3), Interval::new(-0.2, 0.4)];
+        let r = tape_range(&t, &b).expect("defined");
+        // exact range: (0.7² + 0.6²) − 0.25 = 0.6 … (0.9² + 1.2²) − 0.25 = 2.0
+        assert!(
+            r.lo <= 0.6 && r.hi >= 2.0 && r.lo > 0.59 && r.hi < 2.01,
+            "{r:?}"
+        );
+        let mut vals = Vec::new();
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let x = [0.1 + 0.01 * f64::from(i), -0.2 + 0.03 * f64::from(j)];
+                t.eval_into(&x, &mut vals);
+                let g = *vals.last().expect("value");
+                assert!(r.lo <= g && g <= r.hi);
+            }
+        }
+    }
+
+    #[test]
+    fn domain_errors_are_not_bounds() {
+        // 1 / x0 over a box containing 0; log(x0) and sqrt(x0) over negatives
+        let div = tape(&[Node::Const(1.0), Node::Var(0), Node::Div(0, 1)]);
+        let b = [Interval::new(-1.0, 1.0)];
+        assert_eq!(tape_range(&div, &b), Err(DomainError::DivisionByZero));
+        let log = tape(&[Node::Var(0), Node::Func(Func::Log, 0)]);
+        assert_eq!(tape_range(&log, &b), Err(DomainError::LogOfNonPositive));
+        let sqrt = tape(&[Node::Var(0), Node::Func(Func::Sqrt, 0)]);
+        assert_eq!(tape_range(&sqrt, &b), Err(DomainError::SqrtOfNegative));
+        // an overflow, a missing variable and an empty tape are errors too
+        let big = tape(&[Node::Var(0), Node::Func(Func::Exp, 0)]);
+        assert!(tape_range(&big, &[Interval::new(0.0, 1e6)]).is_err());
+        assert!(tape_range(&big, &[]).is_err());
+        assert!(tape_range(&Tape::new(), &b).is_err());
+        let nan = tape(&[Node::Var(0)]);
+        assert!(tape_range(&nan, &[Interval::new(f64::NAN, 1.0)]).is_err());
+    }
+}

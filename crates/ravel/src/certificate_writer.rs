@@ -288,10 +288,11 @@ fn linear(plan: &SystemPlan) -> Result<&ClosedLoop, String> {
 const NONLINEAR_UNSUPPORTED: &str =
     "a nonlinear plant's evidence is a chain of zonotopes, not of boxes";
 
-/// The relative widenings of the analysis's remainders tried, in order,
+/// The relative widenings of the analysis's remainders tried, in order
+/// (each a full re-derivation and check),
 /// for a nonlinear loop's claims: the checker re-derives every claim with
 /// its own arithmetic, which needs some room beyond the analysis's.
-const INFLATIONS: [f64; 4] = [0.01, 0.1, 0.5, 2.0];
+const INFLATIONS: [f64; 5] = [0.01, 0.04, 0.1, 0.5, 2.0];
 
 /// A nonlinear loop's evidence: per cell, the zonotope the analysis carries
 /// at every step up to `steps` (with its remainders widened), checkable by
@@ -310,6 +311,7 @@ fn nonlinear_evidence(
         .filter_map(|sets| sets.first().map(Region::bbox))
         .collect();
     let mut failure = String::from("no cells");
+    let mut failures: Vec<String> = Vec::new();
     for inflate in INFLATIONS {
         let mut cells = Vec::with_capacity(boxes.len());
         for (c, b) in boxes.iter().enumerate() {
@@ -339,17 +341,27 @@ fn nonlinear_evidence(
         candidate["evidence"] = evidence;
         let report = certify::check(&candidate, plan.closed_loop.net());
         match (report.evidence_failure, report.answer) {
-            (Some(why), _) => failure = why,
+            (Some(why), _) => {
+                failures.push(format!("widened by {inflate}: {why}"));
+                failure = why;
+            }
             (None, Answer::Unreadable(e)) => {
                 return json!({ "status": "unsupported", "reason": format!("internal: {e}") })
             }
             (None, _) => return candidate["evidence"].take(),
         }
     }
+    // the least and the most widened tries say most: the first where the
+    // checker's image does not fit, the last where the claims are too wide
+    let shown = match (failures.first(), failures.last()) {
+        (Some(a), Some(b)) if failures.len() > 1 => format!("{a}; {b}"),
+        (Some(a), _) => a.clone(),
+        _ => String::from("no cells"),
+    };
     json!({
         "status": "unsupported",
         "reason": format!(
-            "the checker's own integration does not re-derive the analysis's claims ({failure})"
+            "the checker's own integration does not re-derive the analysis's claims ({shown})"
         ),
     })
 }

@@ -130,8 +130,8 @@ fn system_spec(path: &std::path::Path) {
 }
 
 /// The certificate of a result, checked: the category guard (every shipped
-/// spec's certificate is VALID, nonlinear plants' too; a benchmark's VALID
-/// or UNSUPPORTED), then a summary for the snapshot.
+/// spec's and benchmark's certificate is VALID, nonlinear plants' too),
+/// then a summary for the snapshot.
 fn certificate_summary(
     name: &str,
     plan: &ravel::lower::SystemPlan,
@@ -148,23 +148,12 @@ fn certificate_summary(
     let back: serde_json::Value = serde_json::from_str(&text).expect("parses");
     assert_eq!(back, cert, "{name}: certificate does not round-trip");
     let report = ravel_certify::check(&back, plan.closed_loop.net());
-    // linear and nonlinear plants alike: the checker re-derives every
-    // claim. Specs are VALID; a benchmark may be UNSUPPORTED when the
-    // checker's own bounds cannot re-derive a proof with a tiny margin
-    // (its snapshot says which and why), never INVALID or UNREADABLE.
-    if name.starts_with("benchmarks/") {
-        assert!(
-            matches!(report.answer, Answer::Valid | Answer::Unsupported(_)),
-            "{name}: certificate {:?}",
-            report.answer
-        );
-    } else {
-        assert_eq!(
-            report.answer,
-            Answer::Valid,
-            "{name}: certificate not VALID"
-        );
-    }
+    // linear and nonlinear plants alike: the checker re-derives every claim
+    assert_eq!(
+        report.answer,
+        Answer::Valid,
+        "{name}: certificate not VALID"
+    );
     let mut s = format!("answer: {:?}\n", report.answer);
     s += &format!("evidence: {}\n", cert["evidence"]["status"]);
     s += &format!("cells × steps: {} × {}\n", report.cells, report.steps);

@@ -416,36 +416,57 @@ fn gap_bounds(act: Activation, a: f64, p: f64, q: f64, convex: bool) -> (f64, f6
     }
 }
 
-/// The checker's relaxation of tanh or sigmoid on `[l, u]`: two lines of
-/// the chord's slope, their intercepts the certified infimum and supremum
-/// of `σ(z) − a z` over the interval (σ is convex for `z ≤ 0` and concave
-/// for `z ≥ 0`, so the interval is split at 0).
+/// The checker's relaxation of tanh or sigmoid on `[l, u]`: on a concave
+/// interval (`l ≥ 0`) the upper line has the slope of the tangent at the
+/// midpoint and the lower one the chord's; on a convex one (`u ≤ 0`) the
+/// other way round; across 0 both have the chord's slope. Whatever the
+/// slopes, the intercepts are the certified supremum and infimum of
+/// `σ(z) − a z` over the interval (σ is convex for `z ≤ 0` and concave for
+/// `z ≥ 0`, so the interval is split at 0), so the lines are sound for any
+/// slope; the choice only makes them tight (CROWN's choice).
 fn smooth_lines(act: Activation, l: f64, u: f64) -> Lines {
     let (fl, fu) = (act.eval(l), act.eval(u));
     let peak = if act == Activation::Tanh { 1.0 } else { 0.25 };
-    let a = if u > l { (fu - fl) / (u - l) } else { 0.0 };
-    let a = if a.is_finite() {
-        a.clamp(0.0, peak)
-    } else {
-        0.0
+    let slope = |a: f64| {
+        if a.is_finite() {
+            a.clamp(0.0, peak)
+        } else {
+            0.0
+        }
     };
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    if l < 0.0 {
-        let (a_lo, a_hi) = gap_bounds(act, a, l, u.min(0.0), true);
-        lo = lo.min(a_lo);
-        hi = hi.max(a_hi);
-    }
-    if u >= 0.0 {
-        let (a_lo, a_hi) = gap_bounds(act, a, l.max(0.0), u, false);
-        lo = lo.min(a_lo);
-        hi = hi.max(a_hi);
-    }
+    let chord = slope(if u > l { (fu - fl) / (u - l) } else { 0.0 });
+    let tangent = {
+        let (d_lo, d_hi) = deriv_bounds(act, 0.5 * l + 0.5 * u);
+        slope(0.5 * d_lo + 0.5 * d_hi)
+    };
+    let (au, al) = if l >= 0.0 {
+        (tangent, chord)
+    } else if u <= 0.0 {
+        (chord, tangent)
+    } else {
+        (chord, chord)
+    };
+    // the certified infimum and supremum of σ(z) − a z over [l, u]
+    let gap = |a: f64| {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        if l < 0.0 {
+            let (a_lo, a_hi) = gap_bounds(act, a, l, u.min(0.0), true);
+            lo = lo.min(a_lo);
+            hi = hi.max(a_hi);
+        }
+        if u >= 0.0 {
+            let (a_lo, a_hi) = gap_bounds(act, a, l.max(0.0), u, false);
+            lo = lo.min(a_lo);
+            hi = hi.max(a_hi);
+        }
+        (lo, hi)
+    };
     Lines {
-        al: a,
-        bl: lo,
-        au: a,
-        bu: hi,
+        al,
+        bl: gap(al).0,
+        au,
+        bu: gap(au).1,
     }
 }
 

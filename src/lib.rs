@@ -260,6 +260,13 @@ pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, ReadError> {
     }
     if let Some(dir) = &req.inside {
         let real = std::fs::canonicalize(&req.path)?;
+        // a spec named without a folder (`lane.ravel`) has the empty path
+        // as its folder: the working folder
+        let dir = if dir.as_os_str().is_empty() {
+            std::path::Path::new(".")
+        } else {
+            dir.as_path()
+        };
         let root = std::fs::canonicalize(dir)?;
         if !real.starts_with(&root) {
             return Err(ReadError::Outside);

@@ -929,3 +929,24 @@ fn a_batch_never_writes_two_results_to_one_file() {
     assert!(!root.join("twice").exists());
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// A spec named without its folder (run inside that folder) reads its
+/// observation file from there, as `./name.ravel` does (issue 30: it used
+/// to be E0219).
+#[test]
+fn a_bare_spec_name_reads_files_beside_it() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/network");
+    for name in ["lane_carrl.ravel", "./lane_carrl.ravel"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
+            .args(["check", name])
+            .current_dir(&dir)
+            .output()
+            .expect("runs");
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

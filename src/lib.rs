@@ -1046,6 +1046,14 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    // the output's folder must exist (else the network, read relative to
+    // it, would be reported missing instead)
+    if output.is_some() && !dir.is_dir() {
+        return fail(format!(
+            "cannot write into `{}`: no such folder (create it first)",
+            ravel_syntax::diag::sanitize(&dir.display().to_string())
+        ));
+    }
     let model = if output.is_some() {
         relative_to(&dir, network)
     } else {

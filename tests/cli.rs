@@ -745,6 +745,22 @@ fn import_vnnlib_through_the_binary() {
     ]);
     assert_eq!(code, 2);
     assert!(stderr.contains("E0305"), "{stderr}");
+    // an output into a folder that does not exist names the folder (issue
+    // 30: it used to report the network as unreadable, E0301)
+    let missing = std::env::temp_dir().join(format!("ravel-no-such-{}", std::process::id()));
+    let target = missing.join("x.ravel");
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib",
+        "tests/data/vnnlib/robust_box.vnnlib",
+        "--network",
+        "models/classifier.onnx",
+        "--output",
+        target.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("no such folder"), "{stderr}");
+    assert!(!stderr.contains("E0301"), "{stderr}");
+    assert!(!missing.exists());
 }
 
 /// The CARRL demonstration runs at a small size: a table of average returns

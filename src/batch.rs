@@ -320,6 +320,18 @@ fn run(
         Run::System { .. } => String::new(),
         Run::Network { outcome, .. } => ravel::report::network::csv_rows(&l.name, outcome),
     };
+    // CSV holds robust action selections only: a spec without any is an
+    // error, not a header with no rows and exit 0
+    if opts.format == Format::Csv && csv.is_empty() {
+        fail_item(
+            (&mut json, &mut stderr, &mut class),
+            "csv_error",
+            &format!(
+                "`{}`: `--format csv` prints robust action selections, and this spec has no `select` block (use --format text, json, jsonl or junit)",
+                ravel_syntax::diag::sanitize(&l.display)
+            ),
+        );
+    }
     Item {
         class,
         stdout,

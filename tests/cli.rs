@@ -797,6 +797,20 @@ fn carrl_demonstration_runs() {
     assert_eq!(bad.status.code(), Some(2));
 }
 
+/// `--format csv` on a spec without a `select` block is an error that says
+/// so (exit 2), not a lone header (issue 30).
+#[test]
+fn csv_output_without_selections_is_an_error() {
+    for spec in [
+        "specs/double_integrator.ravel",
+        "specs/network/classifier_robust.ravel",
+    ] {
+        let (code, _, stderr) = ravel(&["verify", "--format", "csv", spec]);
+        assert_eq!(code, 2, "{spec}: {stderr}");
+        assert!(stderr.contains("no `select` block"), "{stderr}");
+    }
+}
+
 /// `--format csv` prints the robust action selections of network specs.
 #[test]
 fn carrl_csv_output() {

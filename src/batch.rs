@@ -192,9 +192,16 @@ fn error_item(
     if let Some(c) = controller {
         json["controller"] = json!(c.display().to_string());
     }
-    let suite = match spec {
-        Some(p) => ravel_syntax::diag::sanitize(&p.display().to_string()),
-        None => "arguments".to_string(),
+    // the same name as the pair's suite when it runs: two failing pairs of
+    // one spec keep their controllers apart
+    let suite = match (spec, controller) {
+        (Some(p), Some(c)) => ravel_syntax::diag::sanitize(&format!(
+            "{} with controller {}",
+            p.display(),
+            c.display()
+        )),
+        (Some(p), None) => ravel_syntax::diag::sanitize(&p.display().to_string()),
+        (None, _) => "arguments".to_string(),
     };
     Item {
         class: Class::Error,
@@ -235,7 +242,7 @@ fn run(
             return error_item(
                 index,
                 Some(path),
-                None,
+                controller,
                 &msg,
                 format!("error: {msg}\n"),
                 json!({ "spec": path.display().to_string(), "verdict": "ERROR", "errors": [{ "code": null, "message": msg }] }),

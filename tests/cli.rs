@@ -980,3 +980,34 @@ fn a_bare_spec_name_reads_files_beside_it() {
         );
     }
 }
+
+/// Failing pairs of one spec keep their controllers apart in JUnit: each
+/// suite is named after its spec and controller, like a pair that ran
+/// (issue 30: two identical suite names).
+#[test]
+fn junit_suites_of_failing_pairs_name_their_controller() {
+    let (code, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "junit",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/classifier.onnx",
+        "--controller",
+        "models/no_such_model.onnx",
+    ]);
+    assert_eq!(code, 2);
+    let names: Vec<&str> = stdout
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("<testsuite name=\""))
+        .filter_map(|l| l.split('"').next())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "specs/double_integrator.ravel with controller models/classifier.onnx",
+            "specs/double_integrator.ravel with controller models/no_such_model.onnx",
+        ],
+        "{stdout}"
+    );
+}

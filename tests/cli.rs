@@ -1011,3 +1011,27 @@ fn junit_suites_of_failing_pairs_name_their_controller() {
         "{stdout}"
     );
 }
+
+/// An unreadable `--controller` path is reported as such, with the rule
+/// that holds for it (relative to the working folder), not the spec's own
+/// path rule (issue 30).
+#[test]
+fn an_unreadable_controller_override_says_where_it_was_looked_for() {
+    let (code, _, stderr) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/no_such_model.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0301"), "{stderr}");
+    assert!(stderr.contains("given with --controller"), "{stderr}");
+    assert!(
+        stderr.contains("relative to the working folder"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("relative to the spec file's folder"),
+        "{stderr}"
+    );
+}

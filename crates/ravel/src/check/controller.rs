@@ -46,6 +46,24 @@ pub(super) fn controller(
                 .hint("the controller file must be readable next to the spec"),
             ),
             Some(file) => match &file.bytes {
+                // `--controller PATH` replaced the spec's path: that path
+                // is relative to the working folder, and the spec's line is
+                // only where it stands in
+                Err(msg) if file.path_override.is_some() => cx.err(
+                    Diagnostic::new(
+                        Code::ControllerUnreadable,
+                        path.span,
+                        format!(
+                            "cannot read controller `{}` (given with --controller): {}",
+                            ravel_syntax::diag::sanitize(
+                                file.path_override.as_deref().unwrap_or_default()
+                            ),
+                            ravel_syntax::diag::sanitize(msg)
+                        ),
+                    )
+                    .label("replaced by the --controller path")
+                    .hint("--controller paths are relative to the working folder, not the spec's"),
+                ),
                 Err(msg) => cx.err(
                     Diagnostic::new(
                         Code::ControllerUnreadable,

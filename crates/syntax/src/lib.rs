@@ -33,6 +33,44 @@ type P<'a> = Pair<'a, Rule>;
 /// The children of a pair, in order.
 type Children<'a> = Pairs<'a, Rule>;
 
+/// The language's keywords, for "did you mean" on a parse error.
+const KEYWORDS: &[&str] = &[
+    "actuate",
+    "always",
+    "analysis",
+    "avoid",
+    "ball",
+    "boundary",
+    "box",
+    "const",
+    "control",
+    "controller",
+    "der",
+    "during",
+    "epsilon",
+    "eventually",
+    "goal",
+    "horizon",
+    "initial",
+    "input",
+    "network",
+    "next",
+    "observations",
+    "observe",
+    "optimise_slopes",
+    "output",
+    "partitioner",
+    "propagator",
+    "require",
+    "samples",
+    "seed",
+    "select",
+    "state",
+    "steps",
+    "system",
+    "time",
+];
+
 /// The next child of a pair where the grammar guarantees one (`what`
 /// names it).
 #[allow(clippy::expect_used)] // pest yields only parse trees the grammar admits
@@ -271,9 +309,20 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
     } else {
         format!("expected {}", names.join(" or "))
     };
+    // a misspelt keyword (`horizn 5`): name the keyword it is closest to
+    let word: String = source[pos..]
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect();
+    let hint = match crate::diag::did_you_mean(&word, KEYWORDS.iter().copied()) {
+        Some(k) if !word.is_empty() && k != word => {
+            format!("did you mean `{k}`? (see docs/language.md for the syntax of each item)")
+        }
+        _ => "see docs/language.md for the syntax of each item".to_string(),
+    };
     Diagnostic::new(Code::Syntax, Span::new(pos, end), message)
         .label(label)
-        .hint("see docs/language.md for the syntax of each item")
+        .hint(hint)
 }
 
 struct Builder {

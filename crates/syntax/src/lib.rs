@@ -314,7 +314,12 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
         .chars()
         .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
         .collect();
+    // `u = box(…)`: a set after `=`, where the plant takes `in`
+    let after_equals = source[..pos].trim_end().ends_with('=');
     let hint = match crate::diag::did_you_mean(&word, KEYWORDS.iter().copied()) {
+        _ if after_equals && (word == "box" || word == "ball" || source[pos..].starts_with('{')) => {
+            "a name and a set are joined by `in` inside `system` (`u in box([-1, 1])`); `=` takes a number, vector or matrix".to_string()
+        }
         Some(k) if !word.is_empty() && k != word => {
             format!("did you mean `{k}`? (see docs/language.md for the syntax of each item)")
         }

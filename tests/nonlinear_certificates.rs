@@ -229,3 +229,38 @@ fn linear_plants_in_continuous_time_are_checked_between_samples() {
         serde_json::json!([{ "a": [1.0, 0.0], "b": -1.0 }]);
     assert_eq!(answer(&ok, &plan), Answer::Valid);
 }
+
+/// A window whose last control period ends after its last instant (a
+/// window in seconds ending inside a period) needs evidence up to that
+/// period's end: a chain that stops at the last instant is not VALID.
+#[test]
+fn evidence_must_reach_the_end_of_the_last_period() {
+    let (plan, cert) = run("specs/double_integrator_continuous.ravel");
+    let i = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "avoid")
+        .expect("an avoid property");
+    let mut bad = cert.clone();
+    // instants 1..=4, periods 2..=5; the chain cut after step 4
+    bad["problem"]["properties"][i]["steps"] = serde_json::json!({ "first": 1, "last": 4 });
+    bad["problem"]["properties"][i]["periods"] = serde_json::json!({ "first": 2, "last": 5 });
+    // the goal needs the horizon too: keep only the avoid property's claim
+    let goal = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "goal")
+        .expect("a goal");
+    bad["verdicts"][goal]["status"] = serde_json::json!("UNSURE");
+    bad["evidence"]["steps"] = serde_json::json!(4);
+    for cell in bad["evidence"]["cells"].as_array_mut().expect("cells") {
+        cell["steps"].as_array_mut().expect("steps").truncate(4);
+    }
+    let a = answer(&bad, &plan);
+    assert!(
+        matches!(a, Answer::Invalid(ref m) if m.contains("0..=5")),
+        "{a:?}"
+    );
+}

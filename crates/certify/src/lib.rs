@@ -552,6 +552,22 @@ impl Problem {
     }
 }
 
+/// The last step the evidence must reach for a property: its last
+/// instant, or the end of its last control period when that is later (a
+/// window in seconds may end inside a period).
+fn needed_step(p: &Prop, horizon: usize) -> usize {
+    match p {
+        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
+            let last = if periods.0 <= periods.1 {
+                steps.1.max(periods.1)
+            } else {
+                steps.1
+            };
+            last.min(horizon)
+        }
+    }
+}
+
 /// The initial set of a problem over `n` states.
 fn read_initial(p: &Value, n: usize) -> R<Initial> {
     let init = get(p, "initial")?;
@@ -777,7 +793,7 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             Some("checkable") => {
                 let needed = verified
                     .iter()
-                    .map(|(_, p)| problem.last_step(p))
+                    .map(|(_, p)| needed_step(p, problem.horizon))
                     .max()
                     .unwrap_or(0);
                 match evidence(&problem, net, ev, needed, &verified, report) {
@@ -1297,8 +1313,12 @@ fn cell_proves(
         return Ok(());
     };
     for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
+        // (the evidence reaches every period's end: `needed_step`)
         let Some(before) = sets.get(p - 1) else {
-            continue;
+            return Err(Error::Invalid(format!(
+                "`{shown}`: cell {c} has no set at step {} for the period ending at step {p}",
+                p - 1
+            )));
         };
         let pipe = nonlinear::intersample(flows, p - 1, &problem.obs, &problem.v, net, before)
             .ok_or_else(|| {
@@ -1359,7 +1379,7 @@ impl<'a> CellCheck<'a> {
         let needed = verified
             .iter()
             .filter_map(|&i| problem.props.get(i))
-            .map(|(_, p)| problem.last_step(p))
+            .map(|(_, p)| needed_step(p, problem.horizon))
             .max()
             .unwrap_or(0);
         let ev = get(cert, "evidence").map_err(Error::Unreadable)?;

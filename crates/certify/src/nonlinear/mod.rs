@@ -111,13 +111,6 @@ impl Problem {
         self.field.n
     }
 
-    /// The last step a property constrains.
-    fn last_step(&self, p: &Prop) -> usize {
-        match p {
-            Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => steps.1.min(self.horizon),
-        }
-    }
-
     /// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.
     fn observe<T: Num>(&self, x: &[T], v: &[Iv]) -> Vec<T> {
         observe(&self.obs, x, v)
@@ -264,7 +257,7 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
             Some("checkable") => {
                 let needed = verified
                     .iter()
-                    .map(|(_, p)| problem.last_step(p))
+                    .map(|(_, p)| super::needed_step(p, problem.horizon))
                     .max()
                     .unwrap_or(0);
                 match evidence(&problem, net, ev, needed, &verified, report)? {
@@ -757,8 +750,15 @@ fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), Strin
         Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
     };
     for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
-        let Some(Some(pipe)) = chain.between.get(p) else {
-            continue;
+        let pipe = match chain.between.get(p) {
+            Some(Some(pipe)) => pipe,
+            // discrete time: no states between the instants
+            Some(None) => continue,
+            None => {
+                return Err(format!(
+                    "the evidence stops before the period ending at step {p}"
+                ))
+            }
         };
         let b = Bx {
             lo: pipe.iter().map(|i| i.lo).collect(),

@@ -18,11 +18,16 @@ pub enum Guide {
     /// Property-guided: refine the cell with the worst unproven property margin
     /// first; stop when every cell is proven or the verdict is decided.
     Property,
+    /// Branch and bound (network specs): refine the subproblem with the
+    /// worst unproven margin first, aim every split at the properties, try
+    /// to falsify every subproblem, and stop as soon as every property is
+    /// settled (see `execute::bab`).
+    Bab,
 }
 
 impl Guide {
     /// Every guide, in the order of the documentation.
-    pub const ALL: [Guide; 3] = [Guide::Sg, Guide::Gsg, Guide::Property];
+    pub const ALL: [Guide; 4] = [Guide::Sg, Guide::Gsg, Guide::Property, Guide::Bab];
 
     /// The spec-language name.
     pub fn name(self) -> &'static str {
@@ -30,6 +35,7 @@ impl Guide {
             Guide::Sg => "sg",
             Guide::Gsg => "gsg",
             Guide::Property => "property",
+            Guide::Bab => "bab",
         }
     }
 

@@ -137,7 +137,7 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::uniform => "`uniform [k, …]`",
         Rule::ball => "`ball(center […], radius …, norm p)`",
         Rule::norm => "`1`, `2` or `inf`",
-        Rule::guided | Rule::guide => "`sg`, `gsg` or `property`",
+        Rule::guided | Rule::guide => "`sg`, `gsg`, `property` or `bab`",
         Rule::budget | Rule::budget_item => "a budget item such as `calls 100`",
         Rule::boundary_polytope => "`polytope K` or `polytope [[…], …]`",
         Rule::per_step => "`per_step(value, …)`",

@@ -161,7 +161,14 @@ fn statement(
                 cx.err(
                     Diagnostic::new(Code::SpecKind, guide.span, "the `property` partitioner refines a closed loop's initial set")
                         .label("in a network spec")
-                        .hint("a network spec's input set is refined by `sg` or `gsg`, guided by the sampled outputs"),
+                        .hint("a network spec's properties are decided by branch and bound: `partitioner bab`"),
+                );
+            }
+            if !network && g == Guide::Bab {
+                cx.err(
+                    Diagnostic::new(Code::SpecKind, guide.span, "branch and bound (`bab`) decides a network spec's properties")
+                        .label("in a closed-loop spec")
+                        .hint("a closed loop's initial set is refined towards its properties by `partitioner property`"),
                 );
             }
             part.partition = cx

@@ -1305,7 +1305,7 @@ fn samples_drawn(cx: &mut Ctx, an: &AnalysisPart) {
         );
     }
     if let (Some((g, span)), true) = (an.guided_span, an.samples == 0) {
-        if g != Guide::Property {
+        if !matches!(g, Guide::Property | Guide::Bab) {
             cx.err(
                 Diagnostic::new(
                     Code::Partition,

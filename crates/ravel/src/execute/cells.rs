@@ -588,9 +588,16 @@ pub(super) fn partition_guided(
     ctl: &Control,
 ) -> Partitioned {
     let stop = || ctl.out_of_time();
+    // `check` refuses `bab` in a closed loop; were it here, it would refine
+    // as the property guide does (its closed-loop counterpart)
+    let guide = if guide == Guide::Bab {
+        Guide::Property
+    } else {
+        guide
+    };
     let strategy = match guide {
         Guide::Sg => Strategy::Sg,
-        Guide::Gsg | Guide::Property => Strategy::Gsg,
+        Guide::Gsg | Guide::Property | Guide::Bab => Strategy::Gsg,
     };
     // nothing left to decide: one call for the report's sets
     let mut budget = if guide == Guide::Property && !undecided.iter().any(|u| *u) {
@@ -641,7 +648,7 @@ pub(super) fn partition_guided(
                         None => f64::INFINITY,
                     })
                     .fold(0.0, f64::max),
-                Guide::Property => plan
+                Guide::Property | Guide::Bab => plan
                     .properties
                     .iter()
                     .zip(undecided)

@@ -53,6 +53,12 @@ pub enum Stop {
     Calls,
     /// The time budget (or the run's time limit) was spent.
     Time,
+    /// Branch and bound: every property was settled (proved, or a
+    /// counterexample confirmed) before every cell was.
+    Decided,
+    /// Branch and bound: the queue of open subproblems reached its memory
+    /// limit.
+    Queue,
 }
 
 impl Stop {
@@ -63,6 +69,8 @@ impl Stop {
             Stop::Done => "done",
             Stop::Calls => "calls",
             Stop::Time => "time",
+            Stop::Decided => "decided",
+            Stop::Queue => "queue",
         }
     }
 }

@@ -19,6 +19,10 @@ pub const DEFAULT_BUDGET: Budget = Budget {
     seconds: None,
 };
 
+/// Branch and bound's default smallest cell, as a fraction of the input
+/// set's width along each input (2⁻³⁰: about 30 halvings of every input).
+pub const BAB_MIN_SIZE: f64 = 1.0 / 1_073_741_824.0;
+
 /// The checked analysis choices (each `None` when it had an error), with
 /// the spans later checks point at.
 pub(super) struct AnalysisPart {
@@ -171,9 +175,22 @@ fn statement(
                         .hint("a closed loop's initial set is refined towards its properties by `partitioner property`"),
                 );
             }
-            part.partition = cx
-                .budget(budget)
-                .map(|budget| Partitioner::Guided { guide: g, budget });
+            let given = |name: &str| budget.iter().any(|(k, _)| k.node == name);
+            let (calls_given, size_given) = (given("calls"), given("min_size"));
+            part.partition = cx.budget(budget).map(|mut budget| {
+                if g == Guide::Bab {
+                    // branch and bound stops when the properties are
+                    // settled: by default its budget is the limit, and it
+                    // splits as fine as it must (the time limit ends it)
+                    if !calls_given {
+                        budget.calls = ravel_base::limits::MAX_CALLS as usize;
+                    }
+                    if !size_given {
+                        budget.min_size = BAB_MIN_SIZE;
+                    }
+                }
+                Partitioner::Guided { guide: g, budget }
+            });
         }
         AnalysisStmt::BoundaryPolytope(v) => {
             if let Some((xn, n)) = state {

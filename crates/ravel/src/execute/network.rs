@@ -42,6 +42,8 @@ use ravel_base::nn::{Activation, InputType, Layer, Network};
 use ravel_base::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper};
 use ravel_base::rng::Rng;
 
+mod bab;
+
 /// The output set: certified offsets along the shape's directions.
 #[derive(Clone, Debug)]
 pub struct OutputBounds {
@@ -1134,9 +1136,45 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
     let rows = stack(&shape_dirs, &prop_rows, m);
     let sampled = support_of_points(&rows.dirs, &mc.outputs);
     let extent = extent_of_points(&rows.dirs, &mc.outputs);
-    let b = bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl);
+    let (b, found) = match &plan.partitioner {
+        Partitioner::Guided {
+            guide: Guide::Bab,
+            budget,
+        } => {
+            let (root, issues) = cell_bounds(
+                &plan.net,
+                input,
+                plan.propagator,
+                plan.slope_steps,
+                &rows.dirs,
+            );
+            let starts = attack_starts(plan, input, &mc);
+            let s = bab::search(
+                plan,
+                input,
+                &rows,
+                root,
+                issues,
+                &starts,
+                &mc.labels,
+                &mc.may_falsify,
+                budget,
+                ctl,
+                bab::queue_limit(
+                    input.dim(),
+                    rows.dirs.nrows() - rows.shape_rows,
+                    plan.properties.len(),
+                ),
+            );
+            (s.bounded, Some((s.witnesses, s.real_only)))
+        }
+        _ => (
+            bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl),
+            None,
+        ),
+    };
     let overflow = b.union.iter().any(|v| !v.is_finite());
-    let properties = property_verdicts(plan, input, &mc, &b, &rows);
+    let properties = property_verdicts(plan, input, &mc, &b, &rows, found);
     let radii = plan
         .radii
         .iter()
@@ -1254,13 +1292,19 @@ fn monte_carlo(plan: &NetworkPlan, input: &Region) -> MonteCarlo {
 /// Each property's verdict: VERIFIED from the certified margin (no solver
 /// issue), FALSIFIED from a confirmed counterexample of the attack, UNSURE
 /// otherwise.
+/// A search's findings per property: confirmed counterexamples and
+/// real-arithmetic-only violations.
+type Found = (Vec<Option<Witness>>, Vec<Option<Vec<f64>>>);
+
 fn property_verdicts(
     plan: &NetworkPlan,
     input: &Region,
     mc: &MonteCarlo,
     b: &Bounded,
     rows: &Rows,
+    found: Option<Found>,
 ) -> Vec<NetPropertyResult> {
+    let (mut witnesses, mut real) = found.unwrap_or_default();
     let m = plan.net.outputs();
     let mut properties = Vec::new();
     for (k, p) in plan.properties.iter().enumerate() {
@@ -1281,8 +1325,14 @@ fn property_verdicts(
             counterexample: None,
             real_only: None,
         };
+        let searched = witnesses.get_mut(k).and_then(Option::take);
         if proves(&p.kind, margin) && b.issues.is_empty() {
             result.status = Verdict::Verified;
+        } else if let Some(w) = searched {
+            // confirmed by the search (`confirm`, as every counterexample)
+            result.status = Verdict::Falsified;
+            result.margin = -violation(&p.kind, label, &w.output).max(0.0);
+            result.counterexample = Some(w);
         } else if mc.may_falsify[k] {
             let found = attack(&plan.net, input, &p.kind, label, &mc.inputs, 2000);
             if let Some(w) = found.witness {
@@ -1290,12 +1340,32 @@ fn property_verdicts(
                 result.margin = -violation(&p.kind, label, &w.output).max(0.0);
                 result.counterexample = Some(w);
             } else {
-                result.real_only = found.real_only;
+                result.real_only = found
+                    .real_only
+                    .or_else(|| real.get_mut(k).and_then(Option::take));
             }
         }
         properties.push(result);
     }
     properties
+}
+
+/// Where the search's opening attack starts: the set's centre, then the
+/// sampled inputs, most violating (of any property) first, at most 16.
+fn attack_starts(plan: &NetworkPlan, input: &Region, mc: &MonteCarlo) -> Vec<Vec<f64>> {
+    let score = |y: &Vec<f64>| {
+        plan.properties
+            .iter()
+            .zip(&mc.labels)
+            .map(|(p, l)| violation(&p.kind, *l, y))
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    let mut ranked: Vec<(f64, &Vec<f64>)> = mc.outputs.iter().map(score).zip(&mc.inputs).collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    centre(input)
+        .into_iter()
+        .chain(ranked.into_iter().take(15).map(|(_, x)| x.clone()))
+        .collect()
 }
 
 /// Whether an outward-rounded enclosure of `f(x)` has output `k` strictly

@@ -80,6 +80,8 @@ pub(crate) fn partition_text(partitioner: &Partitioner, cells: usize, stop: Stop
                 Stop::Calls if budget.calls == 1 => "budget of 1 cell evaluation spent".to_string(),
                 Stop::Calls => format!("budget of {} cell evaluations spent", budget.calls),
                 Stop::Time => "time budget spent".to_string(),
+                Stop::Decided => "every property settled".to_string(),
+                Stop::Queue => "the queue of open subproblems reached its memory limit".to_string(),
             };
             let noun = if cells == 1 { "cell" } else { "cells" };
             format!("{} partition ({cells} {noun}, {why})", guide.name())

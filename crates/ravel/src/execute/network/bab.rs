@@ -1,0 +1,803 @@
+//! Branch and bound over a network spec's input set (`partitioner bab`).
+//!
+//! The search keeps a queue of open subproblems (cells of the input set,
+//! each with certified bounds of the properties' rows over it) and always
+//! works on the cells whose worst property margin is lowest:
+//!
+//! 1. **Attack first.** Projected gradient ascent on each falsifiable
+//!    property's violation, from the centre and the worst sampled inputs,
+//!    before any bound is computed ([`pgd`]); a confirmed counterexample
+//!    settles the property at once.
+//! 2. **Bound in batches.** Up to [`BATCH`] cells are taken from the queue
+//!    at a time, each is split in two along one input, and the children are
+//!    bounded together (CROWN's batched pass over the threads, or the
+//!    spec's propagator cell by cell). A child's bounds are intersected with
+//!    its parent's (both hold on the child).
+//! 3. **Aim the split.** A cell is split along the input with the largest
+//!    *smear* for its worst property row: the gradient of that row at the
+//!    cell's centre times the cell's width along the input (the first-order
+//!    change of the row across the cell). Measured on ACAS Xu against
+//!    splitting the widest input (see docs/network.md).
+//! 4. **Falsify every child.** A child that is not proved is attacked with
+//!    a few gradient steps from its centre; a candidate becomes a
+//!    counterexample only through [`confirm`](super::confirm), as every
+//!    other counterexample of a network spec.
+//! 5. **Stop as soon as every property is settled**: each one proved on
+//!    every cell, or falsified. Otherwise at the call budget, the run's time
+//!    limit, or when the queue reaches its memory limit ([`queue_limit`]);
+//!    the open cells keep the bounds they have (valid on them), so the
+//!    verdict is then UNSURE for the properties still open.
+//!
+//! The proved cells and the open ones together are the final partition:
+//! the certificate's evidence is that partition, re-checked cell by cell as
+//! for every other partitioner. Only the properties' rows are bounded per
+//! cell; the output set's shape rows keep the whole input set's bounds.
+//!
+//! Splitting is on inputs only: complete for continuous networks on the
+//! closure of the property (a violation with positive margin is found on a
+//! small enough cell, a strict proof holds on small enough cells), which is
+//! what input dimensions of a few (ACAS Xu's 5) make practical. Splitting
+//! on ReLU activations, which high-dimensional inputs need, is not
+//! implemented yet.
+
+use std::collections::BinaryHeap;
+
+use nalgebra::DMatrix;
+
+use super::{
+    cell_bounds, confirm, map_ordered, own_slopes, project, representable, violates_real,
+    violation, Bounded, Rows, Witness,
+};
+use crate::execute::Control;
+use crate::ir::{NetProperty, NetPropertyKind};
+use crate::lower::NetworkPlan;
+use ravel_analysis::batch;
+use ravel_analysis::issue::Issue;
+use ravel_analysis::partition::{Budget, Stop};
+use ravel_analysis::sets::{IBox, Region};
+
+/// Cells taken from the queue per round (their children are bounded together).
+pub const BATCH: usize = 64;
+
+/// Memory the queue of open cells may hold, in bytes.
+pub const QUEUE_BYTES: usize = 1 << 30;
+
+/// Gradient steps per start of the opening attack.
+const PGD_STEPS: usize = 50;
+
+/// Gradient steps of the attack on each open child.
+const CHILD_STEPS: usize = 4;
+
+/// The most open cells the queue may hold for inputs of dimension `n` and
+/// `rows` bounded rows per cell (each cell's box, bounds and flags).
+pub fn queue_limit(n: usize, rows: usize, properties: usize) -> usize {
+    let bytes = 2 * n * 8 + rows * 8 + properties + 96;
+    (QUEUE_BYTES / bytes).max(1)
+}
+
+/// What the search found: the final cells with their bounds, and per
+/// property a confirmed counterexample or a real-arithmetic-only violation.
+pub(super) struct Searched {
+    pub bounded: Bounded,
+    pub witnesses: Vec<Option<Witness>>,
+    pub real_only: Vec<Option<Vec<f64>>>,
+}
+
+/// An open cell: its box, the bounds of the properties' rows over it, and
+/// its worst open margin (the queue's key: lowest first).
+struct Node {
+    cell: IBox,
+    bounds: Vec<f64>,
+    worst: f64,
+}
+
+impl PartialEq for Node {
+    fn eq(&self, other: &Self) -> bool {
+        self.worst.total_cmp(&other.worst).is_eq()
+    }
+}
+impl Eq for Node {}
+impl PartialOrd for Node {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Node {
+    /// The max-heap pops the lowest margin first.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other.worst.total_cmp(&self.worst)
+    }
+}
+
+/// The certified margin of property `kind` on one cell from the bounds `b`
+/// of its rows (`range` indexes them), and the row that decides it (the
+/// one a split should improve). Positive proves it on the cell (`≥ 0` for
+/// `require`). NaN counts as no bound.
+pub(super) fn cell_margin(
+    kind: &NetPropertyKind,
+    b: &[f64],
+    range: &std::ops::Range<usize>,
+) -> (f64, usize) {
+    let clean = |v: f64| if v.is_nan() { f64::NEG_INFINITY } else { v };
+    match kind {
+        NetPropertyKind::Require(p) => {
+            let mut worst = (f64::INFINITY, range.start);
+            for ((_, h), k) in p.rows.iter().zip(range.clone()) {
+                let v = clean(h - b[k]);
+                if v < worst.0 {
+                    worst = (v, k);
+                }
+            }
+            worst
+        }
+        NetPropertyKind::Avoid(members) => {
+            let mut worst = (f64::INFINITY, range.start);
+            let mut at = range.start;
+            for p in members {
+                let mut best = (f64::NEG_INFINITY, at);
+                for (_, h) in &p.rows {
+                    let v = clean(-b[at] - h);
+                    if v > best.0 {
+                        best = (v, at);
+                    }
+                    at += 1;
+                }
+                if best.0 < worst.0 {
+                    worst = best;
+                }
+            }
+            worst
+        }
+        NetPropertyKind::Robust(_) => {
+            let mut worst = (f64::INFINITY, range.start);
+            for k in range.clone() {
+                let v = clean(-b[k]);
+                if v < worst.0 {
+                    worst = (v, k);
+                }
+            }
+            worst
+        }
+    }
+}
+
+/// Whether margin `v` proves `kind` on a cell.
+fn proved(kind: &NetPropertyKind, v: f64) -> bool {
+    super::proves(kind, v)
+}
+
+/// The part of `region` inside the box `c` (a box cell of a box, the
+/// polytope's rows kept; a ball's cell is covered by its box).
+fn cell_region(region: &Region, c: &IBox) -> Region {
+    match region {
+        Region::Polytope { rows, .. } => Region::Polytope {
+            bbox: c.clone(),
+            rows: rows.clone(),
+        },
+        _ => Region::Box(c.clone()),
+    }
+}
+
+/// What the search reads, fixed for the run.
+struct Ctx<'a> {
+    plan: &'a NetworkPlan,
+    region: &'a Region,
+    /// The property rows only (the stacked rows past the shape's).
+    pdirs: DMatrix<f64>,
+    /// Per property: its rows, shifted to index `pdirs`.
+    ranges: Vec<std::ops::Range<usize>>,
+    labels: &'a [Option<usize>],
+    may_falsify: &'a [bool],
+    ctl: &'a Control<'a>,
+}
+
+impl Ctx<'_> {
+    fn props(&self) -> &[NetProperty] {
+        &self.plan.properties
+    }
+
+    /// The worst margin over the properties still open on a cell with
+    /// bounds `b` (`+∞`: nothing open), and the decisive row of it.
+    fn worst(&self, b: &[f64], settled: &[bool]) -> (f64, Option<usize>) {
+        let mut w = (f64::INFINITY, None);
+        for (k, p) in self.props().iter().enumerate() {
+            if settled[k] {
+                continue;
+            }
+            let (v, row) = cell_margin(&p.kind, b, &self.ranges[k]);
+            if !proved(&p.kind, v) && v < w.0 {
+                w = (v, Some(row));
+            }
+        }
+        if w.1.is_none() {
+            w.0 = f64::INFINITY;
+        }
+        w
+    }
+
+    /// Certified bounds of the property rows over each cell (`+∞` where
+    /// none), and the solver issues met.
+    fn bound(&self, cells: &[IBox]) -> Vec<(Vec<f64>, Vec<Issue>)> {
+        let plan = self.plan;
+        let threads = self.ctl.threads;
+        if let (Some(mode), Region::Box(_)) =
+            (own_slopes(plan.propagator, plan.slope_steps), self.region)
+        {
+            // groups fixed by the cell count, never by the threads: a
+            // batched pass's bounds may depend on its group (threads never
+            // change a result)
+            let per = cells.len().div_ceil(8).clamp(4, 256);
+            let groups: Vec<&[IBox]> = cells.chunks(per).collect();
+            return map_ordered(&groups, threads, &|g: &&[IBox]| match batch::crown_offsets(
+                &plan.net,
+                g,
+                &self.pdirs,
+                mode,
+            ) {
+                Some(all) => all.into_iter().map(|b| (b, Vec::new())).collect(),
+                None => g
+                    .iter()
+                    .map(|c| {
+                        cell_bounds(
+                            &plan.net,
+                            &Region::Box(c.clone()),
+                            plan.propagator,
+                            plan.slope_steps,
+                            &self.pdirs,
+                        )
+                    })
+                    .collect::<Vec<_>>(),
+            })
+            .into_iter()
+            .flatten()
+            .collect();
+        }
+        map_ordered(cells, threads, &|c: &IBox| {
+            cell_bounds(
+                &plan.net,
+                &cell_region(self.region, c),
+                plan.propagator,
+                plan.slope_steps,
+                &self.pdirs,
+            )
+        })
+    }
+
+    /// The input along which to split `cell` for the decisive row `row`:
+    /// the largest smear `|∂(d·f)/∂xᵢ(centre)|·widthᵢ` among the inputs
+    /// still wider than `min_width`; the widest (relative to `root`) when
+    /// every gradient entry is 0; `None` when no input may be split.
+    fn split_dim(&self, cell: &IBox, row: usize, min_width: &[f64], root: &IBox) -> Option<usize> {
+        let n = cell.dim();
+        let splittable: Vec<usize> = (0..n)
+            .filter(|&i| cell.hi[i] - cell.lo[i] > min_width[i])
+            .collect();
+        if splittable.is_empty() {
+            return None;
+        }
+        let centre: Vec<f64> = (0..n)
+            .map(|i| cell.lo[i] + 0.5 * (cell.hi[i] - cell.lo[i]))
+            .collect();
+        let d: Vec<f64> = self.pdirs.row(row).iter().copied().collect();
+        let (_, g) = self.plan.net.gradient(&centre, &d);
+        let smear = |i: usize| (g[i] * (cell.hi[i] - cell.lo[i])).abs();
+        let best = splittable
+            .iter()
+            .copied()
+            .filter(|&i| smear(i).is_finite())
+            .max_by(|&a, &b| smear(a).total_cmp(&smear(b)));
+        match best {
+            Some(i) if smear(i) > 0.0 => Some(i),
+            _ => splittable.iter().copied().max_by(|&a, &b| {
+                let rel = |i: usize| {
+                    (cell.hi[i] - cell.lo[i]) / (root.hi[i] - root.lo[i]).max(f64::MIN_POSITIVE)
+                };
+                rel(a).total_cmp(&rel(b))
+            }),
+        }
+    }
+
+    /// Try to falsify property `k` from `starts` by projected gradient
+    /// ascent inside `within` (a cell of the input set, or the set), with
+    /// steps of `scale` times the cell's half-width, halved when a step does
+    /// not improve. A candidate is confirmed against the whole input set.
+    fn pgd(
+        &self,
+        k: usize,
+        within: &Region,
+        starts: &[Vec<f64>],
+        steps: usize,
+        real_only: &mut Option<Vec<f64>>,
+    ) -> Option<Witness> {
+        let net = &self.plan.net;
+        let kind = &self.props()[k].kind;
+        let label = self.labels[k];
+        let b = within.bbox();
+        let n = b.dim();
+        let half: Vec<f64> = (0..n).map(|i| 0.5 * (b.hi[i] - b.lo[i])).collect();
+        for x0 in starts {
+            let Some(mut x) = project(within, x0.clone()) else {
+                continue;
+            };
+            let mut alpha = 0.5;
+            let mut v = f64::NEG_INFINITY;
+            for _ in 0..=steps {
+                let y = net.forward(&x);
+                let now = violation(kind, label, &y);
+                if now >= 0.0 {
+                    if let Some(w) = self.confirmed(k, &x, real_only) {
+                        return Some(w);
+                    }
+                }
+                if now <= v {
+                    alpha *= 0.5;
+                }
+                v = v.max(now);
+                let c = ascent_row(kind, label, &y);
+                let (_, g) = net.gradient(&x, &c);
+                let next: Vec<f64> = (0..n)
+                    .map(|i| {
+                        x[i] + alpha * half[i] * g[i].signum() * f64::from(u8::from(g[i] != 0.0))
+                    })
+                    .collect();
+                match project(within, next) {
+                    Some(p) => x = p,
+                    None => break,
+                }
+            }
+        }
+        None
+    }
+
+    /// `x` as a confirmed counterexample of property `k` (made a value of
+    /// the model's input type inside the input set, then confirmed), or
+    /// `None`; the first real-arithmetic-only violation is kept.
+    fn confirmed(&self, k: usize, x: &[f64], real_only: &mut Option<Vec<f64>>) -> Option<Witness> {
+        let net = &self.plan.net;
+        let kind = &self.props()[k].kind;
+        let label = self.labels[k];
+        let stored = representable(self.region, net.input_type, x)
+            .filter(|r| confirm(net, self.region, kind, label, r));
+        if stored.is_none()
+            && real_only.is_none()
+            && violates_real(net, self.region, kind, label, x)
+        {
+            *real_only = Some(x.to_vec());
+        }
+        stored.map(|input| Witness {
+            output: net.forward(&input),
+            input,
+        })
+    }
+}
+
+/// The output combination whose increase increases the violation of
+/// `kind` at output `y` (a subgradient of [`violation`]).
+fn ascent_row(kind: &NetPropertyKind, label: Option<usize>, y: &[f64]) -> Vec<f64> {
+    let m = y.len();
+    let dot = |a: &[f64]| a.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
+    match kind {
+        NetPropertyKind::Require(p) => p
+            .rows
+            .iter()
+            .max_by(|a, b| (dot(&a.0) - a.1).total_cmp(&(dot(&b.0) - b.1)))
+            .map(|r| r.0.clone())
+            .unwrap_or_else(|| vec![0.0; m]),
+        NetPropertyKind::Avoid(members) => {
+            // the member closest to containing y, and its most violated row
+            let row_of = |p: &ravel_analysis::sets::Polytope| {
+                p.rows
+                    .iter()
+                    .max_by(|a, b| (dot(&a.0) - a.1).total_cmp(&(dot(&b.0) - b.1)))
+                    .map(|r| (dot(&r.0) - r.1, r.0.clone()))
+            };
+            members
+                .iter()
+                .filter_map(row_of)
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|(_, a)| a.iter().map(|v| -v).collect())
+                .unwrap_or_else(|| vec![0.0; m])
+        }
+        NetPropertyKind::Robust(_) => {
+            let k = label.unwrap_or(0);
+            let j = (0..m)
+                .filter(|&j| j != k)
+                .max_by(|&a, &b| y[a].total_cmp(&y[b]))
+                .unwrap_or(k);
+            let mut c = vec![0.0; m];
+            if j != k {
+                c[j] = 1.0;
+                c[k] = -1.0;
+            }
+            c
+        }
+    }
+}
+
+/// Branch and bound over `region` for the plan's properties (see the
+/// module documentation). `rows` are the stacked rows of the run
+/// (`root` their bounds over the whole set, one call), `starts` the inputs
+/// the opening attack starts from (best first), `labels` and `may_falsify`
+/// per property as Monte Carlo decided them; `limit` the most open cells
+/// the queue may hold ([`queue_limit`]).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn search(
+    plan: &NetworkPlan,
+    region: &Region,
+    rows: &Rows,
+    root: Vec<f64>,
+    root_issues: Vec<Issue>,
+    starts: &[Vec<f64>],
+    labels: &[Option<usize>],
+    may_falsify: &[bool],
+    budget: &Budget,
+    ctl: &Control,
+    limit: usize,
+) -> Searched {
+    let total = rows.dirs.nrows();
+    let k0 = rows.shape_rows;
+    let np = plan.properties.len();
+    let cx = Ctx {
+        plan,
+        region,
+        pdirs: rows.dirs.rows(k0, total - k0).into_owned(),
+        ranges: rows
+            .ranges
+            .iter()
+            .map(|r| r.start - k0..r.end - k0)
+            .collect(),
+        labels,
+        may_falsify,
+        ctl,
+    };
+    let full = |b: &[f64]| -> Vec<f64> { root[..k0].iter().chain(b).copied().collect() };
+    let mut issues = root_issues;
+    let mut witnesses: Vec<Option<Witness>> = vec![None; np];
+    let mut real_only: Vec<Option<Vec<f64>>> = vec![None; np];
+    let mut settled = vec![false; np];
+    let rootbox = region.bbox();
+    let mut leaves: Vec<(IBox, Vec<f64>)> = Vec::new();
+    let mut calls = 1;
+    let out_of_time = || ctl.out_of_time() || budget.seconds.is_some_and(|s| (ctl.elapsed)() > s);
+
+    // 1. the opening attack
+    let root_b = root[k0..].to_vec();
+    for k in 0..np {
+        if !cx.may_falsify[k] || out_of_time() {
+            continue;
+        }
+        let (v, _) = cell_margin(&plan.properties[k].kind, &root_b, &cx.ranges[k]);
+        if proved(&plan.properties[k].kind, v) {
+            continue;
+        }
+        if let Some(w) = cx.pgd(k, region, starts, PGD_STEPS, &mut real_only[k]) {
+            witnesses[k] = Some(w);
+            settled[k] = true;
+        }
+    }
+
+    let min_width: Vec<f64> = (0..rootbox.dim())
+        .map(|i| budget.min_size * (rootbox.hi[i] - rootbox.lo[i]))
+        .collect();
+    let mut queue = BinaryHeap::new();
+    let (w0, _) = cx.worst(&root_b, &settled);
+    let mut stop = Stop::Done;
+    if w0 < f64::INFINITY {
+        queue.push(Node {
+            cell: rootbox.clone(),
+            bounds: root_b,
+            worst: w0,
+        });
+    } else {
+        leaves.push((rootbox.clone(), full(&root_b)));
+        if settled.iter().any(|s| *s) {
+            // the opening attack settled what the root's bounds did not
+            stop = Stop::Decided;
+        }
+    }
+    let mut progress_done = 0usize;
+    while !queue.is_empty() {
+        if settled.iter().all(|s| *s) {
+            stop = Stop::Decided;
+            break;
+        }
+        if out_of_time() {
+            stop = Stop::Time;
+            break;
+        }
+        if calls >= budget.calls {
+            stop = Stop::Calls;
+            break;
+        }
+        if queue.len() >= limit {
+            stop = Stop::Queue;
+            break;
+        }
+        // take a batch; split each
+        let room = (budget.calls - calls) / 2;
+        let take = BATCH.min(room.max(1));
+        let mut parents: Vec<Node> = Vec::with_capacity(take);
+        let mut kids: Vec<IBox> = Vec::with_capacity(2 * take);
+        while parents.len() < take {
+            let Some(node) = queue.pop() else { break };
+            let (w, row) = cx.worst(&node.bounds, &settled);
+            let Some(row) = row else {
+                // settled since it was queued
+                leaves.push((node.cell.clone(), full(&node.bounds)));
+                continue;
+            };
+            let _ = w;
+            match cx.split_dim(&node.cell, row, &min_width, &rootbox) {
+                Some(i) => {
+                    let mid = node.cell.lo[i] + 0.5 * (node.cell.hi[i] - node.cell.lo[i]);
+                    let (mut a, mut b) = (node.cell.clone(), node.cell.clone());
+                    a.hi[i] = mid;
+                    b.lo[i] = mid;
+                    kids.push(a);
+                    kids.push(b);
+                    parents.push(node);
+                }
+                // too small to split: it stays open
+                None => leaves.push((node.cell.clone(), full(&node.bounds))),
+            }
+        }
+        if kids.is_empty() {
+            continue;
+        }
+        let bounded = cx.bound(&kids);
+        calls += kids.len();
+        (ctl.progress)(crate::execute::Progress {
+            phase: crate::execute::Phase::Cells,
+            done: {
+                progress_done += kids.len();
+                progress_done
+            },
+            total: Some(budget.calls),
+        });
+        for (j, (cell, (b, iss))) in kids.into_iter().zip(bounded).enumerate() {
+            issues.extend(iss);
+            let parent = &parents[j / 2].bounds;
+            let b: Vec<f64> = b
+                .iter()
+                .zip(parent)
+                .map(|(c, p)| if c.is_nan() { *p } else { c.min(*p) })
+                .collect();
+            let (w, _) = cx.worst(&b, &settled);
+            if w == f64::INFINITY {
+                leaves.push((cell, full(&b)));
+                continue;
+            }
+            // attack the child
+            let centre: Vec<f64> = (0..cell.dim())
+                .map(|i| cell.lo[i] + 0.5 * (cell.hi[i] - cell.lo[i]))
+                .collect();
+            for k in 0..np {
+                if settled[k] || !cx.may_falsify[k] {
+                    continue;
+                }
+                let (v, _) = cell_margin(&plan.properties[k].kind, &b, &cx.ranges[k]);
+                if proved(&plan.properties[k].kind, v) {
+                    continue;
+                }
+                let within = cell_region(region, &cell);
+                if let Some(wit) = cx.pgd(
+                    k,
+                    &within,
+                    std::slice::from_ref(&centre),
+                    CHILD_STEPS,
+                    &mut real_only[k],
+                ) {
+                    witnesses[k] = Some(wit);
+                    settled[k] = true;
+                }
+            }
+            queue.push(Node {
+                cell,
+                bounds: b,
+                worst: w,
+            });
+        }
+    }
+    leaves.extend(queue.into_iter().map(|n| {
+        let b = full(&n.bounds);
+        (n.cell, b)
+    }));
+    let union = ravel_analysis::open_loop::union_offsets(&leaves, total);
+    issues.sort_by_key(|i| format!("{i:?}"));
+    issues.dedup();
+    Searched {
+        bounded: Bounded {
+            cells: leaves,
+            union,
+            calls,
+            stop,
+            issues,
+        },
+        witnesses,
+        real_only,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ir::{NetPropagator, Partitioner};
+    use ravel_analysis::sets::Polytope;
+    use ravel_analysis::shape::Shape;
+    use ravel_base::nn::{Activation, Layer, Network};
+
+    /// `y = |z| − |2z| = −|z|` with `z = x₀ − ⅓`, on `[−1, 1]²`: `y ≤ 0`
+    /// holds, tightly along a line no bisection of the box reaches; neither
+    /// interval arithmetic nor CROWN proves it on a cell crossing the line
+    /// (each bounds `|z|` and `−|2z|` apart), and no input violates it, so
+    /// only a limit ends the search.
+    fn tight_plan() -> NetworkPlan {
+        let third = 1.0 / 3.0;
+        let net = Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(4, 2, &[1.0, 0.0, -1.0, 0.0, 2.0, 0.0, -2.0, 0.0]),
+                    b: nalgebra::DVector::from_vec(vec![-third, third, -2.0 * third, 2.0 * third]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 4, &[1.0, 1.0, -1.0, -1.0]),
+                    b: nalgebra::DVector::from_vec(vec![0.0]),
+                },
+            ],
+        );
+        NetworkPlan {
+            name: "t".into(),
+            input_name: "x".into(),
+            output_name: "y".into(),
+            model_path: String::new(),
+            model_sha256: String::new(),
+            model_resolved: String::new(),
+            network_summary: String::new(),
+            net,
+            input: Some(Region::Box(IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]))),
+            input_set_name: "X".into(),
+            selects: Vec::new(),
+            properties: vec![NetProperty {
+                name: "p".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![1.0], 0.0)],
+                }),
+            }],
+            radii: Vec::new(),
+            propagator: NetPropagator::Crown,
+            partitioner: Partitioner::Uniform(vec![1, 1]),
+            shape: Shape::Box,
+            samples: 0,
+            seed: 0,
+            slope_steps: 0,
+        }
+    }
+
+    fn run(limit: usize, calls: usize) -> Searched {
+        let plan = tight_plan();
+        let region = plan.input.clone().unwrap();
+        let shape = DMatrix::from_row_slice(2, 1, &[1.0, -1.0]);
+        let rows = super::super::stack(&shape, &[vec![vec![1.0]]], 1);
+        let (root, issues) = cell_bounds(&plan.net, &region, plan.propagator, 0, &rows.dirs);
+        let budget = Budget {
+            calls,
+            min_size: 1e-9,
+            seconds: None,
+        };
+        search(
+            &plan,
+            &region,
+            &rows,
+            root,
+            issues,
+            &[vec![0.0, 0.0]],
+            &[None],
+            &[true],
+            &budget,
+            &Control::unlimited(),
+            limit,
+        )
+    }
+
+    /// Every final cell's bounds contain the outputs sampled on that cell
+    /// (parents' bounds intersected with the children's, batched CROWN),
+    /// on random ReLU networks with a property the search cannot settle
+    /// (the attack is off, the threshold is the centre's value).
+    #[test]
+    fn every_cells_bounds_contain_its_sampled_outputs() {
+        let mut rng = ravel_base::rng::Rng::new(17);
+        for case in 0..16 {
+            let widths = [2, 3 + rng.below(4), 3 + rng.below(4), 2];
+            let mut layers = Vec::new();
+            for (k, w) in widths.windows(2).enumerate() {
+                let s = 1.5 / (w[0] as f64).sqrt();
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(w[1], w[0], |_, _| rng.normal() * s),
+                    b: nalgebra::DVector::from_fn(w[1], |_, _| rng.normal() * 0.3),
+                });
+                if k + 2 < widths.len() {
+                    layers.push(Layer::Act(Activation::Relu));
+                }
+            }
+            let mut plan = tight_plan();
+            plan.net = Network::new(2, layers);
+            let d = vec![rng.normal(), rng.normal()];
+            let y0 = plan.net.forward(&[0.0, 0.0]);
+            let h = d[0] * y0[0] + d[1] * y0[1];
+            plan.properties[0].kind = NetPropertyKind::Require(Polytope {
+                rows: vec![(d.clone(), h)],
+            });
+            let region = plan.input.clone().unwrap();
+            let rows = super::super::stack(&DMatrix::zeros(0, 2), &[vec![d.clone()]], 2);
+            let (root, issues) = cell_bounds(&plan.net, &region, plan.propagator, 0, &rows.dirs);
+            let budget = Budget {
+                calls: 300,
+                min_size: 1e-9,
+                seconds: None,
+            };
+            let s = search(
+                &plan,
+                &region,
+                &rows,
+                root,
+                issues,
+                &[],
+                &[None],
+                &[false],
+                &budget,
+                &Control::unlimited(),
+                usize::MAX,
+            );
+            assert!(s.bounded.cells.len() > 1, "case {case}: nothing was split");
+            for (c, b) in &s.bounded.cells {
+                for _ in 0..20 {
+                    let x: Vec<f64> = (0..2).map(|i| rng.uniform(c.lo[i], c.hi[i])).collect();
+                    let y = plan.net.forward(&x);
+                    let v = d[0] * y[0] + d[1] * y[1];
+                    assert!(
+                        v <= b[0] + 1e-9 * (1.0 + v.abs()),
+                        "case {case}: {c:?} bounds {} below {v}",
+                        b[0]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_full_queue_stops_the_search_soundly() {
+        let s = run(1, 1000);
+        assert_eq!(s.bounded.stop, Stop::Queue);
+        assert!(s.witnesses[0].is_none());
+        // the open cell keeps bounds valid on it: the root's, here
+        assert_eq!(s.bounded.cells.len(), 1);
+        let (_, b) = &s.bounded.cells[0];
+        assert!(
+            b[2] >= 0.0,
+            "the open cell's bound of y proves nothing: {b:?}"
+        );
+    }
+
+    #[test]
+    fn the_call_budget_stops_the_search_and_the_cells_cover_the_box() {
+        let s = run(usize::MAX, 200);
+        assert_eq!(s.bounded.stop, Stop::Calls);
+        assert!(s.bounded.calls <= 200 + 2 * BATCH);
+        assert!(s.witnesses[0].is_none());
+        // the final cells tile the box: their areas add up to its area
+        let area: f64 = s
+            .bounded
+            .cells
+            .iter()
+            .map(|(c, _)| (c.hi[0] - c.lo[0]) * (c.hi[1] - c.lo[1]))
+            .sum();
+        assert_eq!(area, 4.0);
+        // the cells on the line stay open, every other cell is proved
+        for (c, b) in &s.bounded.cells {
+            let on_line = c.lo[0] <= 1.0 / 3.0 && 1.0 / 3.0 <= c.hi[0];
+            assert_eq!(b[2] > 0.0, on_line, "{c:?}: {b:?}");
+        }
+    }
+}

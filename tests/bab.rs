@@ -1,0 +1,358 @@
+//! Branch and bound (`partitioner bab`) on random small ReLU networks,
+//! against the truth found by exhaustive enumeration of their linear
+//! regions: VERIFIED only when the property holds, FALSIFIED only with a
+//! real counterexample, and — with a margin between the threshold and the
+//! true extreme — always one of the two (the search is complete given
+//! time). Also: the certificate of every answer checks, and a search cut by
+//! the time limit ends UNSURE.
+
+mod common;
+
+use common::{net_certificate, net_plan as plan, random_network, run_net as run};
+use ravel::execute::network::execute_network;
+use ravel::execute::{Control, Verdict};
+use ravel::ir::{Guide, NetProperty, NetPropertyKind, Partitioner};
+use ravel_analysis::partition::{Budget, Stop};
+use ravel_analysis::sets::{IBox, Polytope, Region};
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::rng::Rng;
+
+/// The pre-activations of every hidden layer at `x` (one vector per
+/// activation layer, in order).
+fn pre_activations(net: &Network, x: &[f64]) -> Vec<Vec<f64>> {
+    let mut v = x.to_vec();
+    let mut out = Vec::new();
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w, b } => {
+                v = (0..w.nrows())
+                    .map(|i| b[i] + (0..w.ncols()).map(|j| w[(i, j)] * v[j]).sum::<f64>())
+                    .collect();
+            }
+            Layer::Act(Activation::Relu) => {
+                out.push(v.clone());
+                v.iter_mut().for_each(|a| *a = a.max(0.0));
+            }
+            other => panic!("ReLU networks only: {other:?}"),
+        }
+    }
+    out
+}
+
+/// The part of the convex polygon `poly` where `f` (affine on it, given by
+/// its values at the vertices) has the sign `s` (`f·s ≥ 0`), with the new
+/// vertices where an edge crosses `f = 0`.
+fn clip(poly: &[[f64; 2]], vals: &[f64], s: f64) -> Vec<[f64; 2]> {
+    let mut out = Vec::new();
+    for i in 0..poly.len() {
+        let j = (i + 1) % poly.len();
+        let (a, b) = (vals[i] * s, vals[j] * s);
+        if a >= 0.0 {
+            out.push(poly[i]);
+        }
+        if (a > 0.0 && b < 0.0) || (a < 0.0 && b > 0.0) {
+            let t = a / (a - b);
+            out.push([
+                poly[i][0] + t * (poly[j][0] - poly[i][0]),
+                poly[i][1] + t * (poly[j][1] - poly[i][1]),
+            ]);
+        }
+    }
+    out
+}
+
+/// The vertices of every linear region of `net` (two inputs) inside the
+/// box: the box is cut by each neuron's zero set, layer by layer (on each
+/// piece the neuron's pre-activation is affine). A continuous
+/// piecewise-linear function of the output reaches its extremes over the
+/// box at one of them.
+fn region_vertices(net: &Network, lo: [f64; 2], hi: [f64; 2]) -> Vec<[f64; 2]> {
+    let mut pieces = vec![vec![
+        [lo[0], lo[1]],
+        [hi[0], lo[1]],
+        [hi[0], hi[1]],
+        [lo[0], hi[1]],
+    ]];
+    let widths: Vec<usize> = pre_activations(net, &[lo[0], lo[1]])
+        .iter()
+        .map(Vec::len)
+        .collect();
+    for (l, &w) in widths.iter().enumerate() {
+        for j in 0..w {
+            let mut next = Vec::new();
+            for p in &pieces {
+                // the sign pattern of earlier neurons is fixed on the piece,
+                // so this neuron's pre-activation is affine on it
+                let vals: Vec<f64> = p.iter().map(|v| pre_activations(net, v)[l][j]).collect();
+                for s in [1.0, -1.0] {
+                    let q = clip(p, &vals, s);
+                    if q.len() >= 3 {
+                        next.push(q);
+                    }
+                }
+            }
+            pieces = next;
+        }
+    }
+    pieces.into_iter().flatten().collect()
+}
+
+/// `max over the box of c·f(x)`, exactly up to the rounding of the region
+/// vertices.
+fn exact_max(net: &Network, verts: &[[f64; 2]], c: &[f64]) -> f64 {
+    verts
+        .iter()
+        .map(|v| {
+            let y = net.forward(v);
+            c.iter().zip(&y).map(|(a, b)| a * b).sum::<f64>()
+        })
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn bab_plan(net: Network, input: Region, props: Vec<NetProperty>) -> ravel::lower::NetworkPlan {
+    let mut p = plan(net, input, props);
+    p.partitioner = Partitioner::Guided {
+        guide: Guide::Bab,
+        budget: Budget {
+            calls: 100_000,
+            min_size: 1e-9,
+            seconds: None,
+        },
+    };
+    p
+}
+
+#[test]
+fn bab_agrees_with_exhaustive_enumeration() {
+    use ravel_certify::{check, Answer};
+    let mut rng = Rng::new(29);
+    let (mut verified, mut falsified) = (0, 0);
+    for case in 0..40 {
+        let m = 1 + rng.below(2);
+        let net = random_network(&mut rng, 2, m, Activation::Relu, (2, 5));
+        let c0 = [rng.normal(), rng.normal()];
+        let r = [0.3 + rng.unit(), 0.3 + rng.unit()];
+        let (lo, hi) = ([c0[0] - r[0], c0[1] - r[1]], [c0[0] + r[0], c0[1] + r[1]]);
+        let verts = region_vertices(&net, lo, hi);
+        let input = Region::Box(IBox::new(lo.to_vec(), hi.to_vec()));
+        let dir: Vec<f64> = (0..m).map(|_| rng.normal()).collect();
+        let top = exact_max(&net, &verts, &dir);
+        let bottom = -exact_max(&net, &verts, &dir.iter().map(|v| -v).collect::<Vec<_>>());
+        let delta = 0.02 * (1.0 + top.abs().max(bottom.abs()));
+        // case by case: a `require` that holds or fails, an avoid set that is
+        // missed or touched
+        let holds = case % 2 == 0;
+        let kind = if case % 4 < 2 {
+            let h = if holds { top + delta } else { top - delta };
+            NetPropertyKind::Require(Polytope {
+                rows: vec![(dir.clone(), h)],
+            })
+        } else {
+            // avoid { dir·y <= h }: touched iff the minimum is at most h
+            let h = if holds {
+                bottom - delta
+            } else {
+                bottom + delta
+            };
+            NetPropertyKind::Avoid(vec![Polytope {
+                rows: vec![(dir.clone(), h)],
+            }])
+        };
+        let p = bab_plan(
+            net.clone(),
+            input.clone(),
+            vec![NetProperty {
+                name: "p".into(),
+                kind,
+            }],
+        );
+        let out = run(&p);
+        let got = out.properties[0].status;
+        let want = if holds {
+            Verdict::Verified
+        } else {
+            Verdict::Falsified
+        };
+        assert_eq!(
+            got, want,
+            "case {case}: truth {want:?} (max {top}, min {bottom}), bab says {got:?} after {} calls, stop {:?}",
+            out.calls, out.partition_stop
+        );
+        if let Some(w) = &out.properties[0].counterexample {
+            assert!(input.contains_point(&w.input), "case {case}");
+            let v: f64 = dir
+                .iter()
+                .zip(&net.forward(&w.input))
+                .map(|(a, b)| a * b)
+                .sum();
+            match &p.properties[0].kind {
+                NetPropertyKind::Require(q) => assert!(v > q.rows[0].1, "case {case}"),
+                NetPropertyKind::Avoid(q) => assert!(v <= q[0].rows[0].1, "case {case}"),
+                NetPropertyKind::Robust(_) => unreachable!(),
+            }
+        }
+        // every answer is certifiable, and the search stopped as it should
+        let cert = net_certificate(&p, &out);
+        assert_eq!(check(&cert, &net).answer, Answer::Valid, "case {case}");
+        match got {
+            Verdict::Verified => {
+                verified += 1;
+                assert_eq!(out.partition_stop, Stop::Done, "case {case}");
+            }
+            _ => {
+                falsified += 1;
+                assert!(
+                    matches!(out.partition_stop, Stop::Decided | Stop::Done),
+                    "case {case}: {:?}",
+                    out.partition_stop
+                );
+            }
+        }
+    }
+    assert!(
+        verified >= 15 && falsified >= 15,
+        "{verified} verified, {falsified} falsified"
+    );
+}
+
+/// Robustness of the centre's class: true exactly when no other output
+/// reaches the label's anywhere on the box (enumeration decides it); cases
+/// too close to call are skipped.
+#[test]
+fn bab_robustness_agrees_with_exhaustive_enumeration() {
+    let mut rng = Rng::new(30);
+    let mut decided = 0;
+    for case in 0..60 {
+        let m = 2 + rng.below(2);
+        let net = random_network(&mut rng, 2, m, Activation::Relu, (2, 5));
+        let c0 = [rng.normal(), rng.normal()];
+        let r = 0.05 + 0.5 * rng.unit();
+        let (lo, hi) = ([c0[0] - r, c0[1] - r], [c0[0] + r, c0[1] + r]);
+        let y0 = net.forward(&c0);
+        let label = (0..m).max_by(|&a, &b| y0[a].total_cmp(&y0[b])).unwrap();
+        let verts = region_vertices(&net, lo, hi);
+        // the largest lead of another output over the label's
+        let worst = (0..m)
+            .filter(|&j| j != label)
+            .map(|j| {
+                let mut d = vec![0.0; m];
+                d[j] = 1.0;
+                d[label] = -1.0;
+                exact_max(&net, &verts, &d)
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
+        if worst.abs() < 0.02 {
+            continue;
+        }
+        let input = Region::Box(IBox::new(lo.to_vec(), hi.to_vec()));
+        let p = bab_plan(
+            net.clone(),
+            input.clone(),
+            vec![NetProperty {
+                name: "robust".into(),
+                kind: NetPropertyKind::Robust(Some(label)),
+            }],
+        );
+        let out = run(&p);
+        let want = if worst < 0.0 {
+            Verdict::Verified
+        } else {
+            Verdict::Falsified
+        };
+        assert_eq!(
+            out.properties[0].status, want,
+            "case {case}: largest lead {worst}"
+        );
+        if let Some(w) = &out.properties[0].counterexample {
+            let y = net.forward(&w.input);
+            assert!(input.contains_point(&w.input));
+            assert!(
+                (0..m).any(|j| j != label && y[j] >= y[label]),
+                "case {case}"
+            );
+        }
+        decided += 1;
+    }
+    assert!(decided >= 40, "only {decided} cases were clear");
+}
+
+/// A search cut by the time limit (a clock that is late after a few
+/// looks, so nothing depends on timing) ends UNSURE and says why; its
+/// bounds stay sound.
+#[test]
+fn bab_past_the_time_limit_is_unsure() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let mut rng = Rng::new(31);
+    let net = random_network(&mut rng, 2, 1, Activation::Relu, (3, 6));
+    let (lo, hi) = ([-1.0, -1.0], [1.0, 1.0]);
+    let verts = region_vertices(&net, lo, hi);
+    let top = exact_max(&net, &verts, &[1.0]);
+    // exactly the maximum: it holds, but no rounded bound can prove it and
+    // no point violates it, so only the limits end the search
+    let p = bab_plan(
+        net.clone(),
+        Region::Box(IBox::new(lo.to_vec(), hi.to_vec())),
+        vec![NetProperty {
+            name: "tight".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(vec![1.0], top)],
+            }),
+        }],
+    );
+    let looks = AtomicUsize::new(0);
+    let clock = || looks.fetch_add(1, Ordering::Relaxed) as f64;
+    let out = execute_network(
+        &p,
+        &Control {
+            elapsed: &clock,
+            time_limit: Some(40.0),
+            progress: &|_| {},
+            threads: 1,
+        },
+    );
+    assert_eq!(out.properties[0].status, Verdict::Unsure);
+    assert_eq!(out.partition_stop, Stop::Time);
+    for x in [[0.0, 0.0], [0.5, -0.5], [-1.0, 1.0]] {
+        assert!(net.forward(&x)[0] <= out.output.offsets[0] + 1e-12);
+    }
+}
+
+/// Threads never change a result: the same cells, bounds and verdicts on
+/// one thread as on three.
+#[test]
+fn bab_threads_never_change_a_result() {
+    let mut rng = Rng::new(32);
+    for case in 0..6 {
+        let net = random_network(&mut rng, 2, 2, Activation::Relu, (2, 6));
+        let input = Region::Box(IBox::new(vec![-0.8, -0.6], vec![0.7, 0.9]));
+        let y = net.forward(&[0.0, 0.0]);
+        let p = bab_plan(
+            net,
+            input,
+            vec![NetProperty {
+                name: "p".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(vec![1.0, -1.0], y[0] - y[1] + 0.2 + 0.1 * case as f64)],
+                }),
+            }],
+        );
+        let one = run(&p);
+        let three = execute_network(
+            &p,
+            &Control {
+                elapsed: &|| 0.0,
+                time_limit: None,
+                progress: &|_| {},
+                threads: 3,
+            },
+        );
+        assert_eq!(one.partition, three.partition, "case {case}");
+        assert_eq!(one.output.offsets, three.output.offsets, "case {case}");
+        assert_eq!(one.calls, three.calls, "case {case}");
+        assert_eq!(
+            format!("{:?}", one.properties),
+            format!("{:?}", three.properties),
+            "case {case}"
+        );
+    }
+}

@@ -102,11 +102,13 @@ pub enum Code {
     MalformedOnnx,
     /// E0308: an external-data file that is missing or too short.
     ExternalData,
+    /// E0401: a VNN-LIB property that cannot be read or imported.
+    Vnnlib,
 }
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 45] = [
+    pub const ALL: [Code; 46] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -152,6 +154,7 @@ impl Code {
         Code::NonFiniteWeights,
         Code::MalformedOnnx,
         Code::ExternalData,
+        Code::Vnnlib,
     ];
 
     /// The code as written in messages, e.g. `E0201`.
@@ -202,6 +205,7 @@ impl Code {
             Code::NonFiniteWeights => "E0306",
             Code::MalformedOnnx => "E0307",
             Code::ExternalData => "E0308",
+            Code::Vnnlib => "E0401",
         }
     }
 }

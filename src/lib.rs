@@ -6,6 +6,7 @@
 
 mod batch;
 pub mod demo;
+pub mod vnncomp;
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -39,11 +40,27 @@ enum Cmd {
         #[arg(long = "controller", value_name = "PATH")]
         controllers: Vec<PathBuf>,
     },
-    /// Check, analyse and report a verdict for each spec.
+    /// Check, analyse and report a verdict for each spec; or, with
+    /// `--network NET.onnx --vnnlib PROP.vnnlib`, run a VNN-LIB property
+    /// directly and answer in VNN-COMP's result format.
     Verify {
         /// Spec files (.ravel), or folders searched recursively for them.
-        #[arg(required = true)]
+        #[arg(required_unless_present = "vnnlib")]
         specs: Vec<PathBuf>,
+        /// The direct form: the ONNX network of `--vnnlib` (no spec file).
+        #[arg(long, value_name = "NET.onnx", requires = "vnnlib", conflicts_with_all = ["specs", "controllers"])]
+        network: Option<PathBuf>,
+        /// The direct form: the VNN-LIB property, imported in memory as
+        /// `import-vnnlib` does (one spec per input region, all run): the
+        /// answer is `sat` (with the counterexample), `unsat`, `timeout` or
+        /// `unknown`; exit code 1, 0, 3, 3 (2 for an error, which writes no
+        /// result).
+        #[arg(long, value_name = "PROP.vnnlib", requires = "network", conflicts_with_all = ["certificate", "shard", "plot"])]
+        vnnlib: Option<PathBuf>,
+        /// The direct form: write the answer in VNN-COMP's result format to
+        /// this file (atomically) instead of standard output.
+        #[arg(long, value_name = "OUT", requires = "vnnlib")]
+        result_file: Option<PathBuf>,
         /// Verify each spec with this controller instead of its own (an
         /// .onnx file, or a folder searched recursively for them);
         /// repeatable: every (spec, controller) pair is one result.
@@ -1265,6 +1282,24 @@ pub fn main() -> ExitCode {
             ExitCode::from(worst)
         }
         Cmd::Verify {
+            network: Some(network),
+            vnnlib: Some(vnnlib),
+            result_file,
+            time_limit,
+            jobs,
+            ..
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            vnncomp::verify_direct(
+                &network,
+                &vnnlib,
+                time_limit,
+                result_file.as_deref(),
+                jobs.unwrap_or(cores),
+                color,
+            )
+        }
+        Cmd::Verify {
             specs,
             controllers,
             format,
@@ -1278,6 +1313,7 @@ pub fn main() -> ExitCode {
             quiet,
             plot,
             plot_dims,
+            ..
         } => {
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = batch::Options {

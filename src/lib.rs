@@ -133,6 +133,24 @@ enum Cmd {
         #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
         fail_on: batch::FailOn,
     },
+    /// Run every instance `onnx,vnnlib,timeout` of a VNN-COMP instance list
+    /// (paths relative to its folder or --root) with its timeout, printing
+    /// `network,property,result,seconds` per instance. Every row is checked
+    /// first; exit code 2 if a row is unusable (nothing runs) or an
+    /// instance gave an error (its result is `error`), else 0.
+    Vnncomp {
+        /// The instance list (`instances.csv`).
+        instances: PathBuf,
+        /// The folder the rows' paths are relative to (default: the list's folder).
+        #[arg(long, value_name = "DIR")]
+        root: Option<PathBuf>,
+        /// Also write the results to this file (atomically).
+        #[arg(long, value_name = "RESULTS.csv")]
+        out: Option<PathBuf>,
+        /// Threads for each instance's analysis (default: the number of cores).
+        #[arg(long, value_name = "N", value_parser = batch::parse_jobs)]
+        jobs: Option<usize>,
+    },
     /// Translate a VNN-LIB property into ravel network specs (printed, or
     /// written with --output), checked against the network before they are
     /// shown: one spec, or one per input region when the property's input
@@ -1295,6 +1313,21 @@ pub fn main() -> ExitCode {
                 &vnnlib,
                 time_limit,
                 result_file.as_deref(),
+                jobs.unwrap_or(cores),
+                color,
+            )
+        }
+        Cmd::Vnncomp {
+            instances,
+            root,
+            out,
+            jobs,
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            vnncomp::vnncomp(
+                &instances,
+                root.as_deref(),
+                out.as_deref(),
                 jobs.unwrap_or(cores),
                 color,
             )

@@ -1,7 +1,8 @@
 //! VNN-COMP as a front end: `ravel verify --network NET.onnx --vnnlib
 //! PROP.vnnlib` runs a property without a spec file (importing it in
 //! memory as `import-vnnlib` does, one spec per input region) and writes
-//! the competition's result format.
+//! the competition's result format; `ravel vnncomp INSTANCES.csv` runs
+//! every row `onnx,vnnlib,timeout` of an instance list.
 //!
 //! A property with several input regions is `unsat` only if every region
 //! is VERIFIED, `sat` as soon as one is FALSIFIED (its confirmed
@@ -10,7 +11,7 @@
 //! cannot be read, a property or network outside what ravel supports) is
 //! not an answer: it is a diagnostic with its code, and exit code 2.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ravel::check::Task;
@@ -294,4 +295,251 @@ pub fn verify_direct(
         }
     }
     ExitCode::from(answer.exit_code())
+}
+
+/// One usable row of an instance list: the fields as written, the
+/// resolved paths and the timeout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// The network field, as written.
+    pub network_field: String,
+    /// The property field, as written.
+    pub property_field: String,
+    /// The network's path.
+    pub network: PathBuf,
+    /// The property's path.
+    pub property: PathBuf,
+    /// Seconds.
+    pub timeout: f64,
+}
+
+/// Parse an instance list (`onnx,vnnlib,timeout` per line; blank lines
+/// skipped; paths relative to `root`): the rows, or every problem found
+/// (E0402, each with its span). `exists` says whether a path is a file
+/// (the caller's file system; the parsing itself does no IO).
+pub fn parse_instances(
+    text: &str,
+    root: &Path,
+    exists: &dyn Fn(&Path) -> bool,
+) -> Result<Vec<Row>, Vec<Diagnostic>> {
+    let mut rows = Vec::new();
+    let mut diags = Vec::new();
+    let mut at = 0usize;
+    for raw in text.split_inclusive('\n') {
+        let start = at;
+        at += raw.len();
+        let line = raw.trim_end_matches(['\n', '\r']);
+        if line.trim().is_empty() {
+            continue;
+        }
+        let span = Span::new(start, start + line.len());
+        let fields: Vec<(usize, &str)> = {
+            let mut off = start;
+            line.split(',')
+                .map(|f| {
+                    let here = off;
+                    off += f.len() + 1;
+                    let lead = f.len() - f.trim_start().len();
+                    (here + lead, f.trim())
+                })
+                .collect()
+        };
+        let [(_, onnx), (_, vnnlib), (tat, timeout)] = fields.as_slice() else {
+            diags.push(
+                Diagnostic::new(
+                    Code::Instances,
+                    span,
+                    format!(
+                        "an instance row has {} field(s), not the 3 fields onnx,vnnlib,timeout",
+                        fields.len()
+                    ),
+                )
+                .label("this row")
+                .hint("write each instance as `network.onnx,property.vnnlib,seconds`"),
+            );
+            continue;
+        };
+        let field_span = |off: usize, f: &str| Span::new(off, off + f.len().max(1));
+        let seconds = timeout
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0);
+        if seconds.is_none() {
+            diags.push(
+                Diagnostic::new(
+                    Code::Instances,
+                    field_span(*tat, timeout),
+                    format!(
+                        "the timeout `{}` is not a non-negative number of seconds",
+                        sanitize(timeout)
+                    ),
+                )
+                .label("the timeout")
+                .hint("write the timeout in seconds, e.g. 60"),
+            );
+        }
+        let mut paths = Vec::new();
+        for (k, f) in [(0usize, *onnx), (1, *vnnlib)] {
+            let off = fields.get(k).map_or(start, |x| x.0);
+            let path = root.join(f);
+            let shown = sanitize(&path.display().to_string());
+            if f.is_empty() {
+                diags.push(
+                    Diagnostic::new(Code::Instances, field_span(off, f), "an empty path")
+                        .label("here")
+                        .hint("write each instance as `network.onnx,property.vnnlib,seconds`"),
+                );
+            } else if compressed(&path) {
+                diags.push(
+                    Diagnostic::new(
+                        Code::Instances,
+                        field_span(off, f),
+                        format!("`{shown}` is compressed (.gz): ravel reads plain files"),
+                    )
+                    .label("compressed")
+                    .hint("decompress the benchmark's files first (gunzip -k) and name the plain files"),
+                );
+            } else if !exists(&path) {
+                diags.push(
+                    Diagnostic::new(
+                        Code::Instances,
+                        field_span(off, f),
+                        format!("`{shown}` is not a file"),
+                    )
+                    .label("missing")
+                    .hint("paths are relative to the instance list's folder, or to --root"),
+                );
+            }
+            paths.push(path);
+        }
+        if let (Some(timeout), [network, property]) = (seconds, paths.as_slice()) {
+            rows.push(Row {
+                network_field: (*onnx).to_string(),
+                property_field: (*vnnlib).to_string(),
+                network: network.clone(),
+                property: property.clone(),
+                timeout,
+            });
+        }
+    }
+    if rows.is_empty() && diags.is_empty() {
+        diags.push(nowhere(
+            Code::Instances,
+            "the instance list has no rows".into(),
+            "write one instance per line: `network.onnx,property.vnnlib,seconds`",
+        ));
+    }
+    if diags.is_empty() {
+        Ok(rows)
+    } else {
+        Err(diags)
+    }
+}
+
+/// One line of the results: `network,property,result,seconds` (fields as
+/// written in the list, control characters escaped; `error` for an
+/// instance that gave a diagnostic instead of an answer).
+pub fn result_line(row: &Row, result: &str, seconds: f64) -> String {
+    format!(
+        "{},{},{result},{seconds:.3}",
+        sanitize(&row.network_field),
+        sanitize(&row.property_field)
+    )
+}
+
+/// `ravel vnncomp INSTANCES.csv [--root DIR] [--out RESULTS.csv]`.
+pub fn vnncomp(
+    list: &Path,
+    root: Option<&Path>,
+    out_file: Option<&Path>,
+    threads: usize,
+    color: bool,
+) -> std::process::ExitCode {
+    use std::process::ExitCode;
+    let shown = sanitize(&list.display().to_string());
+    let fail = |d: Diagnostic, source: &str| {
+        crate::err(&render(&[d], &shown, source, 100, color));
+        ExitCode::from(crate::exit::INPUT_ERROR)
+    };
+    let bytes = match crate::read_request(&ravel::ReadRequest {
+        path: list.to_path_buf(),
+        inside: None,
+        max_bytes: ravel_base::limits::MAX_SPEC_BYTES,
+        whole: true,
+    }) {
+        Ok(b) => b,
+        Err(e) => {
+            return fail(
+                nowhere(
+                    Code::Instances,
+                    format!("cannot read the instance list `{shown}`: {e}"),
+                    "name the benchmark's instances.csv",
+                ),
+                "",
+            )
+        }
+    };
+    let Ok(text) = String::from_utf8(bytes) else {
+        return fail(
+            nowhere(
+                Code::Instances,
+                format!("the instance list `{shown}` is not UTF-8 text"),
+                "name the benchmark's instances.csv",
+            ),
+            "",
+        );
+    };
+    let root = match root {
+        Some(r) => r.to_path_buf(),
+        None => list
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
+    };
+    let rows = match parse_instances(&text, &root, &|p: &Path| p.is_file()) {
+        Ok(r) => r,
+        Err(d) => {
+            crate::err(&render(&d, &shown, &text, 100, color));
+            crate::err(&format!(
+                "{shown}: {} unusable row(s); nothing was run\n",
+                d.len()
+            ));
+            return ExitCode::from(crate::exit::INPUT_ERROR);
+        }
+    };
+    let mut lines = String::new();
+    let mut code = crate::exit::VERIFIED;
+    for row in &rows {
+        let started = Instant::now();
+        let result = match run_instance(
+            &row.network,
+            &row.property,
+            Some(row.timeout),
+            threads,
+            color,
+        ) {
+            Ok(a) => a.word(),
+            Err(rendered) => {
+                crate::err(&rendered);
+                code = crate::exit::INPUT_ERROR;
+                "error"
+            }
+        };
+        let line = result_line(row, result, started.elapsed().as_secs_f64());
+        if crate::out(&line).is_err() {
+            return ExitCode::from(crate::exit::BROKEN_PIPE);
+        }
+        lines += &line;
+        lines.push('\n');
+    }
+    if let Some(file) = out_file {
+        if let Err(e) = crate::write_atomically(file, lines.as_bytes()) {
+            crate::err(&format!(
+                "error: cannot write `{}`: {e}\n",
+                sanitize(&file.display().to_string())
+            ));
+            return ExitCode::from(crate::exit::INPUT_ERROR);
+        }
+    }
+    ExitCode::from(code)
 }

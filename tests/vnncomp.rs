@@ -1,7 +1,8 @@
 //! VNN-COMP as a front end, through the binary: `verify --network
 //! --vnnlib` (the result file's rules: `sat` with the counterexample's
 //! assignments, `unsat`, `timeout`, `unknown`; errors are diagnostics with
-//! exit code 2 and no result), and input regions combined.
+//! exit code 2 and no result), `import-vnnlib` over input regions, and
+//! `vnncomp` over a tiny generated benchmark folder, hostile rows included.
 //! Networks are hand-made here; nothing third-party is used.
 
 use std::path::{Path, PathBuf};
@@ -9,7 +10,7 @@ use std::process::Command;
 
 use nalgebra::{DMatrix, DVector};
 use ravel::onnx::build::{GraphBuilder, Storage};
-use ravel_cli::vnncomp::{result_text, Answer};
+use ravel_cli::vnncomp::{parse_instances, result_text, Answer};
 
 fn ravel(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
@@ -251,4 +252,131 @@ fn errors_are_diagnostics_and_write_no_result() {
         "{stderr}"
     );
     assert!(stderr.contains("mixed.vnnlib:9:"), "{stderr}");
+}
+
+#[test]
+fn a_benchmark_folder_runs_row_by_row() {
+    let d = scratch("bench");
+    std::fs::create_dir_all(d.join("onnx")).expect("dir");
+    std::fs::create_dir_all(d.join("vnnlib")).expect("dir");
+    let net = linear_net(&d.join("onnx"));
+    assert!(net.ends_with("onnx/net.onnx"));
+    property(&d.join("vnnlib"), "sat.vnnlib", "(assert (>= Y_0 1.5))");
+    property(&d.join("vnnlib"), "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    property(
+        &d.join("vnnlib"),
+        "mixed.vnnlib",
+        "(assert (<= (+ X_0 Y_0) 1))",
+    );
+    std::fs::write(
+        d.join("instances.csv"),
+        "onnx/net.onnx,vnnlib/sat.vnnlib,60\r\nonnx/net.onnx,vnnlib/unsat.vnnlib,60\n\n",
+    )
+    .expect("write");
+    let results = d.join("results.csv");
+    let (code, stdout, stderr) =
+        ravel(&["vnncomp", s(&d.join("instances.csv")), "--out", s(&results)]);
+    assert_eq!(code, 0, "{stderr}");
+    let written = std::fs::read_to_string(&results).expect("results");
+    assert_eq!(written, stdout);
+    let rows: Vec<Vec<&str>> = written.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2, "{written}");
+    assert_eq!(rows[0][..3], ["onnx/net.onnx", "vnnlib/sat.vnnlib", "sat"]);
+    assert_eq!(
+        rows[1][..3],
+        ["onnx/net.onnx", "vnnlib/unsat.vnnlib", "unsat"]
+    );
+    for r in &rows {
+        let t: f64 = r[3].parse().expect("seconds");
+        assert!((0.0..60.0).contains(&t));
+    }
+
+    // the same list elsewhere, with --root; an instance that cannot be
+    // imported is `error` (exit 2), and the others still run
+    let elsewhere = scratch("bench-list");
+    std::fs::write(
+        elsewhere.join("list.csv"),
+        "onnx/net.onnx,vnnlib/mixed.vnnlib,5\nonnx/net.onnx,vnnlib/unsat.vnnlib,5\n",
+    )
+    .expect("write");
+    let (code, stdout, stderr) =
+        ravel(&["vnncomp", s(&elsewhere.join("list.csv")), "--root", s(&d)]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0401"), "{stderr}");
+    let results: Vec<&str> = stdout
+        .lines()
+        .map(|l| l.split(',').nth(2).expect("result"))
+        .collect();
+    assert_eq!(results, ["error", "unsat"]);
+
+    // unusable rows: every one reported with its line, nothing runs
+    std::fs::write(
+        d.join("bad.csv"),
+        "onnx/net.onnx,vnnlib/sat.vnnlib\n\
+         onnx/net.onnx,vnnlib/sat.vnnlib,sixty\n\
+         onnx/none.onnx,vnnlib/sat.vnnlib,60\n\
+         onnx/net.onnx.gz,vnnlib/sat.vnnlib,60\n\
+         onnx/net.onnx,vnnlib/sat.vnnlib,-1\n\
+         \u{1b}[31m,x,1e999\n",
+    )
+    .expect("write");
+    let out = d.join("bad-results.csv");
+    let (code, stdout, stderr) = ravel(&["vnncomp", s(&d.join("bad.csv")), "--out", s(&out)]);
+    assert_eq!(code, 2);
+    assert!(stdout.is_empty(), "nothing ran: {stdout}");
+    assert!(!out.exists());
+    assert!(stderr.matches("E0402").count() >= 6, "{stderr}");
+    assert!(!stderr.contains('\u{1b}'), "no raw escape: {stderr}");
+    for what in [
+        "3 fields",
+        "sixty",
+        "is not a file",
+        "compressed",
+        "-1",
+        "nothing was run",
+    ] {
+        assert!(stderr.contains(what), "{what}: {stderr}");
+    }
+    // a list that does not exist
+    let (code, _, stderr) = ravel(&["vnncomp", s(&d.join("none.csv"))]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0402"), "{stderr}");
+}
+
+/// The row parser on hostile text: never a panic, every problem a
+/// diagnostic with a span inside the text.
+#[test]
+fn instance_rows_are_parsed_without_panics() {
+    let root = Path::new("/r");
+    let exists = |p: &Path| p.to_str().is_some_and(|s| !s.contains("missing"));
+    let ok = parse_instances(" a.onnx , b.vnnlib , 12.5 \n", root, &exists).expect("a row");
+    assert_eq!(ok.len(), 1);
+    assert_eq!(ok[0].network, Path::new("/r/a.onnx"));
+    assert_eq!(ok[0].property_field, "b.vnnlib");
+    assert_eq!(ok[0].timeout, 12.5);
+    for text in [
+        "",
+        "\n\n",
+        ",,",
+        ",,,,,,",
+        "a,b,NaN",
+        "a,b,inf",
+        "a,b,1e400",
+        "missing.onnx,b,1",
+        "a,b,c\u{0}",
+        "é,ü,☃",
+        "a,b,-0.5",
+        "\r\n,\r\n",
+    ] {
+        let diags = parse_instances(text, root, &exists).expect_err(text);
+        for d in &diags {
+            assert_eq!(d.code.as_str(), "E0402");
+            if let Some(sp) = d.span {
+                assert!(
+                    sp.start <= sp.end && sp.end <= text.len() + 1,
+                    "{text:?}: {sp:?}"
+                );
+            }
+        }
+    }
 }

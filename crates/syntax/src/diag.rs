@@ -104,11 +104,13 @@ pub enum Code {
     ExternalData,
     /// E0401: a VNN-LIB property that cannot be read or imported.
     Vnnlib,
+    /// E0402: an unusable row of a VNN-COMP instance list.
+    Instances,
 }
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 46] = [
+    pub const ALL: [Code; 47] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -155,6 +157,7 @@ impl Code {
         Code::MalformedOnnx,
         Code::ExternalData,
         Code::Vnnlib,
+        Code::Instances,
     ];
 
     /// The code as written in messages, e.g. `E0201`.
@@ -206,6 +209,7 @@ impl Code {
             Code::MalformedOnnx => "E0307",
             Code::ExternalData => "E0308",
             Code::Vnnlib => "E0401",
+            Code::Instances => "E0402",
         }
     }
 }

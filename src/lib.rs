@@ -6,6 +6,7 @@
 
 mod batch;
 pub mod demo;
+pub mod vnncomp;
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -39,11 +40,27 @@ enum Cmd {
         #[arg(long = "controller", value_name = "PATH")]
         controllers: Vec<PathBuf>,
     },
-    /// Check, analyse and report a verdict for each spec.
+    /// Check, analyse and report a verdict for each spec; or, with
+    /// `--network NET.onnx --vnnlib PROP.vnnlib`, run a VNN-LIB property
+    /// directly and answer in VNN-COMP's result format.
     Verify {
         /// Spec files (.ravel), or folders searched recursively for them.
-        #[arg(required = true)]
+        #[arg(required_unless_present = "vnnlib")]
         specs: Vec<PathBuf>,
+        /// The direct form: the ONNX network of `--vnnlib` (no spec file).
+        #[arg(long, value_name = "NET.onnx", requires = "vnnlib", conflicts_with_all = ["specs", "controllers"])]
+        network: Option<PathBuf>,
+        /// The direct form: the VNN-LIB property, imported in memory as
+        /// `import-vnnlib` does (one spec per input region, all run): the
+        /// answer is `sat` (with the counterexample), `unsat`, `timeout` or
+        /// `unknown`; exit code 1, 0, 3, 3 (2 for an error, which writes no
+        /// result).
+        #[arg(long, value_name = "PROP.vnnlib", requires = "network", conflicts_with_all = ["certificate", "shard", "plot"])]
+        vnnlib: Option<PathBuf>,
+        /// The direct form: write the answer in VNN-COMP's result format to
+        /// this file (atomically) instead of standard output.
+        #[arg(long, value_name = "OUT", requires = "vnnlib")]
+        result_file: Option<PathBuf>,
         /// Verify each spec with this controller instead of its own (an
         /// .onnx file, or a folder searched recursively for them);
         /// repeatable: every (spec, controller) pair is one result.
@@ -116,9 +133,29 @@ enum Cmd {
         #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
         fail_on: batch::FailOn,
     },
-    /// Translate a VNN-LIB property into a ravel network spec (printed, or
-    /// written with --output), checked against the network before it is
-    /// shown. Exit code 0, or 2 with the line of what is not supported.
+    /// Run every instance `onnx,vnnlib,timeout` of a VNN-COMP instance list
+    /// (paths relative to its folder or --root) with its timeout, printing
+    /// `network,property,result,seconds` per instance. Every row is checked
+    /// first; exit code 2 if a row is unusable (nothing runs) or an
+    /// instance gave an error (its result is `error`), else 0.
+    Vnncomp {
+        /// The instance list (`instances.csv`).
+        instances: PathBuf,
+        /// The folder the rows' paths are relative to (default: the list's folder).
+        #[arg(long, value_name = "DIR")]
+        root: Option<PathBuf>,
+        /// Also write the results to this file (atomically).
+        #[arg(long, value_name = "RESULTS.csv")]
+        out: Option<PathBuf>,
+        /// Threads for each instance's analysis (default: the number of cores).
+        #[arg(long, value_name = "N", value_parser = batch::parse_jobs)]
+        jobs: Option<usize>,
+    },
+    /// Translate a VNN-LIB property into ravel network specs (printed, or
+    /// written with --output), checked against the network before they are
+    /// shown: one spec, or one per input region when the property's input
+    /// is a disjunction (`FILE.1.ravel`, `FILE.2.ravel` …, which --output
+    /// then needs). Exit code 0, or 2 with the line of what is not supported.
     ImportVnnlib {
         /// The property file (.vnnlib).
         property: PathBuf,
@@ -1023,13 +1060,56 @@ pub(crate) fn relative_to(dir: &Path, path: &Path) -> PathBuf {
     out
 }
 
-/// `ravel import-vnnlib`: the spec, checked by the front end with the network.
+/// The files `import-vnnlib --output FILE` writes for `count` specs:
+/// `FILE` for one, else `STEM.1.EXT`, `STEM.2.EXT` … beside it
+/// (`X.ravel` → `X.1.ravel`).
+pub fn region_files(file: &Path, count: usize) -> Vec<PathBuf> {
+    if count == 1 {
+        return vec![file.to_path_buf()];
+    }
+    let stem = file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = file
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    (1..=count)
+        .map(|k| file.with_file_name(format!("{stem}.{k}{ext}")))
+        .collect()
+}
+
+/// `ravel import-vnnlib`: the specs (one per input region), checked by the
+/// front end with the network.
 fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: bool) -> ExitCode {
     let name = ravel_syntax::diag::sanitize(&property.display().to_string());
     let fail = |msg: String| {
         err(&format!("error: {msg}\n"));
         ExitCode::from(exit::INPUT_ERROR)
     };
+    let nowhere = |message: String, hint: &str| {
+        let d = Diagnostic {
+            span: None,
+            ..Diagnostic::new(
+                ravel_syntax::diag::Code::Vnnlib,
+                ravel_syntax::ast::Span::new(0, 0),
+                message,
+            )
+            .hint(hint)
+        };
+        err(&render(&[d], &name, "", 100, color));
+        ExitCode::from(exit::INPUT_ERROR)
+    };
+    if property
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
+    {
+        return nowhere(
+            format!("`{name}` is compressed (.gz): ravel reads plain VNN-LIB text"),
+            "decompress it first (gunzip -k FILE.vnnlib.gz)",
+        );
+    }
     let bytes = match read_request(&ravel::ReadRequest {
         path: property.to_path_buf(),
         inside: None,
@@ -1037,10 +1117,18 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
         whole: true,
     }) {
         Ok(b) => b,
-        Err(e) => return fail(format!("cannot read `{name}`: {e}")),
+        Err(e) => {
+            return nowhere(
+                format!("cannot read the property `{name}`: {e}"),
+                "check the path",
+            )
+        }
     };
     let Ok(text) = String::from_utf8(bytes) else {
-        return fail(format!("`{name}` is not UTF-8 text"));
+        return nowhere(
+            format!("the property `{name}` is not UTF-8 text"),
+            "VNN-LIB files are plain text",
+        );
     };
     let dir = match output.and_then(Path::parent) {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -1071,34 +1159,78 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
         Some(c) if c.is_ascii_alphabetic() || c == '_' => ident,
         _ => format!("n_{ident}"),
     };
-    let spec = match ravel::vnnlib::import(
+    let specs = match ravel::vnnlib::import(
         &text,
         &model.display().to_string(),
         &ident,
         &property.display().to_string(),
     ) {
         Ok(s) => s,
-        Err(e) => return fail(format!("{name}:{}:{}: {}", e.line, e.column, e.message)),
+        Err(e) => {
+            let end = (e.offset + 1).min(text.len()).max(e.offset);
+            let d = Diagnostic::new(
+                ravel_syntax::diag::Code::Vnnlib,
+                ravel_syntax::ast::Span::new(e.offset, end),
+                e.message,
+            )
+            .label("here")
+            .hint("ravel imports linear constraints over the X_i or the Y_j under and/or (see the README, VNN-LIB properties)");
+            err(&render(&[d], &name, &text, 100, color));
+            return ExitCode::from(exit::INPUT_ERROR);
+        }
     };
-    // the spec must check with the network (sizes included) before anyone sees it
-    if let Err(d) = ravel::front_end_task(&spec, &dir, &read_request, None) {
-        err(&render(&d, "(imported spec)", &spec, 100, color));
-        return fail(format!("the spec imported from `{name}` does not check"));
+    // each spec must check with the network (sizes included) before anyone sees it
+    for (k, spec) in specs.iter().enumerate() {
+        if let Err(d) = ravel::front_end_task(spec, &dir, &read_request, None) {
+            err(&render(&d, "(imported spec)", spec, 100, color));
+            return fail(format!(
+                "the spec imported from `{name}` (input region {} of {}) does not check",
+                k + 1,
+                specs.len()
+            ));
+        }
     }
     match output {
-        Some(file) => match write_atomically(file, spec.as_bytes()) {
-            Ok(()) => ExitCode::from(exit::VERIFIED),
-            Err(e) => fail(format!(
-                "cannot write `{}`: {e}",
-                ravel_syntax::diag::sanitize(&file.display().to_string())
-            )),
-        },
-        None => {
-            if out(spec.trim_end()).is_err() {
-                return ExitCode::from(exit::BROKEN_PIPE);
+        Some(file) => {
+            let files = region_files(file, specs.len());
+            for (f, spec) in files.iter().zip(&specs) {
+                if let Err(e) = write_atomically(f, spec.as_bytes()) {
+                    return fail(format!(
+                        "cannot write `{}`: {e}",
+                        ravel_syntax::diag::sanitize(&f.display().to_string())
+                    ));
+                }
+            }
+            if files.len() > 1 {
+                let mut text = format!(
+                    "the property's input is a union of {} regions: one spec per region (the property holds only if every one is VERIFIED; any FALSIFIED one is a counterexample):",
+                    files.len()
+                );
+                for f in &files {
+                    text += &format!(
+                        "\n  {}",
+                        ravel_syntax::diag::sanitize(&f.display().to_string())
+                    );
+                }
+                if out(&text).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
+                }
             }
             ExitCode::from(exit::VERIFIED)
         }
+        None => match specs.as_slice() {
+            [spec] => {
+                if out(spec.trim_end()).is_err() {
+                    return ExitCode::from(exit::BROKEN_PIPE);
+                }
+                ExitCode::from(exit::VERIFIED)
+            }
+            _ => fail(format!(
+                "the input of `{name}` is a union of {} regions, one spec each: pass --output FILE.ravel to write them as FILE.1.ravel … FILE.{}.ravel",
+                specs.len(),
+                specs.len()
+            )),
+        },
     }
 }
 
@@ -1168,6 +1300,39 @@ pub fn main() -> ExitCode {
             ExitCode::from(worst)
         }
         Cmd::Verify {
+            network: Some(network),
+            vnnlib: Some(vnnlib),
+            result_file,
+            time_limit,
+            jobs,
+            ..
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            vnncomp::verify_direct(
+                &network,
+                &vnnlib,
+                time_limit,
+                result_file.as_deref(),
+                jobs.unwrap_or(cores),
+                color,
+            )
+        }
+        Cmd::Vnncomp {
+            instances,
+            root,
+            out,
+            jobs,
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            vnncomp::vnncomp(
+                &instances,
+                root.as_deref(),
+                out.as_deref(),
+                jobs.unwrap_or(cores),
+                color,
+            )
+        }
+        Cmd::Verify {
             specs,
             controllers,
             format,
@@ -1181,6 +1346,7 @@ pub fn main() -> ExitCode {
             quiet,
             plot,
             plot_dims,
+            ..
         } => {
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
             let opts = batch::Options {

@@ -424,3 +424,285 @@ fn an_onnx_clip_equals_spec_saturation() {
     );
     assert_eq!(pa, pb);
 }
+
+/// Random values for the reference tests (multiples of 1/64 in [-2, 2]).
+fn random_matrix(rng: &mut ravel_base::rng::Rng, r: usize, c: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(r, c, |_, _| (rng.uniform(-2.0, 2.0) * 64.0).round() / 64.0)
+}
+
+/// The loaded network against a reference evaluation of the graph at
+/// random points.
+fn agrees(c: &ravel::onnx::Controller, reference: &dyn Fn(&[f64]) -> Vec<f64>, what: &str) {
+    let mut rng = ravel_base::rng::Rng::new(7);
+    for _ in 0..50 {
+        let x: Vec<f64> = (0..c.inputs).map(|_| rng.uniform(-3.0, 3.0)).collect();
+        let (ours, want) = (c.net.forward(&x), reference(&x));
+        assert_eq!(ours.len(), want.len(), "{what}");
+        for (a, b) in ours.iter().zip(&want) {
+            assert!(
+                (a - b).abs() <= 1e-12 * (1.0 + b.abs()),
+                "{what}: ravel {a} vs reference {b} at {x:?}"
+            );
+        }
+    }
+}
+
+/// `W·x` with the constant on the left, on a 1-D input and on a column
+/// `[k, 1]` (the two ways VNN-COMP's test networks write it), then shape
+/// ops back to a row: each against the graph evaluated by hand.
+#[test]
+fn matmul_with_the_constant_on_the_left() {
+    let mut rng = ravel_base::rng::Rng::new(1);
+    let w1 = random_matrix(&mut rng, 4, 3);
+    let b1 = random_matrix(&mut rng, 4, 1);
+    let w2 = random_matrix(&mut rng, 2, 4);
+    let by_hand = |x: &[f64]| -> Vec<f64> {
+        let h: Vec<f64> = (0..4)
+            .map(|i| ((0..3).map(|j| w1[(i, j)] * x[j]).sum::<f64>() + b1[(i, 0)]).max(0.0))
+            .collect();
+        (0..2)
+            .map(|i| (0..4).map(|j| w2[(i, j)] * h[j]).sum::<f64>() - 0.5)
+            .collect()
+    };
+    for column in [false, true] {
+        let mut g = GraphBuilder::new(3, Storage::RawF64);
+        if column {
+            g.declare_shape(&[Some(3), Some(1)]);
+        } else {
+            g.declare_shape(&[Some(3)]);
+        }
+        g.matmul_left(&w1);
+        let bias_dims: &[usize] = if column { &[4, 1] } else { &[4] };
+        let b = g.constant("bias", bias_dims, b1.as_slice());
+        g.node("Add", &[b], vec![]);
+        g.unary("Relu");
+        g.matmul_left(&w2);
+        g.elementwise("Sub", &[0.5]);
+        if column {
+            // [2, 1] → [1, 2]
+            let s = g.constant("shape", &[2], &[1.0, -1.0]);
+            g.node("Reshape", &[s], vec![]);
+        }
+        let c = load(&g.finish(2).0, &ExternalFiles::new())
+            .unwrap_or_else(|e| panic!("column={column}: {e:?}"));
+        assert_eq!((c.inputs, c.outputs), (3, 2));
+        agrees(&c, &by_hand, &format!("W·x, column={column}"));
+    }
+    // W·X on a matrix X of two columns [3, 2]: W times each column
+    let by_columns = |x: &[f64]| -> Vec<f64> {
+        let mut y = Vec::new();
+        for i in 0..4 {
+            for c in 0..2 {
+                y.push((0..3).map(|j| w1[(i, j)] * x[2 * j + c]).sum::<f64>());
+            }
+        }
+        y
+    };
+    let mut g = GraphBuilder::new(6, Storage::RawF64);
+    g.declare_shape(&[Some(3), Some(2)]);
+    g.matmul_left(&w1);
+    let c = load(&g.finish(8).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!((c.inputs, c.outputs), (6, 8));
+    agrees(&c, &by_columns, "W·X by columns");
+    // a bias of shape [4] on the column [4, 1] broadcasts to [4, 4]: refused
+    let mut g = GraphBuilder::new(3, Storage::RawF64);
+    g.declare_shape(&[Some(3), Some(1)]);
+    g.matmul_left(&w1);
+    g.elementwise("Add", b1.as_slice());
+    let e = load(&g.finish(4).0, &ExternalFiles::new()).expect_err("broadcast");
+    assert_eq!(e.kind, OnnxErrorKind::Malformed);
+    assert!(e.message.contains("larger"), "{}", e.message);
+    // W·x with W's columns not matching x's rows
+    let mut g = GraphBuilder::new(3, Storage::RawF64);
+    g.declare_shape(&[Some(1), Some(3)]);
+    g.matmul_left(&w1);
+    let e = load(&g.finish(4).0, &ExternalFiles::new()).expect_err("shapes");
+    assert_eq!(e.kind, OnnxErrorKind::Malformed);
+    assert!(e.message.contains("[1, 3]"), "{}", e.message);
+    // a constant of three dimensions
+    let mut g = GraphBuilder::new(3, Storage::RawF64);
+    let k = g.constant("kernel", &[1, 3, 2], &[1.0; 6]);
+    g.node("MatMul", &[k], vec![]);
+    let e = load(&g.finish(2).0, &ExternalFiles::new()).expect_err("3-D");
+    assert_eq!(e.kind, OnnxErrorKind::Unsupported);
+    assert!(e.message.contains("2-D"), "{}", e.message);
+}
+
+/// `x·W` on a value of several rows multiplies each row (a block-diagonal
+/// map on the flat vector), after shape ops that keep the flat vector.
+#[test]
+fn matmul_on_rows_after_reshape_squeeze_unsqueeze() {
+    let mut rng = ravel_base::rng::Rng::new(2);
+    let w = random_matrix(&mut rng, 2, 3); // [in 2, out 3] as stored
+    let by_hand = |x: &[f64]| -> Vec<f64> {
+        // [[x0, x1], [x2, x3]] · W, flattened
+        let mut y = Vec::new();
+        for r in 0..2 {
+            for j in 0..3 {
+                y.push(x[2 * r] * w[(0, j)] + x[2 * r + 1] * w[(1, j)]);
+            }
+        }
+        y
+    };
+    for opset13 in [false, true] {
+        let mut g = GraphBuilder::new(4, Storage::RawF64);
+        // [1, 4] → [1, 1, 4] → [1, 4] → [2, 2]
+        if opset13 {
+            let a = g.constant("axes", &[1], &[0.0]);
+            g.node("Unsqueeze", &[a], vec![]);
+            let a = g.constant("axes", &[1], &[-2.0]);
+            g.node("Squeeze", &[a], vec![]);
+        } else {
+            g.node(
+                "Unsqueeze",
+                &[],
+                vec![GraphBuilder::ints_attr("axes", &[0])],
+            );
+            g.node("Squeeze", &[], vec![GraphBuilder::ints_attr("axes", &[1])]);
+        }
+        let s = g.constant("shape", &[2], &[2.0, -1.0]);
+        g.node("Reshape", &[s], vec![]);
+        let k = g.constant("kernel", &[2, 3], w.transpose().as_slice());
+        g.node("MatMul", &[k], vec![]);
+        // [2, 3] → [2, 3] (0 copies a dimension) → [1, 6]
+        let s = g.constant("shape", &[2], &[0.0, -1.0]);
+        g.node("Reshape", &[s], vec![]);
+        g.node(
+            "Flatten",
+            &[],
+            vec![ravel::onnx::build::int_attr("axis", 0)],
+        );
+        g.unary("Identity");
+        let c = load(&g.finish(6).0, &ExternalFiles::new())
+            .unwrap_or_else(|e| panic!("opset13={opset13}: {e:?}"));
+        assert_eq!((c.inputs, c.outputs), (4, 6));
+        agrees(&c, &by_hand, &format!("rows, opset13={opset13}"));
+    }
+    // without the reshape, the same MatMul reads 4 ≠ 2 columns: refused
+    let mut g = GraphBuilder::new(4, Storage::RawF64);
+    let k = g.constant("kernel", &[2, 3], &[1.0; 6]);
+    g.node("MatMul", &[k], vec![]);
+    let e = load(&g.finish(3).0, &ExternalFiles::new()).expect_err("columns");
+    assert_eq!(e.kind, OnnxErrorKind::Malformed);
+}
+
+/// Input normalisation `(x − mean)/std` with per-channel constants, then
+/// `Flatten` and a layer: against the graph evaluated by hand.
+#[test]
+fn per_channel_normalisation_and_flatten() {
+    let mut rng = ravel_base::rng::Rng::new(3);
+    let w = random_matrix(&mut rng, 2, 6);
+    let (mean, std) = ([0.25, -1.5], [0.5, 3.0]);
+    let by_hand = |x: &[f64]| -> Vec<f64> {
+        // x is [1, 2, 3]: channel c holds x[3c..3c+3]
+        let z: Vec<f64> = (0..6).map(|i| (x[i] - mean[i / 3]) / std[i / 3]).collect();
+        (0..2)
+            .map(|r| (0..6).map(|j| w[(r, j)] * z[j]).sum::<f64>())
+            .collect()
+    };
+    let mut g = GraphBuilder::new(6, Storage::RawF64);
+    g.declare_shape(&[None, Some(2), Some(3)]);
+    let m = g.constant("mean", &[2, 1], &mean);
+    g.node("Sub", &[m], vec![]);
+    let s = g.constant("std", &[1, 2, 1], &std);
+    g.node("Div", &[s], vec![]);
+    g.unary("Flatten");
+    g.gemm(&w, &DVector::zeros(2));
+    let c = load(&g.finish(2).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!(c.inputs, 6);
+    // Div by c is multiplication by the f64 nearest 1/c (documented)
+    let mut rng = ravel_base::rng::Rng::new(9);
+    for _ in 0..50 {
+        let x: Vec<f64> = (0..6).map(|_| rng.uniform(-3.0, 3.0)).collect();
+        let (ours, want) = (c.net.forward(&x), by_hand(&x));
+        for (a, b) in ours.iter().zip(&want) {
+            assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+    }
+    // a constant that does not broadcast to [1, 2, 3]
+    let mut g = GraphBuilder::new(6, Storage::RawF64);
+    g.declare_shape(&[None, Some(2), Some(3)]);
+    let m = g.constant("mean", &[2], &mean);
+    g.node("Sub", &[m], vec![]);
+    let e = load(&g.finish(6).0, &ExternalFiles::new()).expect_err("no broadcast");
+    assert_eq!(e.kind, OnnxErrorKind::Malformed);
+    assert!(e.message.contains("do not broadcast"), "{}", e.message);
+}
+
+/// Every refused shape op and division is a named error, never a panic.
+#[test]
+fn shape_ops_and_divisions_that_are_refused() {
+    let refused = |build: &dyn Fn(&mut GraphBuilder), kind: OnnxErrorKind, what: &str| {
+        let mut g = GraphBuilder::new(4, Storage::RawF64);
+        build(&mut g);
+        let e = load(&g.finish(4).0, &ExternalFiles::new()).expect_err(what);
+        assert_eq!(e.kind, kind, "{what}: {e:?}");
+        assert!(e.message.contains(what), "{what}: {}", e.message);
+        assert!(
+            e.message.contains("node '") || e.message.contains("initializer '"),
+            "names the node or tensor: {}",
+            e.message
+        );
+    };
+    refused(
+        &|g| {
+            let s = g.constant("shape", &[2], &[3.0, 2.0]);
+            g.node("Reshape", &[s], vec![]);
+        },
+        OnnxErrorKind::Malformed,
+        "reshapes a value of shape [1, 4] (4 elements) to [3, 2]",
+    );
+    refused(
+        &|g| {
+            let s = g.constant("shape", &[2], &[-1.0, -1.0]);
+            g.node("Reshape", &[s], vec![]);
+        },
+        OnnxErrorKind::Malformed,
+        "two dimensions to infer",
+    );
+    refused(
+        &|g| {
+            // the target shape is the graph's input: computed, not constant
+            let x = g.current();
+            g.node_inputs("Reshape", vec![x.clone(), x], vec![]);
+        },
+        OnnxErrorKind::Unsupported,
+        "reshapes to a computed shape",
+    );
+    refused(
+        &|g| g.node("Squeeze", &[], vec![GraphBuilder::ints_attr("axes", &[1])]),
+        OnnxErrorKind::Malformed,
+        "squeezes axis 1",
+    );
+    refused(
+        &|g| {
+            g.node(
+                "Flatten",
+                &[],
+                vec![ravel::onnx::build::int_attr("axis", 3)],
+            )
+        },
+        OnnxErrorKind::Malformed,
+        "axis 3",
+    );
+    refused(
+        &|g| g.node("Unsqueeze", &[], vec![]),
+        OnnxErrorKind::Malformed,
+        "has no axes",
+    );
+    refused(
+        &|g| g.elementwise("Div", &[1.0, 0.0, 1.0, 1.0]),
+        OnnxErrorKind::NonFinite,
+        "divides by zero",
+    );
+    refused(
+        &|g| g.elementwise("Div", &[1e-320]),
+        OnnxErrorKind::NonFinite,
+        "reciprocal overflows",
+    );
+    refused(
+        &|g| g.elementwise("Div", &[f64::NAN]),
+        OnnxErrorKind::NonFinite,
+        "non-finite",
+    );
+}

@@ -12,10 +12,18 @@ use std::path::Path;
 
 const DIR: &str = "tests/data/vnnlib";
 
-fn import(name: &str) -> Result<String, ravel::vnnlib::ImportError> {
+fn import_all(name: &str) -> Result<Vec<String>, ravel::vnnlib::ImportError> {
     let text =
         std::fs::read_to_string(Path::new(DIR).join(format!("{name}.vnnlib"))).expect("file");
     ravel::vnnlib::import(&text, "../../../models/classifier.onnx", name, name)
+}
+
+/// A property of one input region: its spec.
+fn import(name: &str) -> Result<String, ravel::vnnlib::ImportError> {
+    import_all(name).map(|mut v| {
+        assert_eq!(v.len(), 1, "{name}: one region");
+        v.remove(0)
+    })
 }
 
 fn run(
@@ -24,8 +32,17 @@ fn run(
     ravel::lower::NetworkPlan,
     ravel::execute::network::NetworkOutcome,
 ) {
-    let spec = import(name).expect("imports");
-    let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel_cli::read_request, None)
+    run_spec(name, &import(name).expect("imports"))
+}
+
+fn run_spec(
+    name: &str,
+    spec: &str,
+) -> (
+    ravel::lower::NetworkPlan,
+    ravel::execute::network::NetworkOutcome,
+) {
+    let task = ravel::front_end_task(spec, Path::new(DIR), &ravel_cli::read_request, None)
         .unwrap_or_else(|d| panic!("{name}: the imported spec does not check: {d:?}\n{spec}"));
     let Task::Network(c) = task else {
         panic!("{name}: not a network spec")
@@ -113,7 +130,6 @@ fn polytope_inputs_stay_a_polytope() {
 fn unsupported_constructs_are_refused_with_their_line() {
     for (name, line, what) in [
         ("mixed", 7, "inputs and outputs"),
-        ("input_disjunction", 6, "disjunctions involving inputs"),
         ("nonlinear", 7, "not linear"),
         ("gap", 2, "without gaps"),
     ] {
@@ -169,7 +185,8 @@ fn counterexamples_are_float32_inputs_of_the_box() {
     };
     let verify = |text: &str| {
         let spec = ravel::vnnlib::import(text, "../../../models/classifier.onnx", "f", "f")
-            .expect("imports");
+            .expect("imports")
+            .remove(0);
         let task = ravel::front_end_task(&spec, Path::new(DIR), &ravel_cli::read_request, None)
             .unwrap_or_else(|d| panic!("the imported spec does not check: {d:?}\n{spec}"));
         let Task::Network(c) = task else {
@@ -194,4 +211,198 @@ fn counterexamples_are_float32_inputs_of_the_box() {
     let out = verify(&property("-0.30000004", "-0.30000002"));
     assert_eq!(out.verdict.as_str(), "UNSURE");
     assert!(out.properties[0].real_only.is_some());
+}
+
+/// An input disjunction is a union of input regions, one spec each (the
+/// property holds only if every one is VERIFIED): here the first region is
+/// safe (label 0) and the second is not (label 1 wins at 135°).
+#[test]
+fn input_disjunctions_become_one_spec_per_region() {
+    let specs = import_all("input_disjunction").expect("imports");
+    assert_eq!(specs.len(), 2);
+    let boxes = [
+        (vec![0.55, 0.25], vec![0.65, 0.35]),
+        (vec![-0.35, 0.25], vec![-0.25, 0.35]),
+    ];
+    let mut verdicts = Vec::new();
+    for (k, (spec, (lo, hi))) in specs.iter().zip(boxes).enumerate() {
+        assert!(
+            spec.contains(&format!("Input region {} of 2", k + 1)),
+            "{spec}"
+        );
+        assert!(spec.contains("partitioner bab"), "{spec}");
+        let (plan, out) = run_spec("input_disjunction", spec);
+        assert_eq!(
+            plan.input,
+            Some(Region::Box(ravel_analysis::sets::IBox::new(
+                lo.clone(),
+                hi.clone()
+            )))
+        );
+        assert_eq!(members(&plan), vec![vec![(vec![1.0, -1.0, 0.0], 0.0)]]);
+        if let Some(w) = &out.properties[0].counterexample {
+            assert!(w.input.iter().zip(&lo).all(|(x, l)| x >= l));
+            assert!(w.input.iter().zip(&hi).all(|(x, h)| x <= h));
+            assert!(w.output[1] >= w.output[0]);
+        }
+        verdicts.push(out.verdict.as_str());
+    }
+    assert_eq!(verdicts, ["VERIFIED", "FALSIFIED"]);
+}
+
+const DECLARE: &str = "(declare-const X_0 Real)\n(declare-const X_1 Real)\n\
+     (declare-const Y_0 Real)\n(declare-const Y_1 Real)\n(declare-const Y_2 Real)\n";
+
+fn import_text(body: &str) -> Result<Vec<String>, ravel::vnnlib::ImportError> {
+    ravel::vnnlib::import(
+        &format!("{DECLARE}{body}"),
+        "../../../models/classifier.onnx",
+        "p",
+        "p",
+    )
+}
+
+/// The form of VNN-COMP 2022 and later: one `or` of `and`s, each with the
+/// input box and output constraints. Disjuncts with the same input
+/// constraints are one region (its avoid set the union of their output
+/// parts); a single disjunct is the plain property.
+#[test]
+fn disjuncts_with_inputs_and_outputs_group_by_region() {
+    let boxed =
+        |y: &str| format!("(and (>= X_0 0.55) (<= X_0 0.65) (>= X_1 0.25) (<= X_1 0.35) {y})");
+    // the robustness property of robust_box.vnnlib, written as two disjuncts
+    let specs = import_text(&format!(
+        "(assert (or {} {}))",
+        boxed("(>= Y_1 Y_0)"),
+        boxed("(>= Y_2 Y_0)")
+    ))
+    .expect("imports");
+    assert_eq!(specs.len(), 1);
+    let (plan, out) = run_spec("grouped", &specs[0]);
+    let (reference, _) = run("robust_box");
+    assert_eq!(plan.input, reference.input);
+    assert_eq!(members(&plan), members(&reference));
+    assert_eq!(out.verdict.as_str(), "VERIFIED");
+    assert!(!specs[0].contains("Input region"), "{}", specs[0]);
+
+    // a single disjunct
+    let specs = import_text(&format!("(assert (or {}))", boxed("(>= Y_1 Y_0)"))).expect("imports");
+    assert_eq!(specs.len(), 1);
+    let (plan, _) = run_spec("single", &specs[0]);
+    assert_eq!(plan.input, reference.input);
+    assert_eq!(members(&plan), vec![vec![(vec![1.0, -1.0, 0.0], 0.0)]]);
+
+    // three disjuncts over two regions: the first two share their box
+    let other = "(and (>= X_0 -0.35) (<= X_0 -0.25) (>= X_1 0.25) (<= X_1 0.35) (>= Y_2 Y_1))";
+    let specs = import_text(&format!(
+        "(assert (or {} {other} {}))",
+        boxed("(>= Y_1 Y_0)"),
+        boxed("(>= Y_2 Y_0)")
+    ))
+    .expect("imports");
+    assert_eq!(specs.len(), 2);
+    let (first, out) = run_spec("first", &specs[0]);
+    assert_eq!(first.input, reference.input);
+    assert_eq!(members(&first), members(&reference));
+    assert_eq!(out.verdict.as_str(), "VERIFIED");
+    let (second, out) = run_spec("second", &specs[1]);
+    assert_eq!(members(&second), vec![vec![(vec![0.0, 1.0, -1.0], 0.0)]]);
+    // at 135° label 1 wins over label 2: never reached
+    assert_ne!(out.verdict.as_str(), "FALSIFIED");
+
+    // a disjunct without output constraints would make every input of
+    // its region a counterexample: refused
+    let e = import_text(&format!(
+        "(assert (or {} (and (>= X_0 0) (<= X_0 1) (>= X_1 0) (<= X_1 1))))",
+        boxed("(>= Y_1 Y_0)")
+    ))
+    .expect_err("no outputs");
+    assert!(e.message.contains("no constraint on the outputs"), "{e:?}");
+}
+
+/// A bound with a coefficient other than ±1 stays a polytope row (its
+/// quotient would round and could lose a sliver of the region).
+#[test]
+fn scaled_bounds_stay_rows() {
+    let specs = import_text(
+        "(assert (and (>= X_0 0.5) (<= (* 3 X_0) 2) (>= X_1 0.25) (<= X_1 0.35)))\n\
+         (assert (>= Y_1 Y_0))",
+    )
+    .expect("imports");
+    let (plan, _) = run_spec("scaled", &specs[0]);
+    let Some(Region::Polytope { rows, .. }) = &plan.input else {
+        panic!("not a polytope: {:?}", plan.input)
+    };
+    assert!(
+        rows.iter()
+            .any(|(a, h)| a[0] > 0.0 && a[1] == 0.0 && *h / a[0] > 0.66),
+        "{rows:?}"
+    );
+}
+
+/// Through the binary: `import-vnnlib` writes one spec per region
+/// (`FILE.1.ravel` …) and lists them; to standard output several specs
+/// need `--output`; an unsupported construct is E0401 at its place.
+#[test]
+fn import_vnnlib_writes_one_file_per_region() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let classifier = root.join("models/classifier.onnx");
+    let p = root.join("tests/data/vnnlib/input_disjunction.vnnlib");
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("vnnlib-regions");
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("dir");
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let ravel = |args: &[String]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_ravel"))
+            .args(args)
+            .output()
+            .expect("runs");
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let spec = d.join("prop.ravel");
+    // import-vnnlib writes one spec per region and says so
+    let (code, stdout, stderr) = ravel(&[
+        "import-vnnlib".into(),
+        s(&p),
+        "--network".into(),
+        s(&classifier),
+        "--output".into(),
+        s(&spec),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("union of 2 regions"), "{stdout}");
+    assert!(!spec.exists());
+    for k in [1, 2] {
+        let f = d.join(format!("prop.{k}.ravel"));
+        let text = std::fs::read_to_string(&f).expect("region spec");
+        assert!(text.contains("partitioner bab"), "{text}");
+        let (code, _, stderr) = ravel(&["check".into(), s(&f)]);
+        assert_eq!(code, 0, "{stderr}");
+    }
+    // to standard output, several specs need --output
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib".into(),
+        s(&p),
+        "--network".into(),
+        s(&classifier),
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--output"), "{stderr}");
+
+    // an unsupported construct: E0401 at its line and column
+    let (code, _, stderr) = ravel(&[
+        "import-vnnlib".into(),
+        s(&root.join("tests/data/vnnlib/mixed.vnnlib")),
+        "--network".into(),
+        s(&classifier),
+    ]);
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("E0401") && stderr.contains("mixed.vnnlib:7:9"),
+        "{stderr}"
+    );
 }

@@ -1,22 +1,32 @@
 //! VNN-LIB import: a property file of the verification competition → the
-//! equivalent ravel network spec (text).
+//! equivalent ravel network specs (text), one per input region.
 //!
 //! A VNN-LIB file declares the inputs `X_0 … X_{n−1}` and outputs
 //! `Y_0 … Y_{m−1}` and asserts constraints whose conjunction describes a
 //! *counterexample*: the property holds when no input satisfying the input
 //! constraints produces outputs satisfying the output constraints. ravel
-//! states that as an input set and an `avoid` set over the outputs:
+//! states that as input sets and `avoid` sets over the outputs:
 //!
-//! * input constraints: linear (in)equalities over the `X_i` only, at top
-//!   level or in `and`; bounds of single variables make a box, anything
-//!   else a polytope (every input must be bounded);
-//! * output constraints: linear (in)equalities over the `Y_j` only, under
-//!   any nesting of `and` and `or`; they are expanded into a union of
-//!   polytopes (at most [`MAX_MEMBERS`] members), the `avoid` set.
+//! * every constraint is a linear (in)equality over the `X_i` only or the
+//!   `Y_j` only, under any nesting of `and` and `or`; the conjunction of
+//!   the asserts is expanded into disjunctive normal form (at most
+//!   [`MAX_MEMBERS`] disjuncts);
+//! * the disjuncts are grouped by their input constraints: each group is
+//!   an **input region** (bounds of single variables make a box, anything
+//!   else a polytope; every input must be bounded), and the union of the
+//!   group's output conjunctions is that region's `avoid` set.
+//!
+//! **Semantics of input disjunctions.** A property whose input part is a
+//! disjunction (ACAS Xu's property 6, or the `(or (and X… Y…) …)` form of
+//! VNN-COMP 2022 and later) is a union of input regions: one spec per
+//! region. The property holds (`unsat`) only if every region's spec is
+//! VERIFIED, and is violated (`sat`) if any region's spec is FALSIFIED;
+//! otherwise it is undecided. Without input disjunctions there is one
+//! region and one spec, as before.
 //!
 //! Not supported, each with a message naming the line: constraints mixing
-//! `X` and `Y`, disjunctions involving inputs, non-linear terms, other
-//! sorts than `Real`, and any other command. Strict comparisons (`<`, `>`)
+//! `X` and `Y` in one comparison, non-linear terms, other sorts than
+//! `Real`, and any other command. Strict comparisons (`<`, `>`)
 //! are read as non-strict: the avoid set is then the closure of the unsafe
 //! set, which makes VERIFIED (a positive separation) exact, and a
 //! FALSIFIED input may lie on the boundary of the unsafe set (the generated
@@ -34,6 +44,8 @@ pub const MAX_MEMBERS: usize = 1000;
 /// Why a file could not be imported: the 1-based line and column, and what.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImportError {
+    /// Byte offset in the text (for a span).
+    pub offset: usize,
     /// 1-based line.
     pub line: usize,
     /// 1-based column (characters).
@@ -70,6 +82,7 @@ impl Ctx<'_> {
             .next()
             .map_or(1, |l| l.chars().count() + 1);
         ImportError {
+            offset: at.min(self.text.len()),
             line,
             column,
             message: message.into(),
@@ -160,24 +173,12 @@ struct Row {
     rhs: f64,
 }
 
-/// What a constraint constrains.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
-    /// Inputs only.
-    In,
-    /// Outputs only.
-    Out,
-    /// A conjunction of input and output parts.
-    Mixed,
-}
-
-/// A constraint tree.
+/// A constraint tree; each row constrains the inputs (`false`) or the
+/// outputs (`true`).
 enum Tree {
-    Row(Row),
+    Row(bool, Row),
     And(Vec<Tree>),
     Or(Vec<Tree>),
-    /// A conjunction whose parts constrain different kinds.
-    Mixed(Vec<(Kind, Tree)>),
 }
 
 struct Importer<'a> {
@@ -277,8 +278,8 @@ impl Importer<'_> {
         }
     }
 
-    /// A constraint and what it constrains.
-    fn constraint(&self, e: &Sexp) -> Result<(Kind, Tree), ImportError> {
+    /// A constraint.
+    fn constraint(&self, e: &Sexp) -> Result<Tree, ImportError> {
         let Sexp::List(items, at) = e else {
             return Err(self.cx.err(
                 e.at(),
@@ -298,24 +299,7 @@ impl Importer<'_> {
                 for a in args {
                     parts.push(self.constraint(a)?);
                 }
-                let all = |k: Kind| parts.iter().all(|(x, _)| *x == k);
-                let kind = if all(Kind::In) {
-                    Kind::In
-                } else if all(Kind::Out) {
-                    Kind::Out
-                } else {
-                    Kind::Mixed
-                };
-                if head == "or" {
-                    return match kind {
-                        Kind::Out => Ok((Kind::Out, Tree::Or(parts.into_iter().map(|p| p.1).collect()))),
-                        _ => Err(self.cx.err(*at, "disjunctions involving inputs are not supported (state each input region in its own spec)")),
-                    };
-                }
-                Ok(match kind {
-                    Kind::Mixed => (Kind::Mixed, Tree::Mixed(parts)),
-                    k => (k, Tree::And(parts.into_iter().map(|p| p.1).collect())),
-                })
+                Ok(if head == "or" { Tree::Or(parts) } else { Tree::And(parts) })
             }
             ("<=" | ">=" | "<" | ">" | "=", [lhs, rhs]) => {
                 let mut diff = self.linear(lhs)?.plus(self.linear(rhs)?.scaled(-1.0));
@@ -331,22 +315,25 @@ impl Importer<'_> {
                     coefs: d.terms.iter().map(|((_, i), v)| (*i, sign * v)).collect(),
                     rhs: -sign * d.constant,
                 };
-                let tree = match head {
-                    "<=" | "<" => Tree::Row(le(&diff, 1.0)),
-                    ">=" | ">" => Tree::Row(le(&diff, -1.0)),
-                    _ => Tree::And(vec![Tree::Row(le(&diff, 1.0)), Tree::Row(le(&diff, -1.0))]),
-                };
-                Ok((if out { Kind::Out } else { Kind::In }, tree))
+                Ok(match head {
+                    "<=" | "<" => Tree::Row(out, le(&diff, 1.0)),
+                    ">=" | ">" => Tree::Row(out, le(&diff, -1.0)),
+                    _ => Tree::And(vec![Tree::Row(out, le(&diff, 1.0)), Tree::Row(out, le(&diff, -1.0))]),
+                })
             }
             _ => Err(self.cx.err(*at, format!("`{}` with {} argument(s) is not a supported constraint (supported: <=, >=, <, >, = with two sides; and, or)", clean(head), args.len()))),
         }
     }
 }
 
-/// Disjunctive normal form of a tree: a list of conjunctions.
-fn dnf(t: Tree, limit: usize) -> Option<Vec<Vec<Row>>> {
+/// A conjunction of rows, each on the inputs (`false`) or the outputs (`true`).
+type Conjunction = Vec<(bool, Row)>;
+
+/// Disjunctive normal form of a tree: a list of conjunctions (`None` past
+/// `limit` of them).
+fn dnf(t: Tree, limit: usize) -> Option<Vec<Conjunction>> {
     match t {
-        Tree::Row(r) => Some(vec![vec![r]]),
+        Tree::Row(out, r) => Some(vec![vec![(out, r)]]),
         Tree::Or(parts) => {
             let mut out = Vec::new();
             for p in parts {
@@ -357,9 +344,8 @@ fn dnf(t: Tree, limit: usize) -> Option<Vec<Vec<Row>>> {
             }
             Some(out)
         }
-        Tree::Mixed(_) => None,
         Tree::And(parts) => {
-            let mut acc: Vec<Vec<Row>> = vec![Vec::new()];
+            let mut acc: Vec<Conjunction> = vec![Vec::new()];
             for p in parts {
                 let d = dnf(p, limit)?;
                 let mut next = Vec::new();
@@ -378,24 +364,31 @@ fn dnf(t: Tree, limit: usize) -> Option<Vec<Vec<Row>>> {
     }
 }
 
-/// Split a tree into its input rows (a conjunction) and its output parts.
-fn split(t: Tree, kind: Kind, input: &mut Vec<Row>, output: &mut Vec<Tree>) {
-    match (t, kind) {
-        (Tree::Mixed(parts), _) => {
-            for (k, p) in parts {
-                split(p, k, input, output);
-            }
+/// One input region and the outputs that must not occur for its inputs:
+/// the input rows (a conjunction) and the avoid set's members.
+struct Region {
+    inputs: Vec<Row>,
+    members: Vec<Vec<Row>>,
+}
+
+/// The disjuncts grouped by their input rows, in order of first
+/// appearance: the counterexamples are the union over the regions of
+/// (input in the region, output in one of its members).
+fn regions(conjunctions: Vec<Conjunction>) -> Vec<Region> {
+    let mut out: Vec<Region> = Vec::new();
+    for c in conjunctions {
+        let (ins, outs): (Vec<_>, Vec<_>) = c.into_iter().partition(|(o, _)| !*o);
+        let inputs: Vec<Row> = ins.into_iter().map(|(_, r)| r).collect();
+        let member: Vec<Row> = outs.into_iter().map(|(_, r)| r).collect();
+        match out.iter_mut().find(|g| g.inputs == inputs) {
+            Some(g) => g.members.push(member),
+            None => out.push(Region {
+                inputs,
+                members: vec![member],
+            }),
         }
-        (t, Kind::Out) => output.push(t),
-        (Tree::Row(r), _) => input.push(r),
-        (Tree::And(parts), _) => {
-            for p in parts {
-                split(p, Kind::In, input, output);
-            }
-        }
-        // an input disjunction is refused by `constraint`
-        (Tree::Or(_), _) => {}
     }
+    out
 }
 
 fn fmt_num(v: f64) -> String {
@@ -430,16 +423,26 @@ fn row_text(r: &Row, var: &str) -> String {
     s
 }
 
-/// Import a VNN-LIB property: the ravel network spec that states it, for
-/// the network stored at `model_path` (its sizes are the declared `X_i` and
-/// `Y_j`, which must run from 0 without gaps; the front end then checks them
-/// against the model); `name` names the network and `source` the file.
+/// Import a VNN-LIB property: the ravel network specs that state it, one
+/// per input region, for the network stored at `model_path` (its sizes are
+/// the declared `X_i` and `Y_j`, which must run from 0 without gaps; the
+/// front end then checks them against the model); `name` names the
+/// network and `source` the file.
+///
+/// The asserts are expanded into disjunctive normal form, and the
+/// disjuncts grouped by their input constraints: each group is an input
+/// region with the union of its output conjunctions as the avoid set. A
+/// property without input disjunctions is one region, one spec (the
+/// single-disjunct form `(assert (or (and X… Y…)))` of VNN-COMP 2022 and
+/// later included). With several regions, the property holds if and only
+/// if every region's spec is VERIFIED, and it is violated if any region's
+/// spec is FALSIFIED.
 pub fn import(
     text: &str,
     model_path: &str,
     name: &str,
     source: &str,
-) -> Result<String, ImportError> {
+) -> Result<Vec<String>, ImportError> {
     let cx = Ctx { text };
     let sexps = parse_sexps(&cx, text)?;
     let mut im = Importer {
@@ -453,70 +456,112 @@ pub fn import(
         im.command(e, &mut asserted)?;
     }
     im.count_declared()?;
-    if asserted.outputs.is_empty() {
-        return Err(im.cx.err(
-            0,
-            "there is no constraint on the outputs: every input would be a counterexample",
-        ));
-    }
-    let members = dnf(Tree::And(asserted.outputs), MAX_MEMBERS).ok_or_else(|| {
+    let conjunctions = dnf(Tree::And(asserted.trees), MAX_MEMBERS).ok_or_else(|| {
         im.cx.err(
             0,
-            format!("the output constraints expand into more than {MAX_MEMBERS} polytopes"),
+            format!("the constraints expand into more than {MAX_MEMBERS} disjuncts"),
         )
     })?;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "// Imported from {} by ravel import-vnnlib.",
-        ravel_syntax::diag::sanitize(source)
-    );
-    let _ = writeln!(
-        s,
-        "// VNN-LIB asserts describe a counterexample; ravel states the property as"
-    );
-    let _ = writeln!(
-        s,
-        "// the input set and the outputs that must never occur (the avoid set)."
-    );
-    if asserted.strict {
-        let _ = writeln!(
-            s,
-            "// Strict comparisons are read as non-strict: the avoid set is the closure"
-        );
-        let _ = writeln!(
-            s,
-            "// of the unsafe set, so a FALSIFIED input may lie on its boundary."
-        );
-    }
-    let _ = writeln!(
-        s,
-        "\nnetwork {name} {{\n    input  x[{}]\n    output y[{}]\n}}\n",
-        im.inputs, im.outputs
-    );
-    let _ = writeln!(s, "model \"{}\"\n", model_path.replace('"', "\\\""));
-    s += &im.input_set(&asserted.inputs)?;
-    let texts: Vec<String> = members
+    let regions = regions(conjunctions);
+    if regions
         .iter()
-        .map(|m| {
-            let rows: Vec<String> = m.iter().map(|r| row_text(r, "y")).collect();
-            format!("{{ {} }}", rows.join(", "))
-        })
-        .collect();
-    let _ = writeln!(s, "avoid unsafe = {}\n", texts.join("\n             | "));
-    let _ = writeln!(
-        s,
-        "analysis {{\n    propagator  crown\n    partitioner none\n    shape       box\n    samples     1000\n    seed        0\n}}"
-    );
-    Ok(s)
+        .any(|r| r.members.iter().any(|m| m.is_empty()))
+    {
+        return Err(im.cx.err(
+            0,
+            "there is no constraint on the outputs (in some disjunct): every input would be a counterexample",
+        ));
+    }
+    let count = regions.len();
+    let mut specs = Vec::with_capacity(count);
+    for (k, region) in regions.iter().enumerate() {
+        specs.push(im.spec(
+            region,
+            (k + 1, count),
+            model_path,
+            name,
+            source,
+            asserted.strict,
+        )?);
+    }
+    Ok(specs)
 }
 
-/// What the asserts say: the input rows (a conjunction), the output
-/// constraints (a conjunction), and whether a strict comparison occurs.
+impl Importer<'_> {
+    /// The spec of one region (`which`: its number and the count).
+    fn spec(
+        &self,
+        region: &Region,
+        which: (usize, usize),
+        model_path: &str,
+        name: &str,
+        source: &str,
+        strict: bool,
+    ) -> Result<String, ImportError> {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "// Imported from {} by ravel import-vnnlib.",
+            ravel_syntax::diag::sanitize(source)
+        );
+        let _ = writeln!(
+            s,
+            "// VNN-LIB asserts describe a counterexample; ravel states the property as"
+        );
+        let _ = writeln!(
+            s,
+            "// the input set and the outputs that must never occur (the avoid set)."
+        );
+        if which.1 > 1 {
+            let _ = writeln!(
+                s,
+                "// Input region {} of {}: the property holds only if every region's spec",
+                which.0, which.1
+            );
+            let _ = writeln!(
+                s,
+                "// is VERIFIED; a FALSIFIED region is a counterexample of the property."
+            );
+        }
+        if strict {
+            let _ = writeln!(
+                s,
+                "// Strict comparisons are read as non-strict: the avoid set is the closure"
+            );
+            let _ = writeln!(
+                s,
+                "// of the unsafe set, so a FALSIFIED input may lie on its boundary."
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\nnetwork {name} {{\n    input  x[{}]\n    output y[{}]\n}}\n",
+            self.inputs, self.outputs
+        );
+        let _ = writeln!(s, "model \"{}\"\n", model_path.replace('"', "\\\""));
+        s += &self.input_set(&region.inputs)?;
+        let texts: Vec<String> = region
+            .members
+            .iter()
+            .map(|m| {
+                let rows: Vec<String> = m.iter().map(|r| row_text(r, "y")).collect();
+                format!("{{ {} }}", rows.join(", "))
+            })
+            .collect();
+        let _ = writeln!(s, "avoid unsafe = {}\n", texts.join("\n             | "));
+        let _ = writeln!(
+            s,
+            "analysis {{\n    propagator  crown\n    partitioner bab\n    shape       box\n    samples     1000\n    seed        0\n}}"
+        );
+        Ok(s)
+    }
+}
+
+/// What the asserts say: their constraints (a conjunction), and whether a
+/// strict comparison occurs.
 #[derive(Default)]
 struct Asserted {
-    inputs: Vec<Row>,
-    outputs: Vec<Tree>,
+    trees: Vec<Tree>,
     strict: bool,
 }
 
@@ -534,8 +579,7 @@ impl Importer<'_> {
             [Sexp::Atom(h, _), ..] if h == "declare-const" => self.declare(items, *at),
             [Sexp::Atom(h, _), body] if h == "assert" => {
                 asserted.strict |= contains_strict(body);
-                let (kind, tree) = self.constraint(body)?;
-                split(tree, kind, &mut asserted.inputs, &mut asserted.outputs);
+                asserted.trees.push(self.constraint(body)?);
                 Ok(())
             }
             [Sexp::Atom(h, hat), ..] => Err(self.cx.err(
@@ -621,14 +665,17 @@ impl Importer<'_> {
             // every variable is declared, and the declared indices run
             // from 0 to `inputs` without gaps: `i` is in range
             match r.coefs.as_slice() {
-                [(i, c)] if *c > 0.0 => {
+                // a coefficient of ±1 only: `rhs / c` is then exact (any
+                // other would round, and the box could lose a sliver of
+                // the region); other rows stay rows of a polytope
+                [(i, c)] if *c == 1.0 => {
                     if let Some(h) = hi.get_mut(*i) {
-                        *h = h.min(r.rhs / c);
+                        *h = h.min(r.rhs);
                     }
                 }
-                [(i, c)] if *c < 0.0 => {
+                [(i, c)] if *c == -1.0 => {
                     if let Some(l) = lo.get_mut(*i) {
-                        *l = l.max(r.rhs / c);
+                        *l = l.max(-r.rhs);
                     }
                 }
                 _ => general.push(r.clone()),
@@ -670,6 +717,14 @@ impl Importer<'_> {
         }
     }
 }
+/// Whether a property uses a strict comparison (`<`, `>`), which the
+/// specs read as non-strict: a FALSIFIED input may then lie on the
+/// boundary of the unsafe set, which is not a counterexample of the
+/// property as written. `false` for text that does not parse.
+pub fn has_strict_comparisons(text: &str) -> bool {
+    parse_sexps(&Ctx { text }, text).is_ok_and(|s| s.iter().any(contains_strict))
+}
+
 fn contains_strict(e: &Sexp) -> bool {
     match e {
         Sexp::Atom(a, _) => a == "<" || a == ">",

@@ -102,11 +102,15 @@ pub enum Code {
     MalformedOnnx,
     /// E0308: an external-data file that is missing or too short.
     ExternalData,
+    /// E0401: a VNN-LIB property that cannot be read or imported.
+    Vnnlib,
+    /// E0402: an unusable row of a VNN-COMP instance list.
+    Instances,
 }
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 45] = [
+    pub const ALL: [Code; 47] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -152,6 +156,8 @@ impl Code {
         Code::NonFiniteWeights,
         Code::MalformedOnnx,
         Code::ExternalData,
+        Code::Vnnlib,
+        Code::Instances,
     ];
 
     /// The code as written in messages, e.g. `E0201`.
@@ -202,6 +208,8 @@ impl Code {
             Code::NonFiniteWeights => "E0306",
             Code::MalformedOnnx => "E0307",
             Code::ExternalData => "E0308",
+            Code::Vnnlib => "E0401",
+            Code::Instances => "E0402",
         }
     }
 }

@@ -105,6 +105,51 @@ impl GraphBuilder {
         self.input = value_info("input", &[None, Some(n as i64)]);
     }
 
+    /// Declare the input's shape (`None`: a symbolic batch dimension).
+    pub fn declare_shape(&mut self, dims: &[Option<i64>]) {
+        self.input = value_info("input", dims);
+    }
+
+    /// The name of the running value (the last node's output).
+    pub fn current(&self) -> String {
+        self.current.clone()
+    }
+
+    /// Append a node with the given inputs in order (name the running
+    /// value with [`GraphBuilder::current`]); its output becomes the
+    /// running value.
+    pub fn node_inputs(&mut self, op: &str, inputs: Vec<String>, attrs: Vec<AttributeProto>) {
+        let out = self.fresh(&op.to_lowercase());
+        let name = self.fresh(op);
+        self.nodes.push(NodeProto {
+            input: inputs,
+            output: vec![out.clone()],
+            name: Some(name),
+            op_type: Some(op.into()),
+            attribute: attrs,
+            domain: None,
+        });
+        self.current = out;
+    }
+
+    /// `MatMul` with the constant `W` (`out × in`) on the left: `W·x`, as
+    /// VNN-COMP's test networks write it.
+    pub fn matmul_left(&mut self, w: &DMatrix<f64>) {
+        let wn = self.constant("weight", &[w.nrows(), w.ncols()], &row_major(w));
+        let x = self.current();
+        self.node_inputs("MatMul", vec![wn, x], vec![]);
+    }
+
+    /// An integer-list attribute (`axes` of `Squeeze`/`Unsqueeze` before opset 13).
+    pub fn ints_attr(name: &str, v: &[i64]) -> AttributeProto {
+        AttributeProto {
+            name: Some(name.into()),
+            ints: v.to_vec(),
+            r#type: Some(7),
+            ..Default::default()
+        }
+    }
+
     /// Name of the external-data file (for [`Storage::External`]).
     pub fn external_file(mut self, name: &str) -> GraphBuilder {
         self.external_name = name.into();

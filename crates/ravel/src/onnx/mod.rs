@@ -6,7 +6,13 @@
 //! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
 //! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
 //! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
-//! `Dropout` (inference), plus `Constant`. Weights may be float32, float64
+//! `Dropout` (inference), plus `Constant`. `MatMul` takes its 2-D constant
+//! on either side (`x·W` as Keras writes it, `W·x` on a column as
+//! VNN-COMP's test networks do). The loader follows the running value's
+//! tensor shape (the batch dimension as 1): `MatMul` and broadcasting
+//! follow ONNX's rules on it, and the shape-only ops must keep the flat
+//! (row-major) vector — same number of elements, constant target shapes,
+//! squeezed axes of size 1 — or are refused, naming the node. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed
 //! fields, or in external data files.
 //!
@@ -495,6 +501,10 @@ struct Lowering {
     consts: HashMap<String, Tensor>,
     current: String,
     width: Option<usize>,
+    /// The running value's tensor shape (symbolic dimensions, such as the
+    /// batch, as 1), when known; its product is `width`. Shape-only ops
+    /// check against it, and `MatMul` and broadcasting follow it.
+    shape: Option<Vec<usize>>,
     layers: Vec<Layer>,
     /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
     notes: Vec<String>,
@@ -566,9 +576,270 @@ impl Lowering {
         }
     }
 
+    /// Append an affine layer; the value's shape is kept when the layer
+    /// keeps its width (callers that change the shape set it after).
     fn push_affine(&mut self, w: DMatrix<f64>, b: DVector<f64>) {
         self.width = Some(w.nrows());
+        if self.shape.as_deref().and_then(shape_width) != Some(w.nrows()) {
+            self.shape = Some(vec![w.nrows()]);
+        }
         self.layers.push(Layer::Affine { w, b });
+    }
+
+    /// The running value's shape: as tracked, else the flat width.
+    fn value_shape(&self, n: &NodeProto) -> Result<Vec<usize>, OnnxError> {
+        match (&self.shape, self.width) {
+            (Some(s), _) => Ok(s.clone()),
+            (None, Some(w)) => Ok(vec![w]),
+            (None, None) => Err(err(
+                OnnxErrorKind::Malformed,
+                format!("{} reads a value of unknown size", node_label(n)),
+                "give the graph input a static shape",
+            )),
+        }
+    }
+
+    /// A constant operand of an element-wise op, broadcast (ONNX's
+    /// multidirectional broadcasting) over the running value: one entry
+    /// per element of the flat value. A constant that would broadcast the
+    /// value to a larger shape is refused (the op would not be element-wise
+    /// on the value). Without a known shape: a constant of 1 or `width`
+    /// elements.
+    fn broadcast_shaped(&self, n: &NodeProto, t: &Tensor) -> Result<DVector<f64>, OnnxError> {
+        let Some(shape) = self.shape.clone() else {
+            return self.broadcast(n, t);
+        };
+        let refuse = |what: &str| {
+            err(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "{} combines a value of shape {} with a constant of shape {}, which {what}",
+                    node_label(n),
+                    shape_text(&shape),
+                    shape_text(&t.dims)
+                ),
+                "the constant must broadcast to the value's shape (a scalar, or one entry per element or per channel)",
+            )
+        };
+        if t.dims.len() > shape.len()
+            && t.dims
+                .iter()
+                .take(t.dims.len() - shape.len())
+                .any(|d| *d != 1)
+        {
+            return Err(refuse("would make the value larger"));
+        }
+        // the constant's dimensions aligned with the value's last ones
+        let rank = shape.len();
+        let mut cdims = vec![1usize; rank];
+        for (slot, d) in cdims.iter_mut().rev().zip(t.dims.iter().rev().take(rank)) {
+            *slot = *d;
+        }
+        for (c, d) in cdims.iter().zip(&shape) {
+            if c != d && *c != 1 {
+                return Err(refuse(if *d == 1 {
+                    "would make the value larger"
+                } else {
+                    "do not broadcast"
+                }));
+            }
+        }
+        // row-major strides of the constant, 0 along broadcast dimensions
+        let mut strides = vec![0usize; rank];
+        let mut acc = 1usize;
+        for (s, c) in strides.iter_mut().zip(&cdims).rev() {
+            if *c != 1 {
+                *s = acc;
+            }
+            acc = acc.saturating_mul(*c);
+        }
+        let width = shape_width(&shape).unwrap_or(0);
+        let mut out = Vec::with_capacity(width);
+        for flat in 0..width {
+            let (mut rest, mut at) = (flat, 0usize);
+            for (d, s) in shape.iter().zip(&strides).rev() {
+                let d = (*d).max(1);
+                at += (rest % d) * s;
+                rest /= d;
+            }
+            out.push(t.data.get(at).copied().unwrap_or(0.0));
+        }
+        Ok(DVector::from_vec(out))
+    }
+
+    /// `Flatten`, `Reshape`, `Squeeze`, `Unsqueeze` (and `Identity`): the
+    /// flat value is unchanged; the new shape is computed and checked
+    /// (same number of elements, axes in range, squeezed axes of size 1,
+    /// a constant target shape), and anything else is refused.
+    fn reshape(&mut self, n: &NodeProto, op: &str) -> Result<(), OnnxError> {
+        if op == "Identity" {
+            return Ok(());
+        }
+        let shape = self.value_shape(n)?;
+        let width = shape_width(&shape).unwrap_or(0);
+        let bad = |what: String| {
+            err(
+                OnnxErrorKind::Malformed,
+                format!("{} {what}", node_label(n)),
+                "the model's shapes are inconsistent: re-export it",
+            )
+        };
+        let rank = shape.len() as i64;
+        // an axis in [-r, r) (or [-r, r] for Flatten and the output rank of Unsqueeze)
+        let axis = |a: i64, r: i64, inclusive: bool| -> Result<usize, OnnxError> {
+            let top = if inclusive { r } else { r - 1 };
+            if a < -r || a > top {
+                return Err(bad(format!(
+                    "uses axis {a} on a value of shape {}",
+                    shape_text(&shape)
+                )));
+            }
+            let a = if a < 0 { a + r } else { a };
+            Ok(a as usize)
+        };
+        // opset ≥ 13: axes as a constant input; before, as an attribute
+        let axes = |k: usize| -> Result<Option<Vec<i64>>, OnnxError> {
+            match n.input.get(k).filter(|s| !s.is_empty()) {
+                Some(name) => {
+                    let t = self.named_const(n, name, "axes", "export with constant folding on")?;
+                    Ok(Some(t.data.iter().map(|v| *v as i64).collect()))
+                }
+                None => Ok(attr(n, "axes").map(|a| a.ints.clone())),
+            }
+        };
+        let new: Vec<usize> = match op {
+            "Flatten" => {
+                let a = axis(attr_i(n, "axis", 1), rank, true)?;
+                let (head, tail) = shape.split_at(a.min(shape.len()));
+                let p = |d: &[usize]| d.iter().product::<usize>();
+                vec![p(head), p(tail)]
+            }
+            "Reshape" => {
+                let name = n.input.get(1).cloned().unwrap_or_default();
+                let t = self.consts.get(&name).ok_or_else(|| {
+                    err(
+                        OnnxErrorKind::Unsupported,
+                        format!(
+                            "{} reshapes to a computed shape '{}'",
+                            node_label(n),
+                            sanitize(&name)
+                        ),
+                        "export with constant folding on (the target shape must be a constant)",
+                    )
+                })?;
+                let allow_zero = attr_i(n, "allowzero", 0) != 0;
+                let mut out = Vec::with_capacity(t.data.len());
+                let mut infer = None;
+                for (i, v) in t.data.iter().enumerate() {
+                    let d = *v as i64;
+                    if d as f64 != *v || d < -1 || out.len() >= 64 {
+                        return Err(bad(format!(
+                            "reshapes to {}, which is not a shape",
+                            shape_text(&t.data)
+                        )));
+                    }
+                    match d {
+                        -1 if infer.is_none() => {
+                            infer = Some(i);
+                            out.push(1);
+                        }
+                        -1 => {
+                            return Err(bad(format!(
+                                "reshapes to {} (two dimensions to infer)",
+                                shape_text(&t.data)
+                            )))
+                        }
+                        0 if !allow_zero => match shape.get(i) {
+                            Some(s) => out.push(*s),
+                            None => {
+                                return Err(bad(format!(
+                                    "copies dimension {i} of a value of shape {}",
+                                    shape_text(&shape)
+                                )))
+                            }
+                        },
+                        d => out.push(d as usize),
+                    }
+                }
+                let known = out
+                    .iter()
+                    .try_fold(1usize, |a, d| a.checked_mul(*d))
+                    .unwrap_or(0);
+                if let Some(i) = infer {
+                    if known == 0 || width % known != 0 {
+                        return Err(bad(format!(
+                            "cannot reshape a value of shape {} to {}",
+                            shape_text(&shape),
+                            shape_text(&t.data)
+                        )));
+                    }
+                    if let Some(slot) = out.get_mut(i) {
+                        *slot = width / known;
+                    }
+                }
+                if shape_width(&out) != Some(width) {
+                    return Err(bad(format!(
+                        "reshapes a value of shape {} ({width} elements) to {}",
+                        shape_text(&shape),
+                        shape_text(&t.data)
+                    )));
+                }
+                out
+            }
+            "Squeeze" => match axes(1)? {
+                None => shape.iter().copied().filter(|d| *d != 1).collect(),
+                Some(list) => {
+                    let mut drop = Vec::new();
+                    for a in list {
+                        let a = axis(a, rank, false)?;
+                        if shape.get(a) != Some(&1) {
+                            return Err(bad(format!(
+                                "squeezes axis {a} of a value of shape {}, which is not of size 1",
+                                shape_text(&shape)
+                            )));
+                        }
+                        drop.push(a);
+                    }
+                    shape
+                        .iter()
+                        .enumerate()
+                        .filter(|(i, _)| !drop.contains(i))
+                        .map(|(_, d)| *d)
+                        .collect()
+                }
+            },
+            // Unsqueeze
+            _ => {
+                let Some(list) = axes(1)? else {
+                    return Err(bad("has no axes".to_string()));
+                };
+                let out_rank = rank + list.len() as i64;
+                let mut at = Vec::new();
+                for a in list {
+                    let a = axis(a, out_rank, false)?;
+                    if at.contains(&a) {
+                        return Err(bad(format!("names axis {a} twice")));
+                    }
+                    at.push(a);
+                }
+                let mut rest = shape.iter();
+                (0..out_rank as usize)
+                    .map(|i| {
+                        if at.contains(&i) {
+                            1
+                        } else {
+                            rest.next().copied().unwrap_or(1)
+                        }
+                    })
+                    .collect()
+            }
+        };
+        if new.len() > 64 {
+            return Err(bad("gives a value of more than 64 dimensions".to_string()));
+        }
+        self.width = Some(width);
+        self.shape = Some(new);
+        Ok(())
     }
 
     /// Refuse a layer wider than [`MAX_WIDTH`] before it is built.
@@ -652,6 +923,7 @@ impl Lowering {
                         "export with constant folding on",
                     ));
                 }
+                self.reshape(n, &op)?;
             }
             other => {
                 return Err(err(
@@ -763,6 +1035,7 @@ impl Lowering {
         }
         self.expect_width(n, w.ncols())?;
         let outputs = w.nrows();
+        self.shape = Some(vec![1, outputs]);
         let mut b = DVector::zeros(outputs);
         if let Some(cname) = n.input.get(2).filter(|s| !s.is_empty()) {
             let ct = self.named_const(n, cname, "bias", "biases must be initializers")?;
@@ -773,31 +1046,106 @@ impl Lowering {
         Ok(())
     }
 
-    /// `MatMul`: the data (left) times a 2-D constant (right).
+    /// `MatMul` with a 2-D constant on either side, as a linear map on the
+    /// flat (row-major) value, following ONNX's (numpy's) rules: the data
+    /// `x` of shape `[…, K]` times `W` of shape `[K, N]` gives `[…, N]`
+    /// (each row of `x` times `W`); `W` of shape `[M, K]` times `x` of
+    /// shape `[K]` gives `W·x` of shape `[M]`, and times `x` of shape
+    /// `[…, K, C]` gives `[…, M, C]` (`W` times each column). A value of
+    /// unknown shape is taken as the vector the constant needs.
     fn matmul(&mut self, n: &NodeProto) -> Result<(), OnnxError> {
         let (t, const_first) = self.const_operand(n)?;
-        if const_first || t.dims.len() != 2 {
-            return Err(err(
-                OnnxErrorKind::Unsupported,
-                format!(
-                    "{} must multiply the data (left) by a 2-D constant (right)",
-                    node_label(n)
-                ),
-                "export Linear layers as x @ W",
-            ));
-        }
         let &[r, c] = t.dims.as_slice() else {
             return Err(err(
                 OnnxErrorKind::Unsupported,
-                format!("{} must multiply by a 2-D constant", node_label(n)),
-                "export Linear layers as x @ W",
+                format!(
+                    "{} multiplies by a constant of shape {}; ravel supports 2-D constant matrices",
+                    node_label(n),
+                    shape_text(&t.dims)
+                ),
+                "export linear layers as MatMul by a 2-D weight matrix (or Gemm)",
             ));
         };
         Self::check_width(n, r.max(c))?;
-        let w = DMatrix::from_row_slice(r, c, &t.data).transpose();
-        self.expect_width(n, w.ncols())?;
-        let outputs = w.nrows();
-        self.push_affine(w, DVector::zeros(outputs));
+        let m = DMatrix::from_row_slice(r, c, &t.data);
+        // the contracted dimension and the map on each column: `Wᵀ` for
+        // x·W (rows of x are columns of its transpose), `W` for W·x
+        let (k, w) = if const_first {
+            (c, m)
+        } else {
+            (r, m.transpose())
+        };
+        let shape = self.shape.clone().or_else(|| self.width.map(|w| vec![w]));
+        let shape = shape.unwrap_or_else(|| vec![k]);
+        let mismatch = || {
+            err(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "{} multiplies a value of shape {} {} a constant of shape {}",
+                    node_label(n),
+                    shape_text(&shape),
+                    if const_first { "on the right of" } else { "by" },
+                    shape_text(&t.dims)
+                ),
+                "the model's shapes are inconsistent: re-export it",
+            )
+        };
+        let (blocks, cols, out_shape) = match (shape.split_last(), const_first) {
+            // a vector: W·x or x·W
+            (Some((&d, [])), _) => {
+                if d != k {
+                    return Err(mismatch());
+                }
+                (1, 1, vec![w.nrows()])
+            }
+            // x·W: each row of x
+            (Some((&d, lead)), false) => {
+                if d != k {
+                    return Err(mismatch());
+                }
+                let mut s = lead.to_vec();
+                s.push(w.nrows());
+                (shape_width(lead).ok_or_else(mismatch)?, 1, s)
+            }
+            // W·x: each column of each matrix of x
+            (Some((&cols, rest)), true) => {
+                let Some((&d, lead)) = rest.split_last() else {
+                    return Err(mismatch());
+                };
+                if d != k {
+                    return Err(mismatch());
+                }
+                let mut s = lead.to_vec();
+                s.extend([w.nrows(), cols]);
+                (shape_width(lead).ok_or_else(mismatch)?, cols, s)
+            }
+            (None, _) => return Err(mismatch()),
+        };
+        let wide = |a: usize| {
+            blocks
+                .checked_mul(a)
+                .and_then(|v| v.checked_mul(cols))
+                .filter(|v| *v as u64 <= MAX_WIDTH)
+        };
+        let (Some(inputs), Some(outputs)) = (wide(w.ncols()), wide(w.nrows())) else {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} gives a value of shape {}, wider than ravel's limit of {MAX_WIDTH}",
+                    node_label(n),
+                    shape_text(&out_shape)
+                ),
+                "ravel verifies controllers whose layers have at most 4096 neurons",
+            ));
+        };
+        self.expect_width(n, inputs)?;
+        let map = if blocks == 1 && cols == 1 {
+            w
+        } else {
+            matmul_matrix(&w, blocks, cols)
+        };
+        self.push_affine(map, DVector::zeros(outputs));
+        self.shape = Some(out_shape);
         Ok(())
     }
 
@@ -805,7 +1153,7 @@ impl Lowering {
     /// or `width` elements (division only by the constant).
     fn elementwise(&mut self, n: &NodeProto, op: &str) -> Result<(), OnnxError> {
         let (t, const_first) = self.const_operand(n)?;
-        let v = self.broadcast(n, &t)?;
+        let v = self.broadcast_shaped(n, &t)?;
         Self::check_width(n, v.len())?;
         let w = v.len();
         match (op, const_first) {
@@ -814,10 +1162,15 @@ impl Lowering {
             ("Sub", true) => self.push_affine(-DMatrix::<f64>::identity(w, w), v),
             ("Mul", _) => self.push_affine(DMatrix::from_diagonal(&v), DVector::zeros(w)),
             (_, false) => {
-                if v.iter().any(|x| *x == 0.0) {
+                if let Some(x) = v.iter().find(|x| !(1.0 / **x).is_finite()) {
+                    let what = if *x == 0.0 {
+                        "zero".to_string()
+                    } else {
+                        format!("{x:e}, whose reciprocal overflows")
+                    };
                     return Err(err(
                         OnnxErrorKind::NonFinite,
-                        format!("{} divides by zero", node_label(n)),
+                        format!("{} divides by {what}", node_label(n)),
                         "fix the normalisation constants",
                     ));
                 }
@@ -1089,6 +1442,7 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         consts,
         current: input.name.clone().unwrap_or_default(),
         width: declared,
+        shape: declared.and(declared_shape(input)),
         layers: Vec::new(),
         notes: Vec::new(),
     };
@@ -1246,6 +1600,58 @@ fn declared_width(input: &ValueInfoProto) -> Result<Option<usize>, OnnxError> {
         Some(Some(w)) => Ok(Some(w as usize)),
         None => Ok(None),
     }
+}
+
+/// The input's declared shape, symbolic dimensions (the batch) as 1;
+/// `None` without a shape. Called after [`declared_width`] accepted it.
+fn declared_shape(input: &ValueInfoProto) -> Option<Vec<usize>> {
+    input
+        .r#type
+        .as_ref()
+        .and_then(|t| t.tensor_type.as_ref())
+        .and_then(|t| t.shape.as_ref())
+        .map(|s| {
+            s.dim
+                .iter()
+                .map(|d| d.dim_value.filter(|v| *v > 0).unwrap_or(1) as usize)
+                .collect()
+        })
+}
+
+/// The product of a shape's dimensions, `None` past [`MAX_WIDTH`].
+fn shape_width(dims: &[usize]) -> Option<usize> {
+    dims.iter()
+        .try_fold(1u64, |a, d| {
+            a.checked_mul(*d as u64).filter(|p| *p <= MAX_WIDTH)
+        })
+        .map(|p| p as usize)
+}
+
+/// The matrix of `Y[b, m, c] = Σ_k W[m, k]·X[b, k, c]` on row-major flat
+/// vectors (`blocks` values of `b`, `cols` of `c`): the flat form of every
+/// `MatMul` by a 2-D constant.
+fn matmul_matrix(w: &DMatrix<f64>, blocks: usize, cols: usize) -> DMatrix<f64> {
+    let (m, k) = (w.nrows(), w.ncols());
+    let (rows, columns) = (blocks * m * cols, blocks * k * cols);
+    // column-major, as nalgebra stores it
+    let mut data = vec![0.0; rows * columns];
+    for b in 0..blocks {
+        for ((i, j), v) in (0..k)
+            .flat_map(|j| (0..m).map(move |i| (i, j)))
+            .zip(w.iter())
+        {
+            if *v == 0.0 {
+                continue;
+            }
+            for c in 0..cols {
+                let (r, q) = ((b * m + i) * cols + c, (b * k + j) * cols + c);
+                if let Some(e) = data.get_mut(q * rows + r) {
+                    *e = *v;
+                }
+            }
+        }
+    }
+    DMatrix::from_vec(rows, columns, data)
 }
 
 /// Refuse a network whose weights left the limits: alpha, beta and `Div`

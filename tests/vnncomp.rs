@@ -1,0 +1,382 @@
+//! VNN-COMP as a front end, through the binary: `verify --network
+//! --vnnlib` (the result file's rules: `sat` with the counterexample's
+//! assignments, `unsat`, `timeout`, `unknown`; errors are diagnostics with
+//! exit code 2 and no result), `import-vnnlib` over input regions, and
+//! `vnncomp` over a tiny generated benchmark folder, hostile rows included.
+//! Networks are hand-made here; nothing third-party is used.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use nalgebra::{DMatrix, DVector};
+use ravel::onnx::build::{GraphBuilder, Storage};
+use ravel_cli::vnncomp::{parse_instances, result_text, Answer};
+
+fn ravel(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .args(args)
+        .output()
+        .expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("vnncomp-{name}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("dir");
+    d
+}
+
+/// `y0 = x0 + x1`, `y1 = x0 − x1` (float32, exact weights).
+fn linear_net(dir: &Path) -> PathBuf {
+    let mut g = GraphBuilder::new(2, Storage::RawF32);
+    g.gemm(
+        &DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, -1.0]),
+        &DVector::zeros(2),
+    );
+    let p = dir.join("net.onnx");
+    std::fs::write(&p, g.finish(2).0).expect("write");
+    p
+}
+
+fn property(dir: &Path, name: &str, asserts: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(
+        &p,
+        format!(
+            "(declare-const X_0 Real)\n(declare-const X_1 Real)\n\
+             (declare-const Y_0 Real)\n(declare-const Y_1 Real)\n\
+             (assert (>= X_0 0))\n(assert (<= X_0 1))\n\
+             (assert (>= X_1 0))\n(assert (<= X_1 1))\n{asserts}\n"
+        ),
+    )
+    .expect("write");
+    p
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// The counterexample of a `sat` result file: the `X_i` and `Y_j` values,
+/// after checking the file's layout line by line.
+fn assignments(text: &str, inputs: usize, outputs: usize) -> (Vec<f64>, Vec<f64>) {
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 3 + inputs + outputs, "{text}");
+    assert_eq!(lines[0], "sat");
+    assert_eq!(lines[1], "(");
+    assert_eq!(*lines.last().expect("line"), ")");
+    let value = |line: &str, name: String| -> f64 {
+        let inner = line
+            .strip_prefix('(')
+            .and_then(|l| l.strip_suffix(')'))
+            .unwrap_or_else(|| panic!("{line}"));
+        let (n, v) = inner.split_once(' ').expect("name and value");
+        assert_eq!(n, name);
+        v.parse().expect("a number")
+    };
+    let x = (0..inputs)
+        .map(|i| value(lines[2 + i], format!("X_{i}")))
+        .collect();
+    let y = (0..outputs)
+        .map(|j| value(lines[2 + inputs + j], format!("Y_{j}")))
+        .collect();
+    (x, y)
+}
+
+#[test]
+fn the_result_writer_follows_the_format() {
+    assert_eq!(result_text(&Answer::Unsat), "unsat\n");
+    assert_eq!(result_text(&Answer::Timeout), "timeout\n");
+    assert_eq!(result_text(&Answer::Unknown), "unknown\n");
+    let x = f64::from(0.1f32);
+    let text = result_text(&Answer::Sat {
+        input: vec![x, -2.0],
+        output: vec![1e-30, 3.0],
+    });
+    assert_eq!(
+        text,
+        "sat\n(\n(X_0 0.10000000149011612)\n(X_1 -2.0)\n(Y_0 1e-30)\n(Y_1 3.0)\n)\n"
+    );
+    // full precision: the values read back to the same bits
+    let (xs, ys) = assignments(&text, 2, 2);
+    assert_eq!(xs[0].to_bits(), x.to_bits());
+    assert_eq!(ys, vec![1e-30, 3.0]);
+}
+
+#[test]
+fn the_direct_form_answers_sat_unsat_timeout_and_unknown() {
+    let d = scratch("direct");
+    let net = linear_net(&d);
+    let out = d.join("result.txt");
+
+    // sat: x0 + x1 >= 1.5 somewhere in the box
+    let p = property(&d, "sat.vnnlib", "(assert (>= Y_0 1.5))");
+    let (code, stdout, stderr) = ravel(&[
+        "verify",
+        "--network",
+        s(&net),
+        "--vnnlib",
+        s(&p),
+        "--result-file",
+        s(&out),
+    ]);
+    assert_eq!(code, 1, "{stdout}{stderr}");
+    assert!(stdout.contains(": sat ("), "{stdout}");
+    let text = std::fs::read_to_string(&out).expect("result");
+    let (x, y) = assignments(&text, 2, 2);
+    for v in &x {
+        assert!((0.0..=1.0).contains(v), "{text}");
+        assert_eq!(f64::from(*v as f32), *v, "a float32 input: {text}");
+    }
+    // the output the float32 network gives for it
+    let (a, b) = (x[0] as f32, x[1] as f32);
+    assert_eq!(y, vec![f64::from(a + b), f64::from(a - b)], "{text}");
+    assert!(y[0] >= 1.5);
+
+    // unsat: x0 + x1 never reaches 2.5
+    let p = property(&d, "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    let (code, ..) = ravel(&[
+        "verify",
+        "--network",
+        s(&net),
+        "--vnnlib",
+        s(&p),
+        "--result-file",
+        s(&out),
+    ]);
+    assert_eq!(code, 0);
+    assert_eq!(std::fs::read_to_string(&out).expect("result"), "unsat\n");
+
+    // without --result-file the answer goes to standard output
+    let (code, stdout, _) = ravel(&["verify", "--network", s(&net), "--vnnlib", s(&p)]);
+    assert_eq!((code, stdout.as_str()), (0, "unsat\n"));
+
+    // the time limit ends the run before anything is decided: timeout
+    let (code, stdout, _) = ravel(&[
+        "verify",
+        "--network",
+        s(&net),
+        "--vnnlib",
+        s(&p),
+        "--time-limit",
+        "0",
+    ]);
+    assert_eq!((code, stdout.as_str()), (3, "timeout\n"));
+
+    // x0 + x1 > 2 never holds, but the non-strict reading is met at the
+    // corner (1, 1): never `sat`, and undecided without the time limit
+    let p = property(&d, "strict.vnnlib", "(assert (> Y_0 2))");
+    let (code, stdout, stderr) = ravel(&["verify", "--network", s(&net), "--vnnlib", s(&p)]);
+    assert_eq!((code, stdout.as_str()), (3, "unknown\n"), "{stderr}");
+}
+
+#[test]
+fn regions_are_combined_sat_if_any_unsat_if_all() {
+    let d = scratch("regions");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let classifier = root.join("models/classifier.onnx");
+    // the second region is falsified (see tests/vnnlib.rs)
+    let p = root.join("tests/data/vnnlib/input_disjunction.vnnlib");
+    let out = d.join("r.txt");
+    let (code, _, stderr) = ravel(&[
+        "verify",
+        "--network",
+        s(&classifier),
+        "--vnnlib",
+        s(&p),
+        "--result-file",
+        s(&out),
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    let (x, y) = assignments(&std::fs::read_to_string(&out).expect("result"), 2, 3);
+    assert!((-0.35..=-0.25).contains(&x[0]) && (0.25..=0.35).contains(&x[1]));
+    assert!(y[1] >= y[0]);
+
+    // both regions safe: unsat
+    let both = d.join("both.vnnlib");
+    std::fs::write(
+        &both,
+        "(declare-const X_0 Real)\n(declare-const X_1 Real)\n(declare-const Y_0 Real)\n\
+         (declare-const Y_1 Real)\n(declare-const Y_2 Real)\n\
+         (assert (or (and (>= X_0 0.55) (<= X_0 0.65) (>= X_1 0.25) (<= X_1 0.35) (>= Y_1 Y_0))\n\
+                     (and (>= X_0 0.6) (<= X_0 0.7) (>= X_1 0.2) (<= X_1 0.3) (>= Y_1 Y_0))))\n",
+    )
+    .expect("write");
+    let (code, stdout, stderr) =
+        ravel(&["verify", "--network", s(&classifier), "--vnnlib", s(&both)]);
+    assert_eq!((code, stdout.as_str()), (0, "unsat\n"), "{stderr}");
+}
+
+#[test]
+fn errors_are_diagnostics_and_write_no_result() {
+    let d = scratch("errors");
+    let net = linear_net(&d);
+    let out = d.join("result.txt");
+    let mixed = property(&d, "mixed.vnnlib", "(assert (<= (+ X_0 Y_0) 1))");
+    let gz = d.join("p.vnnlib.gz");
+    std::fs::write(&gz, b"\x1f\x8b").expect("write");
+    let unsat = property(&d, "ok.vnnlib", "(assert (>= Y_0 2.5))");
+    for (net, prop, code) in [
+        (net.clone(), mixed, "E0401"),
+        (net.clone(), gz, "E0401"),
+        (net.clone(), d.join("missing.vnnlib"), "E0401"),
+        (d.join("missing.onnx"), unsat, "E0301"),
+    ] {
+        let (exit, stdout, stderr) = ravel(&[
+            "verify",
+            "--network",
+            s(&net),
+            "--vnnlib",
+            s(&prop),
+            "--result-file",
+            s(&out),
+        ]);
+        assert_eq!(exit, 2, "{stdout}{stderr}");
+        assert!(stderr.contains(code), "{code}: {stderr}");
+        assert!(!out.exists(), "no result for an error");
+    }
+    // the unsupported construct is shown at its place in the property
+    let (_, _, stderr) = ravel(&[
+        "import-vnnlib",
+        s(&d.join("mixed.vnnlib")),
+        "--network",
+        s(&net),
+    ]);
+    assert!(
+        stderr.contains("E0401") && stderr.contains("relating inputs and outputs"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("mixed.vnnlib:9:"), "{stderr}");
+}
+
+#[test]
+fn a_benchmark_folder_runs_row_by_row() {
+    let d = scratch("bench");
+    std::fs::create_dir_all(d.join("onnx")).expect("dir");
+    std::fs::create_dir_all(d.join("vnnlib")).expect("dir");
+    let net = linear_net(&d.join("onnx"));
+    assert!(net.ends_with("onnx/net.onnx"));
+    property(&d.join("vnnlib"), "sat.vnnlib", "(assert (>= Y_0 1.5))");
+    property(&d.join("vnnlib"), "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    property(
+        &d.join("vnnlib"),
+        "mixed.vnnlib",
+        "(assert (<= (+ X_0 Y_0) 1))",
+    );
+    std::fs::write(
+        d.join("instances.csv"),
+        "onnx/net.onnx,vnnlib/sat.vnnlib,60\r\nonnx/net.onnx,vnnlib/unsat.vnnlib,60\n\n",
+    )
+    .expect("write");
+    let results = d.join("results.csv");
+    let (code, stdout, stderr) =
+        ravel(&["vnncomp", s(&d.join("instances.csv")), "--out", s(&results)]);
+    assert_eq!(code, 0, "{stderr}");
+    let written = std::fs::read_to_string(&results).expect("results");
+    assert_eq!(written, stdout);
+    let rows: Vec<Vec<&str>> = written.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2, "{written}");
+    assert_eq!(rows[0][..3], ["onnx/net.onnx", "vnnlib/sat.vnnlib", "sat"]);
+    assert_eq!(
+        rows[1][..3],
+        ["onnx/net.onnx", "vnnlib/unsat.vnnlib", "unsat"]
+    );
+    for r in &rows {
+        let t: f64 = r[3].parse().expect("seconds");
+        assert!((0.0..60.0).contains(&t));
+    }
+
+    // the same list elsewhere, with --root; an instance that cannot be
+    // imported is `error` (exit 2), and the others still run
+    let elsewhere = scratch("bench-list");
+    std::fs::write(
+        elsewhere.join("list.csv"),
+        "onnx/net.onnx,vnnlib/mixed.vnnlib,5\nonnx/net.onnx,vnnlib/unsat.vnnlib,5\n",
+    )
+    .expect("write");
+    let (code, stdout, stderr) =
+        ravel(&["vnncomp", s(&elsewhere.join("list.csv")), "--root", s(&d)]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0401"), "{stderr}");
+    let results: Vec<&str> = stdout
+        .lines()
+        .map(|l| l.split(',').nth(2).expect("result"))
+        .collect();
+    assert_eq!(results, ["error", "unsat"]);
+
+    // unusable rows: every one reported with its line, nothing runs
+    std::fs::write(
+        d.join("bad.csv"),
+        "onnx/net.onnx,vnnlib/sat.vnnlib\n\
+         onnx/net.onnx,vnnlib/sat.vnnlib,sixty\n\
+         onnx/none.onnx,vnnlib/sat.vnnlib,60\n\
+         onnx/net.onnx.gz,vnnlib/sat.vnnlib,60\n\
+         onnx/net.onnx,vnnlib/sat.vnnlib,-1\n\
+         \u{1b}[31m,x,1e999\n",
+    )
+    .expect("write");
+    let out = d.join("bad-results.csv");
+    let (code, stdout, stderr) = ravel(&["vnncomp", s(&d.join("bad.csv")), "--out", s(&out)]);
+    assert_eq!(code, 2);
+    assert!(stdout.is_empty(), "nothing ran: {stdout}");
+    assert!(!out.exists());
+    assert!(stderr.matches("E0402").count() >= 6, "{stderr}");
+    assert!(!stderr.contains('\u{1b}'), "no raw escape: {stderr}");
+    for what in [
+        "3 fields",
+        "sixty",
+        "is not a file",
+        "compressed",
+        "-1",
+        "nothing was run",
+    ] {
+        assert!(stderr.contains(what), "{what}: {stderr}");
+    }
+    // a list that does not exist
+    let (code, _, stderr) = ravel(&["vnncomp", s(&d.join("none.csv"))]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0402"), "{stderr}");
+}
+
+/// The row parser on hostile text: never a panic, every problem a
+/// diagnostic with a span inside the text.
+#[test]
+fn instance_rows_are_parsed_without_panics() {
+    let root = Path::new("/r");
+    let exists = |p: &Path| p.to_str().is_some_and(|s| !s.contains("missing"));
+    let ok = parse_instances(" a.onnx , b.vnnlib , 12.5 \n", root, &exists).expect("a row");
+    assert_eq!(ok.len(), 1);
+    assert_eq!(ok[0].network, Path::new("/r/a.onnx"));
+    assert_eq!(ok[0].property_field, "b.vnnlib");
+    assert_eq!(ok[0].timeout, 12.5);
+    for text in [
+        "",
+        "\n\n",
+        ",,",
+        ",,,,,,",
+        "a,b,NaN",
+        "a,b,inf",
+        "a,b,1e400",
+        "missing.onnx,b,1",
+        "a,b,c\u{0}",
+        "é,ü,☃",
+        "a,b,-0.5",
+        "\r\n,\r\n",
+    ] {
+        let diags = parse_instances(text, root, &exists).expect_err(text);
+        for d in &diags {
+            assert_eq!(d.code.as_str(), "E0402");
+            if let Some(sp) = d.span {
+                assert!(
+                    sp.start <= sp.end && sp.end <= text.len() + 1,
+                    "{text:?}: {sp:?}"
+                );
+            }
+        }
+    }
+}

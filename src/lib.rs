@@ -115,6 +115,10 @@ enum Cmd {
         /// Which verdicts fail the run (as for `verify`).
         #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
         fail_on: batch::FailOn,
+        /// The merged report's format: the JSON document, or the JUnit XML
+        /// document of the whole batch (the shards' `--fail-on` must match).
+        #[arg(long, value_enum, default_value_t = batch::MergeFormat::Json)]
+        format: batch::MergeFormat,
     },
     /// Translate a VNN-LIB property into a ravel network spec (printed, or
     /// written with --output), checked against the network before it is
@@ -1199,7 +1203,11 @@ pub fn main() -> ExitCode {
             };
             batch::verify(&specs, &controllers, &opts)
         }
-        Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
+        Cmd::Merge {
+            reports,
+            fail_on,
+            format,
+        } => batch::merge(&reports, fail_on, format),
         Cmd::Fmt { specs, check } => fmt_files(&specs, check),
         Cmd::ImportVnnlib {
             property,

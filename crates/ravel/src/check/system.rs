@@ -107,7 +107,12 @@ pub(super) fn system<'a>(cx: &mut Ctx, systems: &[&'a System]) -> SystemPart<'a>
     part.decl_spans = (state_span, control_span);
     let state = part.state.as_ref().zip(state_span);
     let control = part.control.as_ref().zip(control_span);
-    vector_names(cx, state, control);
+    if !vector_names(cx, state, control) {
+        // a control named like the noise (`control w[1]`) is reported once:
+        // without it, its limits and the plant are not checked, which would
+        // only report the same mistake again (`u in box(…)`: unknown name)
+        part.control = None;
+    }
     let linear = part.equations.is_empty();
     declared(cx, sys, state_span, control_span, &part.assigns, linear);
     part
@@ -141,12 +146,14 @@ fn parameter<'a>(
 }
 
 /// The state and the control have different names, neither of them the
-/// noise's `w` or `v` (each declaration with its span).
+/// noise's `w` or `v` (each declaration with its span); false when the
+/// control's name is one of the noise's.
 fn vector_names(
     cx: &mut Ctx,
     state: Option<(&(String, usize), Span)>,
     control: Option<(&(String, usize), Span)>,
-) {
+) -> bool {
+    let control_ok = control.is_none_or(|((name, _), _)| name != "w" && name != "v");
     if let (Some(((xn, _), ss)), Some(((un, _), cs))) = (state, control) {
         if xn == un {
             cx.duplicate(&format!("the name `{xn}`"), ss, cs);
@@ -168,6 +175,7 @@ fn vector_names(
             );
         }
     }
+    control_ok
 }
 
 /// The system declares its state, its control, and (a linear plant, when

@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use serde_json::{json, Value};
 
-use super::{err, exit, load_with, out, Format, ProgressLine};
+use super::{err, exit, load_with, out, progress_due, with_ticker, Format, ProgressLine};
 use ravel::execute::{Run, Verdict};
 use ravel_syntax::diag::render;
 
@@ -288,24 +288,29 @@ fn run(
         Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
         _ => l.display.clone(),
     };
+    let clock = || started.elapsed().as_secs_f64();
     let line = ProgressLine {
         name: &shown,
-        started,
-        last: std::sync::atomic::AtomicU64::new(0),
+        clock: &clock,
+        write: &err,
+        state: std::sync::Mutex::new((None, None)),
     };
-    let run = ravel::run(
-        task,
-        &ravel::execute::Control {
-            elapsed: &|| started.elapsed().as_secs_f64(),
-            time_limit: opts.time_limit,
-            progress: &|p| {
-                if show {
-                    line.show(p);
-                }
+    // a ticker redraws the line while one long cell or sample run says nothing
+    let run = with_ticker(show, &|| line.tick(), || {
+        ravel::run(
+            task,
+            &ravel::execute::Control {
+                elapsed: &clock,
+                time_limit: opts.time_limit,
+                progress: &|p| {
+                    if show {
+                        line.show(p);
+                    }
+                },
+                threads: cell_threads,
             },
-            threads: cell_threads,
-        },
-    );
+        )
+    });
     line.clear();
     let ms = started.elapsed().as_secs_f64() * 1e3;
     let mut stderr = String::new();
@@ -855,6 +860,10 @@ fn run_in_parallel(
     run_started: Instant,
 ) -> bool {
     let next = std::sync::atomic::AtomicUsize::new(0);
+    // pairs finished (written or waiting for an earlier one), for the
+    // progress line
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let last_drawn: std::sync::Mutex<Option<f64>> = std::sync::Mutex::new(None);
     let order = std::sync::Mutex::new(InOrder {
         sink,
         waiting: BTreeMap::new(),
@@ -865,6 +874,7 @@ fn run_in_parallel(
         let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let Some(&i) = b.mine.get(k) else { break };
         let item = run(i, &b.work[i], opts, b.cert_dir.as_deref(), false, 1, None);
+        finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut o = order.lock().unwrap_or_else(|e| e.into_inner());
         let InOrder {
             sink,
@@ -875,26 +885,47 @@ fn run_in_parallel(
         waiting.insert(k, item);
         while let Some(item) = waiting.remove(written) {
             *written += 1;
+            if opts.progress
+                && last_drawn
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .is_some()
+            {
+                // the item's messages start a line of their own
+                err("\r\x1b[2K");
+            }
             if !*broken && !sink.emit(item) {
                 *broken = true;
                 // stop handing out work; running items finish
                 next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
             }
-            if opts.progress && !*broken {
-                err(&format!(
-                    "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
-                    b.mine.len(),
-                    run_started.elapsed().as_secs_f64()
-                ));
-            }
         }
     };
-    // the calling thread runs pairs too
-    std::thread::scope(|scope| {
-        for _ in 1..jobs {
-            scope.spawn(pairs);
+    // the progress line: the pairs finished so far, redrawn by a ticker
+    // (a slow first pair holds back the writing of every later one, but
+    // not their count)
+    let tick = || {
+        let o = order.lock().unwrap_or_else(|e| e.into_inner());
+        let now = run_started.elapsed().as_secs_f64();
+        let mut last = last_drawn.lock().unwrap_or_else(|e| e.into_inner());
+        if o.broken || !progress_due(now, *last) {
+            return;
         }
-        pairs();
+        *last = Some(now);
+        err(&format!(
+            "\r\x1b[2K[{}/{} pairs done, {now:.0} s]",
+            finished.load(std::sync::atomic::Ordering::Relaxed),
+            b.mine.len()
+        ));
+    };
+    // the calling thread runs pairs too
+    with_ticker(opts.progress, &tick, || {
+        std::thread::scope(|scope| {
+            for _ in 1..jobs {
+                scope.spawn(pairs);
+            }
+            pairs();
+        })
     });
     let o = order.into_inner().unwrap_or_else(|e| e.into_inner());
     if opts.progress {

@@ -228,7 +228,7 @@ fn every_shipped_spec_is_in_the_house_style() {
 }
 
 #[test]
-fn formatting_never_changes_a_shipped_spec_s_tree() {
+fn formatting_never_changes_a_shipped_spec_s_tree_and_is_idempotent() {
     for (path, src) in shipped() {
         // an indented copy with the items crammed and spaced oddly, so the
         // formatter has work to do even where the spec is canonical
@@ -242,6 +242,12 @@ fn formatting_never_changes_a_shipped_spec_s_tree() {
                 continue;
             };
             let formatted = ravel_syntax::fmt::format(&input).expect("formats");
+            assert_eq!(
+                ravel_syntax::fmt::format(&formatted).expect("formats again"),
+                formatted,
+                "{}: not idempotent",
+                path.display()
+            );
             let after = ravel_syntax::parse(&formatted).expect("the formatted spec parses");
             assert_eq!(
                 without_spans(&before),

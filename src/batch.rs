@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use serde_json::{json, Value};
 
-use super::{err, exit, load_with, out, Format, ProgressLine};
+use super::{err, exit, load_with, out, progress_due, with_ticker, Format, ProgressLine};
 use ravel::execute::{Run, Verdict};
 use ravel_syntax::diag::render;
 
@@ -28,6 +28,23 @@ pub enum FailOn {
     Falsified,
     /// FALSIFIED fails (exit 1) and so does UNSURE (exit 3; JUnit: failure).
     Unsure,
+}
+
+/// `--fail-on`'s value as written on the command line.
+fn fail_on_name(f: FailOn) -> &'static str {
+    match f {
+        FailOn::Falsified => "falsified",
+        FailOn::Unsure => "unsure",
+    }
+}
+
+/// What `ravel merge` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MergeFormat {
+    /// The JSON document of the whole batch.
+    Json,
+    /// The JUnit XML document of the whole batch.
+    Junit,
 }
 
 /// A shard `K/N`: the items whose index is `K − 1` modulo `N`.
@@ -169,6 +186,16 @@ fn xml(s: &str) -> String {
     o
 }
 
+/// The JUnit suite of a pair: its spec, and its controller when one was
+/// given with `--controller` (pairs of one spec with two controllers are
+/// two suites, whether they ran or failed to load).
+fn suite_name(spec: &Path, controller: Option<&Path>) -> String {
+    ravel_syntax::diag::sanitize(&match controller {
+        Some(c) => format!("{} with controller {}", spec.display(), c.display()),
+        None => spec.display().to_string(),
+    })
+}
+
 /// A `<testsuite>` holding one erroring test case.
 fn junit_error(suite: &str, message: &str, detail: &str) -> String {
     format!(
@@ -192,17 +219,7 @@ fn error_item(
     if let Some(c) = controller {
         json["controller"] = json!(c.display().to_string());
     }
-    // the same name as the pair's suite when it runs: two failing pairs of
-    // one spec keep their controllers apart
-    let suite = match (spec, controller) {
-        (Some(p), Some(c)) => ravel_syntax::diag::sanitize(&format!(
-            "{} with controller {}",
-            p.display(),
-            c.display()
-        )),
-        (Some(p), None) => ravel_syntax::diag::sanitize(&p.display().to_string()),
-        (None, _) => "arguments".to_string(),
-    };
+    let suite = spec.map_or_else(|| "arguments".to_string(), |p| suite_name(p, controller));
     Item {
         class: Class::Error,
         stdout: String::new(),
@@ -271,24 +288,29 @@ fn run(
         Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
         _ => l.display.clone(),
     };
+    let clock = || started.elapsed().as_secs_f64();
     let line = ProgressLine {
         name: &shown,
-        started,
-        last: std::sync::atomic::AtomicU64::new(0),
+        clock: &clock,
+        write: &err,
+        state: std::sync::Mutex::new((None, None)),
     };
-    let run = ravel::run(
-        task,
-        &ravel::execute::Control {
-            elapsed: &|| started.elapsed().as_secs_f64(),
-            time_limit: opts.time_limit,
-            progress: &|p| {
-                if show {
-                    line.show(p);
-                }
+    // a ticker redraws the line while one long cell or sample run says nothing
+    let run = with_ticker(show, &|| line.tick(), || {
+        ravel::run(
+            task,
+            &ravel::execute::Control {
+                elapsed: &clock,
+                time_limit: opts.time_limit,
+                progress: &|p| {
+                    if show {
+                        line.show(p);
+                    }
+                },
+                threads: cell_threads,
             },
-            threads: cell_threads,
-        },
-    );
+        )
+    });
     line.clear();
     let ms = started.elapsed().as_secs_f64() * 1e3;
     let mut stderr = String::new();
@@ -322,7 +344,13 @@ fn run(
     };
     // the text report without timing, for JUnit bodies (deterministic)
     let report = ravel::report::text(&l.display, &run, None);
-    let junit = junit_cases(&l.display, &junit_list(&run), opts, ms, &report);
+    let junit = junit_cases(
+        &suite_name(path, controller),
+        &junit_list(&run),
+        opts,
+        ms,
+        &report,
+    );
     let csv = match &run {
         Run::System { .. } => String::new(),
         Run::Network { outcome, .. } => ravel::report::network::csv_rows(&l.name, outcome),
@@ -631,7 +659,15 @@ impl Sink<'_> {
                     return false;
                 }
             }
-            Format::Json => self.results.push(item.json),
+            Format::Json => {
+                let mut json = item.json;
+                // a shard's results carry their JUnit suites, for `ravel
+                // merge --format junit`
+                if self.opts.shard.is_some() {
+                    json["junit"] = json!(item.junit);
+                }
+                self.results.push(json);
+            }
             Format::Jsonl => {
                 if out(&serde_json::to_string(&item.json).unwrap_or_default()).is_err() {
                     return false;
@@ -680,6 +716,10 @@ impl Sink<'_> {
             Format::Json => {
                 let mut doc = json!({ "schema": ravel::report::SCHEMA, "version": env!("CARGO_PKG_VERSION"), "verdict": overall(counts), "results": self.results });
                 shard_fields(&mut doc);
+                if opts.shard.is_some() {
+                    // the gate the results' JUnit suites were written for
+                    doc["fail_on"] = json!(fail_on_name(opts.fail_on));
+                }
                 out(&serde_json::to_string_pretty(&doc).unwrap_or_default())
             }
             Format::Jsonl => {
@@ -820,6 +860,10 @@ fn run_in_parallel(
     run_started: Instant,
 ) -> bool {
     let next = std::sync::atomic::AtomicUsize::new(0);
+    // pairs finished (written or waiting for an earlier one), for the
+    // progress line
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let last_drawn: std::sync::Mutex<Option<f64>> = std::sync::Mutex::new(None);
     let order = std::sync::Mutex::new(InOrder {
         sink,
         waiting: BTreeMap::new(),
@@ -830,6 +874,7 @@ fn run_in_parallel(
         let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let Some(&i) = b.mine.get(k) else { break };
         let item = run(i, &b.work[i], opts, b.cert_dir.as_deref(), false, 1, None);
+        finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut o = order.lock().unwrap_or_else(|e| e.into_inner());
         let InOrder {
             sink,
@@ -840,26 +885,47 @@ fn run_in_parallel(
         waiting.insert(k, item);
         while let Some(item) = waiting.remove(written) {
             *written += 1;
+            if opts.progress
+                && last_drawn
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .is_some()
+            {
+                // the item's messages start a line of their own
+                err("\r\x1b[2K");
+            }
             if !*broken && !sink.emit(item) {
                 *broken = true;
                 // stop handing out work; running items finish
                 next.store(usize::MAX / 2, std::sync::atomic::Ordering::Relaxed);
             }
-            if opts.progress && !*broken {
-                err(&format!(
-                    "\r\x1b[2K[{written}/{} pairs done, {:.0} s]",
-                    b.mine.len(),
-                    run_started.elapsed().as_secs_f64()
-                ));
-            }
         }
     };
-    // the calling thread runs pairs too
-    std::thread::scope(|scope| {
-        for _ in 1..jobs {
-            scope.spawn(pairs);
+    // the progress line: the pairs finished so far, redrawn by a ticker
+    // (a slow first pair holds back the writing of every later one, but
+    // not their count)
+    let tick = || {
+        let o = order.lock().unwrap_or_else(|e| e.into_inner());
+        let now = run_started.elapsed().as_secs_f64();
+        let mut last = last_drawn.lock().unwrap_or_else(|e| e.into_inner());
+        if o.broken || !progress_due(now, *last) {
+            return;
         }
-        pairs();
+        *last = Some(now);
+        err(&format!(
+            "\r\x1b[2K[{}/{} pairs done, {now:.0} s]",
+            finished.load(std::sync::atomic::Ordering::Relaxed),
+            b.mine.len()
+        ));
+    };
+    // the calling thread runs pairs too
+    with_ticker(opts.progress, &tick, || {
+        std::thread::scope(|scope| {
+            for _ in 1..jobs {
+                scope.spawn(pairs);
+            }
+            pairs();
+        })
     });
     let o = order.into_inner().unwrap_or_else(|e| e.into_inner());
     if opts.progress {
@@ -881,8 +947,10 @@ struct InOrder<'s, 'o> {
 }
 
 /// `ravel merge`: the shards' JSON documents as one, identical to the
-/// unsharded run's; every item must be present exactly once.
-pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
+/// unsharded run's; every item must be present exactly once. As JUnit, the
+/// suites the shards recorded, in index order: the unsharded run's JUnit
+/// document (the shards must have been run with the same `--fail-on`).
+pub fn merge(files: &[PathBuf], fail_on: FailOn, format: MergeFormat) -> ExitCode {
     let fail = |msg: String| {
         err(&format!("error: {msg}\n"));
         ExitCode::from(exit::INPUT_ERROR)
@@ -913,6 +981,22 @@ pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
         }
         total = Some(t);
         version = Some(doc["version"].clone());
+        if format == MergeFormat::Junit {
+            let wanted = fail_on_name(fail_on);
+            match doc["fail_on"].as_str() {
+                Some(f) if f == wanted => {}
+                Some(f) => {
+                    return fail(format!(
+                        "`{name}` was run with --fail-on {f}: its JUnit suites follow that gate; merge with --fail-on {f}, or run the shards with --fail-on {wanted}"
+                    ))
+                }
+                None => {
+                    return fail(format!(
+                        "`{name}` holds no JUnit suites (written by an older ravel): run the shard again"
+                    ))
+                }
+            }
+        }
         for r in doc["results"].as_array().into_iter().flatten() {
             let Some(i) = r["index"].as_u64() else {
                 return fail(format!("`{name}`: a result has no index"));
@@ -940,10 +1024,44 @@ pub fn merge(files: &[PathBuf], fail_on: FailOn) -> ExitCode {
         };
         count(&mut counts, class);
     }
-    let results: Vec<Value> = seen.into_values().collect();
-    let doc = json!({ "schema": ravel::report::SCHEMA, "version": version.unwrap_or(Value::Null), "verdict": overall(&counts), "results": results });
-    if out(&serde_json::to_string_pretty(&doc).unwrap_or_default()).is_err() {
+    let mut suites = String::new();
+    let mut results: Vec<Value> = Vec::with_capacity(seen.len());
+    for (i, mut r) in seen {
+        let junit = r.as_object_mut().and_then(|o| o.remove("junit"));
+        if format == MergeFormat::Junit {
+            match junit.as_ref().and_then(Value::as_str) {
+                Some(suite) if is_suite(suite) => suites += suite,
+                _ => return fail(format!("item {i} has no JUnit suite")),
+            }
+        }
+        results.push(r);
+    }
+    let text = match format {
+        MergeFormat::Json => {
+            let doc = json!({ "schema": ravel::report::SCHEMA, "version": version.unwrap_or(Value::Null), "verdict": overall(&counts), "results": results });
+            serde_json::to_string_pretty(&doc).unwrap_or_default()
+        }
+        MergeFormat::Junit => {
+            let skipped = suites.matches("<skipped ").count();
+            junit_document(&suites, &counts, skipped)
+        }
+    };
+    if out(&text).is_err() {
         return ExitCode::from(exit::BROKEN_PIPE);
     }
     ExitCode::from(gate(&counts, fail_on))
+}
+
+/// Whether a shard's `junit` text is one `<testsuite>` element as `verify`
+/// writes them (a file edited by hand or by another program could hold
+/// anything; it is copied into the document only when it has this form).
+fn is_suite(text: &str) -> bool {
+    text.starts_with("  <testsuite name=\"")
+        && text.ends_with("  </testsuite>\n")
+        && text.matches("<testsuite ").count() == 1
+        && text.matches("</testsuite>").count() == 1
+        && !text.contains("<?")
+        && !text
+            .chars()
+            .any(|c| c.is_control() && c != '\n' && c != '\t')
 }

@@ -12,7 +12,6 @@ use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
@@ -132,6 +131,10 @@ enum Cmd {
         /// Which verdicts fail the run (as for `verify`).
         #[arg(long, value_enum, default_value_t = batch::FailOn::Unsure)]
         fail_on: batch::FailOn,
+        /// The merged report's format: the JSON document, or the JUnit XML
+        /// document of the whole batch (the shards' `--fail-on` must match).
+        #[arg(long, value_enum, default_value_t = batch::MergeFormat::Json)]
+        format: batch::MergeFormat,
     },
     /// Run every instance `onnx,vnnlib,timeout` of a VNN-COMP instance list
     /// (paths relative to its folder or --root) with its timeout, printing
@@ -193,39 +196,93 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     }
 }
 
-/// A progress line on standard error (only when it is a terminal), redrawn
-/// at most four times a second and erased when the spec is done.
+/// Whether a progress line is drawn at `now` (seconds since the run
+/// started), last drawn at `last`: not before half a second, then at most
+/// four times a second.
+fn progress_due(now: f64, last: Option<f64>) -> bool {
+    now >= 0.5 && last.is_none_or(|l| now - l >= 0.25)
+}
+
+/// A progress line on standard error (only when it is a terminal), drawn
+/// once the spec has run for half a second, redrawn at most four times a
+/// second, and erased when the spec is done. Execution reports what it is
+/// doing now and then; between reports (one long cell, one long sample
+/// run) a ticker redraws the last report with the time, so a long run
+/// shows the line even when execution says nothing new.
 struct ProgressLine<'a> {
     name: &'a str,
-    started: Instant,
-    /// Seconds (as `f64` bits) when the line was last written; 0: never.
-    last: std::sync::atomic::AtomicU64,
+    /// Seconds since the run started.
+    clock: &'a (dyn Fn() -> f64 + Sync),
+    /// Where the line goes (standard error).
+    write: &'a (dyn Fn(&str) + Sync),
+    /// When the line was last drawn, and the last report.
+    state: std::sync::Mutex<(Option<f64>, Option<ravel::execute::Progress>)>,
 }
 
 impl ProgressLine<'_> {
+    /// Execution's report: drawn if due, kept for the ticker.
     fn show(&self, p: ravel::execute::Progress) {
-        use std::sync::atomic::Ordering;
-        let now = self.started.elapsed().as_secs_f64();
-        if now - f64::from_bits(self.last.load(Ordering::Relaxed)) < 0.25 || now < 0.5 {
+        self.draw(Some(p));
+    }
+
+    /// The ticker: the last report again, if due.
+    fn tick(&self) {
+        self.draw(None);
+    }
+
+    fn draw(&self, report: Option<ravel::execute::Progress>) {
+        let now = (self.clock)();
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        if report.is_some() {
+            state.1 = report;
+        }
+        if !progress_due(now, state.0) {
             return;
         }
-        self.last.store(now.to_bits(), Ordering::Relaxed);
-        let what = match p.phase {
-            ravel::execute::Phase::Sampling => "simulating",
-            ravel::execute::Phase::Cells => "propagating cell",
+        state.0 = Some(now);
+        let what = match state.1 {
+            Some(p) => {
+                let phase = match p.phase {
+                    ravel::execute::Phase::Sampling => "simulating",
+                    ravel::execute::Phase::Cells => "propagating cell",
+                };
+                let of = p.total.map_or(String::new(), |t| format!(" of {t}"));
+                format!("{phase} {}{of}", p.done)
+            }
+            None => "starting".to_string(),
         };
-        let of = p.total.map_or(String::new(), |t| format!(" of {t}"));
-        err(&format!(
-            "\r\x1b[2K{}: {what} {}{of} ({now:.0} s)",
-            self.name, p.done
-        ));
+        (self.write)(&format!("\r\x1b[2K{}: {what} ({now:.0} s)", self.name));
     }
 
     fn clear(&self) {
-        if self.last.load(std::sync::atomic::Ordering::Relaxed) != 0 {
-            err("\r\x1b[2K");
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        if state.0.is_some() {
+            (self.write)("\r\x1b[2K");
         }
     }
+}
+
+/// Run `work` while a ticker thread calls `tick` every tenth of a second
+/// (none when `on` is false); the ticker has stopped when this returns.
+fn with_ticker<T>(on: bool, tick: &(dyn Fn() + Sync), work: impl FnOnce() -> T) -> T {
+    if !on {
+        return work();
+    }
+    let done = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let ticker = scope.spawn(|| {
+            while !done.load(std::sync::atomic::Ordering::Acquire) {
+                std::thread::park_timeout(std::time::Duration::from_millis(100));
+                if !done.load(std::sync::atomic::Ordering::Acquire) {
+                    tick();
+                }
+            }
+        });
+        let out = work();
+        done.store(true, std::sync::atomic::Ordering::Release);
+        ticker.thread().unpark();
+        out
+    })
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -1365,7 +1422,11 @@ pub fn main() -> ExitCode {
             };
             batch::verify(&specs, &controllers, &opts)
         }
-        Cmd::Merge { reports, fail_on } => batch::merge(&reports, fail_on),
+        Cmd::Merge {
+            reports,
+            fail_on,
+            format,
+        } => batch::merge(&reports, fail_on, format),
         Cmd::Fmt { specs, check } => fmt_files(&specs, check),
         Cmd::ImportVnnlib {
             property,
@@ -1378,6 +1439,107 @@ pub fn main() -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_progress_line_waits_half_a_second_then_redraws_four_times_a_second() {
+        assert!(!progress_due(0.0, None));
+        assert!(!progress_due(0.49, None));
+        assert!(progress_due(0.5, None));
+        assert!(!progress_due(0.7, Some(0.5)));
+        assert!(progress_due(0.75, Some(0.5)));
+        // a clock of 1 ms ticks and a line that records what it writes
+        let now = std::sync::atomic::AtomicU64::new(0);
+        let clock = || now.load(std::sync::atomic::Ordering::Relaxed) as f64 / 1e3;
+        let written = std::sync::Mutex::new(Vec::<String>::new());
+        let write = |s: &str| written.lock().expect("lock").push(s.to_string());
+        let line = ProgressLine {
+            name: "spec",
+            clock: &clock,
+            write: &write,
+            state: std::sync::Mutex::new((None, None)),
+        };
+        let at = |ms: u64| now.store(ms, std::sync::atomic::Ordering::Relaxed);
+        let cell = |done| ravel::execute::Progress {
+            phase: ravel::execute::Phase::Cells,
+            done,
+            total: Some(1),
+        };
+        // execution reports its one cell at once, then nothing for seconds
+        at(10);
+        line.show(cell(0));
+        line.tick();
+        assert!(written.lock().expect("lock").is_empty());
+        // the ticker draws the last report after half a second, and again
+        // only a quarter of a second later
+        at(600);
+        line.tick();
+        at(700);
+        line.tick();
+        at(3_700);
+        line.tick();
+        let lines = written.lock().expect("lock").clone();
+        assert_eq!(
+            lines,
+            [
+                "\r\x1b[2Kspec: propagating cell 0 of 1 (1 s)",
+                "\r\x1b[2Kspec: propagating cell 0 of 1 (4 s)"
+            ]
+        );
+        line.clear();
+        assert_eq!(
+            written.lock().expect("lock").last().map(String::as_str),
+            Some("\r\x1b[2K")
+        );
+        // a line never drawn is not erased; before any report it says so
+        let quiet = ProgressLine {
+            name: "pairs",
+            clock: &clock,
+            write: &write,
+            state: std::sync::Mutex::new((None, None)),
+        };
+        written.lock().expect("lock").clear();
+        at(100);
+        quiet.tick();
+        quiet.clear();
+        assert!(written.lock().expect("lock").is_empty());
+        at(900);
+        quiet.tick();
+        assert_eq!(
+            written.lock().expect("lock").clone(),
+            ["\r\x1b[2Kpairs: starting (1 s)"]
+        );
+    }
+
+    #[test]
+    fn the_ticker_runs_while_the_work_does_and_stops_with_it() {
+        let ticks = std::sync::atomic::AtomicUsize::new(0);
+        let tick = || {
+            ticks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        };
+        // the work waits for the ticker's first tick: a ticker that never
+        // ran would hang here, not pass
+        let out = with_ticker(true, &tick, || {
+            while ticks.load(std::sync::atomic::Ordering::Relaxed) == 0 {
+                std::thread::yield_now();
+            }
+            7
+        });
+        assert_eq!(out, 7);
+        let after = ticks.load(std::sync::atomic::Ordering::Relaxed);
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        assert_eq!(
+            ticks.load(std::sync::atomic::Ordering::Relaxed),
+            after,
+            "ticks after the work"
+        );
+        // off: no thread, no tick
+        let none = std::sync::atomic::AtomicUsize::new(0);
+        let tick = || {
+            none.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        };
+        assert_eq!(with_ticker(false, &tick, || 3), 3);
+        assert_eq!(none.load(std::sync::atomic::Ordering::Relaxed), 0);
+    }
 
     fn pair(s: &str, c: Option<&str>) -> (PathBuf, Option<PathBuf>) {
         (PathBuf::from(s), c.map(PathBuf::from))

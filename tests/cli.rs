@@ -1012,6 +1012,151 @@ fn junit_suites_of_failing_pairs_name_their_controller() {
     );
 }
 
+/// Pairs of one spec that ran with two controllers are two suites named
+/// after their controllers too, never two identical `<testsuite name=…>`.
+#[test]
+fn junit_suites_of_pairs_that_ran_name_their_controller() {
+    let (code, stdout, stderr) = ravel(&[
+        "verify",
+        "--format",
+        "junit",
+        "--fail-on",
+        "falsified",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/double_integrator.onnx",
+        "--controller",
+        "models/double_integrator_tanh.onnx",
+    ]);
+    assert!(code == 0 || code == 1, "{stderr}");
+    let doc = roxmltree::Document::parse(&stdout).expect("well-formed XML");
+    let names: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("testsuite"))
+        .filter_map(|n| n.attribute("name"))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "specs/double_integrator.ravel with controller models/double_integrator.onnx",
+            "specs/double_integrator.ravel with controller models/double_integrator_tanh.onnx",
+        ],
+        "{stdout}"
+    );
+    // without --controller, the suite is the spec's path alone
+    let (_, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "junit",
+        "specs/double_integrator.ravel",
+    ]);
+    assert!(
+        stdout.contains("<testsuite name=\"specs/double_integrator.ravel\" "),
+        "{stdout}"
+    );
+}
+
+/// A sharded run ends in JUnit: `merge --format junit` writes the unsharded
+/// run's JUnit document byte for byte, for either gate; shards run with
+/// another `--fail-on`, or whose suites were tampered with, are refused.
+#[test]
+fn shards_merge_into_the_unsharded_junit_report() {
+    let dir = std::env::temp_dir().join(format!("ravel-junit-shards-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    for fail_on in ["unsure", "falsified"] {
+        let whole = bin()
+            .args(batch_args())
+            .args(["--format", "junit", "--fail-on", fail_on])
+            .output()
+            .expect("runs");
+        let mut files = Vec::new();
+        for k in 1..=2 {
+            let o = bin()
+                .args(batch_args())
+                .args(["--format", "json", "--fail-on", fail_on])
+                .args(["--shard", &format!("{k}/2")])
+                .output()
+                .expect("runs");
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+            assert_eq!(v["fail_on"], fail_on);
+            let f = dir.join(format!("{fail_on}-{k}.json"));
+            std::fs::write(&f, &o.stdout).expect("write");
+            files.push(f);
+        }
+        let merged = bin()
+            .args(["merge", "--format", "junit", "--fail-on", fail_on])
+            .args(&files)
+            .output()
+            .expect("runs");
+        assert_eq!(merged.status.code(), whole.status.code(), "{fail_on}");
+        assert_eq!(
+            String::from_utf8_lossy(&merged.stdout),
+            String::from_utf8_lossy(&whole.stdout),
+            "{fail_on}"
+        );
+        let text = String::from_utf8(merged.stdout).expect("UTF-8");
+        let doc = roxmltree::Document::parse(&text).expect("well-formed XML");
+        assert_eq!(
+            doc.descendants()
+                .filter(|n| n.has_tag_name("testsuite"))
+                .count(),
+            6
+        );
+        // the merged JSON is still the unsharded JSON (no JUnit inside)
+        let json = bin()
+            .args(["merge", "--fail-on", fail_on])
+            .args(&files)
+            .output()
+            .expect("runs");
+        let whole_json = bin()
+            .args(batch_args())
+            .args(["--format", "json", "--fail-on", fail_on])
+            .output()
+            .expect("runs");
+        assert_eq!(json.stdout, whole_json.stdout);
+        // another gate than the shards': refused, not a JUnit report that
+        // disagrees with the exit code
+        let other = if fail_on == "unsure" {
+            "falsified"
+        } else {
+            "unsure"
+        };
+        let o = bin()
+            .args(["merge", "--format", "junit", "--fail-on", other])
+            .args(&files)
+            .output()
+            .expect("runs");
+        assert_eq!(o.status.code(), Some(2));
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains(&format!("--fail-on {fail_on}")),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(o.stdout.is_empty());
+        if fail_on == "unsure" {
+            // a suite replaced by something else is refused
+            let text = std::fs::read_to_string(&files[0]).expect("read");
+            let mut v: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+            v["results"][0]["junit"] = serde_json::json!("</testsuites><evil/>");
+            let forged = dir.join("forged.json");
+            std::fs::write(&forged, v.to_string()).expect("write");
+            let o = bin()
+                .args(["merge", "--format", "junit"])
+                .arg(&forged)
+                .arg(&files[1])
+                .output()
+                .expect("runs");
+            assert_eq!(o.status.code(), Some(2));
+            assert!(
+                String::from_utf8_lossy(&o.stderr).contains("has no JUnit suite"),
+                "{}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// An unreadable `--controller` path is reported as such, with the rule
 /// that holds for it (relative to the working folder), not the spec's own
 /// path rule (issue 30).

@@ -158,6 +158,8 @@ fn rule_name(r: &Rule) -> Option<&'static str> {
         Rule::mul_op => "`*` or `/`",
         Rule::add_op => "`+` or `-`",
         Rule::close => "`]`",
+        Rule::comma => "`,`",
+        Rule::close_paren => "`)`",
         _ => return None,
     })
 }
@@ -325,6 +327,30 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> Diagnostic {
         }
         _ => "see docs/language.md for the syntax of each item".to_string(),
     };
+    // a box's intervals without the `,` between them: point at the gap
+    // where it belongs (pest would name only the place it gave up at)
+    if expected.contains(&Rule::comma) && expected.contains(&Rule::close_paren) {
+        let next_is_interval = rest.starts_with('[')
+            || (word
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                && rest[word.len()..].starts_with('['));
+        if next_is_interval {
+            let gap = source[..pos].trim_end().len();
+            let span = if gap < pos {
+                Span::new(gap, pos)
+            } else {
+                Span::new(pos, end)
+            };
+            return Diagnostic::new(Code::Syntax, span, "a `,` is missing between two intervals")
+                .label("expected `,` here")
+                .hint("the intervals of a box are separated by commas: `box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])`");
+        }
+        return Diagnostic::new(Code::Syntax, Span::new(pos, end), message)
+            .label(label)
+            .hint("a box's intervals are separated by `,` and the box ends with `)`: `box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])`");
+    }
     Diagnostic::new(Code::Syntax, Span::new(pos, end), message)
         .label(label)
         .hint(hint)
@@ -928,6 +954,7 @@ impl Builder {
         match body.as_rule() {
             Rule::named_intervals => BoxSet::Named(
                 body.into_inner()
+                    .filter(|ni| ni.as_rule() == Rule::named_interval)
                     .map(|ni| {
                         let mut it = ni.into_inner();
                         let c = self.component(child(&mut it, "component"));
@@ -936,7 +963,12 @@ impl Builder {
                     })
                     .collect(),
             ),
-            _ => BoxSet::Positional(body.into_inner().map(|i| self.interval(i)).collect()),
+            _ => BoxSet::Positional(
+                body.into_inner()
+                    .filter(|i| i.as_rule() == Rule::interval)
+                    .map(|i| self.interval(i))
+                    .collect(),
+            ),
         }
     }
 

@@ -510,6 +510,7 @@ impl Ctx {
     ) -> Option<DMatrix<f64>> {
         let m = self.eval(v, name)?;
         // `None`: any number of columns (C's column count defines the observation size)
+        let free_cols = cols.is_none();
         let cols = cols.unwrap_or(m.cols);
         if m.is_vector && !(cols == 1 && rows == m.rows) {
             self.err(
@@ -526,17 +527,33 @@ impl Ctx {
             return None;
         }
         if m.rows != rows || m.cols != cols {
+            // with free columns (C), only the rows are wrong: `rows × p`
+            let expected = if free_cols {
+                format!("{rows} × p")
+            } else {
+                format!("{rows} × {cols}")
+            };
+            // its transpose would fit: say so, with the shape to write
+            let transposed = m.cols == rows && m.rows != rows && (free_cols || m.rows == cols);
+            let hint = if transposed {
+                format!(
+                    "it looks transposed: write its transpose, a {} × {} matrix ({why})",
+                    m.cols, m.rows
+                )
+            } else {
+                why.to_string()
+            };
             self.err(
                 Diagnostic::new(
                     Code::Shape,
                     v.span,
                     format!(
-                        "`{name}` must be {rows} × {cols}, but it is {} × {}",
+                        "`{name}` must be {expected}, but it is {} × {}",
                         m.rows, m.cols
                     ),
                 )
                 .label(format!("{} × {}", m.rows, m.cols))
-                .hint(why.to_string()),
+                .hint(hint),
             );
             return None;
         }

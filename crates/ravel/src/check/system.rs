@@ -107,7 +107,17 @@ pub(super) fn system<'a>(cx: &mut Ctx, systems: &[&'a System]) -> SystemPart<'a>
     part.decl_spans = (state_span, control_span);
     let state = part.state.as_ref().zip(state_span);
     let control = part.control.as_ref().zip(control_span);
-    vector_names(cx, state, control);
+    let (state_ok, control_ok) = vector_names(cx, state, control);
+    // a state or control named like the noise (`control w[1]`) is reported
+    // once: without it, what refers to it (the limits `u in box(…)`, the
+    // plant, the sets' `x[i]`) is not checked, which would only report the
+    // same mistake again as unknown names
+    if !state_ok {
+        part.state = None;
+    }
+    if !control_ok {
+        part.control = None;
+    }
     let linear = part.equations.is_empty();
     declared(cx, sys, state_span, control_span, &part.assigns, linear);
     part
@@ -141,12 +151,17 @@ fn parameter<'a>(
 }
 
 /// The state and the control have different names, neither of them the
-/// noise's `w` or `v` (each declaration with its span).
+/// noise's `w` or `v` (each declaration with its span); whether the
+/// state's and the control's names are not the noise's.
 fn vector_names(
     cx: &mut Ctx,
     state: Option<(&(String, usize), Span)>,
     control: Option<(&(String, usize), Span)>,
-) {
+) -> (bool, bool) {
+    let free = |v: Option<(&(String, usize), Span)>| {
+        v.is_none_or(|((name, _), _)| name != "w" && name != "v")
+    };
+    let (state_ok, control_ok) = (free(state), free(control));
     if let (Some(((xn, _), ss)), Some(((un, _), cs))) = (state, control) {
         if xn == un {
             cx.duplicate(&format!("the name `{xn}`"), ss, cs);
@@ -168,6 +183,7 @@ fn vector_names(
             );
         }
     }
+    (state_ok, control_ok)
 }
 
 /// The system declares its state, its control, and (a linear plant, when

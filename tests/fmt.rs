@@ -329,18 +329,21 @@ fn imported_vnnlib_specs_are_in_the_house_style() {
             continue;
         }
         let text = std::fs::read_to_string(&p).expect("read");
-        let Ok(spec) = ravel::vnnlib::import(&text, "../../../models/classifier.onnx", "n", "t")
+        let Ok(specs) = ravel::vnnlib::import(&text, "../../../models/classifier.onnx", "n", "t")
         else {
             continue;
         };
-        let formatted = ravel_syntax::fmt::format(&spec).expect("formats");
-        assert_eq!(formatted, spec, "{}", p.display());
-        n += 1;
-        // the layouts that continue a line are among them: a union under
-        // its `=`, a polytope and a box over several lines
-        unions |= spec.contains("\n             | { y[0]");
-        polytopes |= spec.contains("\n            x[0] >= ");
-        boxes |= spec.contains(",\n              x[1] in [");
+        // one spec per input region
+        for spec in specs {
+            let formatted = ravel_syntax::fmt::format(&spec).expect("formats");
+            assert_eq!(formatted, spec, "{}", p.display());
+            n += 1;
+            // the layouts that continue a line are among them: a union under
+            // its `=`, a polytope and a box over several lines
+            unions |= spec.contains("\n             | { y[0]");
+            polytopes |= spec.contains("\n            x[0] >= ");
+            boxes |= spec.contains(",\n              x[1] in [");
+        }
     }
     assert!(n >= 3, "only {n} imports");
     assert!(unions && polytopes && boxes);

@@ -11,7 +11,7 @@ mod common;
 use common::{net_certificate, net_plan as plan, random_network, run_net as run};
 use ravel::execute::network::execute_network;
 use ravel::execute::{Control, Verdict};
-use ravel::ir::{Guide, NetProperty, NetPropertyKind, Partitioner};
+use ravel::ir::{Branching, Guide, NetProperty, NetPropertyKind, Partitioner};
 use ravel_analysis::partition::{Budget, Stop};
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::nn::{Activation, Layer, Network};
@@ -158,7 +158,7 @@ fn bab_agrees_with_exhaustive_enumeration() {
                 rows: vec![(dir.clone(), h)],
             }])
         };
-        let p = bab_plan(
+        let p0 = bab_plan(
             net.clone(),
             input.clone(),
             vec![NetProperty {
@@ -166,51 +166,62 @@ fn bab_agrees_with_exhaustive_enumeration() {
                 kind,
             }],
         );
-        let out = run(&p);
-        let got = out.properties[0].status;
-        let want = if holds {
-            Verdict::Verified
-        } else {
-            Verdict::Falsified
-        };
-        assert_eq!(
+        // every branching rule answers alike
+        for rule in Branching::ALL {
+            let mut p = p0.clone();
+            p.branching = rule;
+            let out = run(&p);
+            let got = out.properties[0].status;
+            let want = if holds {
+                Verdict::Verified
+            } else {
+                Verdict::Falsified
+            };
+            assert_eq!(
             got, want,
-            "case {case}: truth {want:?} (max {top}, min {bottom}), bab says {got:?} after {} calls, stop {:?}",
+            "case {case} {rule:?}: truth {want:?} (max {top}, min {bottom}), bab says {got:?} after {} calls, stop {:?}",
             out.calls, out.partition_stop
         );
-        if let Some(w) = &out.properties[0].counterexample {
-            assert!(input.contains_point(&w.input), "case {case}");
-            let v: f64 = dir
-                .iter()
-                .zip(&net.forward(&w.input))
-                .map(|(a, b)| a * b)
-                .sum();
-            match &p.properties[0].kind {
-                NetPropertyKind::Require(q) => assert!(v > q.rows[0].1, "case {case}"),
-                NetPropertyKind::Avoid(q) => assert!(v <= q[0].rows[0].1, "case {case}"),
-                NetPropertyKind::Robust(_) => unreachable!(),
+            if let Some(w) = &out.properties[0].counterexample {
+                assert!(input.contains_point(&w.input), "case {case} {rule:?}");
+                let v: f64 = dir
+                    .iter()
+                    .zip(&net.forward(&w.input))
+                    .map(|(a, b)| a * b)
+                    .sum();
+                match &p.properties[0].kind {
+                    NetPropertyKind::Require(q) => assert!(v > q.rows[0].1, "case {case} {rule:?}"),
+                    NetPropertyKind::Avoid(q) => {
+                        assert!(v <= q[0].rows[0].1, "case {case} {rule:?}")
+                    }
+                    NetPropertyKind::Robust(_) => unreachable!(),
+                }
             }
-        }
-        // every answer is certifiable, and the search stopped as it should
-        let cert = net_certificate(&p, &out);
-        assert_eq!(check(&cert, &net).answer, Answer::Valid, "case {case}");
-        match got {
-            Verdict::Verified => {
-                verified += 1;
-                assert_eq!(out.partition_stop, Stop::Done, "case {case}");
-            }
-            _ => {
-                falsified += 1;
-                assert!(
-                    matches!(out.partition_stop, Stop::Decided | Stop::Done),
-                    "case {case}: {:?}",
-                    out.partition_stop
-                );
+            // every answer is certifiable, and the search stopped as it should
+            let cert = net_certificate(&p, &out);
+            assert_eq!(
+                check(&cert, &net).answer,
+                Answer::Valid,
+                "case {case} {rule:?}"
+            );
+            match got {
+                Verdict::Verified => {
+                    verified += 1;
+                    assert_eq!(out.partition_stop, Stop::Done, "case {case} {rule:?}");
+                }
+                _ => {
+                    falsified += 1;
+                    assert!(
+                        matches!(out.partition_stop, Stop::Decided | Stop::Done),
+                        "case {case} {rule:?}: {:?}",
+                        out.partition_stop
+                    );
+                }
             }
         }
     }
     assert!(
-        verified >= 15 && falsified >= 15,
+        verified >= 45 && falsified >= 45,
         "{verified} verified, {falsified} falsified"
     );
 }

@@ -216,6 +216,7 @@ fn main() -> ExitCode {
         samples: 0,
         seed: 0,
         slope_steps: 0,
+        branching: Default::default(),
     };
     let mut rows: Vec<(String, Vec<f64>)> = Vec::new();
     let policies: Vec<(String, Option<f64>)> = std::iter::once(("nominal".to_string(), None))

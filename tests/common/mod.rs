@@ -85,6 +85,7 @@ pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> Ne
         samples: 200,
         seed: 7,
         slope_steps: 0,
+        branching: Default::default(),
     }
 }
 

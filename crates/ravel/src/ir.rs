@@ -45,6 +45,31 @@ impl Guide {
     }
 }
 
+/// How branch and bound picks the input a cell is split along. Not part of
+/// the language: [`lower`](crate::lower) always chooses the default,
+/// [`Branching::LookAhead`]; the others exist so the rules can be measured
+/// side by side on the same plan (`examples/bab_branching.rs`, figures in
+/// docs/language.md) and tested alike.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Branching {
+    /// The input with the largest first-order change of the deciding output
+    /// row across the cell: `|∂(d·f)/∂xᵢ(centre)|·widthᵢ`.
+    Smear,
+    /// The widest input relative to the whole input set.
+    Widest,
+    /// Every input is tried (up to `bab::LOOK_AHEAD_DIMS` inputs; more:
+    /// as `Smear`): all the children are bounded, and the split whose
+    /// children's open margins sum highest (a proved child counting 0) is
+    /// kept.
+    #[default]
+    LookAhead,
+}
+
+impl Branching {
+    /// Every rule.
+    pub const ALL: [Branching; 3] = [Branching::Smear, Branching::Widest, Branching::LookAhead];
+}
+
 /// How the initial set is split.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Partitioner {

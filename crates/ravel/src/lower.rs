@@ -299,6 +299,8 @@ pub struct NetworkPlan {
     pub seed: u64,
     /// Projected-gradient steps on the lower ReLU slopes of CROWN (0: CROWN's own).
     pub slope_steps: usize,
+    /// How `partitioner bab` picks a split (always the default from a spec).
+    pub branching: crate::ir::Branching,
 }
 
 /// Lower a checked network spec to its plan.
@@ -327,6 +329,7 @@ pub fn lower_network(c: &NetworkChecked) -> NetworkPlan {
         samples: c.samples,
         seed: c.seed,
         slope_steps: c.slope_steps,
+        branching: crate::ir::Branching::default(),
     }
 }
 

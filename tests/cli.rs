@@ -1180,3 +1180,47 @@ fn an_unreadable_controller_override_says_where_it_was_looked_for() {
         "{stderr}"
     );
 }
+
+/// A `--controller` that loads but does not fit the spec, or is not ONNX,
+/// is named as the command line's file: the spec's own `controller` line is
+/// only where it stands in, not the cause (issue 30).
+#[test]
+fn a_controller_override_that_does_not_fit_is_named_as_the_override() {
+    let (code, _, stderr) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/classifier.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0305"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "the controller `models/classifier.onnx` (given with --controller) has 3 outputs"
+        ),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("3 outputs: the --controller file, not the spec's controller"),
+        "{stderr}"
+    );
+    // without the override, the spec's own controller is the one named
+    let (code, _, stderr) = ravel(&["check", "specs/invalid/controller_outputs.ravel"]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("the controller has"), "{stderr}");
+    assert!(!stderr.contains("--controller"), "{stderr}");
+    // a file that is not ONNX
+    let (code, _, stderr) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "specs/double_integrator.ravel",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0302"), "{stderr}");
+    assert!(
+        stderr.contains("(given with --controller)")
+            && stderr.contains("in the --controller file, not the spec's controller"),
+        "{stderr}"
+    );
+}

@@ -805,10 +805,31 @@ fn csv_output_without_selections_is_an_error() {
         "specs/double_integrator.ravel",
         "specs/network/classifier_robust.ravel",
     ] {
-        let (code, _, stderr) = ravel(&["verify", "--format", "csv", spec]);
+        let (code, stdout, stderr) = ravel(&["verify", "--format", "csv", spec]);
         assert_eq!(code, 2, "{spec}: {stderr}");
         assert!(stderr.contains("no `select` block"), "{stderr}");
+        assert_eq!(stdout, "", "{spec}: no header without rows");
     }
+    // in a batch, the pairs with selections give their rows under one
+    // header, the others are refused on standard error: exit 2
+    let (code, stdout, stderr) = ravel(&[
+        "verify",
+        "--format",
+        "csv",
+        "specs/double_integrator.ravel",
+        "specs/network/lane_carrl.ravel",
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("no `select` block"), "{stderr}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines[0], ravel::report::network::CSV_HEADER);
+    assert_eq!(lines.len(), 1 + 9 * 3, "{stdout}");
+    assert!(
+        lines[1..]
+            .iter()
+            .all(|l| l.starts_with("specs/network/lane_carrl.ravel,")),
+        "{stdout}"
+    );
 }
 
 /// `--format csv` prints the robust action selections of network specs.

@@ -1091,3 +1091,99 @@ fn the_readme_synopsis_lists_every_subcommand_flag_and_value() {
     assert!(has_word("[--format text|json|jsonl]", "json"));
     assert!(!has_word("--fail-on-x", "--fail-on"));
 }
+
+// ---------------------------------------------------------------------------
+// The README's table of shipped specs
+
+/// The spec files a table cell names: `a.ravel`, `…_b.ravel` (the
+/// previous name's stem up to an `_` that makes it a file), `x_{a, b}.ravel`.
+fn named_specs(cell: &str) -> Vec<String> {
+    let names: Vec<&str> = cell
+        .split('`')
+        .enumerate()
+        .filter(|(k, _)| k % 2 == 1)
+        .map(|(_, n)| n)
+        .collect();
+    let mut out: Vec<String> = Vec::new();
+    for name in names {
+        if let (Some(open), Some(close)) = (name.find('{'), name.find('}')) {
+            for part in name[open + 1..close].split(',') {
+                out.push(format!(
+                    "{}{}{}",
+                    &name[..open],
+                    part.trim(),
+                    &name[close + 1..]
+                ));
+            }
+        } else if let Some(rest) = name.strip_prefix('…') {
+            let first = out.last().cloned().unwrap_or_default();
+            let stem = first
+                .match_indices('_')
+                .map(|(at, _)| format!("{}{rest}", &first[..at]))
+                .find(|c| root().join("specs").join(c).is_file())
+                .unwrap_or_else(|| format!("?{rest}"));
+            out.push(stem);
+        } else {
+            out.push(name.to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn the_readme_s_table_of_specs_gives_their_verdicts() {
+    let readme = std::fs::read_to_string(root().join("README.md")).expect("README");
+    let start = readme
+        .find("| spec | shows | verdict |")
+        .expect("the table");
+    let mut rows = 0;
+    for row in readme[start..]
+        .lines()
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+    {
+        let cells: Vec<&str> = row.split(" | ").collect();
+        let (first, verdict) = (
+            cells[0].trim_start_matches("| "),
+            cells[cells.len() - 1].trim_end_matches(" |"),
+        );
+        if first == "`invalid/*.ravel`" {
+            let n = std::fs::read_dir(root().join("specs/invalid"))
+                .expect("folder")
+                .filter(|e| {
+                    e.as_ref()
+                        .expect("entry")
+                        .path()
+                        .extension()
+                        .is_some_and(|x| x == "ravel")
+                })
+                .count();
+            assert!(
+                row.contains(&format!("({n} files)")),
+                "{row}: there are {n}"
+            );
+            assert_eq!(verdict, "exit code 2");
+            continue;
+        }
+        for name in named_specs(first) {
+            let text = std::fs::read_to_string(root().join("specs").join(&name))
+                .unwrap_or_else(|e| panic!("{row}: specs/{name}: {e}"));
+            assert_eq!(
+                text.lines().next(),
+                Some(format!("// expect: {verdict}").as_str()),
+                "{row}: specs/{name}"
+            );
+            rows += 1;
+        }
+    }
+    assert!(rows >= 30, "only {rows} specs named");
+    assert_eq!(
+        named_specs("`quadrotor_{unrolled, gsg}.ravel`, `double_integrator_sdp.ravel`, `…_sdp_partitioned.ravel`"),
+        [
+            "quadrotor_unrolled.ravel",
+            "quadrotor_gsg.ravel",
+            "double_integrator_sdp.ravel",
+            "double_integrator_sdp_partitioned.ravel"
+        ]
+    );
+}

@@ -1187,3 +1187,72 @@ fn the_readme_s_table_of_specs_gives_their_verdicts() {
         ]
     );
 }
+
+// ---------------------------------------------------------------------------
+// docs/json-schema.md's examples name fields the reports have
+
+/// Every object key anywhere in `v`.
+fn keys(v: &serde_json::Value, out: &mut BTreeSet<String>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                out.insert(k.clone());
+                keys(x, out);
+            }
+        }
+        serde_json::Value::Array(a) => a.iter().for_each(|x| keys(x, out)),
+        _ => {}
+    }
+}
+
+/// The `"key":` names of a schematic JSON block.
+fn documented_keys(body: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for (k, part) in body.split('"').enumerate() {
+        if k % 2 == 1 {
+            let after = body.split('"').nth(k + 1).unwrap_or_default();
+            if after.trim_start().starts_with(':') {
+                out.push(part.to_string());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_json_schema_examples_name_real_fields() {
+    // a closed loop, a network spec with a radius search, one with
+    // selections, and a spec with errors
+    let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
+        .args([
+            "verify",
+            "--format",
+            "json",
+            "specs/double_integrator.ravel",
+            "specs/network/classifier_robust.ravel",
+            "specs/network/lane_carrl.ravel",
+            "specs/invalid/wrong_shape.ravel",
+        ])
+        .current_dir(root())
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let mut real = BTreeSet::new();
+    keys(&doc, &mut real);
+    let mut shown = 0;
+    for b in blocks_of(&root().join("docs/json-schema.md"))
+        .iter()
+        .filter(|b| b.kind() == "json")
+    {
+        for k in documented_keys(&b.body) {
+            assert!(real.contains(&k), "{}: `{k}` is in no report", b.at);
+            shown += 1;
+        }
+    }
+    assert!(shown >= 50, "only {shown} fields shown");
+    assert_eq!(
+        documented_keys(r#"{ "a": 1, "b": "c", "d" : [] }"#),
+        ["a", "b", "d"]
+    );
+}

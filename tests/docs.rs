@@ -1256,3 +1256,32 @@ fn the_json_schema_examples_name_real_fields() {
         ["a", "b", "d"]
     );
 }
+
+/// Every spec docs/diagnostics.md names for a code exists and expects that
+/// code (its `// expect:` header, which tests/specs.rs holds it to).
+#[test]
+fn the_diagnostics_examples_name_specs_that_give_them() {
+    let docs = std::fs::read_to_string(root().join("docs/diagnostics.md")).expect("docs");
+    let mut code = String::new();
+    let mut named = 0;
+    for line in docs.lines() {
+        if let Some(h) = line.strip_prefix("## ") {
+            code = h.split(':').next().unwrap_or_default().to_string();
+            continue;
+        }
+        for (k, span) in line.split('`').enumerate() {
+            if k % 2 == 0 || !span.starts_with("specs/invalid/") || !span.ends_with(".ravel") {
+                continue;
+            }
+            let text = std::fs::read_to_string(root().join(span))
+                .unwrap_or_else(|e| panic!("{code}: `{span}`: {e}"));
+            let header = text.lines().next().unwrap_or_default();
+            assert!(
+                header.starts_with("// expect:") && header.split_whitespace().any(|w| w == code),
+                "{code} names `{span}`, whose header is `{header}`"
+            );
+            named += 1;
+        }
+    }
+    assert!(named >= 45, "only {named} specs named");
+}

@@ -185,6 +185,8 @@ fn run_sh(command: &str, dir: &Path) -> (Option<i32>, String) {
         .arg(command)
         .current_dir(dir)
         .env("PATH", std::env::join_paths(paths).expect("PATH"))
+        // a command that reads its standard input (a server) sees its end
+        .stdin(std::process::Stdio::null())
         .output()
         .expect("sh runs");
     let mut text = String::from_utf8_lossy(&out.stdout).into_owned();

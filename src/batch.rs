@@ -678,7 +678,9 @@ impl Sink<'_> {
                 if !item.stderr.is_empty() {
                     err(&item.stderr);
                 }
-                if !self.header {
+                // the header comes with the first rows: a batch that has
+                // none (every pair refused, exit 2) prints nothing
+                if !self.header && !item.csv.is_empty() {
                     self.header = true;
                     if out(ravel::report::network::CSV_HEADER).is_err() {
                         return false;

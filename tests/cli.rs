@@ -805,10 +805,31 @@ fn csv_output_without_selections_is_an_error() {
         "specs/double_integrator.ravel",
         "specs/network/classifier_robust.ravel",
     ] {
-        let (code, _, stderr) = ravel(&["verify", "--format", "csv", spec]);
+        let (code, stdout, stderr) = ravel(&["verify", "--format", "csv", spec]);
         assert_eq!(code, 2, "{spec}: {stderr}");
         assert!(stderr.contains("no `select` block"), "{stderr}");
+        assert_eq!(stdout, "", "{spec}: no header without rows");
     }
+    // in a batch, the pairs with selections give their rows under one
+    // header, the others are refused on standard error: exit 2
+    let (code, stdout, stderr) = ravel(&[
+        "verify",
+        "--format",
+        "csv",
+        "specs/double_integrator.ravel",
+        "specs/network/lane_carrl.ravel",
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("no `select` block"), "{stderr}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines[0], ravel::report::network::CSV_HEADER);
+    assert_eq!(lines.len(), 1 + 9 * 3, "{stdout}");
+    assert!(
+        lines[1..]
+            .iter()
+            .all(|l| l.starts_with("specs/network/lane_carrl.ravel,")),
+        "{stdout}"
+    );
 }
 
 /// `--format csv` prints the robust action selections of network specs.
@@ -1177,6 +1198,50 @@ fn an_unreadable_controller_override_says_where_it_was_looked_for() {
     );
     assert!(
         !stderr.contains("relative to the spec file's folder"),
+        "{stderr}"
+    );
+}
+
+/// A `--controller` that loads but does not fit the spec, or is not ONNX,
+/// is named as the command line's file: the spec's own `controller` line is
+/// only where it stands in, not the cause (issue 30).
+#[test]
+fn a_controller_override_that_does_not_fit_is_named_as_the_override() {
+    let (code, _, stderr) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "models/classifier.onnx",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0305"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "the controller `models/classifier.onnx` (given with --controller) has 3 outputs"
+        ),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("3 outputs: the --controller file, not the spec's controller"),
+        "{stderr}"
+    );
+    // without the override, the spec's own controller is the one named
+    let (code, _, stderr) = ravel(&["check", "specs/invalid/controller_outputs.ravel"]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("the controller has"), "{stderr}");
+    assert!(!stderr.contains("--controller"), "{stderr}");
+    // a file that is not ONNX
+    let (code, _, stderr) = ravel(&[
+        "check",
+        "specs/double_integrator.ravel",
+        "--controller",
+        "specs/double_integrator.ravel",
+    ]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("E0302"), "{stderr}");
+    assert!(
+        stderr.contains("(given with --controller)")
+            && stderr.contains("in the --controller file, not the spec's controller"),
         "{stderr}"
     );
 }

@@ -341,27 +341,3 @@ fn the_phases_import_forward_only() {
         "a module of the ravel crate outside PHASES"
     );
 }
-
-/// The network spec example of docs/language.md checks, read as if it lay
-/// in `specs/network/` (its model path is relative to that folder).
-#[test]
-fn the_language_docs_network_example_checks() {
-    let docs = std::fs::read_to_string(root().join("docs/language.md")).expect("docs");
-    let start = docs
-        .find("```\nnetwork classifier {")
-        .expect("the network example")
-        + "```\n".len();
-    let len = docs[start..].find("```").expect("the block ends");
-    let example = &docs[start..start + len];
-    let checked = ravel::front_end_task(
-        example,
-        &root().join("specs/network"),
-        &ravel_cli::read_request,
-        None,
-    );
-    assert!(
-        matches!(checked, Ok(ravel::check::Task::Network(_))),
-        "docs/language.md's network example does not check: {:?}",
-        checked.err()
-    );
-}

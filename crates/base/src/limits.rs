@@ -90,6 +90,15 @@ pub const MAX_EXPR_DEPTH: usize = 64;
 /// names, components, operators and calls count one each).
 pub const MAX_EXPR_NODES: usize = 100_000;
 
+/// Most directions of `boundary polytope K`.
+pub const MAX_BOUNDARY_DIRECTIONS: usize = 1000;
+/// Largest scale a radius search may try (`radius … (max s)`).
+pub const MAX_RADIUS_SCALE: f64 = 1e6;
+/// Most plant evaluations of check's definedness test (E0225): the corners
+/// of the initial set's box are evaluated only while `2ⁿ × expression
+/// nodes` stays within it.
+pub const MAX_CORNER_EVALUATIONS: usize = 10_000_000;
+
 /// `a × b × …` if it does not overflow `u64`.
 pub fn product(factors: &[u64]) -> Option<u64> {
     factors.iter().try_fold(1u64, |acc, f| acc.checked_mul(*f))

@@ -8,7 +8,9 @@ use crate::ir::{Guide, NetPropagator, Partitioner};
 use ravel_analysis::closed_loop::{Boundary, Propagator};
 use ravel_analysis::partition::Budget;
 use ravel_analysis::shape::Shape;
-use ravel_base::limits::{within, MAX_CELLS, MAX_SAMPLES, MAX_SLOPE_STEPS};
+use ravel_base::limits::{
+    within, MAX_BOUNDARY_DIRECTIONS, MAX_CELLS, MAX_SAMPLES, MAX_SLOPE_STEPS,
+};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{did_you_mean, Code, Diagnostic};
 
@@ -527,12 +529,12 @@ impl Ctx {
                     );
                     return None;
                 }
-                if k == 0 || k > 1000 {
+                if k == 0 || k > MAX_BOUNDARY_DIRECTIONS {
                     self.err(
                         Diagnostic::new(
                             Code::Boundary,
                             v.span,
-                            format!("{k} directions: a polytope boundary needs between 1 and 1000"),
+                            format!("{k} directions: a polytope boundary needs between 1 and {MAX_BOUNDARY_DIRECTIONS}"),
                         )
                         .label("bad count")
                         .hint("8 or 16 directions are typical"),

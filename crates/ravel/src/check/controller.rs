@@ -31,6 +31,14 @@ pub(super) fn controller(
     control: &Option<(String, usize)>,
 ) -> Option<Controller> {
     let mut ctrl = None;
+    let over = controller
+        .and_then(|f| f.path_override.as_deref())
+        .map(|p| Override {
+            who: format!(
+                "the controller `{}` (given with --controller)",
+                ravel_syntax::diag::sanitize(p)
+            ),
+        });
     if let Some(path) = path {
         match controller {
             None => cx.err(
@@ -79,18 +87,40 @@ pub(super) fn controller(
                 ),
                 Ok(bytes) => match onnx::load(bytes, &file.external) {
                     Err(e) => cx.err(
-                        Diagnostic::new(onnx_code(e.kind), path.span, e.message)
-                            .label("in this controller")
-                            .hint(e.hint),
+                        Diagnostic::new(
+                            onnx_code(e.kind),
+                            path.span,
+                            match &over {
+                                Some(o) => format!("{}: {}", o.who, e.message),
+                                None => e.message,
+                            },
+                        )
+                        .label(if over.is_some() {
+                            "in the --controller file, not the spec's controller".to_string()
+                        } else {
+                            "in this controller".to_string()
+                        })
+                        .hint(e.hint),
                     ),
                     Ok(c) => {
+                        let who = over.as_ref().map_or("the controller", |o| o.who.as_str());
                         if let (Some(p), Observed::Observe(span)) = (p_dim, observed) {
                             if c.inputs != p {
                                 cx.err(
-                                    Diagnostic::new(Code::ControllerInputs, span, format!("`observe` lists {p} inputs but the controller takes {}", c.inputs))
-                                        .label(format!("{p} entries"))
-                                        .related(path.span, format!("{} inputs", c.inputs))
-                                        .hint("write one `observe` entry per network input"),
+                                    Diagnostic::new(
+                                        Code::ControllerInputs,
+                                        span,
+                                        format!(
+                                            "`observe` lists {p} inputs but {who} takes {}",
+                                            c.inputs
+                                        ),
+                                    )
+                                    .label(format!("{p} entries"))
+                                    .related(
+                                        path.span,
+                                        at_line(&format!("{} inputs", c.inputs), &over),
+                                    )
+                                    .hint("write one `observe` entry per network input"),
                                 );
                             }
                         } else if let Some(p) = p_dim {
@@ -101,8 +131,8 @@ pub(super) fn controller(
                                     format!("without C the controller sees the full state ({p})")
                                 };
                                 cx.err(
-                                    Diagnostic::new(Code::ControllerInputs, path.span, format!("the controller takes {} inputs but observations have {p} components", c.inputs))
-                                        .label(format!("{} inputs", c.inputs))
+                                    Diagnostic::new(Code::ControllerInputs, path.span, format!("{who} takes {} inputs but observations have {p} components", c.inputs))
+                                        .label(at_line(&format!("{} inputs", c.inputs), &over))
                                         .hint(format!("{what}; the controller's input size must match")),
                                 );
                             }
@@ -110,8 +140,8 @@ pub(super) fn controller(
                         if let (Some((un, m)), false) = (&control, actuated) {
                             if c.outputs != *m {
                                 cx.err(
-                                    Diagnostic::new(Code::ControllerOutputs, path.span, format!("the controller has {} outputs but `{un}` has {m} components", c.outputs))
-                                        .label(format!("{} outputs", c.outputs))
+                                    Diagnostic::new(Code::ControllerOutputs, path.span, format!("{who} has {} outputs but `{un}` has {m} components", c.outputs))
+                                        .label(at_line(&format!("{} outputs", c.outputs), &over))
                                         .hint(format!("declare `control {un}[{}]` or use a controller with {m} outputs", c.outputs)),
                                 );
                             }
@@ -124,6 +154,23 @@ pub(super) fn controller(
     }
 
     ctrl
+}
+
+/// A controller given with `--controller` in place of the spec's own: its
+/// problems are the file's, and the spec's `controller` line (or the whole
+/// spec) is only where it stands in.
+struct Override {
+    /// How messages name it.
+    who: String,
+}
+
+/// A label at the spec's controller line: `what`, said of the
+/// `--controller` file when one replaced the spec's.
+fn at_line(what: &str, over: &Option<Override>) -> String {
+    match over {
+        Some(_) => format!("{what}: the --controller file, not the spec's controller"),
+        None => what.to_string(),
+    }
 }
 
 /// The semidefinite program that would encode a network.

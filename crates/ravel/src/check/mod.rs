@@ -38,6 +38,7 @@ use ravel_base::limits::{
 };
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{compact, Code, Diagnostic};
+pub use sets::TIME_TOLERANCE;
 pub use time::zero_order_hold;
 
 /// Data files a spec names (observation CSVs), as read by the caller:

@@ -11,7 +11,7 @@ use crate::ir::{NetPropagator, NetProperty, NetPropertyKind, Partitioner, Radius
 use crate::onnx::Controller;
 use ravel_analysis::sets::{Polytope, Region};
 use ravel_analysis::shape::Shape;
-use ravel_base::limits::{within, MAX_SDP_DIM, MAX_STORED_NUMBERS};
+use ravel_base::limits::{within, MAX_RADIUS_SCALE, MAX_SDP_DIM, MAX_STORED_NUMBERS};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{compact, Code, Diagnostic};
 
@@ -59,8 +59,6 @@ pub const MAX_OBSERVATIONS: usize = 1_000_000;
 
 /// Defaults of a radius search: the declared set's scale, and a bracket of 1e-3 of it.
 const DEFAULT_RADIUS_MAX: f64 = 1.0;
-/// The largest scale a radius search may try.
-const MAX_RADIUS_SCALE: f64 = 1e6;
 
 /// A system-spec item in a network spec (or the reverse).
 fn wrong_kind(cx: &mut Ctx, span: Span, what: &str, network: bool) {

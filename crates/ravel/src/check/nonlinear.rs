@@ -20,7 +20,7 @@ use nalgebra::{DMatrix, DVector};
 use super::Ctx;
 use ravel_analysis::sets::IBox;
 use ravel_base::expr::{Func, Id, Node, Tape, Time, VectorField};
-use ravel_base::limits::MAX_MAGNITUDE;
+use ravel_base::limits::{MAX_CORNER_EVALUATIONS, MAX_MAGNITUDE};
 use ravel_syntax::ast::*;
 use ravel_syntax::diag::{compact, did_you_mean, Code, Diagnostic};
 
@@ -787,7 +787,7 @@ fn sample_points(
     let centre: Vec<f64> = x0.lo.iter().zip(&x0.hi).map(|(a, b)| mid(*a, *b)).collect();
     let mut xs = vec![centre];
     // corners while 2^n × nodes stays within 10^7 evaluations
-    if n < 24 && (1usize << n).saturating_mul(nodes.max(1)) <= 10_000_000 {
+    if n < 24 && (1usize << n).saturating_mul(nodes.max(1)) <= MAX_CORNER_EVALUATIONS {
         for k in 0..(1usize << n) {
             xs.push(
                 (0..n)

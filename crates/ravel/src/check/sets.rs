@@ -172,7 +172,7 @@ fn avoid(
 
 /// Two times closer than this (relative to the larger of the time and the
 /// time step) are the same instant.
-const TIME_TOLERANCE: f64 = 1e-9;
+pub const TIME_TOLERANCE: f64 = 1e-9;
 
 /// The plant's time step for a time clause at `span`, or E0229 (none when
 /// the time declaration itself was wrong: reported there).

@@ -165,7 +165,15 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "mimalloc",
         ],
     ),
-    // the command line: the only crate with clap and the file system
+    // the editor's answers (hover, definitions, completion) over text: no
+    // IO and no protocol
+    (
+        "crates/ide",
+        "ravel-ide",
+        &["ravel", "ravel-analysis", "ravel-base", "ravel-syntax"],
+    ),
+    // the command line: the only crate with clap, the file system and the
+    // language server's protocol
     (
         ".",
         "ravel-cli",
@@ -175,8 +183,11 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "ravel-base",
             "ravel-certify",
             "ravel-syntax",
+            "ravel-ide",
             "nalgebra",
             "prost",
+            "lsp-server",
+            "lsp-types",
             "clap",
             "libc",
             "serde_json",

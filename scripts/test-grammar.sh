@@ -3,7 +3,8 @@
 # (editors/vscode/syntaxes/ravel.tmLanguage.json) against the annotated
 # samples editors/vscode/test/*.ravel-test, with vscode-tmgrammar-test from
 # npm, installed at the version of the committed lock file into
-# target/grammar-test (never into the repository). Needs node and npm.
+# target/grammar-test (never into the repository); and checks that the
+# extension's script parses. Needs node and npm.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -22,6 +23,9 @@ if ! cmp -s package-lock.json node_modules/.installed-lock.json 2>/dev/null; the
     npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
     cp package-lock.json node_modules/.installed-lock.json
 fi
+
+# the extension's script at least parses (it runs only inside VS Code)
+node --check "$root/editors/vscode/extension.js"
 
 # run from $work (its package.json names no grammar), so the grammar tested
 # is exactly the one given with -g

@@ -513,6 +513,10 @@ fn hostile_requests_get_errors_and_the_server_goes_on() {
     let r = lsp.next();
     assert_eq!(r["error"]["code"], -32700, "{r}");
     assert_eq!(r["id"], Value::Null, "{r}");
+    // bytes that are not UTF-8 inside a string
+    lsp.send_raw(b"Content-Length: 14\r\n\r\n{\"method\":\"\xff\"}");
+    let r = lsp.next();
+    assert_eq!(r["error"]["code"], -32700, "{r}");
     lsp.send(&json!([1, 2, 3]));
     let r = lsp.next();
     assert_eq!(r["error"]["code"], -32600, "{r}");

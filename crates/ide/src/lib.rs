@@ -119,9 +119,34 @@ pub fn hover(source: &str, offset: usize) -> Option<Hover> {
         WordKind::Option => "option",
         WordKind::Function => "built-in",
     };
-    Some(Hover {
-        span,
-        markdown: format!("```ravel\n{word}\n```\n{what}: {doc}"),
+    let mut markdown = format!("```ravel\n{word}\n```\n{what}: {doc}");
+    if let Some(n) = observed(source, word, tokens[at].start) {
+        markdown.push_str(&n);
+    }
+    Some(Hover { span, markdown })
+}
+
+/// For `observe` and `actuate` at `start`: how many observations the
+/// controller sees, or how many inputs drive the plant.
+fn observed(source: &str, word: &str, start: usize) -> Option<String> {
+    use ravel_syntax::ast::{Item, SystemStmt};
+    if word != "observe" && word != "actuate" {
+        return None;
+    }
+    let spec = ravel_syntax::parse(source).ok()?;
+    spec.items.iter().find_map(|i| match i {
+        Item::System(s) => s.stmts.iter().find_map(|st| match st {
+            SystemStmt::Observe { exprs, span } if span.start == start => Some(format!(
+                "\n\nhere: the controller sees {} observations (its input vector)",
+                exprs.len()
+            )),
+            SystemStmt::Actuate { exprs, span } if span.start == start => Some(format!(
+                "\n\nhere: {} plant inputs, from the controller's outputs",
+                exprs.len()
+            )),
+            _ => None,
+        }),
+        _ => None,
     })
 }
 

@@ -200,3 +200,10 @@ fn diagnostics_are_the_front_ends() {
         "{d:?}"
     );
 }
+
+#[test]
+fn hover_on_observe_counts_the_observations() {
+    let text = "system p {\n    state x[2]\n    control u[1]\n    next x[0] = x[1]\n    next x[1] = u[0]\n    observe [x[0], x[1], x[0] * x[1]]\n}\n";
+    let h = hover_text(text, at(text, "observe", 0, 1));
+    assert!(h.contains("the controller sees 3 observations"), "{h}");
+}

@@ -6,6 +6,7 @@
 
 mod batch;
 pub mod demo;
+pub mod lsp;
 pub mod vnncomp;
 
 use std::collections::BTreeMap;
@@ -170,6 +171,10 @@ enum Cmd {
         #[arg(long, value_name = "FILE")]
         output: Option<PathBuf>,
     },
+    /// Serve the Language Server Protocol on standard input and output
+    /// (diagnostics as you type, formatting, hover, go to definition,
+    /// completion), for an editor's LSP client.
+    Lsp,
     /// Re-check certificates written by `verify --certificate`, without
     /// trusting the analysis: VALID, INVALID (with the first false claim) or
     /// UNSUPPORTED. Exit code 0 (all valid), 1 (some invalid), 2 (some
@@ -1308,6 +1313,13 @@ pub fn main() -> ExitCode {
     let color = std::io::stderr().is_terminal();
     let width = 100;
     match cli.cmd {
+        Cmd::Lsp => {
+            let code = lsp::serve(
+                std::io::BufReader::new(std::io::stdin()),
+                &mut std::io::stdout(),
+            );
+            ExitCode::from(u8::try_from(code).unwrap_or(1))
+        }
         Cmd::Check { specs, controllers } => {
             let mut code = exit::VERIFIED;
             let (pairs, errors) = pairs(&specs, &controllers);

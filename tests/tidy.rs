@@ -165,7 +165,15 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "mimalloc",
         ],
     ),
-    // the command line: the only crate with clap and the file system
+    // the editor's answers (hover, definitions, completion) over text: no
+    // IO and no protocol
+    (
+        "crates/ide",
+        "ravel-ide",
+        &["ravel", "ravel-analysis", "ravel-base", "ravel-syntax"],
+    ),
+    // the command line: the only crate with clap, the file system and the
+    // language server's protocol
     (
         ".",
         "ravel-cli",
@@ -175,8 +183,11 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "ravel-base",
             "ravel-certify",
             "ravel-syntax",
+            "ravel-ide",
             "nalgebra",
             "prost",
+            "lsp-server",
+            "lsp-types",
             "clap",
             "libc",
             "serde_json",
@@ -340,4 +351,85 @@ fn the_phases_import_forward_only() {
         on_disk, listed,
         "a module of the ravel crate outside PHASES"
     );
+}
+
+/// The keywords of the pest grammar: its quoted words (not `^"e"`, the
+/// exponent of a number, nor single characters).
+fn grammar_keywords() -> Vec<String> {
+    let text =
+        std::fs::read_to_string(root().join("crates/syntax/grammar/ravel.pest")).expect("grammar");
+    let mut out: Vec<String> = Vec::new();
+    for line in text.lines().filter(|l| !l.trim_start().starts_with("//")) {
+        let mut rest = line;
+        while let Some(i) = rest.find('"') {
+            let caret = rest[..i].ends_with('^');
+            let after = &rest[i + 1..];
+            let Some(j) = after.find('"') else { break };
+            let word = &after[..j];
+            let is_word = word.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+                && word.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if is_word && !caret && !out.iter().any(|w| w == word) {
+                out.push(word.to_string());
+            }
+            rest = &after[j + 1..];
+        }
+    }
+    out
+}
+
+/// Every keyword of the grammar is highlighted by the VS Code extension's
+/// TextMate grammar (it appears in one of its `match` patterns) and is
+/// annotated in its samples (`scripts/test-grammar.sh` checks the scopes),
+/// so the two grammars cannot drift apart.
+#[test]
+fn the_textmate_grammar_knows_every_keyword() {
+    let dir = root().join("editors/vscode");
+    let tm: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("syntaxes/ravel.tmLanguage.json")).expect("grammar"),
+    )
+    .expect("JSON");
+    fn matches(v: &serde_json::Value, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Object(o) => {
+                for (k, x) in o {
+                    match (k.as_str(), x.as_str()) {
+                        ("match" | "begin", Some(s)) => out.push(s.to_string()),
+                        _ => matches(x, out),
+                    }
+                }
+            }
+            serde_json::Value::Array(a) => a.iter().for_each(|x| matches(x, out)),
+            _ => {}
+        }
+    }
+    let mut patterns = Vec::new();
+    matches(&tm, &mut patterns);
+    let words: Vec<&str> = patterns
+        .iter()
+        .flat_map(|p| p.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')))
+        .collect();
+    let mut samples = String::new();
+    for e in std::fs::read_dir(dir.join("test")).expect("samples") {
+        let p = e.expect("entry").path();
+        if p.extension().is_some_and(|x| x == "ravel-test") {
+            samples.push_str(&std::fs::read_to_string(&p).expect("sample"));
+        }
+    }
+    let sample_words: Vec<&str> = samples
+        .lines()
+        .filter(|l| !l.starts_with("//"))
+        .flat_map(|l| l.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')))
+        .collect();
+    let keywords = grammar_keywords();
+    assert!(keywords.len() > 50, "{keywords:?}");
+    for k in &keywords {
+        assert!(
+            words.contains(&k.as_str()),
+            "the keyword `{k}` is not in editors/vscode/syntaxes/ravel.tmLanguage.json"
+        );
+        assert!(
+            sample_words.contains(&k.as_str()),
+            "the keyword `{k}` is in no sample of editors/vscode/test/"
+        );
+    }
 }

@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# The whole test suite, what CI runs (README's second set-up command):
+# the system library the SDP solver opens, then every Rust test, then the
+# checks outside cargo: the VS Code extension's grammar against its
+# annotated samples (node and npm).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+cargo test
+bash scripts/test-grammar.sh

@@ -619,6 +619,8 @@ fn documented_limits() -> Vec<(&'static str, Vec<String>)> {
                 int(l::MAX_POLYTOPE_ROWS as u64),
                 int(l::MAX_POLYTOPE_DIM as u64),
                 int(l::MAX_EXPR_NODES as u64),
+                // an editor document larger than a spec file (ravel lsp)
+                mib(l::MAX_SPEC_BYTES),
             ],
         ),
         ("E0218", vec![format!("{:e}", l::MAX_RADIUS_SCALE)]),

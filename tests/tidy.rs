@@ -163,6 +163,8 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "serde_json",
             "sha2",
             "mimalloc",
+            // plots: its SVG backend only (no fonts, no system libraries)
+            "plotters",
         ],
     ),
     // the command line: the only crate with clap and the file system

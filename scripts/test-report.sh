@@ -57,7 +57,7 @@ fi
 start=$(date +%s%N)
 timeout 120 "$CHROMIUM" --headless --no-sandbox --disable-gpu --disable-quic --no-first-run \
     --disable-background-networking --disable-component-update --disable-sync \
-    --user-data-dir="$WORK/profile" --virtual-time-budget=5000 \
+    --user-data-dir="$WORK/profile" \
     --dump-dom "file://$WORK/report/index.html" > "$WORK/dom.html" 2> "$WORK/chromium.log" || {
     echo "test-report: chromium failed" >&2
     tail -20 "$WORK/chromium.log" >&2

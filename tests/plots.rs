@@ -248,6 +248,25 @@ fn sets_outside_the_view_are_listed() {
 }
 
 #[test]
+fn an_overflowing_loop_is_plotted_without_a_panic() {
+    // states grow by 1e15 a step until the bounds overflow: trajectories
+    // far beyond the window are cut to it, whole-space sets are listed
+    let dir = folder("overflow-spec");
+    std::fs::create_dir_all(&dir).expect("folder");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/double_integrator.onnx");
+    let spec = format!(
+        "system s {{\n    state   x[2]\n    control u[1]\n    A = [[1e15, 1e15], [1e15, 1e15]]\n    B = [[0.5], [1]]\n    u in box([-1, 1])\n}}\n\ncontroller \"{}\"\n\ninitial X0 = box(x[0] in [2.5, 3.0], x[1] in [-0.25, 0.25])\ngoal    G  = box(x[0] in [-1.5, 2.0], x[1] in [-1.5, 0.5])\nhorizon 30\n\nanalysis {{\n    samples 200\n}}\n",
+        model.display()
+    );
+    let path = dir.join("overflow.ravel");
+    std::fs::write(&path, spec).expect("spec written");
+    let f = facts(&plot(path.to_str().expect("utf-8"), &[], 3));
+    assert!(f.has_text("sets are the whole space"), "{:?}", f.texts);
+    assert!(f.has_text("sets reach beyond 1e150"), "{:?}", f.texts);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn plots_are_the_same_bytes_every_run() {
     for spec in [
         "specs/double_integrator_partitioned.ravel",

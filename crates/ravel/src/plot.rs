@@ -398,7 +398,8 @@ fn bounds_of(pts: &[P]) -> Option<[f64; 4]> {
         f64::NEG_INFINITY,
     ];
     for p in pts {
-        if p.0.is_finite() && p.1.is_finite() {
+        // beyond 1e150 a window says nothing: such points are clipped
+        if p.0.abs() <= 1e150 && p.1.abs() <= 1e150 {
             w = [w[0].min(p.0), w[1].max(p.0), w[2].min(p.1), w[3].max(p.1)];
         }
     }
@@ -422,12 +423,14 @@ fn window_of(pts: &[P]) -> [f64; 4] {
 }
 
 /// An inequality `Σ a_k v[k] ≤ b` as text (`≥` when every coefficient is
-/// negative).
+/// negative; positive terms first).
 fn row_text(a: &[f64], b: f64, name: &str) -> String {
     let flip = a.iter().all(|c| *c <= 0.0);
     let s = if flip { -1.0 } else { 1.0 };
     let mut t = String::new();
-    for (k, &c) in a.iter().enumerate() {
+    let mut order: Vec<(usize, f64)> = a.iter().copied().enumerate().collect();
+    order.sort_by_key(|(_, c)| s * c < 0.0);
+    for (k, c) in order {
         let c = s * c;
         if c == 0.0 {
             continue;
@@ -663,6 +666,18 @@ pub fn svg(
         }
     }
     not_finite.dedup();
+    let far = outcome.reach.iter().skip(1).position(|b| {
+        b.is_finite()
+            && [b.lo[i], b.hi[i], b.lo[j], b.hi[j]]
+                .iter()
+                .any(|v| v.abs() > 1e150)
+    });
+    if let Some(k) = far {
+        legend.notes.push(format!(
+            "from step {} on, sets reach beyond 1e150: outside the view",
+            k + 1
+        ));
+    }
     if last >= 1 {
         legend.entries.push((
             Swatch::Ramp(last),
@@ -1290,23 +1305,23 @@ fn draw_panel(p: &Panel, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), St
         }
     }
     for (pts, c, w) in &p.lines {
-        if pts.len() >= 2 {
+        for run in visible_runs(pts, p.window) {
             chart
-                .draw_series(std::iter::once(PathElement::new(
-                    pts.clone(),
-                    c.stroke_width(*w),
-                )))
+                .draw_series(std::iter::once(PathElement::new(run, c.stroke_width(*w))))
                 .map_err(err)?;
         }
     }
+    let inside = |q: &P| q.0 >= x0 && q.0 <= x1 && q.1 >= y0 && q.1 <= y1;
     for (q, c, r) in &p.dots {
+        if !inside(q) {
+            continue;
+        }
         chart
             .draw_series(std::iter::once(Circle::new(*q, *r, c.filled())))
             .map_err(err)?;
     }
     for (q, text, c) in &p.labels {
-        let inside = q.0 >= x0 && q.0 <= x1 && q.1 >= y0 && q.1 <= y1;
-        if inside {
+        if inside(q) {
             chart
                 .draw_series(std::iter::once(Text::new(
                     text.clone(),
@@ -1317,6 +1332,32 @@ fn draw_panel(p: &Panel, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), St
         }
     }
     Ok(())
+}
+
+/// The parts of a polyline inside the window, as polylines (computed in
+/// the window's unit square, so that far-off points stay finite; a part
+/// that does not come out inside is dropped).
+fn visible_runs(pts: &[P], [x0, x1, y0, y1]: [f64; 4]) -> Vec<Vec<P>> {
+    let (w, h) = (x1 - x0, y1 - y0);
+    let unit = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+    let to = |p: &P| ((p.0 - x0) / w, (p.1 - y0) / h);
+    let ok = |q: P| (-1e-9..=1.0 + 1e-9).contains(&q.0) && (-1e-9..=1.0 + 1e-9).contains(&q.1);
+    let mut runs: Vec<Vec<P>> = Vec::new();
+    let mut last: Option<P> = None;
+    for k in 1..pts.len() {
+        let (a, b) = (to(&pts[k - 1]), to(&pts[k]));
+        let Some((c, d)) = clip_segment(a, b, &unit).filter(|(c, d)| ok(*c) && ok(*d)) else {
+            last = None;
+            continue;
+        };
+        let back = |q: P| (x0 + q.0 * w, y0 + q.1 * h);
+        match (last, runs.last_mut()) {
+            (Some(l), Some(run)) if l == c => run.push(back(d)),
+            _ => runs.push(vec![back(c), back(d)]),
+        }
+        last = (d == b).then_some(d);
+    }
+    runs
 }
 
 fn draw_legend(l: &Legend, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), String> {
@@ -1488,10 +1529,21 @@ mod tests {
     }
 
     #[test]
+    fn far_off_lines_are_cut_to_the_window() {
+        let w = [0.0, 1.0, 0.0, 1.0];
+        let runs = visible_runs(&[(0.5, 0.5), (0.5, 0.9), (0.5, 1e300), (0.5, 0.2)], w);
+        assert_eq!(runs.len(), 2);
+        assert_eq!(runs[0], vec![(0.5, 0.5), (0.5, 0.9), (0.5, 1.0)]);
+        assert!(runs.iter().flatten().all(|p| p.1 <= 1.0));
+        assert!(visible_runs(&[(5.0, 5.0), (6.0, 6.0)], w).is_empty());
+    }
+
+    #[test]
     fn rows_read_as_written() {
         assert_eq!(row_text(&[0.0, 0.0, 1.0], 0.5, "x"), "x[2] <= 0.5");
         assert_eq!(row_text(&[0.0, -1.0], -2.0, "x"), "x[1] >= 2");
         assert_eq!(row_text(&[1.0, -2.0], 0.0, "y"), "y[0] - 2 y[1] <= 0");
+        assert_eq!(row_text(&[0.0, -1.0, 1.0], 0.0, "y"), "y[2] - y[1] <= 0");
     }
 
     #[test]

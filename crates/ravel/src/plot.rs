@@ -245,9 +245,15 @@ fn clip(window: &[P], rows: &[([f64; 2], f64)]) -> Vec<P> {
                 out.push(p);
             }
             if (fp <= 0.0) != (fq <= 0.0) {
-                let t = fp / (fp - fq);
+                // from the end inside, so that a far-off end costs no precision
+                let (a, b, fa, fb) = if fp <= 0.0 {
+                    (p, q, fp, fq)
+                } else {
+                    (q, p, fq, fp)
+                };
+                let t = fa / (fa - fb);
                 if t.is_finite() {
-                    out.push((p.0 + t * (q.0 - p.0), p.1 + t * (q.1 - p.1)));
+                    out.push((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)));
                 }
             }
         }
@@ -1261,7 +1267,11 @@ fn draw_panel(p: &Panel, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), St
         .axis_desc_style((FONT, 15))
         .draw()
         .map_err(err)?;
+    // every shape is clipped to the window; clamping only guards plotters'
+    // pixel arithmetic against a point rounding made far off
+    let clamp = |q: &P| (q.0.clamp(x0, x1), q.1.clamp(y0, y1));
     for (pts, style) in &p.shapes {
+        let pts: &Vec<P> = &pts.iter().map(clamp).collect();
         if let Some(fill) = style.fill {
             chart
                 .draw_series(std::iter::once(Polygon::new(pts.clone(), fill.filled())))
@@ -1339,14 +1349,13 @@ fn draw_panel(p: &Panel, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), St
 /// that does not come out inside is dropped).
 fn visible_runs(pts: &[P], [x0, x1, y0, y1]: [f64; 4]) -> Vec<Vec<P>> {
     let (w, h) = (x1 - x0, y1 - y0);
-    let unit = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
     let to = |p: &P| ((p.0 - x0) / w, (p.1 - y0) / h);
     let ok = |q: P| (-1e-9..=1.0 + 1e-9).contains(&q.0) && (-1e-9..=1.0 + 1e-9).contains(&q.1);
     let mut runs: Vec<Vec<P>> = Vec::new();
     let mut last: Option<P> = None;
     for k in 1..pts.len() {
         let (a, b) = (to(&pts[k - 1]), to(&pts[k]));
-        let Some((c, d)) = clip_segment(a, b, &unit).filter(|(c, d)| ok(*c) && ok(*d)) else {
+        let Some((c, d)) = clip_unit(a, b).filter(|(c, d)| ok(*c) && ok(*d)) else {
             last = None;
             continue;
         };
@@ -1358,6 +1367,48 @@ fn visible_runs(pts: &[P], [x0, x1, y0, y1]: [f64; 4]) -> Vec<Vec<P>> {
         last = (d == b).then_some(d);
     }
     runs
+}
+
+/// The segment `p → q` inside the unit square (Cohen–Sutherland: each
+/// crossing is computed from the slope, so a far-off end keeps the part
+/// near the square exact).
+fn clip_unit(mut p: P, mut q: P) -> Option<(P, P)> {
+    let code = |a: P| {
+        (a.0 < 0.0) as u8
+            | ((a.0 > 1.0) as u8) << 1
+            | ((a.1 < 0.0) as u8) << 2
+            | ((a.1 > 1.0) as u8) << 3
+    };
+    for _ in 0..8 {
+        let (cp, cq) = (code(p), code(q));
+        if cp | cq == 0 {
+            return Some((p, q));
+        }
+        if cp & cq != 0 {
+            return None;
+        }
+        let out = if cp != 0 { cp } else { cq };
+        let (a, b) = if cp != 0 { (p, q) } else { (q, p) };
+        // move the outside end `a` onto the border it is beyond
+        let moved = if out & 8 != 0 {
+            (b.0 + (a.0 - b.0) * (1.0 - b.1) / (a.1 - b.1), 1.0)
+        } else if out & 4 != 0 {
+            (b.0 + (a.0 - b.0) * (0.0 - b.1) / (a.1 - b.1), 0.0)
+        } else if out & 2 != 0 {
+            (1.0, b.1 + (a.1 - b.1) * (1.0 - b.0) / (a.0 - b.0))
+        } else {
+            (0.0, b.1 + (a.1 - b.1) * (0.0 - b.0) / (a.0 - b.0))
+        };
+        if !(moved.0.is_finite() && moved.1.is_finite()) {
+            return None;
+        }
+        if cp != 0 {
+            p = moved;
+        } else {
+            q = moved;
+        }
+    }
+    None
 }
 
 fn draw_legend(l: &Legend, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), String> {

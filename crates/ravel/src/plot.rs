@@ -835,7 +835,7 @@ pub fn network_svg(
             ));
         }
         for (x, _) in &samples {
-            panel.dots.push(((x[0], x[1]), SAMPLE.mix(0.7), 1));
+            panel.dots.push(((x[0], x[1]), SAMPLE.mix(0.8), 2));
         }
         for (k, s) in plan.selects.iter().enumerate() {
             let colour = step_colour(k + 1, plan.selects.len().max(2));
@@ -1026,7 +1026,7 @@ pub fn network_svg(
         }
     }
     for (_, y) in &samples {
-        panel.dots.push(((y[i], y[j]), SAMPLE.mix(0.7), 1));
+        panel.dots.push(((y[i], y[j]), SAMPLE.mix(0.8), 2));
     }
     if !samples.is_empty() {
         legend.entries.push((
@@ -1169,7 +1169,7 @@ fn one_output(
             .push("the output has no finite certified bound: not drawn".into()),
     }
     for (x, y) in samples {
-        panel.dots.push(((x[0], y[0]), SAMPLE.mix(0.7), 1));
+        panel.dots.push(((x[0], y[0]), SAMPLE.mix(0.8), 2));
     }
     if !samples.is_empty() {
         legend.entries.push((

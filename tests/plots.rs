@@ -30,12 +30,10 @@ fn folder(name: &str) -> PathBuf {
 
 /// Plot `spec` (with extra arguments) into a fresh folder; the SVG text.
 fn plot(spec: &str, extra: &[&str], expect: i32) -> String {
-    let dir = folder(
-        Path::new(spec)
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("x"),
-    );
+    // a folder per call: tests run in parallel, some plot the same spec
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = folder(&format!("plot-{n}"));
     let mut args = vec![
         "verify",
         spec,
@@ -450,6 +448,51 @@ fn the_report_is_one_self_contained_page_with_a_row_and_a_plot_per_pair() {
     assert_eq!(report(&other, "2"), page);
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&other);
+}
+
+#[test]
+fn names_with_markup_stay_text() {
+    // a spec file named like markup: the page stays well-formed, with one
+    // script, and the name appears as text
+    let dir = folder("markup");
+    let sub = dir.join("a<script>b&c");
+    std::fs::create_dir_all(&sub).expect("folder");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/double_integrator.onnx");
+    let spec = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/double_integrator.ravel"),
+    )
+    .expect("spec")
+    .replace(
+        "\"../models/double_integrator.onnx\"",
+        &format!("\"{}\"", model.display()),
+    );
+    let path = sub.join("x<y>.ravel");
+    std::fs::write(&path, spec).expect("spec written");
+    let report = dir.join("report");
+    let (code, out, err) = ravel(&[
+        "verify",
+        path.to_str().expect("utf-8"),
+        "--quiet",
+        "--report",
+        report.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let page = std::fs::read_to_string(report.join("index.html")).expect("report");
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        ..Default::default()
+    };
+    let doc = roxmltree::Document::parse_with_options(&page, options).expect("well-formed");
+    assert_eq!(
+        doc.descendants()
+            .filter(|n| n.has_tag_name("script"))
+            .count(),
+        1
+    );
+    assert!(doc.descendants().filter(|n| n.is_text()).any(|n| n
+        .text()
+        .is_some_and(|t| t.contains("a<script>b&c/x<y>.ravel"))));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -741,9 +741,11 @@ pub fn svg(
             format!("counterexample of {} {}", p.kind.as_str(), p.name),
         ));
     }
-    legend
-        .notes
-        .push("sets of more than two coordinates: a polygon containing their projection".into());
+    if n > 2 {
+        legend.notes.push(
+            "sets of more than two coordinates: a polygon containing their projection".into(),
+        );
+    }
     render(
         &format!("{title} — {}", verdict_word(outcome.verdict)),
         &[panel],
@@ -1048,9 +1050,11 @@ pub fn network_svg(
             "the output has {m} coordinates: {i} and {j} shown (--plot-dims)"
         ));
     }
-    legend
-        .notes
-        .push("sets of more than two coordinates: a polygon containing their projection".into());
+    if m > 2 || inputs > 2 {
+        legend.notes.push(
+            "sets of more than two coordinates: a polygon containing their projection".into(),
+        );
+    }
     panels.push(panel);
     render(
         &format!("{title} — {}", verdict_word(outcome.verdict)),

@@ -2,9 +2,12 @@
 # The whole test suite, what CI runs (README's second set-up command):
 # the system library the SDP solver opens, then every Rust test, then the
 # checks outside cargo: the VS Code extension's grammar against its
-# annotated samples (node and npm).
+# annotated samples (node and npm), and the HTML report in a browser.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 cargo test
 bash scripts/test-grammar.sh
+# the HTML report in headless Chromium (installed when missing), with the
+# binary `cargo test` built
+bash scripts/test-report.sh

@@ -134,6 +134,8 @@ pub struct Options {
     pub plot: Option<PathBuf>,
     /// The coordinates plotted.
     pub plot_dims: (usize, usize),
+    /// A folder for the HTML report of the batch.
+    pub report: Option<PathBuf>,
 }
 
 /// What one item is.
@@ -165,6 +167,8 @@ struct Item {
     junit: String,
     /// CSV rows of robust action selections (no header).
     csv: String,
+    /// Its row and plot in the HTML report.
+    entry: crate::html::Entry,
 }
 
 /// XML text with the five special characters escaped and control
@@ -220,6 +224,17 @@ fn error_item(
         json["controller"] = json!(c.display().to_string());
     }
     let suite = spec.map_or_else(|| "arguments".to_string(), |p| suite_name(p, controller));
+    let entry = crate::html::Entry {
+        index,
+        spec: spec.map_or_else(|| "(argument)".to_string(), |p| p.display().to_string()),
+        controller: controller.map(|c| c.display().to_string()),
+        verdict: "ERROR".into(),
+        properties: Vec::new(),
+        key: String::new(),
+        time_ms: None,
+        plot: None,
+        error: Some(ravel_syntax::diag::sanitize(message)),
+    };
     Item {
         class: Class::Error,
         stdout: String::new(),
@@ -227,6 +242,7 @@ fn error_item(
         json,
         junit: junit_error(&suite, message, message),
         csv: String::new(),
+        entry,
     }
 }
 
@@ -333,8 +349,14 @@ fn run(
             );
         }
     }
-    if let Some(dir) = &opts.plot {
-        if let Err(msg) = plot(&run, &l.display, dir, file_name, opts.plot_dims) {
+    let svg = (opts.plot.is_some() || opts.report.is_some())
+        .then(|| plot_svg(&run, &l.display, opts.plot_dims));
+    if let (Some(dir), Some(svg)) = (&opts.plot, &svg) {
+        if let Err(msg) = svg
+            .as_ref()
+            .map_err(Clone::clone)
+            .and_then(|s| write_plot(s, dir, file_name))
+        {
             fail_item((&mut json, &mut stderr, &mut class), "plot_error", &msg);
         }
     }
@@ -367,6 +389,24 @@ fn run(
             ),
         );
     }
+    let entry = crate::html::Entry {
+        index,
+        spec: path.display().to_string(),
+        controller: controller.map(|c| c.display().to_string()),
+        verdict: match class {
+            Class::Verdict(v) => v.as_str().to_string(),
+            Class::Error => "ERROR".to_string(),
+        },
+        properties: report_properties(&run),
+        key: key_numbers(&run),
+        time_ms: (!opts.no_timing).then_some(ms),
+        plot: opts.report.as_ref().and(svg),
+        error: json["plot_error"]
+            .as_str()
+            .or(json["certificate_error"].as_str())
+            .or(json["csv_error"].as_str())
+            .map(str::to_string),
+    };
     Item {
         class,
         stdout,
@@ -374,35 +414,117 @@ fn run(
         json,
         junit,
         csv,
+        entry,
     }
 }
 
-/// Draw a run's reachable sets into `dir` (closed loops only: a network
-/// spec's plot is an error that says so, never silently skipped).
-fn plot(
-    run: &Run,
-    display: &str,
-    dir: &Path,
-    file_name: &str,
-    (i, j): (usize, usize),
-) -> Result<(), String> {
-    let Run::System { plan, outcome } = run else {
-        return Err(format!(
-            "plots of network specs are not supported yet (`{display}`)"
-        ));
-    };
-    let n = plan.closed_loop.states();
-    let file = dir.join(format!("{file_name}.svg"));
-    if i >= n || j >= n {
-        return Err(format!(
-            "--plot-dims {i},{j}: the state has {n} coordinates (0 to {})",
-            n - 1
-        ));
+/// A run's properties for the HTML report: what, verdict, margin and where.
+fn report_properties(run: &Run) -> Vec<(String, String, String)> {
+    let c = ravel_syntax::diag::compact;
+    match run {
+        Run::System { outcome, .. } => outcome
+            .properties
+            .iter()
+            .map(|p| {
+                let detail = match p.status {
+                    Verdict::Falsified => {
+                        format!("violated by {} at step {}", c(-p.margin), p.step)
+                    }
+                    _ => format!("margin {} at step {}", c(p.margin), p.step),
+                };
+                (
+                    format!("{} {}", p.kind.as_str(), p.name),
+                    p.status.as_str().to_string(),
+                    detail,
+                )
+            })
+            .collect(),
+        Run::Network { outcome, .. } => outcome
+            .properties
+            .iter()
+            .map(|p| {
+                let detail = match p.status {
+                    Verdict::Falsified => format!("violated by {}", c(-p.margin)),
+                    _ => format!("margin {}", c(p.margin)),
+                };
+                (
+                    format!("{} {}", p.kind.as_str(), p.name),
+                    p.status.as_str().to_string(),
+                    detail,
+                )
+            })
+            .chain(outcome.radii.iter().map(|r| {
+                (
+                    format!("radius {}", r.name),
+                    "—".to_string(),
+                    format!(
+                        "certified scale {}, attacked {}",
+                        r.certified.map_or("none".into(), c),
+                        r.attacked.as_ref().map_or("none".into(), |a| c(a.0))
+                    ),
+                )
+            }))
+            .collect(),
     }
-    let samples: Vec<_> = (0..plan.samples.min(100))
-        .filter_map(|k| ravel::execute::simulate(plan, k))
-        .collect();
-    let svg = ravel::plot::svg(display, plan, outcome, (i, j), &samples);
+}
+
+/// Key numbers of a run: cells, propagator calls, samples.
+fn key_numbers(run: &Run) -> String {
+    match run {
+        Run::System { plan, outcome } => format!(
+            "{} cell{}, {} propagator calls, {} samples, horizon {}",
+            outcome.partition.len(),
+            if outcome.partition.len() == 1 {
+                ""
+            } else {
+                "s"
+            },
+            outcome.propagator_calls,
+            outcome.samples_drawn,
+            plan.horizon
+        ),
+        Run::Network { outcome, .. } => format!(
+            "{} cell{}, {} bounded, {} samples",
+            outcome.partition.len(),
+            if outcome.partition.len() == 1 {
+                ""
+            } else {
+                "s"
+            },
+            outcome.calls,
+            outcome.samples_drawn
+        ),
+    }
+}
+
+/// The SVG of a run: a closed loop's reachable sets over state
+/// coordinates `(i, j)`, or a network spec's input and output sets (its
+/// outputs `(i, j)`).
+fn plot_svg(run: &Run, display: &str, dims: (usize, usize)) -> Result<String, String> {
+    match run {
+        Run::System { plan, outcome } => {
+            let n = plan.closed_loop.states();
+            if dims.0 >= n || dims.1 >= n {
+                return Err(format!(
+                    "--plot-dims {},{}: the state has {n} coordinates (0 to {})",
+                    dims.0,
+                    dims.1,
+                    n - 1
+                ));
+            }
+            let samples: Vec<_> = (0..plan.samples.min(100))
+                .filter_map(|k| ravel::execute::simulate(plan, k))
+                .collect();
+            ravel::plot::svg(display, plan, outcome, dims, &samples)
+        }
+        Run::Network { plan, outcome } => ravel::plot::network_svg(display, plan, outcome, dims),
+    }
+    .map_err(|e| format!("`{}`: {e}", ravel_syntax::diag::sanitize(display)))
+}
+
+/// Write a plot into `dir`.
+fn write_plot(svg: &str, dir: &Path, file_name: &str) -> Result<(), String> {
+    let file = dir.join(format!("{file_name}.svg"));
     super::write_atomically(&file, svg.as_bytes()).map_err(|e| {
         format!(
             "cannot write plot `{}`: {e}",
@@ -643,12 +765,17 @@ struct Sink<'o> {
     skipped: usize,
     /// Whether the CSV header was written.
     header: bool,
+    /// The HTML report's entries (with `--report`).
+    entries: Vec<crate::html::Entry>,
 }
 
 impl Sink<'_> {
     /// Write (or keep) one item; false when standard output is gone.
     fn emit(&mut self, item: Item) -> bool {
         count(&mut self.counts, item.class);
+        if self.opts.report.is_some() {
+            self.entries.push(item.entry);
+        }
         self.skipped += item.junit.matches("<skipped ").count();
         match self.opts.format {
             Format::Text => {
@@ -774,7 +901,11 @@ fn batch(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Result<B
             .zip(names)
             .map(|((s, c), n)| Work::Pair(s, c, n)),
     );
-    for d in cert_dir.iter().chain(opts.plot.as_ref()) {
+    for d in cert_dir
+        .iter()
+        .chain(opts.plot.as_ref())
+        .chain(opts.report.as_ref())
+    {
         if let Err(e) = std::fs::create_dir_all(d) {
             err(&format!(
                 "error: cannot create folder `{}`: {e}\n",
@@ -806,6 +937,7 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         suites: String::new(),
         skipped: 0,
         header: false,
+        entries: Vec::new(),
     };
     let jobs = opts.jobs.min(b.mine.len()).max(1);
     let broken = if jobs == 1 {
@@ -820,6 +952,17 @@ pub fn verify(specs: &[PathBuf], controllers: &[PathBuf], opts: &Options) -> Exi
         return ExitCode::from(exit::BROKEN_PIPE);
     }
     let counts = sink.counts;
+    if let Some(dir) = &opts.report {
+        let page = crate::html::page(&sink.entries, &summary(&counts));
+        let file = dir.join("index.html");
+        if let Err(e) = super::write_atomically(&file, page.as_bytes()) {
+            err(&format!(
+                "error: cannot write report `{}`: {e}\n",
+                ravel_syntax::diag::sanitize(&file.display().to_string())
+            ));
+            return ExitCode::from(exit::INPUT_ERROR);
+        }
+    }
     if !sink.close(b.work.len(), run_started) {
         return ExitCode::from(exit::BROKEN_PIPE);
     }

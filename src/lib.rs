@@ -6,6 +6,7 @@
 
 mod batch;
 pub mod demo;
+mod html;
 pub mod lsp;
 pub mod vnncomp;
 
@@ -55,7 +56,7 @@ enum Cmd {
         /// answer is `sat` (with the counterexample), `unsat`, `timeout` or
         /// `unknown`; exit code 1, 0, 3, 3 (2 for an error, which writes no
         /// result).
-        #[arg(long, value_name = "PROP.vnnlib", requires = "network", conflicts_with_all = ["certificate", "shard", "plot"])]
+        #[arg(long, value_name = "PROP.vnnlib", requires = "network", conflicts_with_all = ["certificate", "shard", "plot", "report"])]
         vnnlib: Option<PathBuf>,
         /// The direct form: write the answer in VNN-COMP's result format to
         /// this file (atomically) instead of standard output.
@@ -109,9 +110,15 @@ enum Cmd {
         /// as the certificates, with `.svg`).
         #[arg(long, value_name = "DIR")]
         plot: Option<PathBuf>,
-        /// The two state coordinates a plot shows (default 0,1).
+        /// The two coordinates a plot shows (default 0,1): state
+        /// coordinates of a closed loop, outputs of a network spec.
         #[arg(long, value_name = "I,J", value_parser = batch::parse_dims, default_value = "0,1")]
         plot_dims: (usize, usize),
+        /// Write DIR/index.html: a self-contained page with a table of every
+        /// pair's verdicts and each pair's plot inline (for CI artifacts).
+        /// It needs the whole batch, so it is refused with --shard.
+        #[arg(long, value_name = "DIR", conflicts_with = "shard")]
+        report: Option<PathBuf>,
     },
     /// Rewrite specs in the canonical layout, comments kept (`--check`:
     /// change nothing, print a diff and exit 1 when a file would change).
@@ -1415,6 +1422,7 @@ pub fn main() -> ExitCode {
             quiet,
             plot,
             plot_dims,
+            report,
             ..
         } => {
             let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -1431,6 +1439,7 @@ pub fn main() -> ExitCode {
                 color,
                 plot,
                 plot_dims,
+                report,
             };
             batch::verify(&specs, &controllers, &opts)
         }

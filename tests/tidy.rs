@@ -163,6 +163,8 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
             "serde_json",
             "sha2",
             "mimalloc",
+            // plots: its SVG backend only (no fonts, no system libraries)
+            "plotters",
         ],
     ),
     // the editor's answers (hover, definitions, completion) over text: no

@@ -766,6 +766,11 @@ mod tests {
     }
 
     fn run(limit: usize, calls: usize) -> Searched {
+        run_with(limit, calls, &Control::unlimited())
+    }
+
+    /// The tight plan's search under `ctl`.
+    fn run_with(limit: usize, calls: usize, ctl: &Control) -> Searched {
         let plan = tight_plan();
         let region = plan.input.clone().unwrap();
         let shape = DMatrix::from_row_slice(2, 1, &[1.0, -1.0]);
@@ -786,7 +791,7 @@ mod tests {
             &[None],
             &[true],
             &budget,
-            &Control::unlimited(),
+            ctl,
             limit,
         )
     }
@@ -901,34 +906,12 @@ mod tests {
         use std::sync::atomic::{AtomicUsize, Ordering};
         let mut partial = 0;
         for ticks in 3..40 {
-            let plan = tight_plan();
-            let region = plan.input.clone().unwrap();
-            let shape = DMatrix::from_row_slice(2, 1, &[1.0, -1.0]);
-            let rows = super::super::stack(&shape, &[vec![vec![1.0]]], 1);
-            let (root, issues) = cell_bounds(&plan.net, &region, plan.propagator, 0, &rows.dirs);
-            let budget = Budget {
-                calls: 100_000,
-                min_size: 1e-9,
-                seconds: None,
-            };
             // a clock that advances one second each time it is read
             let reads = AtomicUsize::new(0);
             let clock = || reads.fetch_add(1, Ordering::SeqCst) as f64;
             let mut ctl = Control::new(&clock);
             ctl.time_limit = Some(ticks as f64);
-            let s = search(
-                &plan,
-                &region,
-                &rows,
-                root,
-                issues,
-                &[vec![0.0, 0.0]],
-                &[None],
-                &[true],
-                &budget,
-                &ctl,
-                usize::MAX,
-            );
+            let s = run_with(usize::MAX, 100_000, &ctl);
             assert_eq!(s.bounded.stop, Stop::Time, "{ticks}");
             // each split adds one cell and, when bounded, four calls (both
             // inputs tried): fewer calls means children were left with

@@ -19,7 +19,7 @@ use serde_json::{json, Value};
 
 use super::{err, exit, load_with, out, progress_due, with_ticker, Format, ProgressLine};
 use ravel::execute::{Run, Verdict};
-use ravel_syntax::diag::render;
+use ravel_syntax::diag::{render, Code, Diagnostic};
 
 /// Which verdicts fail the run (exit code and JUnit).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -282,23 +282,29 @@ fn run(
             )
         }
     };
+    let refused = |d: &[Diagnostic]| {
+        let text = render(d, &l.display, &l.source, 100, opts.color);
+        let plain = render(d, &l.display, &l.source, 100, false);
+        let message = format!("{}: {} error(s)", l.display, d.len());
+        error_item(
+            index,
+            Some(path),
+            controller,
+            &message,
+            format!("{text}{message}\n"),
+            super::diag_json(&l.name, &l.source, d),
+        )
+        .with_junit_detail(&plain)
+    };
     let task = match &l.result {
         Ok(task) => task,
-        Err(d) => {
-            let text = render(d, &l.display, &l.source, 100, opts.color);
-            let plain = render(d, &l.display, &l.source, 100, false);
-            let message = format!("{}: {} error(s)", l.display, d.len());
-            return error_item(
-                index,
-                Some(path),
-                controller,
-                &message,
-                format!("{text}{message}\n"),
-                super::diag_json(&l.name, &l.source, d),
-            )
-            .with_junit_detail(&plain);
-        }
+        Err(d) => return refused(d),
     };
+    // CSV holds robust action selections only: a spec without any is
+    // refused before it runs, not a header with no rows and exit 0
+    if opts.format == Format::Csv && !has_selections(task) {
+        return refused(&[csv_without_select(&l.source)]);
+    }
     let started = Instant::now();
     let shown = match position {
         Some((k, n)) if n > 1 => format!("[{k}/{n}] {}", l.display),
@@ -377,18 +383,6 @@ fn run(
         Run::System { .. } => String::new(),
         Run::Network { outcome, .. } => ravel::report::network::csv_rows(&l.name, outcome),
     };
-    // CSV holds robust action selections only: a spec without any is an
-    // error, not a header with no rows and exit 0
-    if opts.format == Format::Csv && csv.is_empty() {
-        fail_item(
-            (&mut json, &mut stderr, &mut class),
-            "csv_error",
-            &format!(
-                "`{}`: `--format csv` prints robust action selections, and this spec has no `select` block (use --format text, json, jsonl or junit)",
-                ravel_syntax::diag::sanitize(&l.display)
-            ),
-        );
-    }
     let entry = crate::html::Entry {
         index,
         spec: path.display().to_string(),
@@ -404,7 +398,6 @@ fn run(
         error: json["plot_error"]
             .as_str()
             .or(json["certificate_error"].as_str())
-            .or(json["csv_error"].as_str())
             .map(str::to_string),
     };
     Item {
@@ -571,6 +564,34 @@ impl Item {
         }
         self
     }
+}
+
+/// Whether a checked spec has robust action selections (rows for `--format csv`).
+fn has_selections(task: &ravel::check::Task) -> bool {
+    match task {
+        ravel::check::Task::System(_) => false,
+        ravel::check::Task::Network(n) => !n.selects.is_empty(),
+    }
+}
+
+/// E0403: `--format csv` on a spec that has nothing to print in it, at the
+/// spec's name (what it lacks has no place of its own).
+fn csv_without_select(source: &str) -> Diagnostic {
+    use ravel_syntax::ast::{Item, Span};
+    let name = ravel_syntax::parse(source).ok().and_then(|spec| {
+        spec.items.iter().find_map(|item| match item {
+            Item::System(s) => Some(s.name.span),
+            Item::Network(n) => Some(n.name.span),
+            _ => None,
+        })
+    });
+    Diagnostic::new(
+        Code::CsvWithoutSelect,
+        name.unwrap_or(Span::new(0, 0)),
+        "`--format csv` prints robust action selections, and this spec has no `select` block",
+    )
+    .label("this spec selects no actions")
+    .hint("use --format text, json, jsonl or junit for its verdicts; CSV rows come from the `select` blocks of network specs")
 }
 
 /// Turn an item into an ERROR: the message on standard error and in the

@@ -711,17 +711,25 @@ fn carrl_demonstration_runs() {
     assert_eq!(bad.status.code(), Some(2));
 }
 
-/// `--format csv` on a spec without a `select` block is an error that says
-/// so (exit 2), not a lone header (issue 30).
+/// `--format csv` on a spec without a `select` block is a coded diagnostic
+/// (E0403, at the spec's name, with a hint; exit 2), not a lone header
+/// (issue 30).
 #[test]
 fn csv_output_without_selections_is_an_error() {
-    for spec in [
-        "specs/double_integrator.ravel",
-        "specs/network/classifier_robust.ravel",
+    for (spec, name_line) in [
+        ("specs/double_integrator.ravel", "6:8]"),
+        ("specs/network/classifier_robust.ravel", "7:9]"),
     ] {
         let (code, stdout, stderr) = ravel(&["verify", "--format", "csv", spec]);
         assert_eq!(code, 2, "{spec}: {stderr}");
+        assert!(stderr.contains("E0403"), "{stderr}");
         assert!(stderr.contains("no `select` block"), "{stderr}");
+        assert!(stderr.contains("help: use --format text"), "{stderr}");
+        assert!(stderr.contains(&format!("{spec}:{name_line}")), "{stderr}");
+        assert!(
+            !stderr.contains("\nerror:"),
+            "no plain error line: {stderr}"
+        );
         assert_eq!(stdout, "", "{spec}: no header without rows");
     }
     // in a batch, the pairs with selections give their rows under one

@@ -106,11 +106,13 @@ pub enum Code {
     Vnnlib,
     /// E0402: an unusable row of a VNN-COMP instance list.
     Instances,
+    /// E0403: `--format csv` asked of a spec without a `select` block (nothing to print).
+    CsvWithoutSelect,
 }
 
 impl Code {
     /// Every code, in order (the documentation test walks this list).
-    pub const ALL: [Code; 47] = [
+    pub const ALL: [Code; 48] = [
         Code::Syntax,
         Code::IntegerTooLarge,
         Code::UnknownName,
@@ -158,6 +160,7 @@ impl Code {
         Code::ExternalData,
         Code::Vnnlib,
         Code::Instances,
+        Code::CsvWithoutSelect,
     ];
 
     /// The code as written in messages, e.g. `E0201`.
@@ -210,6 +213,7 @@ impl Code {
             Code::ExternalData => "E0308",
             Code::Vnnlib => "E0401",
             Code::Instances => "E0402",
+            Code::CsvWithoutSelect => "E0403",
         }
     }
 }

@@ -192,12 +192,17 @@ fn xml(s: &str) -> String {
 
 /// The JUnit suite of a pair: its spec, and its controller when one was
 /// given with `--controller` (pairs of one spec with two controllers are
-/// two suites, whether they ran or failed to load).
+/// two suites, whether they ran or failed to load). Control characters are
+/// escaped, but the name is never cut (a name cut in the middle, as
+/// messages cut long paths, could give two pairs the same suite).
 fn suite_name(spec: &Path, controller: Option<&Path>) -> String {
-    ravel_syntax::diag::sanitize(&match controller {
-        Some(c) => format!("{} with controller {}", spec.display(), c.display()),
-        None => spec.display().to_string(),
-    })
+    ravel_syntax::diag::sanitize_to(
+        &match controller {
+            Some(c) => format!("{} with controller {}", spec.display(), c.display()),
+            None => spec.display().to_string(),
+        },
+        usize::MAX,
+    )
 }
 
 /// A `<testsuite>` holding one erroring test case.

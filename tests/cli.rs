@@ -997,6 +997,22 @@ fn junit_suites_of_pairs_that_ran_name_their_controller() {
         stdout.contains("<testsuite name=\"specs/double_integrator.ravel\" "),
         "{stdout}"
     );
+    // a name longer than a message's 80 characters is kept whole (cut in
+    // the middle, two pairs of long paths could share one suite)
+    let (_, stdout, _) = ravel(&[
+        "verify",
+        "--format",
+        "junit",
+        "specs/double_integrator_falsified.ravel",
+        "--controller",
+        "models/double_integrator_tanh.onnx",
+    ]);
+    let long = "specs/double_integrator_falsified.ravel with controller models/double_integrator_tanh.onnx";
+    assert!(long.chars().count() > 80);
+    assert!(
+        stdout.contains(&format!("<testsuite name=\"{long}\" ")),
+        "{stdout}"
+    );
 }
 
 /// A sharded run ends in JUnit: `merge --format junit` writes the unsharded

@@ -192,10 +192,12 @@ fn command_line_formats_in_place_and_checks() {
     let _ = std::fs::remove_dir_all(Path::new(&dir));
 }
 
-/// The shipped specs that parse, with their text.
+/// The shipped specs that parse, with their text: `specs/` and the
+/// benchmark suite's `benchmarks/` (pending ones included).
 fn shipped() -> Vec<(std::path::PathBuf, String)> {
     let mut files = Vec::new();
     ravel_files(Path::new("specs"), &mut files);
+    ravel_files(Path::new("benchmarks"), &mut files);
     files.sort();
     files
         .into_iter()

@@ -238,6 +238,47 @@ fn a_set_on_coordinates_not_shown_is_listed_not_filled() {
     assert!(!f.has_text("constrains only"));
 }
 
+/// A plant in continuous time: each period's enclosure (the states between
+/// the sampling instants) drawn lightly behind the steps' sets, in the
+/// legend; a discrete-time plant has none.
+#[test]
+fn intersample_enclosures_are_drawn_lightly_with_a_legend_entry() {
+    let entry = "states between the sampling instants";
+    let light = |f: &Facts| -> Vec<Vec<(f64, f64)>> {
+        f.polygons
+            .iter()
+            .filter(|p| p.1 == "0.04")
+            .map(|p| p.2.clone())
+            .collect()
+    };
+    // one cell, five periods; the band x[0] ∈ [1.9, 2] lies between steps 1
+    // and 2, so the enclosure of period 2 reaches across it while no step's
+    // set touches it (the spec's UNSURE)
+    let svg = plot("specs/double_integrator_continuous_between.ravel", &[], 3);
+    let f = facts(&svg);
+    assert!(f.has_text(entry), "{:?}", f.texts);
+    let periods = light(&f);
+    assert_eq!(periods.len(), 5);
+    let width = |p: &Vec<(f64, f64)>| {
+        let xs = p.iter().map(|q| q.0);
+        xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min)
+    };
+    // each period's enclosure spans at least its two instants' sets in x
+    let cells = f.cells();
+    assert_eq!(cells.len(), 5);
+    for (k, p) in periods.iter().enumerate().skip(1) {
+        assert!(width(p) + 1e-6 >= width(&cells[k].2), "period {}", k + 1);
+    }
+    // a nonlinear plant in continuous time: one per cell and period
+    let f = facts(&plot("specs/damped_pendulum.ravel", &[], 0));
+    assert!(f.has_text(entry));
+    assert_eq!(light(&f).len(), f.cells().len());
+    // a plant in discrete time has nothing between its instants
+    let f = facts(&plot("specs/double_integrator.ravel", &[], 0));
+    assert!(!f.has_text(entry));
+    assert!(light(&f).is_empty());
+}
+
 #[test]
 fn sets_outside_the_view_are_listed() {
     // double_integrator's avoid set `overshoot` lies beyond every state

@@ -20,6 +20,10 @@
 //!   step (a ramp from dark blue at step 1 to orange at the last step,
 //!   shown in the legend), with the step's number at its bounding box;
 //!   polytope and hull sets are polygons, balls ellipses or diamonds;
+//! * for a plant in continuous time, behind the steps' sets, each cell's
+//!   intersample enclosure (its states over the control period ending at
+//!   a step, where the analysis enclosed it): very light, dashed, in that
+//!   step's colour, with a legend entry;
 //! * the bounding box of all cells of a step (dashed, in the step's colour)
 //!   when it differs from the one cell's set;
 //! * simulated trajectories (thin grey lines) and a falsifying trajectory
@@ -175,6 +179,8 @@ enum Swatch {
     Dot(RGBColor),
     /// The step ramp, steps `1 ..= last`.
     Ramp(usize),
+    /// A light fill with a dashed outline (an intersample enclosure).
+    Light(RGBColor),
 }
 
 #[derive(Default)]
@@ -535,6 +541,66 @@ fn draw_set(
     drawn
 }
 
+/// The intersample enclosures of a plant in continuous time (the states of
+/// each cell over the control period ending at step `t`, as the analysis
+/// enclosed them for its properties): drawn lightly, dashed, in the colour
+/// of the period's last step, with a legend entry; periods that could not
+/// be enclosed are noted. Nothing for plants without them.
+fn intersample(
+    panel: &mut Panel,
+    legend: &mut Legend,
+    outcome: &SystemOutcome,
+    (i, j): (usize, usize),
+) {
+    let last = outcome.reach.len().saturating_sub(1);
+    let (mut drawn, mut skipped, mut whole) = (0, 0, None);
+    for t in 1..=last {
+        let colour = step_colour(t, last);
+        let mut any = false;
+        for b in outcome.between.iter().filter_map(|c| c.get(t)?.as_ref()) {
+            any = true;
+            let finite = [b.lo[i], b.hi[i], b.lo[j], b.hi[j]]
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= 1e150);
+            if !finite {
+                whole.get_or_insert(t);
+                continue;
+            }
+            panel.shape(&shadow(b, &[], (i, j)), light(colour));
+            drawn += 1;
+        }
+        if !any {
+            skipped += 1;
+        }
+    }
+    if drawn > 0 {
+        let which = if skipped > 0 {
+            " (the periods a property's window covers)"
+        } else {
+            ""
+        };
+        legend.entries.push((
+            Swatch::Light(step_colour(last, last)),
+            format!("states between the sampling instants: each cell's enclosure over a control period{which}, in its last step's colour"),
+        ));
+    }
+    if let Some(t) = whole {
+        legend.notes.push(format!(
+            "the period ending at step {t} has no finite enclosure: not drawn"
+        ));
+    }
+}
+
+/// The lighter, dashed style of an intersample enclosure.
+fn light(c: RGBColor) -> Style {
+    Style {
+        fill: Some(c.mix(0.04)),
+        stroke: Some((c.mix(0.5), 1)),
+        dashed: true,
+        hatch: None,
+    }
+}
+
 fn verdict_word(v: Verdict) -> &'static str {
     v.as_str()
 }
@@ -571,6 +637,12 @@ pub fn svg(
     }
     for tr in samples.iter().chain(cex.map(|c| c.1)) {
         pts.extend(tr.states.iter().map(|x| (x[i], x[j])));
+    }
+    for b in outcome.between.iter().flatten().flatten() {
+        if b.is_finite() {
+            pts.push((b.lo[i], b.lo[j]));
+            pts.push((b.hi[i], b.hi[j]));
+        }
     }
     let x0 = plan.initial.bbox();
     pts.push((x0.lo[i], x0.lo[j]));
@@ -626,8 +698,9 @@ pub fn svg(
         ));
     }
 
-    // the reachable sets, step by step
+    // the reachable sets, step by step, each period's enclosure behind them
     let last = outcome.reach.len().saturating_sub(1);
+    intersample(&mut panel, &mut legend, outcome, dims);
     let mut not_finite = Vec::new();
     let every = last.div_ceil(12).max(1);
     let mut boxes = false;
@@ -1452,6 +1525,27 @@ fn draw_legend(l: &Legend, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), 
                     area.draw(&PathElement::new(ring, c.stroke_width(1)))
                         .map_err(err)?;
                 }
+            }
+            Swatch::Light(c) => {
+                let ring = vec![
+                    (sx, sy),
+                    (sx + 28, sy),
+                    (sx + 28, sy + 14),
+                    (sx, sy + 14),
+                    (sx, sy),
+                ];
+                area.draw(&Rectangle::new(
+                    [(sx, sy), (sx + 28, sy + 14)],
+                    c.mix(0.08).filled(),
+                ))
+                .map_err(err)?;
+                area.draw(&DashedPathElement::new(
+                    ring,
+                    5,
+                    3,
+                    c.mix(0.5).stroke_width(1),
+                ))
+                .map_err(err)?;
             }
             Swatch::Hatch(c) => {
                 let ring = vec![

@@ -279,6 +279,38 @@ fn intersample_enclosures_are_drawn_lightly_with_a_legend_entry() {
     assert!(light(&f).is_empty());
 }
 
+/// A radius search: the input set scaled to the certified scale (a thick
+/// green outline) inside the one scaled to the attacked scale (dashed red),
+/// with the attack's input as a red dot, and both scales in the legend.
+#[test]
+fn a_radius_search_draws_its_certified_and_attacked_radii() {
+    let f = facts(&plot("specs/network/classifier_robust.ravel", &[], 0));
+    assert!(f.has_text("radius eps for sector: certified up to"));
+    assert!(f.has_text("radius eps: violated at scale"));
+    let extent = |p: &[(f64, f64)]| {
+        let xs = p.iter().map(|q| q.0);
+        xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min)
+    };
+    let certified: Vec<&Shape> = f
+        .lines
+        .iter()
+        .filter(|l| l.0 == "#2E7D32" && l.1 == "2" && l.2.len() >= 4)
+        .collect();
+    assert_eq!(certified.len(), 1, "one certified outline (and its swatch)");
+    // the dashed outline is drawn in pieces: its extent is the pieces'
+    let attacked: Vec<(f64, f64)> = f
+        .lines
+        .iter()
+        .filter(|l| l.0 == "#C62828")
+        .flat_map(|l| l.2.clone())
+        .collect();
+    assert!(extent(&attacked) > extent(&certified[0].2));
+    assert!(f.dots.iter().any(|d| d == "#B71C1C"), "the attack's input");
+    // a spec without a radius search has none of it
+    let f = facts(&plot("specs/network/policy_output_set.ravel", &[], 0));
+    assert!(!f.has_text("certified up to"));
+}
+
 #[test]
 fn sets_outside_the_view_are_listed() {
     // double_integrator's avoid set `overshoot` lies beyond every state

@@ -29,6 +29,10 @@
 //! * simulated trajectories (thin grey lines) and a falsifying trajectory
 //!   (red, thick, with a dot per state).
 //!
+//! A network spec's radius search draws, on the input panel, the input set
+//! scaled to the certified scale (green) and to the attacked one (red,
+//! dashed) with the attack's input: the true radius lies between them.
+//!
 //! A set with more coordinates than two is drawn as a polygon that
 //! contains its projection: each inequality with the other coordinates
 //! replaced by their bounds over the set's box (exact for boxes, balls and
@@ -844,6 +848,92 @@ fn net_samples(plan: &NetworkPlan, count: usize) -> Vec<(Vec<f64>, Vec<f64>)> {
     out
 }
 
+/// The input set scaled about its centre by `s` (a radius search's scale:
+/// radius `s·unit` along each input); `None` for a polytope, which a radius
+/// search does not take.
+fn scaled(input: &Region, unit: &[f64], s: f64) -> Option<Region> {
+    let radius: Vec<f64> = unit.iter().map(|u| s * u).collect();
+    match input {
+        Region::Box(b) => {
+            let c: Vec<f64> = b.lo.iter().zip(&b.hi).map(|(l, h)| 0.5 * (l + h)).collect();
+            Some(Region::Box(IBox::new(
+                c.iter().zip(&radius).map(|(c, r)| c - r).collect(),
+                c.iter().zip(&radius).map(|(c, r)| c + r).collect(),
+            )))
+        }
+        Region::Ball { center, norm, .. } => Some(Region::Ball {
+            center: center.clone(),
+            radius,
+            norm: *norm,
+        }),
+        Region::Polytope { .. } => None,
+    }
+}
+
+/// A radius search on the input panel: the input set scaled to the largest
+/// certified scale (green, solid) and to the smallest attacked one (red,
+/// dashed), with the attack's input as a red dot: the true radius lies
+/// between the two outlines.
+fn radius_searches(
+    panel: &mut Panel,
+    legend: &mut Legend,
+    input: &Region,
+    outcome: &NetworkOutcome,
+    d: (usize, usize),
+) {
+    for r in &outcome.radii {
+        let radius = |s: f64| {
+            let v: Vec<String> = r.unit.iter().take(2).map(|u| num(s * u)).collect();
+            v.join(", ")
+        };
+        match r.certified {
+            Some(s) => {
+                if let Some(p) = scaled(input, &r.unit, s).and_then(|g| project(&g, d)) {
+                    panel.shape(&p, Style::outline(GOAL, 2, false));
+                }
+                legend.entries.push((
+                    Swatch::Line(GOAL, 2),
+                    format!(
+                        "radius {} for {}: certified up to scale {} (radius {} on inputs 0, 1)",
+                        r.name,
+                        r.property,
+                        num(s),
+                        radius(s)
+                    ),
+                ));
+            }
+            None => legend.notes.push(format!(
+                "radius {} for {}: not certified even at the centre",
+                r.name, r.property
+            )),
+        }
+        match &r.attacked {
+            Some((s, w)) => {
+                if let Some(p) = scaled(input, &r.unit, *s).and_then(|g| project(&g, d)) {
+                    panel.shape(&p, Style::outline(AVOID, 1, true));
+                }
+                panel
+                    .dots
+                    .push(((w.input[0], w.input[1]), CEX.to_rgba(), 4));
+                legend.entries.push((
+                    Swatch::Outline(AVOID, true),
+                    format!(
+                        "radius {}: violated at scale {} (radius {}), by the input at the red dot",
+                        r.name,
+                        num(*s),
+                        radius(*s)
+                    ),
+                ));
+            }
+            None => legend.notes.push(format!(
+                "radius {}: no violation found up to scale {}",
+                r.name,
+                num(r.max)
+            )),
+        }
+    }
+}
+
 /// The SVG of one network-spec result: the input set over inputs 0 and 1
 /// (with the partition, sampled inputs and a counterexample), and the
 /// output set over outputs `(i, j)` with the properties' sets.
@@ -887,6 +977,20 @@ pub fn network_svg(
         }
         if let Some((_, w)) = cex {
             pts.push((w.input[0], w.input[1]));
+        }
+        for r in &outcome.radii {
+            let scales = r
+                .certified
+                .into_iter()
+                .chain(r.attacked.as_ref().map(|a| a.0));
+            for s in scales {
+                if let Some(region) = plan.input.as_ref().and_then(|i| scaled(i, &r.unit, s)) {
+                    pts.extend(project(&region, d).unwrap_or_default());
+                }
+            }
+            if let Some((_, w)) = &r.attacked {
+                pts.push((w.input[0], w.input[1]));
+            }
         }
         let mut panel = Panel::new(format!("{xn}[0]"), format!("{xn}[1]"), window_of(&pts));
         if let Some(r) = &plan.input {
@@ -943,6 +1047,9 @@ pub fn network_svg(
             panel
                 .dots
                 .push(((w.input[0], w.input[1]), CEX.to_rgba(), 4));
+        }
+        if let Some(input) = &plan.input {
+            radius_searches(&mut panel, &mut legend, input, outcome, d);
         }
         if inputs > 2 {
             legend

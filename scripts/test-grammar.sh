@@ -3,8 +3,11 @@
 # (editors/vscode/syntaxes/ravel.tmLanguage.json) against the annotated
 # samples editors/vscode/test/*.ravel-test, with vscode-tmgrammar-test from
 # npm, installed at the version of the committed lock file into
-# target/grammar-test (never into the repository); and checks that the
-# extension's script parses. Needs node and npm.
+# target/grammar-test (never into the repository); checks that the
+# extension's script parses; then scripts/test-extension.sh packages the
+# extension with vsce (from the same lock file) and starts the `ravel lsp`
+# it launches (it needs the ravel binary: run cargo build first). Needs
+# node and npm.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -32,3 +35,7 @@ node --check "$root/editors/vscode/extension.js"
 node_modules/.bin/vscode-tmgrammar-test \
     -g "$root/editors/vscode/syntaxes/ravel.tmLanguage.json" \
     "$root/editors/vscode/test/*.ravel-test"
+
+# the extension packaged and its launch of `ravel lsp` (the binary of
+# $CARGO_TARGET_DIR or target/, or the one given as this script's argument)
+bash "$root/scripts/test-extension.sh" "$work" "$@"

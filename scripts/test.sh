@@ -2,7 +2,8 @@
 # The whole test suite, what CI runs (README's second set-up command):
 # the system library the SDP solver opens, then every Rust test, then the
 # checks outside cargo: the VS Code extension's grammar against its
-# annotated samples (node and npm), and the HTML report in a browser.
+# annotated samples, the extension packaged and its launch of `ravel lsp`
+# (node and npm), and the HTML report in a browser.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh

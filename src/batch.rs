@@ -18,6 +18,7 @@ use std::time::Instant;
 use serde_json::{json, Value};
 
 use super::{err, exit, load_with, out, progress_due, with_ticker, Format, ProgressLine};
+use crate::html::esc;
 use ravel::execute::{Run, Verdict};
 use ravel_syntax::diag::{render, Code, Diagnostic};
 
@@ -171,25 +172,6 @@ struct Item {
     entry: crate::html::Entry,
 }
 
-/// XML text with the five special characters escaped and control
-/// characters (not allowed in XML 1.0) written as `\u{…}`.
-fn xml(s: &str) -> String {
-    let mut o = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => o.push_str("&amp;"),
-            '<' => o.push_str("&lt;"),
-            '>' => o.push_str("&gt;"),
-            '"' => o.push_str("&quot;"),
-            '\'' => o.push_str("&apos;"),
-            '\n' | '\t' => o.push(c),
-            c if c.is_control() => o.push_str(&format!("\\u{{{:x}}}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o
-}
-
 /// The JUnit suite of a pair: its spec, and its controller when one was
 /// given with `--controller` (pairs of one spec with two controllers are
 /// two suites, whether they ran or failed to load). Control characters are
@@ -209,9 +191,9 @@ fn suite_name(spec: &Path, controller: Option<&Path>) -> String {
 fn junit_error(suite: &str, message: &str, detail: &str) -> String {
     format!(
         "  <testsuite name=\"{s}\" tests=\"1\" failures=\"0\" errors=\"1\" skipped=\"0\">\n    <testcase classname=\"{s}\" name=\"check\">\n      <error message=\"{m}\" type=\"ERROR\">{d}</error>\n    </testcase>\n  </testsuite>\n",
-        s = xml(suite),
-        m = xml(message),
-        d = xml(detail)
+        s = esc(suite),
+        m = esc(message),
+        d = esc(detail)
     )
 }
 
@@ -564,7 +546,7 @@ impl Item {
         if let Some(start) = self.junit.find("type=\"ERROR\">") {
             let from = start + "type=\"ERROR\">".len();
             if let Some(len) = self.junit[from..].find("</error>") {
-                self.junit.replace_range(from..from + len, &xml(detail));
+                self.junit.replace_range(from..from + len, &esc(detail));
             }
         }
         self
@@ -685,7 +667,7 @@ fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str
                     "\n      <failure message=\"FALSIFIED {} (violated by {})\" type=\"FALSIFIED\">{}</failure>\n    ",
                     p.place,
                     ravel_syntax::diag::compact(-p.margin),
-                    xml(report)
+                    esc(report)
                 )
             }
             Verdict::Unsure => match opts.fail_on {
@@ -694,7 +676,7 @@ fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str
                     format!(
                         "\n      <failure message=\"UNSURE {} (margin {margin})\" type=\"UNSURE\">{}</failure>\n    ",
                         p.place,
-                        xml(report)
+                        esc(report)
                     )
                 }
                 FailOn::Falsified => {
@@ -708,13 +690,13 @@ fn junit_cases(suite: &str, list: &[Case], opts: &Options, ms: f64, report: &str
         };
         cases += &format!(
             "    <testcase classname=\"{s}\" name=\"{n}\"{time}>{body}</testcase>\n",
-            s = xml(suite),
-            n = xml(name)
+            s = esc(suite),
+            n = esc(name)
         );
     }
     format!(
         "  <testsuite name=\"{s}\" tests=\"{t}\" failures=\"{failures}\" errors=\"0\" skipped=\"{skipped}\"{time}>\n{cases}  </testsuite>\n",
-        s = xml(suite),
+        s = esc(suite),
         t = list.len()
     )
 }

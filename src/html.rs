@@ -29,7 +29,9 @@ pub struct Entry {
     pub error: Option<String>,
 }
 
-/// Text made safe for HTML (and free of control characters).
+/// Text made safe for XML and HTML, the report's page and JUnit documents
+/// alike: the five special characters escaped and control characters (not
+/// allowed in XML 1.0) written as `\u{…}`.
 pub fn esc(s: &str) -> String {
     let mut o = String::with_capacity(s.len());
     for c in s.chars() {
@@ -38,9 +40,9 @@ pub fn esc(s: &str) -> String {
             '<' => o.push_str("&lt;"),
             '>' => o.push_str("&gt;"),
             '"' => o.push_str("&quot;"),
-            '\'' => o.push_str("&#39;"),
+            '\'' => o.push_str("&apos;"),
             '\n' | '\t' => o.push(c),
-            c if c.is_control() => o.push('?'),
+            c if c.is_control() => o.push_str(&format!("\\u{{{:x}}}", c as u32)),
             c => o.push(c),
         }
     }
@@ -144,4 +146,16 @@ pub fn page(entries: &[Entry], summary: &str) -> String {
     // well-formed XML alike
     s += &format!("<script>//<![CDATA[\n{CHECK}\n//]]></script>\n</body>\n</html>\n");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn esc_escapes_markup_and_control_characters() {
+        assert_eq!(
+            super::esc("a<b>&\"c'\u{1b}[2J\n\td"),
+            "a&lt;b&gt;&amp;&quot;c&apos;\\u{1b}[2J\n\td"
+        );
+        assert_eq!(super::esc("x[0] ∈ ℝ²"), "x[0] ∈ ℝ²");
+    }
 }

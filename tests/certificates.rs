@@ -13,23 +13,10 @@ use ravel_base::nn::Layer;
 use ravel_certify::{check, Answer};
 use serde_json::Value;
 
-fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
-    let source = std::fs::read_to_string(spec).expect("spec readable");
-    let dir = Path::new(spec).parent().expect("folder");
-    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
-    let plan = ravel::lower::lower_system(&checked);
-    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
-    let id = ravel::certificate_writer::Identity {
-        spec_path: spec.to_string(),
-        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
-    };
-    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
-    (plan, cert)
-}
-
-fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
-    check(cert, plan.closed_loop.net()).answer
-}
+#[path = "common/binary.rs"]
+mod binary;
+mod common;
+use common::{system_answer as answer, system_certificate as run};
 
 fn expect_invalid(cert: &Value, plan: &ravel::lower::SystemPlan, words: &str, what: &str) {
     match answer(cert, plan) {
@@ -307,10 +294,7 @@ fn ravel() -> Command {
 }
 
 fn tmp(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("ravel-cert-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
+    binary::scratch("ravel-cert", name)
 }
 
 #[test]

@@ -5,28 +5,11 @@
 //! non-axis-aligned), a forged counterexample or a hostile number is
 //! rejected — never VALID.
 
-use std::path::Path;
-
-use ravel_certify::{check, Answer};
+use ravel_certify::Answer;
 use serde_json::Value;
 
-fn run(spec: &str) -> (ravel::lower::SystemPlan, Value) {
-    let source = std::fs::read_to_string(spec).expect("spec readable");
-    let dir = Path::new(spec).parent().expect("folder");
-    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
-    let plan = ravel::lower::lower_system(&checked);
-    let outcome = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
-    let id = ravel::certificate_writer::Identity {
-        spec_path: spec.to_string(),
-        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
-    };
-    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
-    (plan, cert)
-}
-
-fn answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> Answer {
-    check(cert, plan.closed_loop.net()).answer
-}
+mod common;
+use common::{system_answer as answer, system_certificate as run};
 
 fn not_valid(cert: &Value, plan: &ravel::lower::SystemPlan, what: &str) -> Answer {
     let a = answer(cert, plan);

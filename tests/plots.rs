@@ -6,26 +6,14 @@
 //! plots. (`scripts/test-report.sh` loads the report in a real browser.)
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-fn ravel(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the binary runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+#[path = "common/binary.rs"]
+mod binary;
+use binary::ravel;
 
 /// A fresh folder for one test.
 fn folder(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ravel-plots-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    binary::scratch("ravel-plots", name)
 }
 
 /// Plot `spec` (with extra arguments) into a fresh folder; the SVG text.

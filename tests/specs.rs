@@ -13,6 +13,8 @@ use std::path::Path;
 
 use ravel_syntax::diag::render;
 
+mod common;
+
 fn expect_header(source: &str) -> Vec<String> {
     let line = source.lines().next().unwrap_or_default();
     let rest = line
@@ -169,8 +171,6 @@ fn certificate_summary(
 /// tree and of the report.
 #[test]
 fn network_specs() {
-    use ravel::execute::network::execute_network;
-    use ravel::execute::Control;
     use ravel::execute::Verdict;
     insta::glob!("../specs/network", "*.ravel", |path| {
         let source = std::fs::read_to_string(path).expect("spec is readable");
@@ -190,15 +190,7 @@ fn network_specs() {
             ),
         };
         let plan = ravel::lower::lower_network(&checked);
-        let out = execute_network(
-            &plan,
-            &Control {
-                elapsed: &|| 0.0,
-                time_limit: None,
-                progress: &|_| {},
-                threads: 1,
-            },
-        );
+        let out = common::run_net(&plan);
         if let (Some(b), Some(s)) = (&out.output.bbox, &out.output.sampled_bbox) {
             assert!(
                 b.contains_box(s),

@@ -356,34 +356,13 @@ fn the_phases_import_forward_only() {
     );
 }
 
-/// The keywords of the pest grammar: its quoted words (not `^"e"`, the
-/// exponent of a number, nor single characters).
-fn grammar_keywords() -> Vec<String> {
-    let text =
-        std::fs::read_to_string(root().join("crates/syntax/grammar/ravel.pest")).expect("grammar");
-    let mut out: Vec<String> = Vec::new();
-    for line in text.lines().filter(|l| !l.trim_start().starts_with("//")) {
-        let mut rest = line;
-        while let Some(i) = rest.find('"') {
-            let caret = rest[..i].ends_with('^');
-            let after = &rest[i + 1..];
-            let Some(j) = after.find('"') else { break };
-            let word = &after[..j];
-            let is_word = word.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
-                && word.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
-            if is_word && !caret && !out.iter().any(|w| w == word) {
-                out.push(word.to_string());
-            }
-            rest = &after[j + 1..];
-        }
-    }
-    out
-}
-
 /// Every keyword of the grammar is highlighted by the VS Code extension's
 /// TextMate grammar (it appears in one of its `match` patterns) and is
 /// annotated in its samples (`scripts/test-grammar.sh` checks the scopes),
-/// so the two grammars cannot drift apart.
+/// so the two grammars cannot drift apart. The keywords are the language
+/// server's list, `ravel_ide::words::KEYWORDS`, which its own test holds
+/// equal to the pest grammar's quoted words: one list, not a second reading
+/// of the grammar here.
 #[test]
 fn the_textmate_grammar_knows_every_keyword() {
     let dir = root().join("editors/vscode");
@@ -423,15 +402,15 @@ fn the_textmate_grammar_knows_every_keyword() {
         .filter(|l| !l.starts_with("//"))
         .flat_map(|l| l.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')))
         .collect();
-    let keywords = grammar_keywords();
+    let keywords: Vec<&str> = ravel_ide::words::KEYWORDS.iter().map(|(k, _)| *k).collect();
     assert!(keywords.len() > 50, "{keywords:?}");
     for k in &keywords {
         assert!(
-            words.contains(&k.as_str()),
+            words.contains(k),
             "the keyword `{k}` is not in editors/vscode/syntaxes/ravel.tmLanguage.json"
         );
         assert!(
-            sample_words.contains(&k.as_str()),
+            sample_words.contains(k),
             "the keyword `{k}` is in no sample of editors/vscode/test/"
         );
     }

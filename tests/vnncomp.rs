@@ -6,29 +6,17 @@
 //! Networks are hand-made here; nothing third-party is used.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use nalgebra::{DMatrix, DVector};
 use ravel::onnx::build::{GraphBuilder, Storage};
 use ravel_cli::vnncomp::{parse_instances, result_text, Answer};
 
-fn ravel(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ravel"))
-        .args(args)
-        .output()
-        .expect("runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+#[path = "common/binary.rs"]
+mod binary;
+use binary::ravel;
 
 fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("vnncomp-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("dir");
-    d
+    binary::scratch("vnncomp", name)
 }
 
 /// `y0 = x0 + x1`, `y1 = x0 − x1` (float32, exact weights).

@@ -4,11 +4,13 @@
 //! outside the supported fragment are refused with their line.
 
 use ravel::check::Task;
-use ravel::execute::network::execute_network;
-use ravel::execute::Control;
 use ravel::ir::NetPropertyKind;
 use ravel_analysis::sets::Region;
 use std::path::Path;
+
+#[path = "common/binary.rs"]
+mod binary;
+mod common;
 
 const DIR: &str = "tests/data/vnnlib";
 
@@ -48,15 +50,7 @@ fn run_spec(
         panic!("{name}: not a network spec")
     };
     let plan = ravel::lower::lower_network(&c);
-    let out = execute_network(
-        &plan,
-        &Control {
-            elapsed: &|| 0.0,
-            time_limit: None,
-            progress: &|_| {},
-            threads: 1,
-        },
-    );
+    let out = common::run_net(&plan);
     (plan, out)
 }
 
@@ -192,14 +186,7 @@ fn counterexamples_are_float32_inputs_of_the_box() {
         let Task::Network(c) = task else {
             panic!("not a network spec")
         };
-        let plan = ravel::lower::lower_network(&c);
-        let ctl = Control {
-            elapsed: &|| 0.0,
-            time_limit: None,
-            progress: &|_| {},
-            threads: 1,
-        };
-        execute_network(&plan, &ctl)
+        common::run_net(&ravel::lower::lower_network(&c))
     };
     // [-0.30000003, -0.30000001] holds one float32, -0.30000001192…
     let out = verify(&property("-0.30000003", "-0.30000001"));
@@ -348,20 +335,11 @@ fn import_vnnlib_writes_one_file_per_region() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let classifier = root.join("models/classifier.onnx");
     let p = root.join("tests/data/vnnlib/input_disjunction.vnnlib");
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("vnnlib-regions");
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("dir");
+    let d = binary::scratch("vnnlib", "regions");
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     let ravel = |args: &[String]| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_ravel"))
-            .args(args)
-            .output()
-            .expect("runs");
-        (
-            out.status.code().unwrap_or(-1),
-            String::from_utf8_lossy(&out.stdout).into_owned(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        binary::ravel(&args)
     };
     let spec = d.join("prop.ravel");
     // import-vnnlib writes one spec per region and says so

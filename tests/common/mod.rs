@@ -110,3 +110,25 @@ pub fn net_certificate(p: &NetworkPlan, out: &NetworkOutcome) -> Value {
     };
     ravel::certificate_writer::build_network(p, out, &id)
 }
+
+/// A closed-loop spec (a path from the repository's root) run from its
+/// file, and the certificate of its result (its identity: that path and
+/// the spec's hash).
+pub fn system_certificate(spec: &str) -> (ravel::lower::SystemPlan, Value) {
+    let source = std::fs::read_to_string(spec).expect("spec readable");
+    let dir = std::path::Path::new(spec).parent().expect("folder");
+    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
+    let plan = ravel::lower::lower_system(&checked);
+    let outcome = ravel::execute::execute_system(&plan, &Control::unlimited());
+    let id = ravel::certificate_writer::Identity {
+        spec_path: spec.to_string(),
+        spec_sha256: ravel::check::sha256_hex(source.as_bytes()),
+    };
+    let cert = ravel::certificate_writer::build_system(&plan, &outcome, &id);
+    (plan, cert)
+}
+
+/// The independent checker's answer on a closed loop's certificate.
+pub fn system_answer(cert: &Value, plan: &ravel::lower::SystemPlan) -> ravel_certify::Answer {
+    ravel_certify::check(cert, plan.closed_loop.net()).answer
+}

@@ -605,6 +605,43 @@ fn light(c: RGBColor) -> Style {
     }
 }
 
+/// A trajectory's states on coordinates `(i, j)`, up to its first
+/// non-finite state.
+fn trace(tr: &Trajectory, (i, j): (usize, usize)) -> Vec<P> {
+    tr.states
+        .iter()
+        .take_while(|x| x.iter().all(|z| z.is_finite()))
+        .map(|x| (x[i], x[j]))
+        .collect()
+}
+
+/// The set an analysis starts from (a closed loop's initial set, a
+/// network's input set), filled grey at `alpha`, and the cells it was
+/// partitioned into, outlined in black when there are several, each with
+/// its legend entry.
+fn start(
+    (panel, legend): (&mut Panel, &mut Legend),
+    (set, alpha, label): (&Region, f64, String),
+    (cells, cells_word): (&[IBox], &str),
+    d: (usize, usize),
+) {
+    if let Some(poly) = project(set, d) {
+        panel.shape(&poly, Style::filled(GREY, alpha, 1));
+        legend.entries.push((Swatch::Fill(GREY), label));
+    }
+    if cells.len() > 1 {
+        for c in cells {
+            if let Some(p) = project(&Region::Box(c.clone()), d) {
+                panel.shape(&p, Style::outline(BLACK, 1, false));
+            }
+        }
+        legend.entries.push((
+            Swatch::Outline(BLACK, false),
+            format!("{} {cells_word}", cells.len()),
+        ));
+    }
+}
+
 fn verdict_word(v: Verdict) -> &'static str {
     v.as_str()
 }
@@ -683,24 +720,16 @@ pub fn svg(
     }
 
     // the initial set and its partition
-    if let Some(poly) = project(&plan.initial, dims) {
-        panel.shape(&poly, Style::filled(GREY, 0.35, 1));
-        legend.entries.push((
-            Swatch::Fill(GREY),
+    start(
+        (&mut panel, &mut legend),
+        (
+            &plan.initial,
+            0.35,
             format!("initial set {} (step 0)", plan.initial_name),
-        ));
-    }
-    if outcome.partition.len() > 1 {
-        for c in &outcome.partition {
-            if let Some(p) = project(&Region::Box(c.clone()), dims) {
-                panel.shape(&p, Style::outline(BLACK, 1, false));
-            }
-        }
-        legend.entries.push((
-            Swatch::Outline(BLACK, false),
-            format!("{} partition cells", outcome.partition.len()),
-        ));
-    }
+        ),
+        (&outcome.partition, "partition cells"),
+        dims,
+    );
 
     // the reachable sets, step by step, each period's enclosure behind them
     let last = outcome.reach.len().saturating_sub(1);
@@ -788,13 +817,7 @@ pub fn svg(
 
     // trajectories
     for tr in samples {
-        let pts: Vec<P> = tr
-            .states
-            .iter()
-            .take_while(|x| x.iter().all(|z| z.is_finite()))
-            .map(|x| (x[i], x[j]))
-            .collect();
-        panel.lines.push((pts, SAMPLE.mix(0.45), 1));
+        panel.lines.push((trace(tr, dims), SAMPLE.mix(0.45), 1));
     }
     if !samples.is_empty() {
         legend.entries.push((
@@ -803,12 +826,7 @@ pub fn svg(
         ));
     }
     if let Some((p, tr)) = cex {
-        let pts: Vec<P> = tr
-            .states
-            .iter()
-            .take_while(|x| x.iter().all(|z| z.is_finite()))
-            .map(|x| (x[i], x[j]))
-            .collect();
+        let pts = trace(tr, dims);
         for q in &pts {
             panel.dots.push((*q, CEX.to_rgba(), 3));
         }
@@ -994,24 +1012,12 @@ pub fn network_svg(
         }
         let mut panel = Panel::new(format!("{xn}[0]"), format!("{xn}[1]"), window_of(&pts));
         if let Some(r) = &plan.input {
-            if let Some(poly) = project(r, d) {
-                panel.shape(&poly, Style::filled(GREY, 0.3, 1));
-                legend.entries.push((
-                    Swatch::Fill(GREY),
-                    format!("input set {} (left)", plan.input_set_name),
-                ));
-            }
-        }
-        if outcome.partition.len() > 1 {
-            for c in &outcome.partition {
-                if let Some(p) = project(&Region::Box(c.clone()), d) {
-                    panel.shape(&p, Style::outline(BLACK, 1, false));
-                }
-            }
-            legend.entries.push((
-                Swatch::Outline(BLACK, false),
-                format!("{} input cells", outcome.partition.len()),
-            ));
+            start(
+                (&mut panel, &mut legend),
+                (r, 0.3, format!("input set {} (left)", plan.input_set_name)),
+                (&outcome.partition, "input cells"),
+                d,
+            );
         }
         for (x, _) in &samples {
             panel.dots.push(((x[0], x[1]), SAMPLE.mix(0.8), 2));
@@ -1604,64 +1610,40 @@ fn draw_legend(l: &Legend, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), 
     y += 8;
     for (swatch, text) in &l.entries {
         let (sx, sy) = (x, y);
+        // the swatch's box, and its outline dashed
+        let rect = [(sx, sy), (sx + 28, sy + 14)];
+        let ring = vec![
+            (sx, sy),
+            (sx + 28, sy),
+            (sx + 28, sy + 14),
+            (sx, sy + 14),
+            (sx, sy),
+        ];
+        let dashed_ring = |style: ShapeStyle| {
+            area.draw(&DashedPathElement::new(ring.clone(), 5, 3, style))
+                .map_err(err)
+        };
         match swatch {
             Swatch::Fill(c) => {
-                area.draw(&Rectangle::new(
-                    [(sx, sy), (sx + 28, sy + 14)],
-                    c.mix(0.3).filled(),
-                ))
-                .map_err(err)?;
-                area.draw(&Rectangle::new(
-                    [(sx, sy), (sx + 28, sy + 14)],
-                    c.stroke_width(1),
-                ))
-                .map_err(err)?;
+                area.draw(&Rectangle::new(rect, c.mix(0.3).filled()))
+                    .map_err(err)?;
+                area.draw(&Rectangle::new(rect, c.stroke_width(1)))
+                    .map_err(err)?;
             }
             Swatch::Outline(c, dashed) => {
-                let ring = vec![
-                    (sx, sy),
-                    (sx + 28, sy),
-                    (sx + 28, sy + 14),
-                    (sx, sy + 14),
-                    (sx, sy),
-                ];
                 if *dashed {
-                    area.draw(&DashedPathElement::new(ring, 5, 3, c.stroke_width(1)))
-                        .map_err(err)?;
+                    dashed_ring(c.stroke_width(1))?;
                 } else {
-                    area.draw(&PathElement::new(ring, c.stroke_width(1)))
+                    area.draw(&PathElement::new(ring.clone(), c.stroke_width(1)))
                         .map_err(err)?;
                 }
             }
             Swatch::Light(c) => {
-                let ring = vec![
-                    (sx, sy),
-                    (sx + 28, sy),
-                    (sx + 28, sy + 14),
-                    (sx, sy + 14),
-                    (sx, sy),
-                ];
-                area.draw(&Rectangle::new(
-                    [(sx, sy), (sx + 28, sy + 14)],
-                    c.mix(0.08).filled(),
-                ))
-                .map_err(err)?;
-                area.draw(&DashedPathElement::new(
-                    ring,
-                    5,
-                    3,
-                    c.mix(0.5).stroke_width(1),
-                ))
-                .map_err(err)?;
+                area.draw(&Rectangle::new(rect, c.mix(0.08).filled()))
+                    .map_err(err)?;
+                dashed_ring(c.mix(0.5).stroke_width(1))?;
             }
             Swatch::Hatch(c) => {
-                let ring = vec![
-                    (sx, sy),
-                    (sx + 28, sy),
-                    (sx + 28, sy + 14),
-                    (sx, sy + 14),
-                    (sx, sy),
-                ];
                 for k in 0..4 {
                     let a = sx + 7 * k;
                     area.draw(&PathElement::new(
@@ -1670,8 +1652,7 @@ fn draw_legend(l: &Legend, area: &DrawingArea<SVGBackend, Shift>) -> Result<(), 
                     ))
                     .map_err(err)?;
                 }
-                area.draw(&DashedPathElement::new(ring, 5, 3, c.stroke_width(1)))
-                    .map_err(err)?;
+                dashed_ring(c.stroke_width(1))?;
             }
             Swatch::Line(c, w) => {
                 area.draw(&PathElement::new(

@@ -257,6 +257,7 @@ impl ProgressLine<'_> {
                 let phase = match p.phase {
                     ravel::execute::Phase::Sampling => "simulating",
                     ravel::execute::Phase::Cells => "propagating cell",
+                    ravel::execute::Phase::Observations => "selecting actions, observation",
                 };
                 let of = p.total.map_or(String::new(), |t| format!(" of {t}"));
                 format!("{phase} {}{of}", p.done)

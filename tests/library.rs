@@ -62,3 +62,33 @@ fn front_end_diagnostics_reach_the_caller() {
         .expect_err("does not check");
     assert!(!err.is_empty());
 }
+
+/// Robust action selection reports its progress (issue 30: a long CARRL
+/// run said nothing): one report per observation over every select block,
+/// the count of those done before it, of the total, on one thread and on
+/// several.
+#[test]
+fn action_selection_reports_progress_per_observation() {
+    let spec = "specs/network/lane_carrl.ravel";
+    let source = std::fs::read_to_string(spec).expect("spec");
+    for threads in [1, 3] {
+        let seen = std::sync::Mutex::new(Vec::new());
+        let progress = |p: ravel::execute::Progress| {
+            if p.phase == ravel::execute::Phase::Observations {
+                seen.lock().expect("lock").push((p.done, p.total));
+            }
+        };
+        let ctl = Control {
+            elapsed: &|| 0.0,
+            time_limit: None,
+            progress: &progress,
+            threads,
+        };
+        ravel::verify(&source, Path::new("specs/network"), &read, None, &ctl).expect("checks");
+        let mut seen = seen.into_inner().expect("lock");
+        seen.sort_unstable();
+        // 3 inline observations and 6 from the file
+        let expected: Vec<(usize, Option<usize>)> = (0..9).map(|k| (k, Some(9))).collect();
+        assert_eq!(seen, expected, "{threads} threads");
+    }
+}

@@ -211,6 +211,8 @@ pub enum Phase {
     Sampling,
     /// Propagating partition cells.
     Cells,
+    /// Robust action selection: observations whose ε-balls are bounded.
+    Observations,
 }
 
 /// A progress report: `done` of `total` items of a phase.

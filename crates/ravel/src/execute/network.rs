@@ -1217,8 +1217,19 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
 }
 
 /// Every select block's robust action choice per observation (past the
-/// time limit: no bound, no claim).
+/// time limit: no bound, no claim). Progress counts the observations done
+/// over every block (from any thread: only the count is shared).
 fn select_actions(plan: &NetworkPlan, ctl: &Control) -> Vec<Selection> {
+    let total: usize = plan.selects.iter().map(|s| s.observations.len()).sum();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let report = || {
+        let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        (ctl.progress)(crate::execute::Progress {
+            phase: crate::execute::Phase::Observations,
+            done: k,
+            total: Some(total),
+        });
+    };
     plan.selects
         .iter()
         .map(|s| Selection {
@@ -1226,6 +1237,7 @@ fn select_actions(plan: &NetworkPlan, ctl: &Control) -> Vec<Selection> {
             epsilon: s.epsilon.clone(),
             observations: s.observations.clone(),
             choices: map_ordered(&s.observations, ctl.threads, &|o: &Vec<f64>| {
+                report();
                 if ctl.out_of_time() {
                     let m = plan.net.outputs();
                     let nominal = argmax(&plan.net.forward(o));

@@ -92,3 +92,36 @@ fn action_selection_reports_progress_per_observation() {
         assert_eq!(seen, expected, "{threads} threads");
     }
 }
+
+/// A network spec's uniform grid reports its cells as it bounds them: the
+/// count started before each report, of the grid's cells, ending at the
+/// last group or cell (grouped cells are reported a group at a time).
+#[test]
+fn a_network_grid_reports_its_cells() {
+    let source = std::fs::read_to_string("specs/network/classifier_robust.ravel")
+        .expect("spec")
+        .replace("partitioner none", "partitioner uniform [6, 5]")
+        // one analysis (a radius search runs one per scale it tries)
+        .replace("radius eps for sector (max 8, tolerance 0.01)", "");
+    assert!(source.contains("uniform [6, 5]") && !source.contains("radius eps"));
+    let seen = std::sync::Mutex::new(Vec::new());
+    let progress = |p: ravel::execute::Progress| {
+        if p.phase == ravel::execute::Phase::Cells {
+            seen.lock().expect("lock").push((p.done, p.total));
+        }
+    };
+    let ctl = Control {
+        elapsed: &|| 0.0,
+        time_limit: None,
+        progress: &progress,
+        threads: 1,
+    };
+    ravel::verify(&source, Path::new("specs/network"), &read, None, &ctl).expect("checks");
+    let seen = seen.into_inner().expect("lock");
+    assert!(!seen.is_empty());
+    assert!(seen.iter().all(|&(_, t)| t == Some(30)), "{seen:?}");
+    assert_eq!(seen[0].0, 0);
+    assert!(seen.windows(2).all(|w| w[0].0 < w[1].0), "{seen:?}");
+    assert!(seen.last().is_some_and(|&(d, _)| d < 30), "{seen:?}");
+    assert!(seen.len() > 1, "one report for the whole grid: {seen:?}");
+}

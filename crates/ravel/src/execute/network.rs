@@ -465,6 +465,16 @@ fn bound_all(
                         cell_bounds(&plan.net, c, plan.propagator, plan.slope_steps, dirs);
                     (within(b, Some(&root)), iss)
                 };
+                // progress: the cells started so far (from any thread)
+                let started = std::sync::atomic::AtomicUsize::new(0);
+                let report = |count: usize| {
+                    let k = started.fetch_add(count, std::sync::atomic::Ordering::Relaxed);
+                    (ctl.progress)(crate::execute::Progress {
+                        phase: crate::execute::Phase::Cells,
+                        done: k,
+                        total: Some(parts.len()),
+                    });
+                };
                 let done: Vec<Option<(Vec<f64>, Vec<Issue>)>> =
                     if let (Some(mode), Region::Box(_)) =
                         (own_slopes(plan.propagator, plan.slope_steps), region)
@@ -477,6 +487,7 @@ fn bound_all(
                         let group = parts.len().div_ceil(8).clamp(4, 256);
                         let groups: Vec<&[Region]> = parts.chunks(group).collect();
                         map_ordered(&groups, ctl.threads, &|g: &&[Region]| {
+                            report(g.len());
                             if ctl.out_of_time() {
                                 return vec![None; g.len()];
                             }
@@ -497,6 +508,7 @@ fn bound_all(
                         .collect()
                     } else {
                         map_ordered(&parts, ctl.threads, &|c: &Region| {
+                            report(1);
                             if ctl.out_of_time() {
                                 return None;
                             }

@@ -6,6 +6,7 @@ pub mod blas;
 pub mod closed_loop;
 pub mod crown;
 pub mod dense;
+pub mod dual;
 pub mod expm;
 pub mod feedback;
 pub mod issue;

@@ -46,6 +46,8 @@
 
 use std::collections::BinaryHeap;
 
+mod activations;
+
 use nalgebra::DMatrix;
 
 use super::{
@@ -516,6 +518,14 @@ pub(super) fn search(
         }
     }
 
+    // many inputs: split activations instead (where the network allows)
+    if rootbox.dim() > LOOK_AHEAD_DIMS && !settled.iter().all(|s| *s) {
+        if let Some((chain, bx)) = activations::applies(&cx, region) {
+            return activations::search(
+                &cx, &chain, &bx, root_b, &full, issues, budget, settled, witnesses, real_only,
+            );
+        }
+    }
     let min_width: Vec<f64> = (0..rootbox.dim())
         .map(|i| budget.min_size * (rootbox.hi[i] - rootbox.lo[i]))
         .collect();

@@ -1,0 +1,850 @@
+//! Lagrangian bounds of a ReLU network over an input box with some neurons'
+//! phases fixed: the bounding step of branch and bound on ReLU activations.
+//!
+//! A network of affine layers `z_k = W_k h_{k−1} + b_k` (`h_{−1} = x`, the
+//! input) with `h_k = max(z_k, 0)` between them, and a linear objective
+//! `o·z_L` of its output. Over a *domain* (the input box, and bounds
+//! `l_k ≤ z_k ≤ u_k` of every pre-activation that hold on it), each ReLU is
+//! relaxed to its convex hull: the segment `h = 0` for `u ≤ 0`, the segment
+//! `h = z` for `l ≥ 0`, else the triangle with vertices `(l, 0)`, `(0, 0)`,
+//! `(u, u)`. A neuron split *inactive* has `u` clamped to `min(u, 0)`, one
+//! split *active* `l` clamped to `max(l, 0)`: the split constraint is part
+//! of the neuron's own set, so the bound below holds on the sub-domain
+//! where the split holds (the part of the input box where `z_k` has that
+//! sign), and two children cover their parent.
+//!
+//! Dualising the equalities `z_k = W_k h_{k−1} + b_k` with multipliers `ν_k`
+//! (and `ν_L = o`, which cancels the objective's `z_L`) gives, for **any**
+//! `ν`, a lower bound of `o·z_L` over the relaxed problem, hence over the
+//! domain (weak duality; Dvijotham et al. 2018, Bunel et al. 2020):
+//!
+//! ```text
+//! L(ν) = Σ_k ν_k·b_k + min_{x∈box} (W_0ᵀν_0)·x
+//!      + Σ_{k<L} Σ_j min_{(z,h) ∈ relaxation_kj} (−ν_kj z + (W_{k+1}ᵀν_{k+1})_j h)
+//! ```
+//!
+//! Each inner minimum is over a segment or triangle, so at one of its
+//! vertices: every term is computed exactly up to rounding. CROWN's bound
+//! is `L` at the multipliers of its back-substitution ([`Dual::crown`]),
+//! at least as tight here since each neuron takes its hull, not CROWN's
+//! lower line; [`optimise`] then climbs `L` by supergradient ascent (Adam):
+//! the supergradient for `ν_k` is `W_k h*_{k−1} + b_k − z*_k` at the
+//! minimisers.
+//!
+//! # Soundness
+//! The ascent is plain floating point and trusts nothing: the bound
+//! returned is [`certified`]'s, which evaluates `L` at the multipliers found
+//! with every rounding accounted for: the products `Wᵀν` carry their
+//! error bound `γ·|W|ᵀ|ν|` (any summation order), each vertex value is
+//! rounded down term by term, and the sums are [`Acc`]'s lower bounds. A
+//! non-finite number anywhere gives `−∞` (no bound). The pre-activation
+//! bounds of the root come from [`Relaxation`]'s certified boxes.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::crown::{Mode, Relaxation};
+use crate::sets::IBox;
+use ravel_base::nn::{Activation, Layer, Network};
+use ravel_base::num::{error_bound, Acc};
+
+/// A network as alternating affine layers and ReLUs (at least one ReLU).
+#[derive(Clone, Debug)]
+pub struct ReluChain {
+    w: Vec<DMatrix<f64>>,
+    /// `W_kᵀ`, for the products `W_kᵀ ν_k`.
+    wt: Vec<DMatrix<f64>>,
+    /// `|W_k|ᵀ`, for their error bounds.
+    abs_wt: Vec<DMatrix<f64>>,
+    b: Vec<DVector<f64>>,
+}
+
+impl ReluChain {
+    /// `net` as a chain, if it is one (affine, then ReLU and affine
+    /// alternating) with finite weights.
+    pub fn of(net: &Network) -> Option<ReluChain> {
+        let mut w = Vec::new();
+        let mut b = Vec::new();
+        for (i, layer) in net.layers.iter().enumerate() {
+            match (i % 2, layer) {
+                (0, Layer::Affine { w: wi, b: bi }) => {
+                    if !wi.iter().chain(bi.iter()).all(|v| v.is_finite()) {
+                        return None;
+                    }
+                    w.push(wi.clone());
+                    b.push(bi.clone());
+                }
+                (1, Layer::Act(Activation::Relu)) => {}
+                _ => return None,
+            }
+        }
+        if net.layers.len() % 2 == 0 || w.len() < 2 {
+            return None;
+        }
+        let wt = w.iter().map(|m| m.transpose()).collect();
+        let abs_wt = w.iter().map(|m| m.transpose().abs()).collect();
+        Some(ReluChain { w, wt, abs_wt, b })
+    }
+
+    /// The number of affine layers (`L + 1`; the hidden layers are one fewer).
+    fn depth(&self) -> usize {
+        self.w.len()
+    }
+
+    /// The chain up to affine layer `k` (its output `z_k`).
+    fn prefix(&self, k: usize) -> ReluChain {
+        ReluChain {
+            w: self.w[..=k].to_vec(),
+            wt: self.wt[..=k].to_vec(),
+            abs_wt: self.abs_wt[..=k].to_vec(),
+            b: self.b[..=k].to_vec(),
+        }
+    }
+
+    /// The number of outputs.
+    pub fn outputs(&self) -> usize {
+        self.w[self.depth() - 1].nrows()
+    }
+}
+
+/// A neuron's split: the sign its pre-activation is constrained to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// `z ≤ 0`.
+    Inactive,
+    /// `z ≥ 0`.
+    Active,
+}
+
+/// Bounds `lo ≤ z_k ≤ hi` of every hidden pre-activation that hold on a
+/// domain (the splits made so far are in them as clamps).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Domain {
+    /// Per hidden layer, lower bounds.
+    pub lo: Vec<Vec<f64>>,
+    /// Per hidden layer, upper bounds.
+    pub hi: Vec<Vec<f64>>,
+}
+
+impl Domain {
+    /// The root domain: CROWN's certified pre-activation bounds over `input`
+    /// (`None` if any is not finite).
+    pub fn root(net: &Network, input: &IBox) -> Option<Domain> {
+        let r = Relaxation::new(net, input, Mode::Crown);
+        if !r.is_finite() {
+            return None;
+        }
+        let boxes = r.boxes();
+        // boxes[i] bounds the value before layer i; layer 2k + 1 is the
+        // k-th ReLU, so its input, z_k, is boxes[2k + 1]
+        let hidden = (net.layers.len() - 1) / 2;
+        let (lo, hi) = (0..hidden)
+            .map(|k| (boxes[2 * k + 1].lo.clone(), boxes[2 * k + 1].hi.clone()))
+            .unzip();
+        Some(Domain { lo, hi })
+    }
+
+    /// Whether neuron `j` of hidden layer `k` is unstable (its sign unknown).
+    pub fn unstable(&self, k: usize, j: usize) -> bool {
+        self.lo[k][j] < 0.0 && self.hi[k][j] > 0.0
+    }
+
+    /// The number of unstable neurons.
+    pub fn unstable_count(&self) -> usize {
+        (0..self.lo.len())
+            .map(|k| {
+                (0..self.lo[k].len())
+                    .filter(|&j| self.unstable(k, j))
+                    .count()
+            })
+            .sum()
+    }
+
+    /// Tighten the bounds of every unstable neuron of the hidden layers
+    /// after the first (whose bounds are its exact interval image) by
+    /// [`optimise`] on the network up to that layer, for `steps` steps,
+    /// layer by layer (each layer's relaxation uses the tightened bounds of
+    /// the layers before it). A bound is kept only where it is tighter.
+    pub fn tighten(&mut self, chain: &ReluChain, input: &IBox, steps: usize) {
+        for k in 1..self.lo.len() {
+            let open: Vec<usize> = (0..self.lo[k].len())
+                .filter(|&j| self.unstable(k, j))
+                .collect();
+            if open.is_empty() {
+                continue;
+            }
+            let n = self.lo[k].len();
+            let m = open.len();
+            let mut obj = DMatrix::zeros(n, 2 * m);
+            for (c, &j) in open.iter().enumerate() {
+                obj[(j, c)] = 1.0;
+                obj[(j, m + c)] = -1.0;
+            }
+            let sub = chain.prefix(k);
+            let dom = Domain {
+                lo: self.lo[..k].to_vec(),
+                hi: self.hi[..k].to_vec(),
+            };
+            let start = Slopes::crown(&sub, &dom, 2 * m);
+            let o = optimise(&sub, input, &dom, &obj, start, steps);
+            for (c, &j) in open.iter().enumerate() {
+                let (lo, hi) = (o.bounds[c], -o.bounds[m + c]);
+                if lo.is_finite() && lo > self.lo[k][j] {
+                    self.lo[k][j] = lo;
+                }
+                if hi.is_finite() && hi < self.hi[k][j] {
+                    self.hi[k][j] = hi;
+                }
+            }
+        }
+    }
+
+    /// The child where neuron `j` of layer `k` has phase `p`.
+    pub fn split(&self, k: usize, j: usize, p: Phase) -> Domain {
+        let mut d = self.clone();
+        match p {
+            Phase::Inactive => d.hi[k][j] = d.hi[k][j].min(0.0),
+            Phase::Active => d.lo[k][j] = d.lo[k][j].max(0.0),
+        }
+        d
+    }
+}
+
+/// Multipliers `ν_k` of every hidden layer, one column per objective.
+#[derive(Clone, Debug)]
+pub struct Dual {
+    /// Per hidden layer `k`: `n_k × R`.
+    pub nu: Vec<DMatrix<f64>>,
+}
+
+/// The domain of each objective column: several subproblems' objectives
+/// go through one pass side by side (their products are one matrix
+/// product each), every column read against its own domain.
+#[derive(Clone, Copy)]
+struct Cols<'a> {
+    doms: &'a [&'a Domain],
+    /// Per column, its domain's index in `doms`.
+    owner: &'a [usize],
+}
+
+impl Cols<'_> {
+    /// The bounds of neuron `j` of hidden layer `k` in column `c`'s domain.
+    #[inline]
+    fn at(&self, k: usize, j: usize, c: usize) -> (f64, f64) {
+        let d = self.doms[self.owner[c]];
+        (d.lo[k][j], d.hi[k][j])
+    }
+}
+
+/// The minimum of `a z + g h` over neuron `(l, u)`'s relaxation, and the
+/// minimiser `(z, h)`. Floating point (the ascent's; see [`certified`]).
+fn vertex_min(a: f64, g: f64, l: f64, u: f64) -> (f64, f64, f64) {
+    if u <= 0.0 {
+        // h = 0, z in [l, u]
+        if a * l <= a * u {
+            (a * l, l, 0.0)
+        } else {
+            (a * u, u, 0.0)
+        }
+    } else if l >= 0.0 {
+        let c = a + g;
+        if c * l <= c * u {
+            (c * l, l, l)
+        } else {
+            (c * u, u, u)
+        }
+    } else {
+        let (v1, v3) = (a * l, (a + g) * u);
+        if v1 <= 0.0 && v1 <= v3 {
+            (v1, l, 0.0)
+        } else if v3 <= 0.0 {
+            (v3, u, u)
+        } else {
+            (0.0, 0.0, 0.0)
+        }
+    }
+}
+
+/// The ascent's parameters (as α-β-CROWN's): per hidden layer and
+/// objective, the lower-line slope `α ∈ [0, 1]` of each unstable neuron,
+/// and a multiplier `β ≥ 0` of each split neuron's sign constraint. The
+/// multipliers `ν` follow by back-substitution ([`Slopes::multipliers`]).
+#[derive(Clone, Debug)]
+pub struct Slopes {
+    /// Per hidden layer `k`: `n_k × R`, in `[0, 1]`.
+    pub alpha: Vec<DMatrix<f64>>,
+    /// Per hidden layer `k`: `n_k × R`, `≥ 0` (used at split neurons).
+    pub beta: Vec<DMatrix<f64>>,
+}
+
+/// Whether neuron `(l, u)` was split (a bound clamped to exactly 0).
+fn split_active(l: f64) -> bool {
+    l == 0.0
+}
+fn split_inactive(u: f64) -> bool {
+    u == 0.0
+}
+
+impl Slopes {
+    /// The slopes of objectives `cols` only (in that order).
+    pub fn columns(&self, cols: &[usize]) -> Slopes {
+        let pick = |m: &DMatrix<f64>| m.select_columns(cols.iter());
+        Slopes {
+            alpha: self.alpha.iter().map(pick).collect(),
+            beta: self.beta.iter().map(pick).collect(),
+        }
+    }
+
+    /// Put `part`'s columns (of objectives `cols`, as from
+    /// [`Slopes::columns`]) back in place.
+    pub fn set_columns(&mut self, cols: &[usize], part: &Slopes) {
+        for (into, from) in [(&mut self.alpha, &part.alpha), (&mut self.beta, &part.beta)] {
+            for (m, p) in into.iter_mut().zip(from) {
+                for (i, &c) in cols.iter().enumerate() {
+                    m.set_column(c, &p.column(i));
+                }
+            }
+        }
+    }
+
+    /// CROWN's slopes: the lower line `z` or `0`, the larger side; no `β`.
+    pub fn crown(chain: &ReluChain, dom: &Domain, r: usize) -> Slopes {
+        let hidden = chain.depth() - 1;
+        let alpha = (0..hidden)
+            .map(|k| {
+                let n = dom.lo[k].len();
+                DMatrix::from_fn(n, r, |j, _| {
+                    if dom.hi[k][j] >= -dom.lo[k][j] {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        let beta = (0..hidden)
+            .map(|k| DMatrix::zeros(dom.lo[k].len(), r))
+            .collect();
+        Slopes { alpha, beta }
+    }
+
+    /// The multipliers of these slopes by back-substitution from `obj`:
+    /// `ν_k = D_k(W_{k+1}ᵀ ν_{k+1})` entry by entry (an unstable neuron's
+    /// upper-line slope `u/(u − l)` where its coefficient is negative, its
+    /// `α` where not; `1` for an active neuron, `0` for an inactive one),
+    /// shifted by `β` at split neurons. With the derivatives `∂ν_k/∂g_k`.
+    fn multipliers(
+        &self,
+        chain: &ReluChain,
+        cols: Cols,
+        obj: &DMatrix<f64>,
+    ) -> (Dual, Vec<DMatrix<f64>>) {
+        let hidden = chain.depth() - 1;
+        let mut nu: Vec<DMatrix<f64>> = vec![DMatrix::zeros(0, 0); hidden];
+        let mut deriv: Vec<DMatrix<f64>> = vec![DMatrix::zeros(0, 0); hidden];
+        for k in (0..hidden).rev() {
+            let next = if k + 1 == hidden { obj } else { &nu[k + 1] };
+            let g = &chain.wt[k + 1] * next;
+            let mut v = g.clone();
+            let mut d = g.clone();
+            for j in 0..g.nrows() {
+                for c in 0..g.ncols() {
+                    let (l, u) = cols.at(k, j, c);
+                    let gj = g[(j, c)];
+                    let (slope, shift) = if u <= 0.0 {
+                        (
+                            0.0,
+                            if split_inactive(u) {
+                                self.beta[k][(j, c)]
+                            } else {
+                                0.0
+                            },
+                        )
+                    } else if l >= 0.0 {
+                        (
+                            1.0,
+                            if split_active(l) {
+                                -self.beta[k][(j, c)]
+                            } else {
+                                0.0
+                            },
+                        )
+                    } else if gj < 0.0 {
+                        (u / (u - l), 0.0)
+                    } else {
+                        (self.alpha[k][(j, c)], 0.0)
+                    };
+                    v[(j, c)] = slope * gj + shift;
+                    d[(j, c)] = slope;
+                }
+            }
+            nu[k] = v;
+            deriv[k] = d;
+        }
+        (Dual { nu }, deriv)
+    }
+}
+
+impl Dual {
+    /// CROWN's multipliers for the objectives `obj` (`outputs × R`, one
+    /// column each).
+    pub fn crown(chain: &ReluChain, dom: &Domain, obj: &DMatrix<f64>) -> Dual {
+        let owner = vec![0; obj.ncols()];
+        let cols = Cols {
+            doms: &[dom],
+            owner: &owner,
+        };
+        Slopes::crown(chain, dom, obj.ncols())
+            .multipliers(chain, cols, obj)
+            .0
+    }
+}
+
+/// `L(ν)` per objective in floating point, with a supergradient per
+/// hidden layer and the input minimiser per objective (columns).
+fn evaluate(
+    chain: &ReluChain,
+    input: &IBox,
+    cols: Cols,
+    obj: &DMatrix<f64>,
+    dual: &Dual,
+) -> (Vec<f64>, Vec<DMatrix<f64>>, DMatrix<f64>) {
+    let depth = chain.depth();
+    let hidden = depth - 1;
+    let r = obj.ncols();
+    let nu = |k: usize| if k == hidden { obj } else { &dual.nu[k] };
+    let mut value = vec![0.0; r];
+    for k in 0..depth {
+        let v = nu(k);
+        for (c, val) in value.iter_mut().enumerate() {
+            *val += v.column(c).dot(&chain.b[k]);
+        }
+    }
+    // the input term
+    let d = &chain.wt[0] * nu(0);
+    let n0 = input.dim();
+    let mut xs = DMatrix::zeros(n0, r);
+    for c in 0..r {
+        for i in 0..n0 {
+            let di = d[(i, c)];
+            let x = if di >= 0.0 { input.lo[i] } else { input.hi[i] };
+            xs[(i, c)] = x;
+            value[c] += di * x;
+        }
+    }
+    // the neurons' terms, with the minimisers
+    let mut zs: Vec<DMatrix<f64>> = Vec::with_capacity(hidden);
+    let mut hs: Vec<DMatrix<f64>> = Vec::with_capacity(hidden);
+    for k in 0..hidden {
+        let g = &chain.wt[k + 1] * nu(k + 1);
+        let v = nu(k);
+        let n = g.nrows();
+        let (mut z, mut h) = (DMatrix::zeros(n, r), DMatrix::zeros(n, r));
+        for c in 0..r {
+            for j in 0..n {
+                let (l, u) = cols.at(k, j, c);
+                let (m, zz, hh) = vertex_min(-v[(j, c)], g[(j, c)], l, u);
+                value[c] += m;
+                z[(j, c)] = zz;
+                h[(j, c)] = hh;
+            }
+        }
+        zs.push(z);
+        hs.push(h);
+    }
+    // supergradients: W_k h*_{k−1} + b_k − z*_k
+    let mut grads = Vec::with_capacity(hidden);
+    for k in 0..hidden {
+        let prev = if k == 0 { &xs } else { &hs[k - 1] };
+        let mut gk = &chain.w[k] * prev - &zs[k];
+        for c in 0..r {
+            let mut col = gk.column_mut(c);
+            col += &chain.b[k];
+        }
+        grads.push(gk);
+    }
+    (value, grads, xs)
+}
+
+/// `W_kᵀ ν` (columns) and a bound on its rounding error per entry.
+fn product_with_error(
+    chain: &ReluChain,
+    k: usize,
+    nu: &DMatrix<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let g = &chain.wt[k] * nu;
+    let s = &chain.abs_wt[k] * nu.abs();
+    let terms = chain.wt[k].ncols();
+    let e = s.map(|a| error_bound(terms, a));
+    (g, e)
+}
+
+/// A certified lower bound of `objective c` over the domain from the
+/// multipliers `dual` (see the module's soundness note): `−∞` where any
+/// number is not finite.
+pub fn certified(
+    chain: &ReluChain,
+    input: &IBox,
+    dom: &Domain,
+    obj: &DMatrix<f64>,
+    dual: &Dual,
+) -> Vec<f64> {
+    let owner = vec![0; obj.ncols()];
+    let cols = Cols {
+        doms: &[dom],
+        owner: &owner,
+    };
+    certified_cols(chain, input, cols, obj, dual)
+}
+
+/// [`certified`], each column against its own domain.
+fn certified_cols(
+    chain: &ReluChain,
+    input: &IBox,
+    cols: Cols,
+    obj: &DMatrix<f64>,
+    dual: &Dual,
+) -> Vec<f64> {
+    let depth = chain.depth();
+    let hidden = depth - 1;
+    let r = obj.ncols();
+    let nu = |k: usize| if k == hidden { obj } else { &dual.nu[k] };
+    let finite = |m: &DMatrix<f64>| m.iter().all(|v| v.is_finite());
+    if !(0..depth).all(|k| finite(nu(k))) || !input.is_finite() {
+        return vec![f64::NEG_INFINITY; r];
+    }
+    let mut acc = vec![Acc::ZERO; r];
+    for k in 0..depth {
+        let v = nu(k);
+        for (c, a) in acc.iter_mut().enumerate() {
+            a.add_products(v.column(c).as_slice(), chain.b[k].as_slice());
+        }
+    }
+    // each term below is a lower bound already (rounded down), added as a
+    // term of the sum: Acc bounds the sum's own rounding
+    let down = |v: f64| v.next_down();
+    let (d, e) = product_with_error(chain, 0, nu(0));
+    for (c, a) in acc.iter_mut().enumerate() {
+        for i in 0..input.dim() {
+            let (dl, dh) = (
+                down(d[(i, c)] - e[(i, c)]),
+                (d[(i, c)] + e[(i, c)]).next_up(),
+            );
+            let (xl, xh) = (input.lo[i], input.hi[i]);
+            let m = down(dl * xl)
+                .min(down(dl * xh))
+                .min(down(dh * xl))
+                .min(down(dh * xh));
+            a.add(m);
+        }
+    }
+    for k in 0..hidden {
+        let (g, e) = product_with_error(chain, k + 1, nu(k + 1));
+        let v = nu(k);
+        for (c, acc) in acc.iter_mut().enumerate() {
+            for j in 0..g.nrows() {
+                let a = -v[(j, c)];
+                // h ≥ 0 at every vertex: g's lowest value gives the minimum
+                let gl = down(g[(j, c)] - e[(j, c)]);
+                let (l, u) = cols.at(k, j, c);
+                let at = |z: f64, h: f64| {
+                    let t = if h == 0.0 { 0.0 } else { down(gl * h) };
+                    down(down(a * z) + t)
+                };
+                let m = if u <= 0.0 {
+                    at(l, 0.0).min(at(u, 0.0))
+                } else if l >= 0.0 {
+                    at(l, l).min(at(u, u))
+                } else {
+                    at(l, 0.0).min(0.0).min(at(u, u))
+                };
+                acc.add(m);
+            }
+        }
+    }
+    acc.into_iter()
+        .map(|a| {
+            let v = a.lower();
+            if v.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                v
+            }
+        })
+        .collect()
+}
+
+/// What [`optimise`] found per objective: the certified lower bound, the
+/// parameters and multipliers that give it, and the input minimising
+/// their relaxed objective (where the relaxation expects the worst output:
+/// a start for an attack).
+#[derive(Clone, Debug)]
+pub struct Optimised {
+    /// Certified lower bounds, one per objective.
+    pub bounds: Vec<f64>,
+    /// The parameters of the bounds.
+    pub slopes: Slopes,
+    /// Their multipliers.
+    pub dual: Dual,
+    /// Per objective, the input minimising the relaxed objective.
+    pub worst_inputs: Vec<Vec<f64>>,
+}
+
+/// Climb `L` from `start` for `steps` Adam steps on the slopes (projected
+/// to `α ∈ [0, 1]`, `β ≥ 0`) and certify the best multipliers met per
+/// objective (see the module documentation).
+pub fn optimise(
+    chain: &ReluChain,
+    input: &IBox,
+    dom: &Domain,
+    obj: &DMatrix<f64>,
+    start: Slopes,
+    steps: usize,
+) -> Optimised {
+    optimise_many(chain, input, vec![(dom, obj.clone(), start)], steps)
+        .pop()
+        .expect("one job")
+}
+
+/// [`optimise`] for several subproblems at once (each its domain, its
+/// objectives and its start): their columns go through every product
+/// together, which multiplies larger matrices (faster per column), and
+/// each column is read against its own domain. Results in order.
+pub fn optimise_many(
+    chain: &ReluChain,
+    input: &IBox,
+    jobs: Vec<(&Domain, DMatrix<f64>, Slopes)>,
+    steps: usize,
+) -> Vec<Optimised> {
+    let hidden = chain.depth() - 1;
+    let widths: Vec<usize> = jobs.iter().map(|j| j.1.ncols()).collect();
+    let r: usize = widths.iter().sum();
+    let doms: Vec<&Domain> = jobs.iter().map(|j| j.0).collect();
+    let owner: Vec<usize> = widths
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &w)| std::iter::repeat_n(i, w))
+        .collect();
+    let cols = Cols {
+        doms: &doms,
+        owner: &owner,
+    };
+    let m = chain.outputs();
+    let mut obj = DMatrix::zeros(m, r);
+    let mut cur = Slopes {
+        alpha: (0..hidden)
+            .map(|k| DMatrix::zeros(chain.w[k].nrows(), r))
+            .collect(),
+        beta: (0..hidden)
+            .map(|k| DMatrix::zeros(chain.w[k].nrows(), r))
+            .collect(),
+    };
+    let mut at = 0;
+    for (_, o, s) in &jobs {
+        let w = o.ncols();
+        obj.columns_mut(at, w).copy_from(o);
+        for k in 0..hidden {
+            cur.alpha[k].columns_mut(at, w).copy_from(&s.alpha[k]);
+            cur.beta[k].columns_mut(at, w).copy_from(&s.beta[k]);
+        }
+        at += w;
+    }
+    let (dual0, _) = cur.multipliers(chain, cols, &obj);
+    let (mut best_v, _, mut best_x) = evaluate(chain, input, cols, &obj, &dual0);
+    let mut best = cur.clone();
+    let (b1, b2, eps) = (0.9, 0.999, 1e-12);
+    let zeros =
+        |m: &Vec<DMatrix<f64>>| -> Vec<DMatrix<f64>> { m.iter().map(|m| m.map(|_| 0.0)).collect() };
+    let (mut ma, mut va) = (zeros(&cur.alpha), zeros(&cur.alpha));
+    let (mut mb, mut vb) = (zeros(&cur.beta), zeros(&cur.beta));
+    let keep = |best: &mut Slopes,
+                cur: &Slopes,
+                best_x: &mut DMatrix<f64>,
+                xs: &DMatrix<f64>,
+                c: usize| {
+        for k in 0..hidden {
+            best.alpha[k].set_column(c, &cur.alpha[k].column(c));
+            best.beta[k].set_column(c, &cur.beta[k].column(c));
+        }
+        best_x.set_column(c, &xs.column(c));
+    };
+    for t in 1..=steps {
+        let (dual, deriv) = cur.multipliers(chain, cols, &obj);
+        let (v, partial, xs) = evaluate(chain, input, cols, &obj, &dual);
+        for c in 0..r {
+            if v[c] > best_v[c] {
+                best_v[c] = v[c];
+                keep(&mut best, &cur, &mut best_x, &xs, c);
+            }
+        }
+        // total derivatives T_k = ∂L/∂ν_k through the later ν's dependence:
+        // T_{k+1} = partial_{k+1} + W_{k+1}(D_k ⊙ T_k)
+        let mut total: Vec<DMatrix<f64>> = Vec::with_capacity(hidden);
+        for k in 0..hidden {
+            let mut tk = partial[k].clone();
+            if k > 0 {
+                tk += &chain.w[k] * deriv[k - 1].component_mul(&total[k - 1]);
+            }
+            total.push(tk);
+        }
+        let lr = 0.1 * (1.0 - t as f64 / (steps as f64 + 1.0));
+        let (c1, c2) = (1.0 - f64::powi(b1, t as i32), 1.0 - f64::powi(b2, t as i32));
+        for k in 0..hidden {
+            let next = if k + 1 == hidden {
+                &obj
+            } else {
+                &dual.nu[k + 1]
+            };
+            let g = &chain.wt[k + 1] * next;
+            let n = g.nrows();
+            let mut ga = DMatrix::zeros(n, r);
+            let mut gb = DMatrix::zeros(n, r);
+            for c in 0..r {
+                for j in 0..n {
+                    let (l, u) = cols.at(k, j, c);
+                    let tkj = total[k][(j, c)];
+                    if l < 0.0 && u > 0.0 && g[(j, c)] >= 0.0 {
+                        ga[(j, c)] = tkj * g[(j, c)];
+                    } else if u <= 0.0 && split_inactive(u) {
+                        gb[(j, c)] = tkj;
+                    } else if l >= 0.0 && split_active(l) {
+                        gb[(j, c)] = -tkj;
+                    }
+                }
+            }
+            let adam = |m: &mut DMatrix<f64>, v: &mut DMatrix<f64>, g: &DMatrix<f64>| {
+                *m = &*m * b1 + g * (1.0 - b1);
+                *v = &*v * b2 + g.component_mul(g) * (1.0 - b2);
+                m.zip_map(v, |a, b| (a / c1) / ((b / c2).sqrt() + eps))
+            };
+            let sa = adam(&mut ma[k], &mut va[k], &ga);
+            cur.alpha[k] += sa * lr;
+            cur.alpha[k].apply(|a| *a = a.clamp(0.0, 1.0));
+            let sb = adam(&mut mb[k], &mut vb[k], &gb);
+            // β in the units of the coefficients it shifts, per column
+            let mut sb = sb;
+            for c in 0..r {
+                let scale = g.column(c).amax().max(1e-12);
+                sb.column_mut(c).scale_mut(lr * 0.5 * scale);
+            }
+            cur.beta[k] += sb;
+            cur.beta[k].apply(|b| *b = b.max(0.0));
+        }
+    }
+    let (dual, _) = cur.multipliers(chain, cols, &obj);
+    let (last, _, xs) = evaluate(chain, input, cols, &obj, &dual);
+    for c in 0..r {
+        if last[c] > best_v[c] {
+            keep(&mut best, &cur, &mut best_x, &xs, c);
+        }
+    }
+    let (dual, _) = best.multipliers(chain, cols, &obj);
+    let bounds = certified_cols(chain, input, cols, &obj, &dual);
+    let mut out = Vec::with_capacity(jobs.len());
+    let mut at = 0;
+    for w in widths {
+        let range: Vec<usize> = (at..at + w).collect();
+        out.push(Optimised {
+            bounds: bounds[at..at + w].to_vec(),
+            slopes: best.columns(&range),
+            dual: Dual {
+                nu: dual
+                    .nu
+                    .iter()
+                    .map(|m| m.columns(at, w).into_owned())
+                    .collect(),
+            },
+            worst_inputs: range
+                .iter()
+                .map(|&c| best_x.column(c).iter().copied().collect())
+                .collect(),
+        });
+        at += w;
+    }
+    out
+}
+
+/// The unstable neurons most worth splitting for objective column `c`
+/// under `slopes`, best first, at most `top` of them: the largest
+/// `|g|·(−l·u)/(u − l)`, the area a neuron's relaxation adds times the
+/// weight its output carries (`g = (W_{k+1}ᵀ ν_{k+1})_j`; BaBSR's score).
+pub fn candidates(
+    chain: &ReluChain,
+    dom: &Domain,
+    obj: &DMatrix<f64>,
+    slopes: &Slopes,
+    c: usize,
+    top: usize,
+) -> Vec<(usize, usize)> {
+    let hidden = chain.depth() - 1;
+    let one = obj.columns(c, 1).into_owned();
+    let owner = [0];
+    let cols = Cols {
+        doms: &[dom],
+        owner: &owner,
+    };
+    let (dual, _) = slopes.columns(&[c]).multipliers(chain, cols, &one);
+    let mut scored: Vec<(f64, usize, usize)> = Vec::new();
+    for k in 0..hidden {
+        let next = if k + 1 == hidden {
+            &one
+        } else {
+            &dual.nu[k + 1]
+        };
+        let g = &chain.wt[k + 1] * next;
+        for j in 0..g.nrows() {
+            if !dom.unstable(k, j) {
+                continue;
+            }
+            let (l, u) = (dom.lo[k][j], dom.hi[k][j]);
+            let s = g[j].abs() * (-l * u) / (u - l);
+            scored.push((if s.is_finite() { s } else { 0.0 }, k, j));
+        }
+    }
+    // best first; ties by position, so the order is fixed
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+    scored.truncate(top);
+    scored.into_iter().map(|(_, k, j)| (k, j)).collect()
+}
+
+/// The neuron to split next for objective column `c`: of the best `top`
+/// [`candidates`], the one whose worse child bounds highest with the
+/// parent's slopes re-substituted (one pass per child, no ascent; as
+/// filtered smart branching); `None` when no neuron is unstable.
+pub fn branch(
+    chain: &ReluChain,
+    input: &IBox,
+    dom: &Domain,
+    obj: &DMatrix<f64>,
+    slopes: &Slopes,
+    c: usize,
+    top: usize,
+) -> Option<(usize, usize)> {
+    let list = candidates(chain, dom, obj, slopes, c, top);
+    if list.len() <= 1 {
+        return list.first().copied();
+    }
+    let one = obj.columns(c, 1).into_owned();
+    let start = slopes.columns(&[c]);
+    let owner = [0];
+    let mut best: Option<(f64, (usize, usize))> = None;
+    for &(k, j) in &list {
+        let mut worse = f64::INFINITY;
+        for p in [Phase::Inactive, Phase::Active] {
+            let child = dom.split(k, j, p);
+            let cols = Cols {
+                doms: &[&child],
+                owner: &owner,
+            };
+            let (dual, _) = start.multipliers(chain, cols, &one);
+            let (v, _, _) = evaluate(chain, input, cols, &one, &dual);
+            worse = worse.min(v[0]);
+        }
+        if worse.is_finite() && best.is_none_or(|b| worse > b.0) {
+            best = Some((worse, (k, j)));
+        }
+    }
+    best.map(|b| b.1).or(list.first().copied())
+}
+
+#[cfg(test)]
+mod tests;

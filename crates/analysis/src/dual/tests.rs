@@ -1,0 +1,280 @@
+use super::*;
+use ravel_base::rng::Rng;
+
+/// A random ReLU network `sizes[0] → … → sizes[last]`.
+fn net(rng: &mut Rng, sizes: &[usize]) -> Network {
+    let mut layers = Vec::new();
+    for (g, win) in sizes.windows(2).enumerate() {
+        if g > 0 {
+            layers.push(Layer::Act(Activation::Relu));
+        }
+        let w = DMatrix::from_fn(win[1], win[0], |_, _| rng.normal() / (win[0] as f64).sqrt());
+        let b = DVector::from_fn(win[1], |_, _| 0.3 * rng.normal());
+        layers.push(Layer::Affine { w, b });
+    }
+    Network::new(sizes[0], layers)
+}
+
+/// The pre-activations of every hidden layer at `x`.
+fn pre_activations(net: &Network, x: &[f64]) -> Vec<Vec<f64>> {
+    let mut h = DVector::from_column_slice(x);
+    let mut out = Vec::new();
+    for layer in &net.layers {
+        match layer {
+            Layer::Affine { w, b } => h = w * &h + b,
+            Layer::Act(_) => {
+                out.push(h.iter().copied().collect());
+                h = h.map(|v| v.max(0.0));
+            }
+        }
+    }
+    out
+}
+
+/// Whether `x`'s pre-activations satisfy the domain's bounds (the splits).
+fn inside(dom: &Domain, pre: &[Vec<f64>]) -> bool {
+    pre.iter().enumerate().all(|(k, z)| {
+        z.iter()
+            .enumerate()
+            .all(|(j, &v)| dom.lo[k][j] <= v && v <= dom.hi[k][j])
+    })
+}
+
+struct Case {
+    net: Network,
+    input: IBox,
+    obj: DMatrix<f64>,
+}
+
+fn case(seed: u64, sizes: &[usize]) -> Case {
+    let mut rng = Rng::new(seed);
+    let net = net(&mut rng, sizes);
+    let n = sizes[0];
+    let c: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let r: Vec<f64> = (0..n).map(|_| rng.uniform(0.05, 0.5)).collect();
+    let input = IBox::new(
+        (0..n).map(|i| c[i] - r[i]).collect(),
+        (0..n).map(|i| c[i] + r[i]).collect(),
+    );
+    let m = *sizes.last().unwrap();
+    let obj = DMatrix::from_fn(m, 3, |_, _| rng.normal());
+    Case { net, input, obj }
+}
+
+/// The smallest objective value over `samples` random inputs of the box
+/// that satisfy the domain's splits (`+∞` if none does).
+fn sampled_min(cs: &Case, dom: &Domain, seed: u64, samples: usize) -> Vec<f64> {
+    let mut rng = Rng::new(seed);
+    let mut best = vec![f64::INFINITY; cs.obj.ncols()];
+    for _ in 0..samples {
+        let x: Vec<f64> = (0..cs.input.dim())
+            .map(|i| rng.uniform(cs.input.lo[i], cs.input.hi[i]))
+            .collect();
+        if !inside(dom, &pre_activations(&cs.net, &x)) {
+            continue;
+        }
+        let y = DVector::from_vec(cs.net.forward(&x));
+        for (c, b) in best.iter_mut().enumerate() {
+            *b = b.min(cs.obj.column(c).dot(&y));
+        }
+    }
+    best
+}
+
+#[test]
+fn the_bounds_hold_on_every_sampled_input_of_every_split_domain() {
+    for seed in 0..12 {
+        let cs = case(seed, &[3, 12, 10, 4]);
+        let chain = ReluChain::of(&cs.net).expect("a ReLU chain");
+        let root = Domain::root(&cs.net, &cs.input).expect("finite");
+        // the root, then one child per phase of two successive splits
+        let mut doms = vec![root.clone()];
+        let mut d = root;
+        for p in [Phase::Active, Phase::Inactive] {
+            let start = Slopes::crown(&chain, &d, cs.obj.ncols());
+            let Some((k, j)) = branch(&chain, &cs.input, &d, &cs.obj, &start, 0, 4) else {
+                break;
+            };
+            let other = match p {
+                Phase::Active => Phase::Inactive,
+                Phase::Inactive => Phase::Active,
+            };
+            doms.push(d.split(k, j, other));
+            d = d.split(k, j, p);
+            doms.push(d.clone());
+        }
+        for (i, dom) in doms.iter().enumerate() {
+            let crown = Dual::crown(&chain, dom, &cs.obj);
+            let plain = certified(&chain, &cs.input, dom, &cs.obj, &crown);
+            let opt = optimise(
+                &chain,
+                &cs.input,
+                dom,
+                &cs.obj,
+                Slopes::crown(&chain, dom, 3),
+                40,
+            );
+            let seen = sampled_min(&cs, dom, seed + 100, 4000);
+            for c in 0..cs.obj.ncols() {
+                assert!(
+                    plain[c] <= seen[c],
+                    "seed {seed} domain {i} col {c}: {} > {}",
+                    plain[c],
+                    seen[c]
+                );
+                assert!(
+                    opt.bounds[c] <= seen[c],
+                    "seed {seed} domain {i} col {c}: optimised {} > {}",
+                    opt.bounds[c],
+                    seen[c]
+                );
+                assert!(
+                    opt.bounds[c] >= plain[c] - 1e-9 * plain[c].abs().max(1.0),
+                    "optimising lost ground"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_crown_multipliers_bound_at_least_as_tightly_as_crown() {
+    for seed in 0..8 {
+        let cs = case(seed, &[4, 16, 16, 3]);
+        let chain = ReluChain::of(&cs.net).unwrap();
+        let root = Domain::root(&cs.net, &cs.input).unwrap();
+        let dual = Dual::crown(&chain, &root, &cs.obj);
+        let ours = certified(&chain, &cs.input, &root, &cs.obj, &dual);
+        // CROWN's upper bound of −o·y is minus a lower bound of o·y
+        let rel = Relaxation::new(&cs.net, &cs.input, Mode::Crown);
+        let neg: DMatrix<f64> = -cs.obj.transpose();
+        let theirs = rel.upper(neg).concretize(&cs.input);
+        for c in 0..cs.obj.ncols() {
+            let crown_lower = -theirs[c];
+            assert!(
+                ours[c] >= crown_lower - 1e-9 * crown_lower.abs().max(1.0),
+                "seed {seed}: {} < CROWN's {crown_lower}",
+                ours[c]
+            );
+        }
+    }
+}
+
+#[test]
+fn optimising_tightens_a_bound_crown_leaves_loose() {
+    let mut gained = 0;
+    for seed in 0..8 {
+        let cs = case(seed, &[4, 20, 20, 3]);
+        let chain = ReluChain::of(&cs.net).unwrap();
+        let root = Domain::root(&cs.net, &cs.input).unwrap();
+        let crown = Dual::crown(&chain, &root, &cs.obj);
+        let plain = certified(&chain, &cs.input, &root, &cs.obj, &crown);
+        let opt = optimise(
+            &chain,
+            &cs.input,
+            &root,
+            &cs.obj,
+            Slopes::crown(&chain, &root, 3),
+            60,
+        );
+        gained += (0..3).filter(|&c| opt.bounds[c] > plain[c] + 1e-6).count();
+    }
+    assert!(
+        gained >= 8,
+        "the ascent improved only {gained} of 24 bounds"
+    );
+}
+
+#[test]
+fn splitting_every_unstable_neuron_makes_the_bound_exact_on_a_one_layer_network() {
+    // one hidden layer: with every neuron's phase fixed the relaxation is
+    // the network on that region, and the optimised bound approaches the
+    // sampled minimum over the region
+    let cs = case(7, &[2, 6, 1]);
+    let chain = ReluChain::of(&cs.net).unwrap();
+    let mut leaves = vec![Domain::root(&cs.net, &cs.input).unwrap()];
+    let mut done = Vec::new();
+    while let Some(d) = leaves.pop() {
+        match (0..6).find(|&j| d.unstable(0, j)) {
+            Some(j) => {
+                leaves.push(d.split(0, j, Phase::Active));
+                leaves.push(d.split(0, j, Phase::Inactive));
+            }
+            None => done.push(d),
+        }
+    }
+    let obj = cs.obj.columns(0, 1).into_owned();
+    let cs = Case { obj, ..cs };
+    let mut lowest = f64::INFINITY;
+    for d in &done {
+        let o = optimise(
+            &chain,
+            &cs.input,
+            d,
+            &cs.obj,
+            Slopes::crown(&chain, d, 1),
+            200,
+        );
+        lowest = lowest.min(o.bounds[0]);
+    }
+    let seen = sampled_min(&cs, &Domain::root(&cs.net, &cs.input).unwrap(), 3, 20000)[0];
+    assert!(lowest <= seen);
+    assert!(
+        seen - lowest < 0.05 * seen.abs().max(1.0),
+        "bound {lowest} vs sampled {seen}"
+    );
+}
+
+#[test]
+fn a_non_finite_multiplier_gives_no_bound() {
+    let cs = case(1, &[3, 5, 2]);
+    let chain = ReluChain::of(&cs.net).unwrap();
+    let root = Domain::root(&cs.net, &cs.input).unwrap();
+    let mut dual = Dual::crown(&chain, &root, &cs.obj);
+    dual.nu[0][(0, 1)] = f64::NAN;
+    let b = certified(&chain, &cs.input, &root, &cs.obj, &dual);
+    assert_eq!(b[1], f64::NEG_INFINITY);
+    dual.nu[0][(0, 1)] = 1e308;
+    dual.nu[0][(1, 1)] = -1e308;
+    let b = certified(&chain, &cs.input, &root, &cs.obj, &dual);
+    assert!(b[1] == f64::NEG_INFINITY || b[1] < -1e300, "{}", b[1]);
+}
+
+#[test]
+fn only_relu_chains_are_taken() {
+    let mut rng = Rng::new(3);
+    let mut n = net(&mut rng, &[2, 3, 2]);
+    assert!(ReluChain::of(&n).is_some());
+    n.layers[1] = Layer::Act(Activation::Tanh);
+    assert!(ReluChain::of(&n).is_none());
+    let lin = net(&mut rng, &[2, 2]);
+    assert!(ReluChain::of(&lin).is_none());
+}
+
+#[test]
+fn subproblems_optimised_together_get_the_bounds_they_get_apart() {
+    let cs = case(5, &[4, 12, 12, 3]);
+    let chain = ReluChain::of(&cs.net).unwrap();
+    let root = Domain::root(&cs.net, &cs.input).unwrap();
+    let start = Slopes::crown(&chain, &root, 3);
+    let (k, j) =
+        branch(&chain, &cs.input, &root, &cs.obj, &start, 1, 4).expect("an unstable neuron");
+    let kids = [
+        root.split(k, j, Phase::Inactive),
+        root.split(k, j, Phase::Active),
+    ];
+    let apart: Vec<Vec<f64>> = kids
+        .iter()
+        .map(|d| optimise(&chain, &cs.input, d, &cs.obj, start.clone(), 30).bounds)
+        .collect();
+    let jobs = kids
+        .iter()
+        .map(|d| (d, cs.obj.clone(), start.clone()))
+        .collect();
+    let together = optimise_many(&chain, &cs.input, jobs, 30);
+    for (a, t) in apart.iter().zip(&together) {
+        for (x, y) in a.iter().zip(&t.bounds) {
+            assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+        }
+    }
+}

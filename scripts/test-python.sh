@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The Python package (crates/python): a virtual environment under the
+# target folder with pinned maturin, pytest, NumPy and onnx; the extension
+# built by maturin as an abi3 wheel and installed; then its pytest suite
+# (crates/python/tests), which also runs examples/python/train_until_verified.py.
+#
+# The wheel is built with cargo's `test` profile into the same target folder
+# as `cargo test`, so the crates it shares with the test build (everything
+# below `ravel`: syntax, base, certify, analysis and their dependencies) are
+# reused, not compiled again; only `ravel`, `ravel-files` and the extension
+# itself (built without mimalloc, see ARCHITECTURE.md) are. The profile's
+# optimisation is the one every test of the suite runs at.
+#
+# Needs python3 (3.9 or later) with pip. Where `python3 -m venv` cannot
+# make an environment (Debian's python3 without the python3-venv package),
+# the package is installed with apt-get when this runs as root or with sudo.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+target="${CARGO_TARGET_DIR:-$PWD/target}"
+venv="$target/python-venv"
+python="${PYTHON:-python3}"
+
+if [ ! -x "$venv/bin/python" ]; then
+    rm -rf "$venv"
+    if ! "$python" -m venv "$venv" >/dev/null 2>&1; then
+        rm -rf "$venv"
+        echo "test-python: '$python -m venv' failed; installing python3-venv" >&2
+        SUDO=""
+        if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq python3-venv >/dev/null
+        "$python" -m venv "$venv"
+    fi
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+    maturin==1.9.6 pytest==8.4.2 numpy==2.3.5 onnx==1.19.1
+
+wheels="$target/python-wheels"
+rm -rf "$wheels"
+"$venv/bin/maturin" build --profile test --manifest-path crates/python/Cargo.toml \
+    --interpreter "$venv/bin/python" --out "$wheels"
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+    --force-reinstall --no-deps "$wheels"/ravel-*.whl
+
+# the command line `cargo test` built, for the test comparing the reports
+export RAVEL_BIN="$target/debug/ravel"
+"$venv/bin/python" -m pytest crates/python/tests -q

@@ -4,12 +4,12 @@
 # built by maturin as an abi3 wheel and installed; then its pytest suite
 # (crates/python/tests), which also runs examples/python/train_until_verified.py.
 #
-# The wheel is built with cargo's `test` profile into the same target folder
-# as `cargo test`, so the crates it shares with the test build (everything
-# below `ravel`: syntax, base, certify, analysis and their dependencies) are
-# reused, not compiled again; only `ravel`, `ravel-files` and the extension
-# itself (built without mimalloc, see ARCHITECTURE.md) are. The profile's
-# optimisation is the one every test of the suite runs at.
+# The wheel is built under the cargo profile `python` (the test profile's
+# settings: the workspace at opt-level 1, dependencies at 2) into
+# target/python/, kept between runs: a second run rebuilds only what
+# changed. It cannot share `cargo test`'s artifacts: a cdylib cannot be built
+# under the `test` profile itself, and the extension's `ravel` is built
+# without mimalloc (ARCHITECTURE.md, Decisions).
 #
 # Needs python3 (3.9 or later) with pip. Where `python3 -m venv` cannot
 # make an environment (Debian's python3 without the python3-venv package),
@@ -37,7 +37,7 @@ fi
 
 wheels="$target/python-wheels"
 rm -rf "$wheels"
-"$venv/bin/maturin" build --profile test --manifest-path crates/python/Cargo.toml \
+"$venv/bin/maturin" build --profile python --manifest-path crates/python/Cargo.toml \
     --interpreter "$venv/bin/python" --out "$wheels"
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
     --force-reinstall --no-deps "$wheels"/ravel-*.whl

@@ -12,6 +12,5 @@ bash scripts/test-grammar.sh
 # the HTML report in headless Chromium (installed when missing), with the
 # binary `cargo test` built
 bash scripts/test-report.sh
-# the Python package: its wheel (built into the same target folder, reusing
-# what `cargo test` compiled) and its pytest suite
+# the Python package: its wheel (maturin) and its pytest suite
 bash scripts/test-python.sh

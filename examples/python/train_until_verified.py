@@ -40,7 +40,7 @@ horizon 5
 
 analysis {
     propagator  reach_lp
-    partitioner uniform 4
+    partitioner uniform [2, 2]
     boundary    box
     samples     500
     seed        0
@@ -98,7 +98,7 @@ def forward(layers, x):
     return hs
 
 
-def train_epoch(layers, rng, k, steps=300, lr=0.05):
+def train_epoch(layers, rng, k, steps=25, lr=0.02):
     """Gradient descent on the squared error to the saturated LQR law."""
     for _ in range(steps):
         x = rng.uniform([-3.5, -2.0], [3.5, 2.0], size=(256, 2))

@@ -18,7 +18,6 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
 
-use ravel::ReadError;
 use ravel_syntax::diag::{render, Diagnostic};
 
 /// ravel — verify reach-avoid properties of neural feedback loops.

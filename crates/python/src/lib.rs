@@ -252,6 +252,39 @@ fn controller<'a>(
     }
 }
 
+/// A spec and the controller given with it: what the front end reads.
+struct Inputs<'a> {
+    spec: Spec,
+    ctrl: Controller<'a>,
+}
+
+impl<'a> Inputs<'a> {
+    /// The spec (a path or a text) and the controller (none, a path or
+    /// bytes) from the arguments.
+    fn new(
+        py: Python<'_>,
+        (path, text, directory): (Option<String>, Option<String>, Option<String>),
+        controller_path: Option<String>,
+        controller_bytes: Option<&'a [u8]>,
+    ) -> PyResult<Inputs<'a>> {
+        Ok(Inputs {
+            spec: load_spec(py, path, text, directory)?,
+            ctrl: controller(py, controller_path, controller_bytes)?,
+        })
+    }
+
+    /// The front end over the spec, with the controller given in place of
+    /// the spec's own (run without the GIL).
+    fn front_end(&self) -> Result<ravel::check::Task, Vec<Diagnostic>> {
+        ravel::front_end_task(
+            &self.spec.text,
+            &self.spec.dir,
+            &|r| self.ctrl.read(r),
+            self.ctrl.path().as_deref(),
+        )
+    }
+}
+
 /// Parse and check a spec with its controller; the kind of spec
 /// (`"system"` or `"network"`), or `RavelError`.
 #[pyfunction]
@@ -264,21 +297,16 @@ fn check(
     controller_path: Option<String>,
     controller_bytes: Option<&[u8]>,
 ) -> PyResult<&'static str> {
-    let spec = load_spec(py, path, text, directory)?;
-    let ctrl = controller(py, controller_path, controller_bytes)?;
-    let override_path = ctrl.path();
-    let task = py.allow_threads(|| {
-        ravel::front_end_task(
-            &spec.text,
-            &spec.dir,
-            &|r| ctrl.read(r),
-            override_path.as_deref(),
-        )
-    });
-    match task {
+    let inputs = Inputs::new(
+        py,
+        (path, text, directory),
+        controller_path,
+        controller_bytes,
+    )?;
+    match py.allow_threads(|| inputs.front_end()) {
         Ok(ravel::check::Task::System(_)) => Ok("system"),
         Ok(ravel::check::Task::Network(_)) => Ok("network"),
-        Err(d) => Err(diagnostics_error(py, &spec, &d)),
+        Err(d) => Err(diagnostics_error(py, &inputs.spec, &d)),
     }
 }
 
@@ -392,18 +420,17 @@ fn verify<'py>(
     if jobs == Some(0) {
         return Err(plain_error(py, "jobs must be at least 1".into()));
     }
-    let spec = load_spec(py, path, text, directory)?;
-    let ctrl = controller(py, controller_path, controller_bytes)?;
-    let override_path = ctrl.path();
+    let inputs = Inputs::new(
+        py,
+        (path, text, directory),
+        controller_path,
+        controller_bytes,
+    )?;
+    let (spec, override_path) = (&inputs.spec, inputs.ctrl.path());
     let threads =
         jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let ran = py.allow_threads(|| {
-        let task = ravel::front_end_task(
-            &spec.text,
-            &spec.dir,
-            &|r| ctrl.read(r),
-            override_path.as_deref(),
-        )?;
+        let task = inputs.front_end()?;
         let started = Instant::now();
         let clock = || started.elapsed().as_secs_f64();
         let run = ravel::run(
@@ -431,7 +458,7 @@ fn verify<'py>(
         Ok((report.to_string(), arrays(&run), cert))
     });
     let (report, arrays, cert) =
-        ran.map_err(|d: Vec<Diagnostic>| diagnostics_error(py, &spec, &d))?;
+        ran.map_err(|d: Vec<Diagnostic>| diagnostics_error(py, spec, &d))?;
     let list = PyList::empty(py);
     for a in arrays {
         let bytes: Vec<u8> = a.data.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -540,16 +567,15 @@ fn certify<'py>(
         },
         _ => controller_path,
     };
-    let spec = load_spec(py, spec_path, spec_text, directory)?;
-    let ctrl = controller(py, controller_path, controller_bytes)?;
-    let override_path = ctrl.path();
+    let inputs = Inputs::new(
+        py,
+        (spec_path, spec_text, directory),
+        controller_path,
+        controller_bytes,
+    )?;
+    let spec = &inputs.spec;
     let checked = py.allow_threads(|| {
-        let task = ravel::front_end_task(
-            &spec.text,
-            &spec.dir,
-            &|r| ctrl.read(r),
-            override_path.as_deref(),
-        )?;
+        let task = inputs.front_end()?;
         let plan = ravel::lower::lower(&task);
         let recorded_sha = cert
             .get("spec")
@@ -563,7 +589,7 @@ fn certify<'py>(
         })
     });
     let (differs, report) =
-        checked.map_err(|d: Vec<Diagnostic>| diagnostics_error(py, &spec, &d))?;
+        checked.map_err(|d: Vec<Diagnostic>| diagnostics_error(py, spec, &d))?;
     out.set_item("spec_text_differs", differs)?;
     match report {
         Err(why) => answer("INVALID", Some(why)),

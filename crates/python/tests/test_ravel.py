@@ -288,6 +288,14 @@ def test_bad_model_bytes_are_diagnostics(data):
     assert e.value.code is not None and e.value.code.startswith("E")
 
 
+def test_model_bytes_over_the_size_limit_are_refused_before_any_copy():
+    huge = bytes(ravel.MAX_CONTROLLER_BYTES + 1)
+    with pytest.raises(ravel.RavelError) as e:
+        ravel.check(DI, controller=huge)
+    assert "limit" in str(e.value)
+    del huge
+
+
 def test_a_model_declaring_a_huge_tensor_is_refused():
     model = onnx.load(str(DI_MODEL))
     w = model.graph.initializer[0]

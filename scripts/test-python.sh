@@ -4,12 +4,14 @@
 # built by maturin as an abi3 wheel and installed; then its pytest suite
 # (crates/python/tests), which also runs examples/python/train_until_verified.py.
 #
-# The wheel is built under the cargo profile `python` (the test profile's
-# settings: the workspace at opt-level 1, dependencies at 2) into
-# target/python/, kept between runs: a second run rebuilds only what
-# changed. It cannot share `cargo test`'s artifacts: a cdylib cannot be built
-# under the `test` profile itself, and the extension's `ravel` is built
-# without mimalloc (ARCHITECTURE.md, Decisions).
+# The wheel is built under cargo's `dev` profile into the same target folder
+# as `cargo test`: the dependencies (faer, Clarabel, nalgebra, …) are
+# compiled with the same settings there (opt-level 2, the workspace's
+# `profile.dev.package."*"`), so after `cargo test` (scripts/test.sh) only
+# the workspace's crates and PyO3 are compiled, in about a minute; the
+# workspace's crates at opt-level 0 run the suite in seconds. (The `test`
+# profile itself cannot build a cdylib: it makes every target a test
+# harness. A wheel for use is built with `maturin build --release`.)
 #
 # Needs python3 (3.9 or later) with pip. Where `python3 -m venv` cannot
 # make an environment (Debian's python3 without the python3-venv package),
@@ -37,7 +39,7 @@ fi
 
 wheels="$target/python-wheels"
 rm -rf "$wheels"
-"$venv/bin/maturin" build --profile python --manifest-path crates/python/Cargo.toml \
+"$venv/bin/maturin" build --profile dev --manifest-path crates/python/Cargo.toml \
     --interpreter "$venv/bin/python" --out "$wheels"
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
     --force-reinstall --no-deps "$wheels"/ravel-*.whl

@@ -252,6 +252,10 @@ fn controller<'a>(
     }
 }
 
+/// The spec as the Python layer passes it: `(path, text, directory)`, one
+/// of the first two set.
+type SpecArgs = (Option<String>, Option<String>, Option<String>);
+
 /// A spec and the controller given with it: what the front end reads.
 struct Inputs<'a> {
     spec: Spec,
@@ -263,7 +267,7 @@ impl<'a> Inputs<'a> {
     /// bytes) from the arguments.
     fn new(
         py: Python<'_>,
-        (path, text, directory): (Option<String>, Option<String>, Option<String>),
+        (path, text, directory): SpecArgs,
         controller_path: Option<String>,
         controller_bytes: Option<&'a [u8]>,
     ) -> PyResult<Inputs<'a>> {
@@ -288,21 +292,14 @@ impl<'a> Inputs<'a> {
 /// Parse and check a spec with its controller; the kind of spec
 /// (`"system"` or `"network"`), or `RavelError`.
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, directory=None, controller_path=None, controller_bytes=None))]
+#[pyo3(signature = (spec, controller_path=None, controller_bytes=None))]
 fn check(
     py: Python<'_>,
-    path: Option<String>,
-    text: Option<String>,
-    directory: Option<String>,
+    spec: SpecArgs,
     controller_path: Option<String>,
     controller_bytes: Option<&[u8]>,
 ) -> PyResult<&'static str> {
-    let inputs = Inputs::new(
-        py,
-        (path, text, directory),
-        controller_path,
-        controller_bytes,
-    )?;
+    let inputs = Inputs::new(py, spec, controller_path, controller_bytes)?;
     match py.allow_threads(|| inputs.front_end()) {
         Ok(ravel::check::Task::System(_)) => Ok("system"),
         Ok(ravel::check::Task::Network(_)) => Ok("network"),
@@ -398,13 +395,10 @@ fn arrays(run: &Run) -> Vec<Array> {
 /// Parse, check, run and report a spec: `(report JSON text, arrays,
 /// certificate JSON text or None)`, each array a `(name, bytes, shape)`.
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, directory=None, controller_path=None, controller_bytes=None, time_limit=None, jobs=None, certificate=false))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (spec, controller_path=None, controller_bytes=None, time_limit=None, jobs=None, certificate=false))]
 fn verify<'py>(
     py: Python<'py>,
-    path: Option<String>,
-    text: Option<String>,
-    directory: Option<String>,
+    spec: SpecArgs,
     controller_path: Option<String>,
     controller_bytes: Option<&[u8]>,
     time_limit: Option<f64>,
@@ -420,12 +414,7 @@ fn verify<'py>(
     if jobs == Some(0) {
         return Err(plain_error(py, "jobs must be at least 1".into()));
     }
-    let inputs = Inputs::new(
-        py,
-        (path, text, directory),
-        controller_path,
-        controller_bytes,
-    )?;
+    let inputs = Inputs::new(py, spec, controller_path, controller_bytes)?;
     let (spec, override_path) = (&inputs.spec, inputs.ctrl.path());
     let threads =
         jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -481,18 +470,16 @@ fn verify<'py>(
 /// `INVALID`, `UNSUPPORTED`, `UNREADABLE`), `reason`, `cells`, `steps`,
 /// `properties`, `spec_text_differs`.
 #[pyfunction]
-#[pyo3(signature = (certificate_path=None, certificate=None, spec_path=None, spec_text=None, directory=None, controller_path=None, controller_bytes=None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (certificate_path, certificate, spec, controller_path=None, controller_bytes=None))]
 fn certify<'py>(
     py: Python<'py>,
     certificate_path: Option<String>,
     certificate: Option<&[u8]>,
-    spec_path: Option<String>,
-    spec_text: Option<String>,
-    directory: Option<String>,
+    spec: SpecArgs,
     controller_path: Option<String>,
     controller_bytes: Option<&[u8]>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let (spec_path, spec_text, directory) = spec;
     let out = PyDict::new(py);
     let answer = |answer: &str, reason: Option<String>| -> PyResult<Bound<'py, PyDict>> {
         out.set_item("answer", answer)?;

@@ -99,7 +99,7 @@ def check(
     """
     path, text, directory = _spec_args(spec, text, directory)
     cpath, cbytes = _controller_args(controller)
-    return _ravel.check(path, text, directory, cpath, cbytes)
+    return _ravel.check((path, text, directory), cpath, cbytes)
 
 
 class Report:
@@ -172,7 +172,7 @@ def verify(
         if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
             raise _argument_error("jobs must be a whole number, at least 1")
     report, arrays, cert = _ravel.verify(
-        path, text, directory, cpath, cbytes, time_limit, jobs, bool(certificate)
+        (path, text, directory), cpath, cbytes, time_limit, jobs, bool(certificate)
     )
     return Report(
         json.loads(report),
@@ -226,12 +226,5 @@ def certify(
         raise TypeError("give the spec as a path or as text=, not both")
     spec_path = None if spec is None else os.fspath(spec)
     cpath, cbytes = _controller_args(controller)
-    return _ravel.certify(
-        cert_path,
-        data,
-        spec_path,
-        text,
-        None if directory is None else os.fspath(directory),
-        cpath,
-        cbytes,
-    )
+    spec_args = (spec_path, text, None if directory is None else os.fspath(directory))
+    return _ravel.certify(cert_path, data, spec_args, cpath, cbytes)

@@ -18,7 +18,6 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use serde_json::{json, Value};
 
-use ravel::ReadError;
 use ravel_syntax::diag::{render, Diagnostic};
 
 /// ravel — verify reach-avoid properties of neural feedback loops.
@@ -343,52 +342,7 @@ pub mod exit {
     pub const BROKEN_PIPE: u8 = 141;
 }
 
-/// Read a file the front end asks for ([`ravel::ReadRequest`]): only a
-/// regular file (a FIFO, device or folder is refused without blocking: it is
-/// opened non-blocking and inspected before any read), at most
-/// `max_bytes` bytes, and, for external data, only if its real path (symbolic
-/// links resolved) lies inside the requested folder.
-pub fn read_request(req: &ravel::ReadRequest) -> Result<Vec<u8>, ReadError> {
-    use std::io::Read;
-    let mut opts = std::fs::OpenOptions::new();
-    opts.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        opts.custom_flags(libc::O_NONBLOCK);
-    }
-    let file = opts.open(&req.path)?;
-    let meta = file.metadata()?;
-    if meta.is_dir() {
-        return Err(ReadError::Folder);
-    }
-    if !meta.is_file() {
-        return Err(ReadError::Special);
-    }
-    if let Some(dir) = &req.inside {
-        let real = std::fs::canonicalize(&req.path)?;
-        // a spec named without a folder (`lane.ravel`) has the empty path
-        // as its folder: the working folder
-        let dir = if dir.as_os_str().is_empty() {
-            std::path::Path::new(".")
-        } else {
-            dir.as_path()
-        };
-        let root = std::fs::canonicalize(dir)?;
-        if !real.starts_with(&root) {
-            return Err(ReadError::Outside);
-        }
-    }
-    if req.whole && meta.len() > req.max_bytes {
-        return Err(ReadError::TooLarge {
-            bytes: meta.len(),
-            limit: req.max_bytes,
-        });
-    }
-    let mut buf = Vec::with_capacity(meta.len().min(req.max_bytes).min(1 << 26) as usize);
-    file.take(req.max_bytes).read_to_end(&mut buf)?;
-    Ok(buf)
-}
+pub use ravel_files::read_request;
 
 /// A spec's source and the result of its front end.
 struct Loaded {
@@ -509,24 +463,7 @@ fn diag_json(name: &str, source: &str, diags: &[Diagnostic]) -> Value {
     json!({ "spec": name, "verdict": "ERROR", "errors": errors })
 }
 
-/// 1-based line and column (in characters) of a byte offset; lines end at
-/// LF, CRLF or a lone CR.
-pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
-    let mut offset = offset.min(source.len());
-    while !source.is_char_boundary(offset) {
-        offset -= 1;
-    }
-    let before = &source[..offset];
-    let line = before.matches('\n').count() + before.matches('\r').count()
-        - before.matches("\r\n").count()
-        + 1;
-    let col = before
-        .rsplit(['\n', '\r'])
-        .next()
-        .map_or(0, |l| l.chars().count())
-        + 1;
-    (line, col)
-}
+pub use ravel_syntax::diag::line_col;
 
 /// A JSON document from a file (a regular file of at most 512 MiB).
 fn read_json(file: &Path) -> Result<Value, String> {
@@ -688,38 +625,6 @@ fn write_atomically(file: &Path, bytes: &[u8]) -> std::io::Result<()> {
     written
 }
 
-/// The first place two JSON values differ, as a path (`problem.plants[0].A[1]`).
-fn first_difference(a: &Value, b: &Value, path: &str) -> Option<String> {
-    match (a, b) {
-        (Value::Object(x), Value::Object(y)) => {
-            for (k, v) in x {
-                let p = format!("{path}.{k}");
-                match y.get(k) {
-                    Some(w) => {
-                        if let Some(d) = first_difference(v, w, &p) {
-                            return Some(d);
-                        }
-                    }
-                    None => return Some(p),
-                }
-            }
-            y.keys()
-                .find(|k| !x.contains_key(*k))
-                .map(|k| format!("{path}.{k}"))
-        }
-        (Value::Array(x), Value::Array(y)) => {
-            if x.len() != y.len() {
-                return Some(format!("{path} (length {} vs {})", x.len(), y.len()));
-            }
-            x.iter()
-                .zip(y)
-                .enumerate()
-                .find_map(|(i, (v, w))| first_difference(v, w, &format!("{path}[{i}]")))
-        }
-        _ => (a != b).then(|| path.to_string()),
-    }
-}
-
 /// Where a certificate's recorded path is read: relative to the
 /// certificate's own folder (as `verify` records it); a relative path not
 /// found there but found in the working folder is read from there (a
@@ -876,41 +781,21 @@ impl Certifying {
                 .to_string()
         };
         let ctrl_name = ravel_syntax::diag::sanitize(&ctrl_path.display().to_string());
-        let sha = plan.controller_sha256();
         self.files.push(format!(
             "controller  {ctrl_name} (SHA-256 {})",
-            short_hash(sha)
+            short_hash(plan.controller_sha256())
         ));
-        if sha != hash("controller", "sha256") {
-            return Err(self
-                .invalid("the controller file is not the one certified (SHA-256 differs)".into()));
-        }
-        if ravel::certificate_writer::network_sha256(plan.network())
-            != hash("controller", "network_sha256")
-        {
-            return Err(self.invalid(
-                "the controller's network (external data included) is not the one certified".into(),
-            ));
-        }
         let text_differs = spec_sha != hash("spec", "sha256");
         let text_note = format!(
             "note: the spec's text differs from the certified one (SHA-256 {}, certified {})",
             short_hash(spec_sha),
             short_hash(&hash("spec", "sha256"))
         );
-        let problem = ravel::certificate_writer::problem_json(plan);
-        if let Some(d) = first_difference(
-            &problem,
-            cert.get("problem").unwrap_or(&Value::Null),
-            "problem",
-        ) {
-            if text_differs {
+        if let Err(why) = ravel::certified_problem(cert, plan) {
+            if text_differs && matches!(why, ravel::NotCertified::Problem(_)) {
                 self.notes.push(text_note);
             }
-            return Err(self.invalid(format!(
-                "the recorded problem is not the spec's: `{}` differs",
-                ravel_syntax::diag::sanitize(&d)
-            )));
+            return Err(self.invalid(why.to_string()));
         }
         if text_differs {
             self.notes

@@ -1,10 +1,14 @@
 //! ravel: a Reach-Avoid Verification Language and its compiler.
 #![forbid(unsafe_code)]
 
-/// The allocator of every program that links ravel: mimalloc. The analysis
-/// allocates many small vectors per step; glibc's allocator takes an atomic
-/// lock on every call once a second thread exists, which cost the parallel
-/// cell and batch runs about 40 % per thread (see the speed benchmark).
+/// The allocator of every program that links ravel with its default feature
+/// `mimalloc`: mimalloc. The analysis allocates many small vectors per step;
+/// glibc's allocator takes an atomic lock on every call once a second thread
+/// exists, which cost the parallel cell and batch runs about 40 % per thread
+/// (see the speed benchmark). The Python extension turns the feature off: a
+/// library loaded into a running interpreter keeps the interpreter's
+/// allocator (ARCHITECTURE.md, Decisions).
+#[cfg(feature = "mimalloc")]
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
@@ -25,6 +29,7 @@ use execute::{Control, Run};
 use ravel_base::limits;
 use ravel_syntax as syntax;
 use ravel_syntax::diag::{self, Diagnostic};
+use serde_json::Value;
 
 /// One file the front end asks the caller to read.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -226,4 +231,95 @@ pub fn verify(
 ) -> Result<Run, Vec<Diagnostic>> {
     let task = front_end_task(source, spec_dir, read, controller)?;
     Ok(run(&task, ctl))
+}
+
+/// Why a certificate is not about a plan: its recorded controller, network
+/// or problem is not the plan's. `Display` says which, for people.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum NotCertified {
+    /// The controller file's SHA-256 is not the recorded one.
+    Controller,
+    /// The network read (external data included) is not the recorded one.
+    Network,
+    /// The recorded problem differs from the plan's, first at this path.
+    Problem(String),
+}
+
+impl std::fmt::Display for NotCertified {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NotCertified::Controller => {
+                f.write_str("the controller file is not the one certified (SHA-256 differs)")
+            }
+            NotCertified::Network => f.write_str(
+                "the controller's network (external data included) is not the one certified",
+            ),
+            NotCertified::Problem(at) => write!(
+                f,
+                "the recorded problem is not the spec's: `{}` differs",
+                diag::sanitize(at)
+            ),
+        }
+    }
+}
+
+/// Whether a certificate is about `plan`: the controller and its network
+/// are the certified ones, and the spec's problem is the recorded one,
+/// number for number (the spec's text may differ: comments, layout). What
+/// `ravel certify` and the Python package's `certify` ask before they let
+/// [`ravel_certify::check`] read the certificate's claims.
+pub fn certified_problem(cert: &Value, plan: &lower::Plan) -> Result<(), NotCertified> {
+    let recorded = |field: &str| {
+        cert.get("controller")
+            .and_then(|v| v.get(field))
+            .and_then(Value::as_str)
+            .unwrap_or("")
+    };
+    if plan.controller_sha256() != recorded("sha256") {
+        return Err(NotCertified::Controller);
+    }
+    if certificate_writer::network_sha256(plan.network()) != recorded("network_sha256") {
+        return Err(NotCertified::Network);
+    }
+    let problem = certificate_writer::problem_json(plan);
+    match first_difference(
+        &problem,
+        cert.get("problem").unwrap_or(&Value::Null),
+        "problem",
+    ) {
+        Some(at) => Err(NotCertified::Problem(at)),
+        None => Ok(()),
+    }
+}
+
+/// The first place two JSON values differ, as a path (`problem.plants[0].A[1]`).
+pub fn first_difference(a: &Value, b: &Value, path: &str) -> Option<String> {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x {
+                let p = format!("{path}.{k}");
+                match y.get(k) {
+                    Some(w) => {
+                        if let Some(d) = first_difference(v, w, &p) {
+                            return Some(d);
+                        }
+                    }
+                    None => return Some(p),
+                }
+            }
+            y.keys()
+                .find(|k| !x.contains_key(*k))
+                .map(|k| format!("{path}.{k}"))
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            if x.len() != y.len() {
+                return Some(format!("{path} (length {} vs {})", x.len(), y.len()));
+            }
+            x.iter()
+                .zip(y)
+                .enumerate()
+                .find_map(|(i, (v, w))| first_difference(v, w, &format!("{path}[{i}]")))
+        }
+        _ => (a != b).then(|| path.to_string()),
+    }
 }

@@ -326,6 +326,25 @@ impl miette::Diagnostic for Report<'_> {
     }
 }
 
+/// 1-based line and column (in characters) of a byte offset; lines end at
+/// LF, CRLF or a lone CR.
+pub fn line_col(source: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(source.len());
+    while !source.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = source.get(..offset).unwrap_or_default();
+    let line = before.matches('\n').count() + before.matches('\r').count()
+        - before.matches("\r\n").count()
+        + 1;
+    let col = before
+        .rsplit(['\n', '\r'])
+        .next()
+        .map_or(0, |l| l.chars().count())
+        + 1;
+    (line, col)
+}
+
 /// Render diagnostics for a source file as text.
 ///
 /// `color` turns on ANSI colours; `width` wraps messages. With `color = false`

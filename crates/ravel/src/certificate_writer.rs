@@ -840,6 +840,17 @@ pub fn build_network(
     };
     let (mut cells, first) = prove(&outcome.partition, true);
     let mut failure = first.evidence_failure;
+    if let (Some(why), true) = (&failure, outcome.split_activations) {
+        // bisecting inputs does not reach bounds proved by splitting
+        // activations (and would bisect hundreds of inputs in vain)
+        cert["evidence"] = json!({
+            "status": "unsupported",
+            "reason": format!(
+                "the analysis proved it by branch and bound on ReLU activations, whose subproblems (the input box with neurons' signs fixed) the checker does not re-bound yet: it re-bounds input cells, and its bounds over the whole input box fall short ({why})"
+            ),
+        });
+        return cert;
+    }
     if failure.is_some() {
         // the refinement: every cell whose bounds fall short is bisected
         // until they prove the verdicts (depth first, in order), within

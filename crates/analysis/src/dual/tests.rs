@@ -1,3 +1,8 @@
+//! Tests of the Lagrangian bounds: soundness against sampled inputs of
+//! split domains, no looser than CROWN, tightened by the ascent, exact
+//! once every neuron is split, batched as apart, no bound from non-finite
+//! multipliers.
+
 use super::*;
 use ravel_base::rng::Rng;
 

@@ -157,6 +157,9 @@ pub struct NetworkOutcome {
     pub partition: Vec<IBox>,
     /// Why partitioning stopped.
     pub partition_stop: Stop,
+    /// Whether branch and bound split ReLU activations (then `partition`
+    /// is the whole input box, bounded over the split subproblems).
+    pub split_activations: bool,
     /// Cells bounded (parents included).
     pub calls: usize,
     /// Solver statuses that forced a fallback bound.
@@ -1130,6 +1133,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
             verdict: Verdict::Verified,
             partition: Vec::new(),
             partition_stop: Stop::Grid,
+            split_activations: false,
             calls: 0,
             solver_issues: Vec::new(),
             overflow: false,
@@ -1148,7 +1152,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
     let rows = stack(&shape_dirs, &prop_rows, m);
     let sampled = support_of_points(&rows.dirs, &mc.outputs);
     let extent = extent_of_points(&rows.dirs, &mc.outputs);
-    let (b, found) = match &plan.partitioner {
+    let (b, found, split_activations) = match &plan.partitioner {
         Partitioner::Guided {
             guide: Guide::Bab,
             budget,
@@ -1178,11 +1182,12 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
                     plan.properties.len(),
                 ),
             );
-            (s.bounded, Some((s.witnesses, s.real_only)))
+            (s.bounded, Some((s.witnesses, s.real_only)), s.activations)
         }
         _ => (
             bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl),
             None,
+            false,
         ),
     };
     let overflow = b.union.iter().any(|v| !v.is_finite());
@@ -1220,6 +1225,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
         verdict,
         partition: b.cells.iter().map(|c| c.0.clone()).collect(),
         partition_stop: b.stop,
+        split_activations,
         calls: b.calls,
         solver_issues: b.issues,
         overflow,

@@ -95,6 +95,8 @@ pub(super) struct Searched {
     pub made: usize,
     pub witnesses: Vec<Option<Witness>>,
     pub real_only: Vec<Option<Vec<f64>>>,
+    /// Whether the search split ReLU activations ([`activations`]).
+    pub activations: bool,
 }
 
 /// A child of a split: its box, its bounds, the issues met bounding it,
@@ -714,6 +716,7 @@ pub(super) fn search(
         made,
         witnesses,
         real_only,
+        activations: false,
     }
 }
 

@@ -433,5 +433,6 @@ fn finish(
         made,
         witnesses,
         real_only,
+        activations: true,
     }
 }

@@ -367,3 +367,96 @@ fn bab_threads_never_change_a_result() {
         );
     }
 }
+
+/// `net` (two inputs) as a network of `n` inputs that reads inputs `a`
+/// and `b` only (the others' weights are zero).
+fn widen(net: &Network, n: usize, a: usize, b: usize) -> Network {
+    let mut layers = net.layers.clone();
+    if let Layer::Affine { w, .. } = &mut layers[0] {
+        let mut wide = nalgebra::DMatrix::zeros(w.nrows(), n);
+        wide.set_column(a, &w.column(0));
+        wide.set_column(b, &w.column(1));
+        *w = wide;
+    }
+    Network::new(n, layers)
+}
+
+/// With more than 8 inputs branch and bound splits ReLU activations: on
+/// random two-input networks widened to 10 inputs (8 of them ignored),
+/// its answers agree with the exhaustive enumeration of the two-input
+/// network's linear regions, counterexamples are real, a FALSIFIED
+/// certificate is VALID and a VERIFIED one VALID or UNSUPPORTED (the
+/// checker does not re-bound split subproblems), never INVALID.
+#[test]
+fn bab_on_activations_agrees_with_exhaustive_enumeration() {
+    use ravel_certify::{check, Answer};
+    let mut rng = Rng::new(41);
+    let (mut verified, mut falsified) = (0, 0);
+    for case in 0..24 {
+        let m = 1 + rng.below(2);
+        let small = random_network(&mut rng, 2, m, Activation::Relu, (2, 5));
+        let c0 = [rng.normal(), rng.normal()];
+        let r = [0.3 + rng.unit(), 0.3 + rng.unit()];
+        let (lo, hi) = ([c0[0] - r[0], c0[1] - r[1]], [c0[0] + r[0], c0[1] + r[1]]);
+        let verts = region_vertices(&small, lo, hi);
+        let dir: Vec<f64> = (0..m).map(|_| rng.normal()).collect();
+        let top = exact_max(&small, &verts, &dir);
+        let delta = 0.02 * (1.0 + top.abs());
+        let holds = case % 2 == 0;
+        let h = if holds { top + delta } else { top - delta };
+        let net = widen(&small, 10, 3, 7);
+        let (mut blo, mut bhi) = (vec![-1.0; 10], vec![1.0; 10]);
+        (blo[3], bhi[3], blo[7], bhi[7]) = (lo[0], hi[0], lo[1], hi[1]);
+        let input = Region::Box(IBox::new(blo, bhi));
+        let p = bab_plan(
+            net.clone(),
+            input.clone(),
+            vec![NetProperty {
+                name: "p".into(),
+                kind: NetPropertyKind::Require(Polytope {
+                    rows: vec![(dir.clone(), h)],
+                }),
+            }],
+        );
+        let out = run(&p);
+        let got = out.properties[0].status;
+        let want = if holds {
+            Verdict::Verified
+        } else {
+            Verdict::Falsified
+        };
+        assert_eq!(
+            got, want,
+            "case {case}: truth {want:?} (max {top}, threshold {h}), bab says {got:?} after {} calls, stop {:?}",
+            out.calls, out.partition_stop
+        );
+        if let Some(w) = &out.properties[0].counterexample {
+            assert!(input.contains_point(&w.input), "case {case}");
+            let v: f64 = dir
+                .iter()
+                .zip(&net.forward(&w.input))
+                .map(|(a, b)| a * b)
+                .sum();
+            assert!(v > h, "case {case}");
+        }
+        let answer = check(&net_certificate(&p, &out), &net).answer;
+        match got {
+            Verdict::Verified => {
+                verified += 1;
+                assert!(out.split_activations, "case {case}: inputs were split");
+                assert!(
+                    matches!(answer, Answer::Valid | Answer::Unsupported(_)),
+                    "case {case}: {answer:?}"
+                );
+            }
+            _ => {
+                falsified += 1;
+                assert_eq!(answer, Answer::Valid, "case {case}");
+            }
+        }
+    }
+    assert!(
+        verified >= 10 && falsified >= 10,
+        "{verified} verified, {falsified} falsified"
+    );
+}

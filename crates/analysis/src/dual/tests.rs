@@ -283,3 +283,86 @@ fn subproblems_optimised_together_get_the_bounds_they_get_apart() {
         }
     }
 }
+
+#[test]
+fn any_multipliers_give_a_sound_bound() {
+    // weak duality holds for every ν, not only the back-substitution's:
+    // optimised multipliers perturbed at random, on the root and on split
+    // domains
+    for seed in 0..10 {
+        let cs = case(seed, &[3, 8, 8, 2]);
+        let chain = ReluChain::of(&cs.net).unwrap();
+        let root = Domain::root(&cs.net, &cs.input).unwrap();
+        let mut doms = vec![root.clone()];
+        for k in 0..2 {
+            if let Some(j) = (0..8).find(|&j| root.unstable(k, j)) {
+                doms.push(root.split(k, j, Phase::Active));
+                doms.push(root.split(k, j, Phase::Inactive));
+            }
+        }
+        let mut rng = Rng::new(seed + 7);
+        for (i, dom) in doms.iter().enumerate() {
+            let seen = sampled_min(&cs, dom, seed + 50, 3000);
+            // near the optimum, where a vertex left out would show
+            let best = optimise(
+                &chain,
+                &cs.input,
+                dom,
+                &cs.obj,
+                Slopes::crown(&chain, dom, 3),
+                60,
+            )
+            .dual;
+            for t in 0..20 {
+                let size = 0.02 * t as f64;
+                let dual = Dual {
+                    nu: best
+                        .nu
+                        .iter()
+                        .map(|m| m.map(|v| v + size * rng.normal()))
+                        .collect(),
+                };
+                let b = certified(&chain, &cs.input, dom, &cs.obj, &dual);
+                for c in 0..3 {
+                    assert!(
+                        b[c] <= seen[c],
+                        "seed {seed} domain {i}: {} > {}",
+                        b[c],
+                        seen[c]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_hull_vertex_at_the_upper_bound_counts() {
+    // y = relu(x) on [−1, 1], objective −y (minimum −1 at x = 1): with
+    // ν = 0 the bound is the neuron's term alone, min over the triangle
+    // of −h, attained at its vertex (u, u) = (1, 1); leaving that vertex
+    // out would claim 0
+    let net = Network::new(
+        1,
+        vec![
+            Layer::Affine {
+                w: DMatrix::from_element(1, 1, 1.0),
+                b: DVector::from_element(1, 0.0),
+            },
+            Layer::Act(Activation::Relu),
+            Layer::Affine {
+                w: DMatrix::from_element(1, 1, 1.0),
+                b: DVector::from_element(1, 0.0),
+            },
+        ],
+    );
+    let chain = ReluChain::of(&net).unwrap();
+    let input = IBox::new(vec![-1.0], vec![1.0]);
+    let dom = Domain::root(&net, &input).unwrap();
+    let obj = DMatrix::from_element(1, 1, -1.0);
+    let dual = Dual {
+        nu: vec![DMatrix::zeros(1, 1)],
+    };
+    let b = certified(&chain, &input, &dom, &obj, &dual)[0];
+    assert!(b <= -1.0 && b > -1.0 - 1e-12, "{b}");
+}

@@ -46,6 +46,9 @@ const BRANCH_TOP: usize = 8;
 /// Ascent steps on each child (warm-started from its parent).
 const CHILD_STEPS: usize = 20;
 
+/// Ascent steps on a subproblem with every neuron's sign fixed.
+const LEAF_STEPS: usize = 1000;
+
 /// Children bounded together in one pass.
 const GROUP: usize = 32;
 
@@ -278,8 +281,33 @@ pub(super) fn search(
                     parents += 1;
                 }
                 None => {
-                    // every neuron's sign is fixed: it stays open
-                    stuck.push(sub.bounds);
+                    // every neuron's sign is fixed: the relaxation is the
+                    // network on this piece, and a longer ascent reaches
+                    // its exact extreme; if that does not prove it, it
+                    // stays open
+                    let cols = open_rows(cx, &sub.bounds, &settled);
+                    let part = obj.select_columns(cols.iter());
+                    let o = dual::optimise(
+                        chain,
+                        rootbox,
+                        &sub.dom,
+                        &part,
+                        sub.slopes.columns(&cols),
+                        LEAF_STEPS,
+                    );
+                    calls += 1;
+                    let mut b = sub.bounds;
+                    for (i, &c) in cols.iter().enumerate() {
+                        let v = -o.bounds[i];
+                        if !v.is_nan() {
+                            b[c] = b[c].min(v);
+                        }
+                    }
+                    if cx.worst(&b, &settled).0 == f64::INFINITY {
+                        absorb(&mut proved_union, &b);
+                    } else {
+                        stuck.push(b);
+                    }
                 }
             }
         }

@@ -181,6 +181,30 @@ pub(super) fn cell_margin(
     }
 }
 
+/// Why a search with `queued` open subproblems stops before its next
+/// round, if it does: every property settled, the time limit, the call
+/// budget (`made` subproblems so far), or the queue's memory `limit`.
+fn halt(
+    settled: &[bool],
+    late: bool,
+    made: usize,
+    budget: &Budget,
+    queued: usize,
+    limit: usize,
+) -> Option<Stop> {
+    if settled.iter().all(|s| *s) {
+        Some(Stop::Decided)
+    } else if late {
+        Some(Stop::Time)
+    } else if made >= budget.calls {
+        Some(Stop::Calls)
+    } else if queued >= limit {
+        Some(Stop::Queue)
+    } else {
+        None
+    }
+}
+
 /// Whether margin `v` proves `kind` on a cell.
 fn proved(kind: &NetPropertyKind, v: f64) -> bool {
     super::proves(kind, v)
@@ -548,20 +572,8 @@ pub(super) fn search(
         }
     }
     while !queue.is_empty() {
-        if settled.iter().all(|s| *s) {
-            stop = Stop::Decided;
-            break;
-        }
-        if out_of_time() {
-            stop = Stop::Time;
-            break;
-        }
-        if made >= budget.calls {
-            stop = Stop::Calls;
-            break;
-        }
-        if queue.len() >= limit {
-            stop = Stop::Queue;
+        if let Some(why) = halt(&settled, out_of_time(), made, budget, queue.len(), limit) {
+            stop = why;
             break;
         }
         // take a batch; split each (along each candidate input: one, but

@@ -20,7 +20,7 @@ use std::ops::Not;
 
 use nalgebra::DMatrix;
 
-use super::{cell_margin, proved, Bounded, Ctx, Searched, Witness, BATCH};
+use super::{cell_margin, halt, proved, Bounded, Ctx, Searched, Witness, BATCH};
 use crate::execute::{Phase as Stage, Progress};
 use crate::ir::NetPropertyKind;
 use ravel_analysis::dual::{self, Domain, Phase, ReluChain, Slopes};
@@ -236,20 +236,8 @@ pub(super) fn search(
     // open subproblems kept when the search stops with no split left
     let mut stuck: Vec<Vec<f64>> = Vec::new();
     while !queue.is_empty() {
-        if settled.iter().all(|s| *s) {
-            stop = Stop::Decided;
-            break;
-        }
-        if out_of_time() {
-            stop = Stop::Time;
-            break;
-        }
-        if made >= budget.calls {
-            stop = Stop::Calls;
-            break;
-        }
-        if queue.len() >= limit {
-            stop = Stop::Queue;
+        if let Some(why) = halt(&settled, out_of_time(), made, budget, queue.len(), limit) {
+            stop = why;
             break;
         }
         let room = (budget.calls - made) / 2;

@@ -164,7 +164,21 @@ impl Domain {
     /// [`optimise`] on the network up to that layer, for `steps` steps,
     /// layer by layer (each layer's relaxation uses the tightened bounds of
     /// the layers before it). A bound is kept only where it is tighter.
-    pub fn tighten(&mut self, chain: &ReluChain, input: &IBox, steps: usize) {
+    ///
+    /// A layer's neurons go through the ascent in groups of
+    /// [`TIGHTEN_GROUP`] (fixed, so the bounds never depend on the thread
+    /// count) on `threads` threads. `stop` is asked before each group: once
+    /// it says so, the remaining neurons keep their bounds (each bound is
+    /// valid on its own, so stopping anywhere is sound). Returns whether
+    /// every layer was tightened.
+    pub fn tighten(
+        &mut self,
+        chain: &ReluChain,
+        input: &IBox,
+        steps: usize,
+        threads: usize,
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> bool {
         for k in 1..self.lo.len() {
             let open: Vec<usize> = (0..self.lo[k].len())
                 .filter(|&j| self.unstable(k, j))
@@ -173,29 +187,60 @@ impl Domain {
                 continue;
             }
             let n = self.lo[k].len();
-            let m = open.len();
-            let mut obj = DMatrix::zeros(n, 2 * m);
-            for (c, &j) in open.iter().enumerate() {
-                obj[(j, c)] = 1.0;
-                obj[(j, m + c)] = -1.0;
-            }
             let sub = chain.prefix(k);
             let dom = Domain {
                 lo: self.lo[..k].to_vec(),
                 hi: self.hi[..k].to_vec(),
             };
-            let start = Slopes::crown(&sub, &dom, 2 * m);
-            let o = optimise(&sub, input, &dom, &obj, start, steps);
-            for (c, &j) in open.iter().enumerate() {
-                let (lo, hi) = (o.bounds[c], -o.bounds[m + c]);
-                if lo.is_finite() && lo > self.lo[k][j] {
-                    self.lo[k][j] = lo;
-                }
-                if hi.is_finite() && hi < self.hi[k][j] {
-                    self.hi[k][j] = hi;
+            let groups: Vec<&[usize]> = open.chunks(TIGHTEN_GROUP).collect();
+            let parts = crate::pool::available(threads).clamp(1, groups.len());
+            let per = groups.len().div_ceil(parts);
+            let run = |i: usize| -> Vec<Option<Optimised>> {
+                groups
+                    .iter()
+                    .skip(i * per)
+                    .take(per)
+                    .map(|g| {
+                        if stop() {
+                            return None;
+                        }
+                        let m = g.len();
+                        let mut obj = DMatrix::zeros(n, 2 * m);
+                        for (c, &j) in g.iter().enumerate() {
+                            obj[(j, c)] = 1.0;
+                            obj[(j, m + c)] = -1.0;
+                        }
+                        let start = Slopes::crown(&sub, &dom, 2 * m);
+                        Some(optimise(&sub, input, &dom, &obj, start, steps))
+                    })
+                    .collect()
+            };
+            let got: Vec<Option<Optimised>> = crate::pool::on_threads(parts, &run)
+                .into_iter()
+                .flatten()
+                .collect();
+            let mut whole = true;
+            for (g, o) in groups.iter().zip(got) {
+                let Some(o) = o else {
+                    whole = false;
+                    continue;
+                };
+                let m = g.len();
+                for (c, &j) in g.iter().enumerate() {
+                    let (lo, hi) = (o.bounds[c], -o.bounds[m + c]);
+                    if lo.is_finite() && lo > self.lo[k][j] {
+                        self.lo[k][j] = lo;
+                    }
+                    if hi.is_finite() && hi < self.hi[k][j] {
+                        self.hi[k][j] = hi;
+                    }
                 }
             }
+            if !whole {
+                return false;
+            }
         }
+        true
     }
 
     /// The child where neuron `j` of layer `k` has phase `p`.
@@ -208,6 +253,10 @@ impl Domain {
         d
     }
 }
+
+/// Neurons per ascent in [`Domain::tighten`] (each gives two objective
+/// columns, its lower and its upper bound).
+pub const TIGHTEN_GROUP: usize = 16;
 
 /// Multipliers `ν_k` of every hidden layer, one column per objective.
 #[derive(Clone, Debug)]

@@ -366,3 +366,39 @@ fn the_hull_vertex_at_the_upper_bound_counts() {
     let b = certified(&chain, &input, &dom, &obj, &dual)[0];
     assert!(b <= -1.0 && b > -1.0 - 1e-12, "{b}");
 }
+
+#[test]
+fn tightened_bounds_hold_do_not_depend_on_threads_and_stop_when_asked() {
+    // 40 neurons per layer: more than one group of TIGHTEN_GROUP
+    let cs = case(11, &[5, 40, 40, 40, 2]);
+    let chain = ReluChain::of(&cs.net).unwrap();
+    let root = Domain::root(&cs.net, &cs.input).unwrap();
+    let mut one = root.clone();
+    assert!(one.tighten(&chain, &cs.input, 30, 1, &|| false));
+    let mut two = root.clone();
+    assert!(two.tighten(&chain, &cs.input, 30, 2, &|| false));
+    assert_eq!(one.lo, two.lo);
+    assert_eq!(one.hi, two.hi);
+    // tighter somewhere, never looser
+    let mut gained = 0;
+    for k in 0..root.lo.len() {
+        for j in 0..root.lo[k].len() {
+            assert!(one.lo[k][j] >= root.lo[k][j] && one.hi[k][j] <= root.hi[k][j]);
+            gained += usize::from(one.lo[k][j] > root.lo[k][j] || one.hi[k][j] < root.hi[k][j]);
+        }
+    }
+    assert!(gained > 10, "only {gained} bounds tightened");
+    // every sampled input's pre-activations lie within the tightened bounds
+    let mut rng = Rng::new(5);
+    for _ in 0..4000 {
+        let x: Vec<f64> = (0..cs.input.dim())
+            .map(|i| rng.uniform(cs.input.lo[i], cs.input.hi[i]))
+            .collect();
+        assert!(inside(&one, &pre_activations(&cs.net, &x)), "x = {x:?}");
+    }
+    // asked to stop at once: nothing changes, and it says so
+    let mut stopped = root.clone();
+    assert!(!stopped.tighten(&chain, &cs.input, 30, 2, &|| true));
+    assert_eq!(stopped.lo, root.lo);
+    assert_eq!(stopped.hi, root.hi);
+}

@@ -29,7 +29,6 @@ use ravel_analysis::partition::{Budget, Stop};
 use ravel_analysis::sets::{IBox, Region};
 
 /// Ascent steps on the root.
-/// Ascent steps on the root.
 const ROOT_STEPS: usize = 100;
 
 /// Ascent steps per unstable neuron's bounds when the root's hidden-layer
@@ -42,7 +41,6 @@ const TIGHTEN_STEPS: usize = 50;
 /// (the score alone) 2 047.
 const BRANCH_TOP: usize = 8;
 
-/// Ascent steps on each child (warm-started from its parent).
 /// Ascent steps on each child (warm-started from its parent).
 const CHILD_STEPS: usize = 20;
 
@@ -202,14 +200,20 @@ pub(super) fn search(
             real_only,
         );
     };
-    root_dom.tighten(chain, rootbox, TIGHTEN_STEPS);
+    // the root's bounds from the ascent alone first: when they settle
+    // everything, the tightening (most of an easy instance's time) is not
+    // needed
+    let rows_bounds = |o: &dual::Optimised| -> Vec<f64> {
+        uppers(&o.bounds)
+            .iter()
+            .zip(&root_b)
+            .map(|(a, b)| if a.is_nan() { *b } else { a.min(*b) })
+            .collect()
+    };
     let start = Slopes::crown(chain, &root_dom, rows);
-    let opt = dual::optimise(chain, rootbox, &root_dom, &obj, start, ROOT_STEPS);
-    let root_bounds: Vec<f64> = uppers(&opt.bounds)
-        .iter()
-        .zip(&root_b)
-        .map(|(a, b)| if a.is_nan() { *b } else { a.min(*b) })
-        .collect();
+    let mut opt = dual::optimise(chain, rootbox, &root_dom, &obj, start, ROOT_STEPS);
+    calls += 1;
+    let mut root_bounds = rows_bounds(&opt);
     // the relaxation's worst inputs, as counterexample candidates
     attack(
         cx,
@@ -219,6 +223,32 @@ pub(super) fn search(
         &mut witnesses,
         &mut real_only,
     );
+    if cx.worst(&root_bounds, &settled).0 < f64::INFINITY && !out_of_time() {
+        root_dom.tighten(chain, rootbox, TIGHTEN_STEPS, ctl.threads, &out_of_time);
+        // the slopes found stay a valid start on the tightened domain
+        let again = dual::optimise(
+            chain,
+            rootbox,
+            &root_dom,
+            &obj,
+            opt.slopes.clone(),
+            ROOT_STEPS,
+        );
+        calls += 1;
+        let b = rows_bounds(&again);
+        // the tighter domain's bounds hold too (every domain bound is
+        // valid): keep the better of the two per row
+        root_bounds = root_bounds.iter().zip(&b).map(|(a, b)| a.min(*b)).collect();
+        attack(
+            cx,
+            &again.worst_inputs,
+            &root_bounds,
+            &mut settled,
+            &mut witnesses,
+            &mut real_only,
+        );
+        opt = again;
+    }
     let mut queue: std::collections::BinaryHeap<Open> = std::collections::BinaryHeap::new();
     let mut subs: Vec<Option<Sub>> = Vec::new();
     let (w0, _) = cx.worst(&root_bounds, &settled);
@@ -245,8 +275,8 @@ pub(super) fn search(
         // the children: their domain, their parent's multipliers (the
         // ascent's start) and bounds (which hold on them too)
         let mut kids: Vec<Kid> = Vec::with_capacity(2 * take);
-        let mut parents = 0;
-        while parents < take {
+        let mut popped: Vec<(Sub, usize)> = Vec::with_capacity(take);
+        while popped.len() < take {
             let Some(node) = queue.pop() else { break };
             let sub = subs[node.at].take().expect("a queued subproblem");
             let (_, row) = cx.worst(&sub.bounds, &settled);
@@ -254,7 +284,23 @@ pub(super) fn search(
                 absorb(&mut proved_union, &sub.bounds);
                 continue;
             };
-            match dual::branch(chain, rootbox, &sub.dom, &obj, &sub.slopes, row, BRANCH_TOP) {
+            popped.push((sub, row));
+        }
+        // the branching decisions on the threads (each parent's own: the
+        // same whatever the thread count)
+        let choices = super::super::map_ordered(&popped, ctl.threads, &|(sub, row)| {
+            dual::branch(
+                chain,
+                rootbox,
+                &sub.dom,
+                &obj,
+                &sub.slopes,
+                *row,
+                BRANCH_TOP,
+            )
+        });
+        for ((sub, _), choice) in popped.into_iter().zip(choices) {
+            match choice {
                 Some((k, j)) => {
                     let cols = open_rows(cx, &sub.bounds, &settled);
                     let bounds = sub.bounds;
@@ -266,7 +312,6 @@ pub(super) fn search(
                             cols.clone(),
                         ));
                     }
-                    parents += 1;
                 }
                 None => {
                     // every neuron's sign is fixed: the relaxation is the

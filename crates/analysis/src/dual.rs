@@ -872,22 +872,31 @@ pub fn branch(
     if list.len() <= 1 {
         return list.first().copied();
     }
-    let one = obj.columns(c, 1).into_owned();
-    let start = slopes.columns(&[c]);
-    let owner = [0];
+    // every candidate's two children in one pass, a column each against
+    // its own domain (the same values as one pass per child)
+    let children: Vec<Domain> = list
+        .iter()
+        .flat_map(|&(k, j)| {
+            [
+                dom.split(k, j, Phase::Inactive),
+                dom.split(k, j, Phase::Active),
+            ]
+        })
+        .collect();
+    let doms: Vec<&Domain> = children.iter().collect();
+    let owner: Vec<usize> = (0..children.len()).collect();
+    let cols = Cols {
+        doms: &doms,
+        owner: &owner,
+    };
+    let r = children.len();
+    let objs = DMatrix::from_fn(obj.nrows(), r, |i, _| obj[(i, c)]);
+    let start = slopes.columns(&vec![c; r]);
+    let (dual, _) = start.multipliers(chain, cols, &objs);
+    let (v, _, _) = evaluate(chain, input, cols, &objs, &dual);
     let mut best: Option<(f64, (usize, usize))> = None;
-    for &(k, j) in &list {
-        let mut worse = f64::INFINITY;
-        for p in [Phase::Inactive, Phase::Active] {
-            let child = dom.split(k, j, p);
-            let cols = Cols {
-                doms: &[&child],
-                owner: &owner,
-            };
-            let (dual, _) = start.multipliers(chain, cols, &one);
-            let (v, _, _) = evaluate(chain, input, cols, &one, &dual);
-            worse = worse.min(v[0]);
-        }
+    for (i, &(k, j)) in list.iter().enumerate() {
+        let worse = v[2 * i].min(v[2 * i + 1]);
         if worse.is_finite() && best.is_none_or(|b| worse > b.0) {
             best = Some((worse, (k, j)));
         }

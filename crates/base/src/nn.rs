@@ -64,6 +64,22 @@ pub fn mat_batch_into(m: &DMatrix<f64>, x: &[f64], count: usize, out: &mut Vec<f
     if rows == 0 || count == 0 {
         return;
     }
+    if count == 1 {
+        // one vector: column by column down each (contiguous) column of
+        // `M`, every entry still summed in the order j = 0, 1, …
+        for (j, (col, &xj)) in m.column_iter().zip(x).enumerate() {
+            if j == 0 {
+                for (o, &c) in out.iter_mut().zip(col.iter()) {
+                    *o = xj * c;
+                }
+            } else {
+                for (o, &c) in out.iter_mut().zip(col.iter()) {
+                    *o += xj * c;
+                }
+            }
+        }
+        return;
+    }
     for (i, o) in out.chunks_exact_mut(count).enumerate() {
         for (j, xj) in x.chunks_exact(count).enumerate().take(m.ncols()) {
             let c = m[(i, j)];
@@ -306,7 +322,8 @@ impl Network {
         for (layer, z) in self.layers.iter().zip(&pre).rev() {
             match layer {
                 Layer::Affine { w, .. } => {
-                    g = (w.transpose() * DVector::from_column_slice(&g))
+                    g = w
+                        .tr_mul(&DVector::from_column_slice(&g))
                         .as_slice()
                         .to_vec();
                 }
@@ -475,6 +492,37 @@ pub fn leaky_relu_layers(m: usize, alpha: f64) -> Vec<Layer> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_vector_and_a_batch_sum_in_the_same_order() {
+        // each entry is x₀c₀ + x₁c₁ + … in that order, whether the vector
+        // goes alone or beside others (bit for bit)
+        let mut rng = crate::rng::Rng::new(3);
+        let m = DMatrix::from_fn(7, 13, |_, _| rng.normal() * 1e3);
+        let xs: Vec<Vec<f64>> = (0..5)
+            .map(|_| (0..13).map(|_| rng.normal()).collect())
+            .collect();
+        let mut batch_in = vec![0.0; 13 * 5];
+        for (s, x) in xs.iter().enumerate() {
+            for (j, v) in x.iter().enumerate() {
+                batch_in[j * 5 + s] = *v;
+            }
+        }
+        let mut batch = Vec::new();
+        mat_batch_into(&m, &batch_in, 5, &mut batch);
+        for (s, x) in xs.iter().enumerate() {
+            let mut one = Vec::new();
+            mat_batch_into(&m, x, 1, &mut one);
+            for i in 0..7 {
+                let mut by_hand = x[0] * m[(i, 0)];
+                for j in 1..13 {
+                    by_hand += x[j] * m[(i, j)];
+                }
+                assert_eq!(one[i].to_bits(), by_hand.to_bits());
+                assert_eq!(batch[i * 5 + s].to_bits(), by_hand.to_bits());
+            }
+        }
+    }
 
     #[test]
     fn saturation_clips() {

@@ -1,10 +1,14 @@
 //! ONNX controllers: decoding (prost, no code generation), lowering the graph
 //! to a [`Network`], and a small writer used by the model generator and tests.
 //!
-//! Supported graphs are chains on one vector input: `Gemm` (alpha, beta,
+//! Supported graphs are chains on one input: `Gemm` (alpha, beta,
 //! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `LeakyRelu`, `Tanh`,
 //! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
-//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
+//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), 2-D `Conv`
+//! (NCHW, batch 1: `strides`, `dilations`, `pads` or `auto_pad` of any
+//! ONNX value, `group` including depthwise, optional bias; constant
+//! weights), `AveragePool` (`ceil_mode` 0; `count_include_pad`) and
+//! `GlobalAveragePool` (see [`conv`]), and the
 //! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
 //! `Dropout` (inference), plus `Constant`. `MatMul` takes its 2-D constant
 //! on either side (`x·W` as Keras writes it, `W·x` on a column as
@@ -12,14 +16,26 @@
 //! tensor shape (the batch dimension as 1): `MatMul` and broadcasting
 //! follow ONNX's rules on it, and the shape-only ops must keep the flat
 //! (row-major) vector — same number of elements, constant target shapes,
-//! squeezed axes of size 1 — or are refused, naming the node. Weights may be float32, float64
+//! squeezed axes of size 1 — or are refused, naming the node. A
+//! convolution or pooling becomes one dense affine layer on the flat
+//! row-major `(C, H, W)` value, checked against the limits on width and on
+//! weights (every layer's dense matrix counts, together at most
+//! [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
+//! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
+//! kept as they are, not multiplied together (their product would be
+//! rounded). A node combining two computed values (`Add` of a residual or
+//! skip connection, `Concat`) is refused, naming it: the network is a
+//! chain of layers on one running value. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed
 //! fields, or in external data files.
 //!
 //! Semantics: the network ravel verifies is the real-arithmetic function of
 //! the stored weights (float32 values are widened to f64 exactly). `Clip`
 //! and `LeakyRelu` become ReLU layers that compute them exactly. `Div` by a
-//! constant `c` is read as multiplication by the f64 nearest to `1/c`, a
+//! constant `c` is read as multiplication by the f64 nearest to `1/c`, so
+//! is an average over `k` elements (`AveragePool`, `GlobalAveragePool`:
+//! the sum times the f64 nearest to `1/k`; counterexamples are replayed
+//! with that weight rounded to the stored precision, as every weight), a
 //! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64, and
 //! `BatchNormalization` is the diagonal affine map whose coefficients
 //! `scale/√(var + ε)` and `B − mean·scale/√(var + ε)` are computed in f64
@@ -33,6 +49,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod build;
+mod conv;
 pub mod proto;
 
 use std::collections::{BTreeMap, HashMap};
@@ -495,7 +512,7 @@ fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
 
 /// The ops ravel accepts, for hints.
 pub const SUPPORTED_OPS: &str =
-    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
+    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Conv (2-D), AveragePool, GlobalAveragePool, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
 
 struct Lowering {
     consts: HashMap<String, Tensor>,
@@ -508,6 +525,8 @@ struct Lowering {
     layers: Vec<Layer>,
     /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
     notes: Vec<String>,
+    /// Entries of the dense matrices built so far (see [`Lowering::reserve`]).
+    dense: u64,
 }
 
 impl Lowering {
@@ -537,7 +556,7 @@ impl Lowering {
         .ok_or_else(|| {
             err(
                 OnnxErrorKind::Unsupported,
-                format!("{} combines two computed values; ravel supports only chains with constant operands", node_label(n)),
+                format!("{} combines two computed values (a residual or skip connection); ravel supports only chains with constant operands", node_label(n)),
                 "export a plain feed-forward network (no skip connections)",
             )
         })
@@ -573,6 +592,20 @@ impl Lowering {
                 ),
                 "the constant must be a scalar or have one entry per element",
             ))
+        }
+    }
+
+    /// Refuse node `n` before it allocates a dense `rows × cols` matrix
+    /// that would bring the entries of the network's dense matrices
+    /// together past [`MAX_PARAMETERS`] (every node's layers are counted
+    /// after it by [`Lowering::node`]).
+    fn reserve(&self, n: &NodeProto, rows: usize, cols: usize) -> Result<(), OnnxError> {
+        let total = (rows as u64)
+            .checked_mul(cols as u64)
+            .and_then(|e| e.checked_add(self.dense));
+        match total {
+            Some(t) if t <= MAX_PARAMETERS => Ok(()),
+            _ => Err(too_many_weights(n, rows, cols)),
         }
     }
 
@@ -904,6 +937,7 @@ impl Lowering {
             ));
         }
         let data_first = first == self.current;
+        let before = self.layers.len();
         match op.as_str() {
             "Gemm" => self.gemm(n, data_first)?,
             "MatMul" => self.matmul(n)?,
@@ -915,6 +949,8 @@ impl Lowering {
             "LeakyRelu" => self.leaky_relu(n)?,
             "BatchNormalization" => self.batch_norm(n)?,
             "Dropout" => self.dropout(n, data_first)?,
+            "Conv" => self.conv(n, data_first)?,
+            "AveragePool" | "GlobalAveragePool" => self.average_pool(n, &op)?,
             "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" => {
                 if !data_first {
                     return Err(err(
@@ -935,6 +971,16 @@ impl Lowering {
                     ),
                     format!("supported operators: {SUPPORTED_OPS}"),
                 ))
+            }
+        }
+        // the dense matrices built so far, against the limit on weights
+        for l in self.layers.iter().skip(before) {
+            if let Layer::Affine { w, .. } = l {
+                let entries = (w.nrows() as u64).saturating_mul(w.ncols() as u64);
+                self.dense = self.dense.saturating_add(entries);
+                if self.dense > MAX_PARAMETERS {
+                    return Err(too_many_weights(n, w.nrows(), w.ncols()));
+                }
             }
         }
         self.current = out;
@@ -1373,6 +1419,18 @@ impl Lowering {
     }
 }
 
+/// A node whose dense `rows × cols` layer passes the limit on weights.
+fn too_many_weights(n: &NodeProto, rows: usize, cols: usize) -> OnnxError {
+    err(
+        OnnxErrorKind::Unsupported,
+        format!(
+            "{} is a dense {rows} × {cols} layer, which brings the network's weights past ravel's limit of {MAX_PARAMETERS}",
+            node_label(n)
+        ),
+        "ravel verifies small networks: at most 16777216 weights in its layers' dense matrices together (a convolution or pooling counts as its dense matrix)",
+    )
+}
+
 /// A node exported in training mode (Dropout or BatchNormalization).
 fn training_mode(n: &NodeProto) -> OnnxError {
     err(
@@ -1445,6 +1503,7 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         shape: declared.and(declared_shape(input)),
         layers: Vec::new(),
         notes: Vec::new(),
+        dense: 0,
     };
     for n in &graph.node {
         low.node(n)?;

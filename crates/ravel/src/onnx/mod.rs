@@ -22,8 +22,11 @@
 //! weights (every layer's dense matrix counts, together at most
 //! [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
 //! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
-//! kept as they are, not multiplied together (their product would be
-//! rounded). A node combining two computed values (`Add` of a residual or
+//! kept as they are, not multiplied together: their product would be
+//! rounded, and counterexamples are replayed layer by layer in the stored
+//! precision as a runtime evaluates them (the analyses that need affine
+//! layers and activations to alternate — the batched CROWN kernel, branch
+//! and bound on activations — fall back to their general paths). A node combining two computed values (`Add` of a residual or
 //! skip connection, `Concat`) is refused, naming it: the network is a
 //! chain of layers on one running value. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed

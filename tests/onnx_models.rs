@@ -1450,3 +1450,49 @@ fn hostile_convolutions_are_diagnostics() {
     // rows: ⌊(5 + 2·(2⁶³ − 1) − 3)/(2⁶³ − 1)⌋ + 1 = 3 outputs, columns 3
     assert_eq!(c.outputs, 2 * 3 * 3);
 }
+
+/// `BatchNormalization` after a `Conv` normalises per channel (axis 1 of
+/// `[1, C, H, W]`): against the reference convolution, normalised by hand.
+#[test]
+fn batch_normalisation_per_channel_after_a_conv() {
+    let mut rng = ravel_base::rng::Rng::new(14);
+    let g = geometry([2, 5, 4], [3, 3], [1, 1], [1, 1], [1, 1, 1, 1]);
+    let w = random_matrix(&mut rng, 3 * 2 * 9, 1);
+    let b = random_matrix(&mut rng, 3, 1);
+    let (scale, shift, mean, var) = (
+        [0.5, -2.0, 1.5],
+        [0.25, 0.0, -1.0],
+        [1.0, -0.5, 0.0],
+        [4.0, 0.25, 1.0],
+    );
+    let eps = 0.5f32;
+    let reference = |x: &[f64]| -> Vec<f64> {
+        let y = reference_conv(&g, 3, 1, w.as_slice(), b.as_slice(), x);
+        y.iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let c = i / 20;
+                let z = (v - mean[c]) / (var[c] + f64::from(eps)).sqrt() * scale[c] + shift[c];
+                z.max(0.0)
+            })
+            .collect()
+    };
+    let mut gb = GraphBuilder::new(40, Storage::RawF64);
+    gb.declare_shape(&[None, Some(2), Some(5), Some(4)]);
+    let wn = gb.constant("weight", &[3, 2, 3, 3], w.as_slice());
+    let bn = gb.constant("bias", &[3], b.as_slice());
+    gb.node("Conv", &[wn, bn], g.attrs());
+    let params: Vec<String> = [&scale[..], &shift, &mean, &var]
+        .iter()
+        .map(|p| gb.constant("bn", &[3], p))
+        .collect();
+    gb.node(
+        "BatchNormalization",
+        &params,
+        vec![ravel::onnx::build::float_attr("epsilon", eps)],
+    );
+    gb.unary("Relu");
+    let c = load(&gb.finish(60).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!(c.outputs, 60);
+    agrees(&c, &reference, "Conv, BatchNormalization, Relu");
+}

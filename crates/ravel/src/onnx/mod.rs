@@ -3,8 +3,8 @@
 //!
 //! Supported graphs are chains on one input: `Gemm` (alpha, beta,
 //! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `LeakyRelu`, `Tanh`,
-//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
-//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), 2-D `Conv`
+//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form; per channel
+//! on an image), `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), 2-D `Conv`
 //! (NCHW, batch 1: `strides`, `dilations`, `pads` or `auto_pad` of any
 //! ONNX value, `group` including depthwise, optional bias; constant
 //! weights), `AveragePool` (`ceil_mode` 0; `count_include_pad`) and
@@ -1355,6 +1355,18 @@ impl Lowering {
                     "export in eval mode with constant folding on",
                 )
             })?;
+            // one value per channel (axis 1) of an image [1, C, H, W]
+            // (after a Conv), spread over its H·W positions
+            if let Some([1, c, rest @ ..]) = self.shape.as_deref() {
+                let plane: usize = rest.iter().product();
+                if !rest.is_empty() && t.data.len() == *c && plane > 1 {
+                    return Ok(t
+                        .data
+                        .iter()
+                        .flat_map(|v| std::iter::repeat_n(*v, plane))
+                        .collect());
+                }
+            }
             Ok(self.broadcast(n, t)?.iter().copied().collect())
         };
         let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);

@@ -19,8 +19,8 @@
 //! squeezed axes of size 1 — or are refused, naming the node. A
 //! convolution or pooling becomes one dense affine layer on the flat
 //! row-major `(C, H, W)` value, checked against the limits on width and on
-//! weights (every layer's dense matrix counts, together at most
-//! [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
+//! weights (the dense matrices of the convolutions and poolings together at
+//! most [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
 //! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
 //! kept as they are, not multiplied together: their product would be
 //! rounded, and counterexamples are replayed layer by layer in the stored
@@ -528,7 +528,8 @@ struct Lowering {
     layers: Vec<Layer>,
     /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
     notes: Vec<String>,
-    /// Entries of the dense matrices built so far (see [`Lowering::reserve`]).
+    /// Entries of the dense matrices of the convolutions and poolings so
+    /// far (see [`Lowering::reserve`]).
     dense: u64,
 }
 
@@ -598,16 +599,19 @@ impl Lowering {
         }
     }
 
-    /// Refuse node `n` before it allocates a dense `rows × cols` matrix
-    /// that would bring the entries of the network's dense matrices
-    /// together past [`MAX_PARAMETERS`] (every node's layers are counted
-    /// after it by [`Lowering::node`]).
-    fn reserve(&self, n: &NodeProto, rows: usize, cols: usize) -> Result<(), OnnxError> {
+    /// Count the dense `rows × cols` matrix of a convolution or pooling
+    /// `n` before it is allocated, refusing the node when the entries of
+    /// these matrices together would pass [`MAX_PARAMETERS`] (a
+    /// convolution's matrix is far larger than its kernel).
+    fn reserve(&mut self, n: &NodeProto, rows: usize, cols: usize) -> Result<(), OnnxError> {
         let total = (rows as u64)
             .checked_mul(cols as u64)
             .and_then(|e| e.checked_add(self.dense));
         match total {
-            Some(t) if t <= MAX_PARAMETERS => Ok(()),
+            Some(t) if t <= MAX_PARAMETERS => {
+                self.dense = t;
+                Ok(())
+            }
             _ => Err(too_many_weights(n, rows, cols)),
         }
     }
@@ -940,7 +944,6 @@ impl Lowering {
             ));
         }
         let data_first = first == self.current;
-        let before = self.layers.len();
         match op.as_str() {
             "Gemm" => self.gemm(n, data_first)?,
             "MatMul" => self.matmul(n)?,
@@ -974,16 +977,6 @@ impl Lowering {
                     ),
                     format!("supported operators: {SUPPORTED_OPS}"),
                 ))
-            }
-        }
-        // the dense matrices built so far, against the limit on weights
-        for l in self.layers.iter().skip(before) {
-            if let Layer::Affine { w, .. } = l {
-                let entries = (w.nrows() as u64).saturating_mul(w.ncols() as u64);
-                self.dense = self.dense.saturating_add(entries);
-                if self.dense > MAX_PARAMETERS {
-                    return Err(too_many_weights(n, w.nrows(), w.ncols()));
-                }
             }
         }
         self.current = out;
@@ -1434,15 +1427,16 @@ impl Lowering {
     }
 }
 
-/// A node whose dense `rows × cols` layer passes the limit on weights.
+/// A convolution or pooling whose dense `rows × cols` layer passes the
+/// limit on weights.
 fn too_many_weights(n: &NodeProto, rows: usize, cols: usize) -> OnnxError {
     err(
         OnnxErrorKind::Unsupported,
         format!(
-            "{} is a dense {rows} × {cols} layer, which brings the network's weights past ravel's limit of {MAX_PARAMETERS}",
+            "{} is a dense {rows} × {cols} layer, which brings its convolutions' and poolings' weights past ravel's limit of {MAX_PARAMETERS}",
             node_label(n)
         ),
-        "ravel verifies small networks: at most 16777216 weights in its layers' dense matrices together (a convolution or pooling counts as its dense matrix)",
+        "ravel verifies small networks: at most 16777216 weights in the dense matrices of its convolutions and poolings together",
     )
 }
 

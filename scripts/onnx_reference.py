@@ -19,6 +19,7 @@ MODELS = [
     "double_integrator_external",
     "double_integrator_tanh",
     "quadrotor",
+    "conv_bars",
 ]
 
 out = {}
@@ -27,9 +28,11 @@ for name in MODELS:
     path = f"models/{name}.onnx"
     onnx.checker.check_model(onnx.load(path))
     sess = ort.InferenceSession(path)
-    n = sess.get_inputs()[0].shape[1]
+    # the batch dimension first; an image input is fed as flat rows reshaped
+    shape = [d if isinstance(d, int) else 6 for d in sess.get_inputs()[0].shape]
+    n = int(np.prod(shape[1:]))
     xs = rng.uniform(-4.0, 4.0, size=(6, n)).astype(np.float32)
-    ys = sess.run(None, {sess.get_inputs()[0].name: xs})[0]
+    ys = sess.run(None, {sess.get_inputs()[0].name: xs.reshape(shape)})[0].reshape(6, -1)
     out[name] = {
         "inputs": [[float(v) for v in x] for x in xs],
         "outputs": [[float(v) for v in y] for y in ys],

@@ -18,13 +18,14 @@ fn read_model(name: &str) -> ravel::onnx::Controller {
     load(&bytes, &ext).expect("model loads")
 }
 
-/// Outputs computed by onnxruntime (float32) with scripts/onnx_reference.py.
+/// Outputs computed by onnxruntime (float32) with scripts/onnx_reference.py
+/// (the convolutional `conv_bars` included).
 #[test]
 fn committed_models_match_onnxruntime() {
     let text = include_str!("data/onnx_reference.json");
     let reference: Value = serde_json::from_str(text).expect("valid JSON");
     let models = reference.as_object().expect("object");
-    assert_eq!(models.len(), 4);
+    assert_eq!(models.len(), 5);
     for (name, data) in models {
         let c = read_model(name);
         let inputs = data["inputs"].as_array().expect("inputs");
@@ -705,4 +706,798 @@ fn shape_ops_and_divisions_that_are_refused() {
         OnnxErrorKind::NonFinite,
         "non-finite",
     );
+}
+
+/// The geometry of one convolution or pooling case: the input `[C, H, W]`,
+/// the kernel, strides, dilations and pads `[top, left, bottom, right]`.
+#[derive(Clone, Copy, Debug)]
+struct Geometry {
+    input: [usize; 3],
+    kernel: [usize; 2],
+    strides: [usize; 2],
+    dilations: [usize; 2],
+    pads: [usize; 4],
+}
+
+impl Geometry {
+    /// The output height and width, ONNX's formula with floor.
+    fn out(&self) -> [usize; 2] {
+        let axis = |a: usize| {
+            let padded = self.input[1 + a] + self.pads[a] + self.pads[2 + a];
+            let extent = (self.kernel[a] - 1) * self.dilations[a] + 1;
+            (padded - extent) / self.strides[a] + 1
+        };
+        [axis(0), axis(1)]
+    }
+
+    /// The input row and column of output `(y, x)` and kernel tap `(ky, kx)`,
+    /// `None` on the padding.
+    fn at(&self, y: usize, x: usize, ky: usize, kx: usize) -> Option<(usize, usize)> {
+        let iy = (y * self.strides[0] + ky * self.dilations[0]) as i64 - self.pads[0] as i64;
+        let ix = (x * self.strides[1] + kx * self.dilations[1]) as i64 - self.pads[1] as i64;
+        let inside = |v: i64, n: usize| v >= 0 && (v as usize) < n;
+        (inside(iy, self.input[1]) && inside(ix, self.input[2]))
+            .then_some((iy as usize, ix as usize))
+    }
+
+    fn attrs(&self) -> Vec<ravel::onnx::proto::AttributeProto> {
+        let ints = |v: &[usize]| v.iter().map(|d| *d as i64).collect::<Vec<_>>();
+        vec![
+            GraphBuilder::ints_attr("strides", &ints(&self.strides)),
+            GraphBuilder::ints_attr("dilations", &ints(&self.dilations)),
+            GraphBuilder::ints_attr("pads", &ints(&self.pads)),
+        ]
+    }
+}
+
+/// A reference 2-D convolution by naive loops over NCHW: weight
+/// `[M, C/group, kH, kW]` row-major, bias per output channel.
+fn reference_conv(
+    g: &Geometry,
+    m: usize,
+    group: usize,
+    w: &[f64],
+    b: &[f64],
+    x: &[f64],
+) -> Vec<f64> {
+    let [c, h, wd] = g.input;
+    let cg = c / group;
+    let [oh, ow] = g.out();
+    let mut y = vec![0.0; m * oh * ow];
+    for mo in 0..m {
+        let grp = mo / (m / group);
+        for yy in 0..oh {
+            for xx in 0..ow {
+                let mut s = b[mo];
+                for ci in 0..cg {
+                    for ky in 0..g.kernel[0] {
+                        for kx in 0..g.kernel[1] {
+                            if let Some((iy, ix)) = g.at(yy, xx, ky, kx) {
+                                let wi = ((mo * cg + ci) * g.kernel[0] + ky) * g.kernel[1] + kx;
+                                let xi = ((grp * cg + ci) * h + iy) * wd + ix;
+                                s += w[wi] * x[xi];
+                            }
+                        }
+                    }
+                }
+                y[(mo * oh + yy) * ow + xx] = s;
+            }
+        }
+    }
+    y
+}
+
+/// A reference average pooling by naive loops (`count_include_pad`: divide
+/// by the kernel's size, else by the taps inside the input).
+fn reference_pool(g: &Geometry, include_pad: bool, x: &[f64]) -> Vec<f64> {
+    let [c, h, wd] = g.input;
+    let [oh, ow] = g.out();
+    let mut y = Vec::new();
+    for ci in 0..c {
+        for yy in 0..oh {
+            for xx in 0..ow {
+                let (mut s, mut count) = (0.0, 0usize);
+                for ky in 0..g.kernel[0] {
+                    for kx in 0..g.kernel[1] {
+                        if let Some((iy, ix)) = g.at(yy, xx, ky, kx) {
+                            s += x[(ci * h + iy) * wd + ix];
+                            count += 1;
+                        }
+                    }
+                }
+                let k = if include_pad {
+                    g.kernel[0] * g.kernel[1]
+                } else {
+                    count
+                };
+                y.push(s / k as f64);
+            }
+        }
+    }
+    y
+}
+
+fn geometry(
+    input: [usize; 3],
+    kernel: [usize; 2],
+    strides: [usize; 2],
+    dilations: [usize; 2],
+    pads: [usize; 4],
+) -> Geometry {
+    Geometry {
+        input,
+        kernel,
+        strides,
+        dilations,
+        pads,
+    }
+}
+
+/// `Conv` on random weights and inputs for several pad, stride, dilation
+/// and group combinations (with and without bias, `auto_pad` spelled
+/// out), each against the naive reference convolution.
+#[test]
+fn conv_matches_a_reference_convolution() {
+    let mut rng = ravel_base::rng::Rng::new(11);
+    // (geometry, output channels, group, bias, auto_pad)
+    let cases: Vec<(Geometry, usize, usize, bool, Option<&str>)> = vec![
+        (
+            geometry([1, 5, 5], [3, 3], [1, 1], [1, 1], [0, 0, 0, 0]),
+            2,
+            1,
+            true,
+            None,
+        ),
+        (
+            geometry([2, 6, 5], [3, 2], [1, 1], [1, 1], [1, 1, 1, 1]),
+            3,
+            1,
+            true,
+            None,
+        ),
+        (
+            geometry([2, 7, 7], [3, 3], [2, 2], [1, 1], [1, 1, 1, 1]),
+            2,
+            1,
+            false,
+            None,
+        ),
+        (
+            geometry([3, 8, 6], [2, 3], [2, 1], [1, 1], [0, 2, 1, 0]),
+            2,
+            1,
+            true,
+            None,
+        ),
+        (
+            geometry([2, 9, 9], [3, 3], [1, 2], [2, 2], [2, 1, 0, 3]),
+            2,
+            1,
+            true,
+            None,
+        ),
+        (
+            geometry([1, 7, 8], [2, 2], [3, 2], [3, 1], [1, 0, 2, 1]),
+            4,
+            1,
+            true,
+            None,
+        ),
+        // grouped and depthwise
+        (
+            geometry([4, 5, 5], [3, 3], [1, 1], [1, 1], [1, 1, 1, 1]),
+            2,
+            2,
+            true,
+            None,
+        ),
+        (
+            geometry([3, 6, 6], [3, 3], [2, 2], [1, 1], [1, 1, 1, 1]),
+            3,
+            3,
+            true,
+            None,
+        ),
+        (
+            geometry([2, 4, 4], [1, 1], [1, 1], [1, 1], [0, 0, 0, 0]),
+            4,
+            2,
+            true,
+            None,
+        ),
+        // auto_pad, with the pads it implies written out for the reference:
+        // VALID none; SAME_UPPER on 7 with k 3, s 2: out 4, total pad 2 → 1, 1;
+        // on 6 with k 2, s 1: total 1 → 0 before, 1 after (SAME_LOWER: 1, 0)
+        (
+            geometry([1, 7, 6], [3, 2], [2, 1], [1, 1], [0, 0, 0, 0]),
+            2,
+            1,
+            true,
+            Some("VALID"),
+        ),
+        (
+            geometry([1, 7, 6], [3, 2], [2, 1], [1, 1], [1, 0, 1, 1]),
+            2,
+            1,
+            true,
+            Some("SAME_UPPER"),
+        ),
+        (
+            geometry([1, 7, 6], [3, 2], [2, 1], [1, 1], [1, 1, 1, 0]),
+            2,
+            1,
+            true,
+            Some("SAME_LOWER"),
+        ),
+    ];
+    for (k, (g, m, group, bias, auto_pad)) in cases.into_iter().enumerate() {
+        let [c, h, wd] = g.input;
+        let cg = c / group;
+        let w = random_matrix(&mut rng, m * cg * g.kernel[0] * g.kernel[1], 1);
+        let b = random_matrix(&mut rng, m, 1);
+        let mut gb = GraphBuilder::new(c * h * wd, Storage::RawF64);
+        gb.declare_shape(&[None, Some(c as i64), Some(h as i64), Some(wd as i64)]);
+        let wn = gb.constant("weight", &[m, cg, g.kernel[0], g.kernel[1]], w.as_slice());
+        let mut inputs = vec![wn];
+        if bias {
+            inputs.push(gb.constant("bias", &[m], b.as_slice()));
+        }
+        let mut attrs = vec![
+            ravel::onnx::build::int_attr("group", group as i64),
+            GraphBuilder::ints_attr("kernel_shape", &[g.kernel[0] as i64, g.kernel[1] as i64]),
+        ];
+        match auto_pad {
+            Some(a) => {
+                attrs.push(ravel::onnx::proto::AttributeProto {
+                    name: Some("auto_pad".into()),
+                    s: Some(a.as_bytes().to_vec()),
+                    r#type: Some(3),
+                    ..Default::default()
+                });
+                attrs.extend(
+                    g.attrs()
+                        .into_iter()
+                        .filter(|a| a.name.as_deref() != Some("pads")),
+                );
+            }
+            None => attrs.extend(g.attrs()),
+        }
+        gb.node("Conv", &inputs, attrs);
+        let [oh, ow] = g.out();
+        let c2 = load(&gb.finish(m * oh * ow).0, &ExternalFiles::new())
+            .unwrap_or_else(|e| panic!("case {k}: {e:?}"));
+        assert_eq!(
+            (c2.inputs, c2.outputs),
+            (c * h * wd, m * oh * ow),
+            "case {k}"
+        );
+        let zeros = vec![0.0; m];
+        let bb = if bias { b.as_slice() } else { &zeros[..] };
+        agrees(
+            &c2,
+            &|x| reference_conv(&g, m, group, w.as_slice(), bb, x),
+            &format!("conv case {k}: {g:?}, group {group}, {auto_pad:?}"),
+        );
+    }
+}
+
+/// `AveragePool` (with and without `count_include_pad`, strides, pads,
+/// dilations) and `GlobalAveragePool` against the naive reference.
+#[test]
+fn average_pools_match_a_reference() {
+    let cases = [
+        (
+            geometry([2, 6, 6], [2, 2], [2, 2], [1, 1], [0, 0, 0, 0]),
+            false,
+        ),
+        (
+            geometry([1, 5, 7], [3, 3], [1, 2], [1, 1], [1, 1, 1, 1]),
+            false,
+        ),
+        (
+            geometry([1, 5, 7], [3, 3], [1, 2], [1, 1], [1, 1, 1, 1]),
+            true,
+        ),
+        (
+            geometry([3, 7, 6], [3, 2], [2, 1], [2, 1], [2, 0, 1, 1]),
+            false,
+        ),
+        (
+            geometry([2, 8, 8], [3, 3], [3, 3], [1, 1], [1, 2, 0, 1]),
+            true,
+        ),
+    ];
+    for (k, (g, include)) in cases.into_iter().enumerate() {
+        let [c, h, wd] = g.input;
+        let mut gb = GraphBuilder::new(c * h * wd, Storage::RawF32);
+        gb.declare_shape(&[None, Some(c as i64), Some(h as i64), Some(wd as i64)]);
+        let mut attrs = g.attrs();
+        attrs.push(GraphBuilder::ints_attr(
+            "kernel_shape",
+            &[g.kernel[0] as i64, g.kernel[1] as i64],
+        ));
+        attrs.push(ravel::onnx::build::int_attr(
+            "count_include_pad",
+            i64::from(include),
+        ));
+        gb.node("AveragePool", &[], attrs);
+        let [oh, ow] = g.out();
+        let p = load(&gb.finish(c * oh * ow).0, &ExternalFiles::new())
+            .unwrap_or_else(|e| panic!("case {k}: {e:?}"));
+        assert_eq!(p.outputs, c * oh * ow, "case {k}");
+        agrees(
+            &p,
+            &|x| reference_pool(&g, include, x),
+            &format!("pool case {k}: {g:?}, {include}"),
+        );
+        // every weight is the f64 nearest to 1/k for the k it divides by
+        for l in &p.net.layers {
+            if let Layer::Affine { w, .. } = l {
+                for v in w.iter().filter(|v| **v != 0.0) {
+                    let size = (1.0 / v).round();
+                    assert_eq!(*v, 1.0 / size, "case {k}");
+                }
+            }
+        }
+    }
+    // the global mean of each channel
+    let mut gb = GraphBuilder::new(2 * 3 * 5, Storage::RawF32);
+    gb.declare_shape(&[None, Some(2), Some(3), Some(5)]);
+    gb.unary("GlobalAveragePool");
+    let p = load(&gb.finish(2).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!(p.outputs, 2);
+    agrees(
+        &p,
+        &|x| {
+            (0..2)
+                .map(|c| x[15 * c..15 * c + 15].iter().sum::<f64>() / 15.0)
+                .collect()
+        },
+        "global average",
+    );
+}
+
+/// A small convolutional classifier as PyTorch writes it: normalisation,
+/// Conv, Relu, a strided depthwise Conv, Relu, AveragePool, Flatten, Gemm
+/// (consecutive affine layers kept as they are), against the reference;
+/// replay in float32 stays near the real-arithmetic output.
+#[test]
+fn a_conv_network_loads_as_a_chain() {
+    let mut rng = ravel_base::rng::Rng::new(12);
+    let g1 = geometry([1, 8, 8], [3, 3], [1, 1], [1, 1], [1, 1, 1, 1]);
+    let g2 = geometry([4, 8, 8], [3, 3], [2, 2], [1, 1], [1, 1, 1, 1]);
+    let g3 = geometry([4, 4, 4], [2, 2], [2, 2], [1, 1], [0, 0, 0, 0]);
+    let w1 = random_matrix(&mut rng, 4 * 9, 1);
+    let b1 = random_matrix(&mut rng, 4, 1);
+    let w2 = random_matrix(&mut rng, 4 * 9, 1);
+    let b2 = random_matrix(&mut rng, 4, 1);
+    let fc = random_matrix(&mut rng, 3, 16);
+    let fb = random_matrix(&mut rng, 3, 1);
+    let reference = |x: &[f64]| -> Vec<f64> {
+        let z: Vec<f64> = x.iter().map(|v| (v - 0.5) * 4.0).collect();
+        let relu = |v: Vec<f64>| v.into_iter().map(|a| a.max(0.0)).collect::<Vec<_>>();
+        let h = relu(reference_conv(&g1, 4, 1, w1.as_slice(), b1.as_slice(), &z));
+        let h = relu(reference_conv(&g2, 4, 4, w2.as_slice(), b2.as_slice(), &h));
+        let h = reference_pool(&g3, false, &h);
+        (0..3)
+            .map(|i| fb[i] + (0..16).map(|j| fc[(i, j)] * h[j]).sum::<f64>())
+            .collect()
+    };
+    let mut gb = GraphBuilder::new(64, Storage::RawF32);
+    gb.declare_shape(&[None, Some(1), Some(8), Some(8)]);
+    gb.elementwise("Sub", &[0.5]);
+    gb.elementwise("Div", &[0.25]);
+    let conv =
+        |gb: &mut GraphBuilder, g: &Geometry, w: &DMatrix<f64>, b: &DMatrix<f64>, group: i64| {
+            // [M, C/group, kH, kW]: 4 × 1 × 3 × 3 for both (1 channel, or 4 in 4 groups)
+            let wn = gb.constant(
+                "weight",
+                &[4, g.input[0] / group as usize, 3, 3],
+                w.as_slice(),
+            );
+            let bn = gb.constant("bias", &[4], b.as_slice());
+            let mut attrs = g.attrs();
+            attrs.push(ravel::onnx::build::int_attr("group", group));
+            gb.node("Conv", &[wn, bn], attrs);
+        };
+    conv(&mut gb, &g1, &w1, &b1, 1);
+    gb.unary("Relu");
+    conv(&mut gb, &g2, &w2, &b2, 4);
+    gb.unary("Relu");
+    let mut attrs = g3.attrs();
+    attrs.push(GraphBuilder::ints_attr("kernel_shape", &[2, 2]));
+    gb.node("AveragePool", &[], attrs);
+    gb.unary("Flatten");
+    gb.gemm(&fc, &fb.column(0).into_owned());
+    let c = load(&gb.finish(3).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!((c.inputs, c.outputs), (64, 3));
+    agrees(&c, &reference, "conv network");
+    let kinds: Vec<bool> = c
+        .net
+        .layers
+        .iter()
+        .map(|l| matches!(l, Layer::Affine { .. }))
+        .collect();
+    // Sub, Div, Conv | Relu | Conv | Relu | AveragePool, Gemm
+    assert_eq!(
+        kinds,
+        [true, true, true, false, true, false, true, true],
+        "{kinds:?}"
+    );
+    let mut rng = ravel_base::rng::Rng::new(13);
+    for _ in 0..20 {
+        let x: Vec<f64> = (0..64)
+            .map(|_| f64::from(rng.uniform(0.0, 1.0) as f32))
+            .collect();
+        for (a, b) in c.net.forward_stored(&x).iter().zip(c.net.forward(&x)) {
+            assert!((a - b).abs() <= 1e-4 * (1.0 + b.abs()), "stored {a} vs {b}");
+        }
+    }
+}
+
+/// Hostile or inconsistent convolutions and poolings: each a named
+/// diagnostic of the right kind, never a panic.
+#[test]
+fn hostile_convolutions_are_diagnostics() {
+    use ravel::onnx::build::int_attr;
+    let ints = GraphBuilder::ints_attr;
+    // a Conv of a 3×3 kernel from 2 channels to 2 on a [1, 2, 5, 5] value
+    let refused = |shape: &[Option<i64>],
+                   build: &dyn Fn(&mut GraphBuilder),
+                   kind: OnnxErrorKind,
+                   what: &str| {
+        let n: i64 = shape.iter().map(|d| d.unwrap_or(1)).product();
+        let mut g = GraphBuilder::new(n as usize, Storage::RawF64);
+        g.declare_shape(shape);
+        build(&mut g);
+        // not `expect_err`: a wrongly accepted model is not printed (its
+        // matrices can hold millions of entries)
+        let e = match load(&g.finish(4).0, &ExternalFiles::new()) {
+            Ok(c) => panic!("{what}: loaded as {} → {}", c.inputs, c.outputs),
+            Err(e) => e,
+        };
+        assert_eq!(e.kind, kind, "{what}: {e:?}");
+        assert!(e.message.contains(what), "{what}: {}", e.message);
+        assert!(
+            e.message.contains("node '"),
+            "names the node: {}",
+            e.message
+        );
+    };
+    let image = [None, Some(2), Some(5), Some(5)];
+    let conv =
+        |g: &mut GraphBuilder, dims: &[usize], attrs: Vec<ravel::onnx::proto::AttributeProto>| {
+            let count = dims.iter().product::<usize>();
+            let w = g.constant("weight", dims, &vec![0.5; count]);
+            g.node("Conv", &[w], attrs);
+        };
+    let bad = OnnxErrorKind::Malformed;
+    let unsupported = OnnxErrorKind::Unsupported;
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("strides", &[0, 1])]),
+        bad,
+        "stride 0",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("strides", &[1, -2])]),
+        bad,
+        "stride -2",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("dilations", &[1, 0])]),
+        bad,
+        "dilation 0",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("pads", &[0, -1, 0, 0])]),
+        bad,
+        "negative pad -1",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("pads", &[1, 1])]),
+        bad,
+        "needs 4",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 6, 3], vec![]),
+        bad,
+        "larger than the padded input",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("dilations", &[3, 1])]),
+        bad,
+        "larger than the padded input",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("dilations", &[i64::MAX, 1])]),
+        bad,
+        "larger than the padded input",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 3, 3, 3], vec![]),
+        bad,
+        "input channels per group",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[3, 1, 3, 3], vec![int_attr("group", 2)]),
+        bad,
+        "group 2",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![int_attr("group", 0)]),
+        bad,
+        "group 0",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 1, 3, 3], vec![int_attr("group", -2)]),
+        bad,
+        "group -2",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3, 3], vec![ints("kernel_shape", &[3, 2])]),
+        bad,
+        "kernel_shape [3, 2]",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 3], vec![]),
+        unsupported,
+        "2-D convolutions",
+    );
+    refused(
+        &image,
+        &|g| conv(g, &[2, 2, 0, 3], vec![]),
+        bad,
+        "empty weight",
+    );
+    refused(
+        &image,
+        &|g| {
+            let auto = |v: &str| ravel::onnx::proto::AttributeProto {
+                name: Some("auto_pad".into()),
+                s: Some(v.as_bytes().to_vec()),
+                r#type: Some(3),
+                ..Default::default()
+            };
+            conv(
+                g,
+                &[2, 2, 3, 3],
+                vec![auto("SAME_UPPER"), ints("pads", &[1, 1, 1, 1])],
+            )
+        },
+        bad,
+        "sets both pads and auto_pad",
+    );
+    refused(
+        &image,
+        &|g| {
+            let a = ravel::onnx::proto::AttributeProto {
+                name: Some("auto_pad".into()),
+                s: Some(b"SAME\x1b[31m".to_vec()),
+                r#type: Some(3),
+                ..Default::default()
+            };
+            conv(g, &[2, 2, 3, 3], vec![a])
+        },
+        bad,
+        "not an ONNX value",
+    );
+    // huge attributes: an output too wide, or padding beyond any input
+    refused(
+        &image,
+        &|g| {
+            conv(
+                g,
+                &[2, 2, 3, 3],
+                vec![ints("pads", &[i64::MAX, 0, i64::MAX, 0])],
+            )
+        },
+        unsupported,
+        "wider than ravel's limit",
+    );
+    refused(
+        &[None, Some(1), Some(64), Some(64)],
+        &|g| conv(g, &[2, 1, 1, 1], vec![]),
+        unsupported,
+        "wider than ravel's limit",
+    );
+    refused(
+        &image,
+        &|g| {
+            let x = g.current();
+            g.node_inputs("Conv", vec![x, "missing".into()], vec![]);
+        },
+        unsupported,
+        "non-constant weight 'missing'",
+    );
+    refused(
+        &image,
+        &|g| g.node("Conv", &[], vec![]),
+        bad,
+        "has no weight input",
+    );
+    refused(
+        &image,
+        &|g| {
+            let w = g.constant("weight", &[2, 2, 3, 3], &[0.5; 36]);
+            let b = g.constant("bias", &[3], &[0.0; 3]);
+            g.node("Conv", &[w, b], vec![]);
+        },
+        bad,
+        "bias of shape [3]",
+    );
+    refused(
+        &image,
+        &|g| {
+            let w = g.constant("weight", &[2, 2, 3, 3], &[0.5; 36]);
+            let x = g.current();
+            g.node_inputs("Conv", vec![w, x], vec![]);
+        },
+        unsupported,
+        "convolves a constant",
+    );
+    // not one NCHW image
+    refused(
+        &[None, Some(50)],
+        &|g| conv(g, &[2, 2, 3, 3], vec![]),
+        unsupported,
+        "shape [1, 50]",
+    );
+    refused(
+        &[Some(2), Some(1), Some(5), Some(5)],
+        &|g| conv(g, &[2, 1, 3, 3], vec![]),
+        unsupported,
+        "shape [2, 1, 5, 5]",
+    );
+    refused(
+        &[None, Some(2), Some(25)],
+        &|g| g.unary("GlobalAveragePool"),
+        unsupported,
+        "[1, C, H, W]",
+    );
+    // pooling
+    refused(
+        &image,
+        &|g| {
+            g.node(
+                "AveragePool",
+                &[],
+                vec![ints("kernel_shape", &[2, 2]), int_attr("ceil_mode", 1)],
+            )
+        },
+        unsupported,
+        "ceil_mode",
+    );
+    refused(
+        &image,
+        &|g| g.node("AveragePool", &[], vec![]),
+        bad,
+        "has no kernel_shape",
+    );
+    refused(
+        &image,
+        &|g| g.node("AveragePool", &[], vec![ints("kernel_shape", &[0, 2])]),
+        bad,
+        "kernel extent of 0",
+    );
+    refused(
+        &image,
+        &|g| {
+            g.node(
+                "AveragePool",
+                &[],
+                vec![ints("kernel_shape", &[1, 1]), ints("pads", &[2, 0, 0, 0])],
+            )
+        },
+        bad,
+        "lies in the padding",
+    );
+    refused(
+        &image,
+        &|g| {
+            g.node(
+                "AveragePool",
+                &[],
+                vec![ints("kernel_shape", &[2, 2]), ints("strides", &[0, 0])],
+            )
+        },
+        bad,
+        "stride 0",
+    );
+    // the dense matrices together past the limit on weights: two
+    // 4096 × 4096 convolutions (the second refused before it is built)
+    refused(
+        &[None, Some(1), Some(64), Some(64)],
+        &|g| {
+            conv(g, &[1, 1, 1, 1], vec![]);
+            conv(g, &[1, 1, 1, 1], vec![]);
+        },
+        unsupported,
+        "dense 4096 × 4096 layer, which brings its convolutions' and poolings' weights past",
+    );
+    // a residual connection: two computed values added
+    refused(
+        &image,
+        &|g| {
+            let x = g.current();
+            conv(g, &[2, 2, 3, 3], vec![ints("pads", &[1, 1, 1, 1])]);
+            let y = g.current();
+            g.node_inputs("Add", vec![y, x], vec![]);
+        },
+        unsupported,
+        "a residual or skip connection",
+    );
+    // a huge stride over huge padding is a valid (mostly padded) layer
+    let mut g = GraphBuilder::new(50, Storage::RawF64);
+    g.declare_shape(&image);
+    conv(
+        &mut g,
+        &[2, 2, 3, 3],
+        vec![
+            ints("pads", &[i64::MAX, 0, i64::MAX, 0]),
+            ints("strides", &[i64::MAX, 1]),
+        ],
+    );
+    let c = load(&g.finish(4).0, &ExternalFiles::new()).expect("loads");
+    // rows: ⌊(5 + 2·(2⁶³ − 1) − 3)/(2⁶³ − 1)⌋ + 1 = 3 outputs, columns 3
+    assert_eq!(c.outputs, 2 * 3 * 3);
+}
+
+/// `BatchNormalization` after a `Conv` normalises per channel (axis 1 of
+/// `[1, C, H, W]`): against the reference convolution, normalised by hand.
+#[test]
+fn batch_normalisation_per_channel_after_a_conv() {
+    let mut rng = ravel_base::rng::Rng::new(14);
+    let g = geometry([2, 5, 4], [3, 3], [1, 1], [1, 1], [1, 1, 1, 1]);
+    let w = random_matrix(&mut rng, 3 * 2 * 9, 1);
+    let b = random_matrix(&mut rng, 3, 1);
+    let (scale, shift, mean, var) = (
+        [0.5, -2.0, 1.5],
+        [0.25, 0.0, -1.0],
+        [1.0, -0.5, 0.0],
+        [4.0, 0.25, 1.0],
+    );
+    let eps = 0.5f32;
+    let reference = |x: &[f64]| -> Vec<f64> {
+        let y = reference_conv(&g, 3, 1, w.as_slice(), b.as_slice(), x);
+        y.iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let c = i / 20;
+                let z = (v - mean[c]) / (var[c] + f64::from(eps)).sqrt() * scale[c] + shift[c];
+                z.max(0.0)
+            })
+            .collect()
+    };
+    let mut gb = GraphBuilder::new(40, Storage::RawF64);
+    gb.declare_shape(&[None, Some(2), Some(5), Some(4)]);
+    let wn = gb.constant("weight", &[3, 2, 3, 3], w.as_slice());
+    let bn = gb.constant("bias", &[3], b.as_slice());
+    gb.node("Conv", &[wn, bn], g.attrs());
+    let params: Vec<String> = [&scale[..], &shift, &mean, &var]
+        .iter()
+        .map(|p| gb.constant("bn", &[3], p))
+        .collect();
+    gb.node(
+        "BatchNormalization",
+        &params,
+        vec![ravel::onnx::build::float_attr("epsilon", eps)],
+    );
+    gb.unary("Relu");
+    let c = load(&gb.finish(60).0, &ExternalFiles::new()).expect("loads");
+    assert_eq!(c.outputs, 60);
+    agrees(&c, &reference, "Conv, BatchNormalization, Relu");
 }

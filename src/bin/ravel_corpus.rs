@@ -1129,7 +1129,7 @@ fn onnx(dir: &Path) -> usize {
         "float weights declared bool",
         m.encode_to_vec(),
     );
-    for op in ["Elu", "Softmax", "Conv", "Exp", "Softplus"] {
+    for op in ["Elu", "Softmax", "MaxPool", "Exp", "Softplus"] {
         let mut g = GraphBuilder::new(2, Storage::RawF32);
         g.network(&net(), false);
         g.unary(op);
@@ -1139,6 +1139,70 @@ fn onnx(dir: &Path) -> usize {
             &format!("the unsupported op {op}"),
             g.finish(1).0,
         );
+    }
+    // convolutions and poolings on a [1, 2, 1, 1] image: hostile attributes,
+    // a residual connection, an output past the width limit
+    let image = || {
+        let mut g = GraphBuilder::new(2, Storage::RawF32);
+        g.declare_shape(&[None, Some(2), Some(1), Some(1)]);
+        g
+    };
+    let ints = GraphBuilder::ints_attr;
+    let conv = |g: &mut GraphBuilder, attrs: Vec<AttributeProto>| {
+        let w = g.constant("weight", &[2, 2, 1, 1], &[1.0, 0.5, -0.5, 1.0]);
+        g.node("Conv", &[w], attrs);
+    };
+    let conv_cases: Vec<(&str, &str, &str, Vec<u8>)> = vec![
+        ("conv_stride_zero", "E0307", "Conv with stride 0", {
+            let mut g = image();
+            conv(&mut g, vec![ints("strides", &[0, 1])]);
+            g.finish(2).0
+        }),
+        ("conv_negative_pad", "E0307", "Conv with a negative pad", {
+            let mut g = image();
+            conv(&mut g, vec![ints("pads", &[0, -3, 0, 0])]);
+            g.finish(2).0
+        }),
+        (
+            "conv_huge_pads",
+            "E0303",
+            "Conv whose pads of 2^63 − 1 make it too wide",
+            {
+                let mut g = image();
+                conv(&mut g, vec![ints("pads", &[i64::MAX, 0, i64::MAX, 0])]);
+                g.finish(2).0
+            },
+        ),
+        (
+            "conv_residual",
+            "E0303",
+            "a residual Add of a Conv's output and its input",
+            {
+                let mut g = image();
+                let x = g.current();
+                conv(&mut g, vec![]);
+                let y = g.current();
+                g.node_inputs("Add", vec![y, x], vec![]);
+                g.finish(2).0
+            },
+        ),
+        (
+            "pool_in_padding",
+            "E0307",
+            "an AveragePool window entirely in the padding",
+            {
+                let mut g = image();
+                g.node(
+                    "AveragePool",
+                    &[],
+                    vec![ints("kernel_shape", &[1, 1]), ints("pads", &[2, 0, 0, 0])],
+                );
+                g.finish(2).0
+            },
+        ),
+    ];
+    for (name, code, what, bytes) in conv_cases {
+        put(name, code, what, bytes);
     }
     // exporter ops with bad parameters
     let bad_ops: Vec<(&str, &str, &str, Vec<u8>)> = vec![

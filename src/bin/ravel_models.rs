@@ -2,7 +2,8 @@
 //!
 //! Each controller is a small network trained (plain Adam on mean squared
 //! error, fixed seed) to imitate a saturated LQR law of its plant, then
-//! written as ONNX by ravel's own writer. The invalid models used by the
+//! written as ONNX by ravel's own writer; the network specs' classifiers
+//! are trained the same way, or (the convolutional one) set by hand. The invalid models used by the
 //! diagnostic specs are written here too. Run from the repository root:
 //!
 //! ```text
@@ -234,6 +235,47 @@ fn encode_into(mut g: GraphBuilder, net: &Network, keras: bool) -> GraphBuilder 
     g
 }
 
+/// A small convolutional classifier of 1 × 6 × 6 images, with weights set
+/// by hand (nothing to train): label 0 for a horizontal bar, 1 for a
+/// vertical one. Conv (two 3 × 3 filters, pads 1, bias −0.25) detecting
+/// horizontal and vertical lines, ReLU, 2 × 2 AveragePool with stride 2,
+/// Flatten, and a Gemm scoring the horizontal channel's sum against the
+/// vertical one's: the network of `specs/network/conv_bars.ravel`.
+fn conv_bars() -> (Vec<u8>, Vec<u8>) {
+    use ravel::onnx::build::int_attr;
+    let mut g = GraphBuilder::new(36, Storage::RawF32);
+    g.declare_shape(&[None, Some(1), Some(6), Some(6)]);
+    let line = [-0.5, -0.5, -0.5, 1.0, 1.0, 1.0, -0.5, -0.5, -0.5];
+    // the vertical filter is the horizontal one transposed
+    let column: Vec<f64> = (0..9).map(|i| line[(i % 3) * 3 + i / 3]).collect();
+    let kernel: Vec<f64> = line.iter().chain(&column).copied().collect();
+    let w = g.constant("conv_weight", &[2, 1, 3, 3], &kernel);
+    let b = g.constant("conv_bias", &[2], &[-0.25, -0.25]);
+    g.node(
+        "Conv",
+        &[w, b],
+        vec![
+            GraphBuilder::ints_attr("kernel_shape", &[3, 3]),
+            GraphBuilder::ints_attr("pads", &[1, 1, 1, 1]),
+            GraphBuilder::ints_attr("strides", &[1, 1]),
+            int_attr("group", 1),
+        ],
+    );
+    g.unary("Relu");
+    g.node(
+        "AveragePool",
+        &[],
+        vec![
+            GraphBuilder::ints_attr("kernel_shape", &[2, 2]),
+            GraphBuilder::ints_attr("strides", &[2, 2]),
+        ],
+    );
+    g.unary("Flatten");
+    let score = DMatrix::from_fn(2, 18, |i, j| if (j < 9) == (i == 0) { 1.0 } else { -1.0 });
+    g.gemm(&score, &DVector::zeros(2));
+    g.finish(2)
+}
+
 fn main() {
     let root = Path::new("models");
     fs::create_dir_all(root.join("invalid")).expect("create models/");
@@ -413,6 +455,8 @@ fn main() {
         "planar_sigmoid.onnx",
         encode(&planar, Storage::RawF32, true).finish(2),
     );
+
+    write(root, "conv_bars.onnx", conv_bars());
 
     // invalid models, one per loader diagnostic
     let inv = root.join("invalid");

@@ -1,10 +1,14 @@
 //! ONNX controllers: decoding (prost, no code generation), lowering the graph
 //! to a [`Network`], and a small writer used by the model generator and tests.
 //!
-//! Supported graphs are chains on one vector input: `Gemm` (alpha, beta,
+//! Supported graphs are chains on one input: `Gemm` (alpha, beta,
 //! transA = 0, transB), `MatMul` (+ `Add`), `Relu`, `LeakyRelu`, `Tanh`,
-//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form),
-//! `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), and the
+//! `Sigmoid`, `Clip`, `BatchNormalization` (inference form; per channel
+//! on an image), `Add`/`Sub`/`Mul`/`Div` by constants (input normalisation), 2-D `Conv`
+//! (NCHW, batch 1: `strides`, `dilations`, `pads` or `auto_pad` of any
+//! ONNX value, `group` including depthwise, optional bias; constant
+//! weights), `AveragePool` (`ceil_mode` 0; `count_include_pad`) and
+//! `GlobalAveragePool` (see [`conv`]), and the
 //! shape-only ops `Flatten`, `Reshape`, `Identity`, `Squeeze`, `Unsqueeze`,
 //! `Dropout` (inference), plus `Constant`. `MatMul` takes its 2-D constant
 //! on either side (`x·W` as Keras writes it, `W·x` on a column as
@@ -12,14 +16,29 @@
 //! tensor shape (the batch dimension as 1): `MatMul` and broadcasting
 //! follow ONNX's rules on it, and the shape-only ops must keep the flat
 //! (row-major) vector — same number of elements, constant target shapes,
-//! squeezed axes of size 1 — or are refused, naming the node. Weights may be float32, float64
+//! squeezed axes of size 1 — or are refused, naming the node. A
+//! convolution or pooling becomes one dense affine layer on the flat
+//! row-major `(C, H, W)` value, checked against the limits on width and on
+//! weights (the dense matrices of the convolutions and poolings together at
+//! most [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
+//! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
+//! kept as they are, not multiplied together: their product would be
+//! rounded, and counterexamples are replayed layer by layer in the stored
+//! precision as a runtime evaluates them (the analyses that need affine
+//! layers and activations to alternate — the batched CROWN kernel, branch
+//! and bound on activations — fall back to their general paths). A node combining two computed values (`Add` of a residual or
+//! skip connection, `Concat`) is refused, naming it: the network is a
+//! chain of layers on one running value. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed
 //! fields, or in external data files.
 //!
 //! Semantics: the network ravel verifies is the real-arithmetic function of
 //! the stored weights (float32 values are widened to f64 exactly). `Clip`
 //! and `LeakyRelu` become ReLU layers that compute them exactly. `Div` by a
-//! constant `c` is read as multiplication by the f64 nearest to `1/c`, a
+//! constant `c` is read as multiplication by the f64 nearest to `1/c`, so
+//! is an average over `k` elements (`AveragePool`, `GlobalAveragePool`:
+//! the sum times the f64 nearest to `1/k`; counterexamples are replayed
+//! with that weight rounded to the stored precision, as every weight), a
 //! `Gemm` with `alpha ≠ 1` or `beta ≠ 1` has its weights scaled in f64, and
 //! `BatchNormalization` is the diagonal affine map whose coefficients
 //! `scale/√(var + ε)` and `B − mean·scale/√(var + ε)` are computed in f64
@@ -33,6 +52,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod build;
+mod conv;
 pub mod proto;
 
 use std::collections::{BTreeMap, HashMap};
@@ -495,7 +515,7 @@ fn attr_f(n: &NodeProto, name: &str, default: f64) -> f64 {
 
 /// The ops ravel accepts, for hints.
 pub const SUPPORTED_OPS: &str =
-    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
+    "Gemm, MatMul, Add, Sub, Mul, Div, Relu, LeakyRelu, Tanh, Sigmoid, Clip, BatchNormalization, Conv (2-D), AveragePool, GlobalAveragePool, Flatten, Reshape, Identity, Squeeze, Unsqueeze, Dropout (inference), Constant";
 
 struct Lowering {
     consts: HashMap<String, Tensor>,
@@ -508,6 +528,9 @@ struct Lowering {
     layers: Vec<Layer>,
     /// What was rewritten (clips, leaky ReLUs, batch normalisation), for the summary.
     notes: Vec<String>,
+    /// Entries of the dense matrices of the convolutions and poolings so
+    /// far (see [`Lowering::reserve`]).
+    dense: u64,
 }
 
 impl Lowering {
@@ -537,7 +560,7 @@ impl Lowering {
         .ok_or_else(|| {
             err(
                 OnnxErrorKind::Unsupported,
-                format!("{} combines two computed values; ravel supports only chains with constant operands", node_label(n)),
+                format!("{} combines two computed values (a residual or skip connection); ravel supports only chains with constant operands", node_label(n)),
                 "export a plain feed-forward network (no skip connections)",
             )
         })
@@ -573,6 +596,23 @@ impl Lowering {
                 ),
                 "the constant must be a scalar or have one entry per element",
             ))
+        }
+    }
+
+    /// Count the dense `rows × cols` matrix of a convolution or pooling
+    /// `n` before it is allocated, refusing the node when the entries of
+    /// these matrices together would pass [`MAX_PARAMETERS`] (a
+    /// convolution's matrix is far larger than its kernel).
+    fn reserve(&mut self, n: &NodeProto, rows: usize, cols: usize) -> Result<(), OnnxError> {
+        let total = (rows as u64)
+            .checked_mul(cols as u64)
+            .and_then(|e| e.checked_add(self.dense));
+        match total {
+            Some(t) if t <= MAX_PARAMETERS => {
+                self.dense = t;
+                Ok(())
+            }
+            _ => Err(too_many_weights(n, rows, cols)),
         }
     }
 
@@ -915,6 +955,8 @@ impl Lowering {
             "LeakyRelu" => self.leaky_relu(n)?,
             "BatchNormalization" => self.batch_norm(n)?,
             "Dropout" => self.dropout(n, data_first)?,
+            "Conv" => self.conv(n, data_first)?,
+            "AveragePool" | "GlobalAveragePool" => self.average_pool(n, &op)?,
             "Flatten" | "Reshape" | "Identity" | "Squeeze" | "Unsqueeze" => {
                 if !data_first {
                     return Err(err(
@@ -1306,6 +1348,18 @@ impl Lowering {
                     "export in eval mode with constant folding on",
                 )
             })?;
+            // one value per channel (axis 1) of an image [1, C, H, W]
+            // (after a Conv), spread over its H·W positions
+            if let Some([1, c, rest @ ..]) = self.shape.as_deref() {
+                let plane: usize = rest.iter().product();
+                if !rest.is_empty() && t.data.len() == *c && plane > 1 {
+                    return Ok(t
+                        .data
+                        .iter()
+                        .flat_map(|v| std::iter::repeat_n(*v, plane))
+                        .collect());
+                }
+            }
             Ok(self.broadcast(n, t)?.iter().copied().collect())
         };
         let (scale, bias, mean, var) = (param(1)?, param(2)?, param(3)?, param(4)?);
@@ -1371,6 +1425,19 @@ impl Lowering {
             }
         }
     }
+}
+
+/// A convolution or pooling whose dense `rows × cols` layer passes the
+/// limit on weights.
+fn too_many_weights(n: &NodeProto, rows: usize, cols: usize) -> OnnxError {
+    err(
+        OnnxErrorKind::Unsupported,
+        format!(
+            "{} is a dense {rows} × {cols} layer, which brings its convolutions' and poolings' weights past ravel's limit of {MAX_PARAMETERS}",
+            node_label(n)
+        ),
+        "ravel verifies small networks: at most 16777216 weights in the dense matrices of its convolutions and poolings together",
+    )
 }
 
 /// A node exported in training mode (Dropout or BatchNormalization).
@@ -1445,6 +1512,7 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         shape: declared.and(declared_shape(input)),
         layers: Vec::new(),
         notes: Vec::new(),
+        dense: 0,
     };
     for n in &graph.node {
         low.node(n)?;

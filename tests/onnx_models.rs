@@ -1428,6 +1428,19 @@ fn hostile_convolutions_are_diagnostics() {
         unsupported,
         "dense 4096 × 4096 layer, which brings its convolutions' and poolings' weights past",
     );
+    // element-wise constant ops are width × width layers each: nine on a
+    // 4096-wide value pass the limit on the layers' entries together
+    refused(
+        &[None, Some(4096)],
+        &|g| {
+            for _ in 0..9 {
+                let c = g.constant("scale", &[1], &[2.0]);
+                g.node("Mul", &[c], vec![]);
+            }
+        },
+        unsupported,
+        "matrix entries, more than ravel's limit",
+    );
     // a residual connection: two computed values added
     refused(
         &image,

@@ -42,6 +42,11 @@ pub const MAX_CONTROLLER_BYTES: u64 = 512 << 20;
 pub const MAX_TENSOR_ELEMENTS: u64 = 1 << 24;
 /// Largest number of weights of a controller, all tensors together.
 pub const MAX_PARAMETERS: u64 = 1 << 24;
+/// Largest number of matrix entries of a loaded network's layers together
+/// (1 GiB of `f64`): each layer is stored dense, an element-wise constant op
+/// (a normalisation) as a full `width × width` diagonal, so a chain of such
+/// ops must not multiply its memory past what the machine holds.
+pub const MAX_LAYER_ENTRIES: u64 = 1 << 27;
 /// Largest width of a controller layer (its input included).
 pub const MAX_WIDTH: u64 = 4096;
 /// Largest number of nodes of an ONNX graph.

@@ -20,7 +20,10 @@
 //! convolution or pooling becomes one dense affine layer on the flat
 //! row-major `(C, H, W)` value, checked against the limits on width and on
 //! weights (the dense matrices of the convolutions and poolings together at
-//! most [`MAX_PARAMETERS`] entries) before it is allocated. Consecutive affine
+//! most [`MAX_PARAMETERS`] entries) before it is allocated. Every layer is
+//! stored dense (an element-wise constant op as a `width × width`
+//! diagonal), and all layers together hold at most [`MAX_LAYER_ENTRIES`]
+//! entries, checked after each node. Consecutive affine
 //! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
 //! kept as they are, not multiplied together: their product would be
 //! rounded, and counterexamples are replayed layer by layer in the stored
@@ -64,7 +67,8 @@ use proto::{
     dtype, AttributeProto, GraphProto, ModelProto, NodeProto, TensorProto, ValueInfoProto,
 };
 use ravel_base::limits::{
-    MAX_CONTROLLER_BYTES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS, MAX_TENSOR_ELEMENTS, MAX_WIDTH,
+    MAX_CONTROLLER_BYTES, MAX_LAYER_ENTRIES, MAX_MAGNITUDE, MAX_NODES, MAX_PARAMETERS,
+    MAX_TENSOR_ELEMENTS, MAX_WIDTH,
 };
 use ravel_base::nn::{Activation, InputType, Layer, Network};
 use ravel_syntax::diag::sanitize;
@@ -1516,6 +1520,25 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
     };
     for n in &graph.node {
         low.node(n)?;
+        // every layer is a dense matrix (a normalisation's diagonal too):
+        // the model's memory is bounded by their entries together, checked
+        // after each node (one layer is at most MAX_WIDTH² entries)
+        let entries = low.layers.iter().fold(0u64, |t, l| match l {
+            Layer::Affine { w, .. } => {
+                t.saturating_add((w.nrows() as u64).saturating_mul(w.ncols() as u64))
+            }
+            Layer::Act(_) => t,
+        });
+        if entries > MAX_LAYER_ENTRIES {
+            return Err(err(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "{} brings the network's layers to {entries} matrix entries, more than ravel's limit of {MAX_LAYER_ENTRIES}",
+                    node_label(n)
+                ),
+                "ravel verifies small networks; element-wise constant ops (Add, Sub, Mul, Div, BatchNormalization) each count as a full width × width layer: fold them into the neighbouring layers before export",
+            ));
+        }
     }
     let output = graph
         .output

@@ -1015,6 +1015,17 @@ pub(crate) fn relative_to(dir: &Path, path: &Path) -> PathBuf {
     out
 }
 
+/// A file's stem as if it were not compressed: `net.onnx.gz` → `net`, as
+/// `net.onnx` → `net`.
+fn plain_stem(p: &Path) -> Option<String> {
+    let p = if ravel_files::gzip_named(p) {
+        p.with_extension("")
+    } else {
+        p.to_path_buf()
+    };
+    p.file_stem().map(|s| s.to_string_lossy().into_owned())
+}
+
 /// The files `import-vnnlib --output FILE` writes for `count` specs:
 /// `FILE` for one, else `STEM.1.EXT`, `STEM.2.EXT` … beside it
 /// (`X.ravel` → `X.1.ravel`).
@@ -1056,15 +1067,6 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
         err(&render(&[d], &name, "", 100, color));
         ExitCode::from(exit::INPUT_ERROR)
     };
-    if property
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
-    {
-        return nowhere(
-            format!("`{name}` is compressed (.gz): ravel reads plain VNN-LIB text"),
-            "decompress it first (gunzip -k FILE.vnnlib.gz)",
-        );
-    }
     let bytes = match read_request(&ravel::ReadRequest {
         path: property.to_path_buf(),
         inside: None,
@@ -1102,10 +1104,7 @@ fn import_vnnlib(property: &Path, network: &Path, output: Option<&Path>, color: 
     } else {
         network.to_path_buf()
     };
-    let stem = property
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let stem = plain_stem(property).unwrap_or_default();
     let ident: String = stem
         .chars()
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })

@@ -10,6 +10,10 @@
 //! ended the analysis, `unknown` when it did not. An error (a file that
 //! cannot be read, a property or network outside what ravel supports) is
 //! not an answer: it is a diagnostic with its code, and exit code 2.
+//!
+//! Files named `.gz` (the networks and properties VNN-COMP ships since
+//! 2022, the instance list too) are read decompressed, under the same size
+//! limits as plain files (`ravel_files::read_request`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -99,11 +103,6 @@ fn nowhere(code: Code, message: String, hint: &str) -> Diagnostic {
     }
 }
 
-/// Whether a path names a compressed file (`.gz`), which ravel does not read.
-fn compressed(p: &Path) -> bool {
-    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"))
-}
-
 /// Run one instance: the property `property` on the network `network`,
 /// within `time_limit` seconds (counted from the call); `threads` as
 /// `verify --jobs`. An error is returned rendered (diagnostics with their
@@ -118,13 +117,6 @@ pub fn run_instance(
     let started = Instant::now();
     let shown = sanitize(&property.display().to_string());
     let plain = |d: Diagnostic| render(&[d], &shown, "", 100, color);
-    if compressed(property) {
-        return Err(plain(nowhere(
-            Code::Vnnlib,
-            format!("`{shown}` is compressed (.gz): ravel reads plain VNN-LIB text"),
-            "decompress it first (gunzip -k FILE.vnnlib.gz)",
-        )));
-    }
     let bytes = crate::read_request(&ravel::ReadRequest {
         path: property.to_path_buf(),
         inside: None,
@@ -388,16 +380,6 @@ pub fn parse_instances(
                     Diagnostic::new(Code::Instances, field_span(off, f), "an empty path")
                         .label("here")
                         .hint("write each instance as `network.onnx,property.vnnlib,seconds`"),
-                );
-            } else if compressed(&path) {
-                diags.push(
-                    Diagnostic::new(
-                        Code::Instances,
-                        field_span(off, f),
-                        format!("`{shown}` is compressed (.gz): ravel reads plain files"),
-                    )
-                    .label("compressed")
-                    .hint("decompress the benchmark's files first (gunzip -k) and name the plain files"),
                 );
             } else if !exists(&path) {
                 diags.push(

@@ -650,7 +650,14 @@ fn documented_limits() -> Vec<(&'static str, Vec<String>)> {
         ("E0306", vec![format!("±{mag}")]),
         ("E0307", vec![int(l::MAX_TENSOR_ELEMENTS)]),
         ("E0308", vec![mib(l::MAX_CONTROLLER_BYTES)]),
-        ("E0401", vec![int(ravel::vnnlib::MAX_MEMBERS as u64)]),
+        (
+            "E0401",
+            vec![
+                int(ravel::vnnlib::MAX_MEMBERS as u64),
+                // a property file, plain or decompressed
+                mib(l::MAX_SPEC_BYTES),
+            ],
+        ),
     ]
 }
 

@@ -176,8 +176,9 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
         &["ravel", "ravel-analysis", "ravel-base", "ravel-syntax"],
     ),
     // the file reader of the entry points (the command line and the Python
-    // extension): regular files only, confined, limited
-    ("crates/files", "ravel-files", &["ravel", "libc"]),
+    // extension): regular files only, confined, limited; `.gz` files
+    // decompressed (flate2's pure-Rust backend)
+    ("crates/files", "ravel-files", &["ravel", "libc", "flate2"]),
     // the Python extension: an entry point beside the command line, on the
     // library alone (no clap, no protocol); PyO3 its only new dependency
     (

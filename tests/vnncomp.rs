@@ -46,6 +46,20 @@ fn property(dir: &Path, name: &str, asserts: &str) -> PathBuf {
     p
 }
 
+/// `file` gzip-compressed, written beside it as `NAME.gz`.
+fn gzip(file: &Path) -> PathBuf {
+    use std::io::Write;
+    let out = PathBuf::from(format!("{}.gz", file.display()));
+    let mut e = flate2::write::GzEncoder::new(
+        std::fs::File::create(&out).expect("create"),
+        flate2::Compression::default(),
+    );
+    e.write_all(&std::fs::read(file).expect("read"))
+        .expect("compress");
+    e.finish().expect("finish");
+    out
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
@@ -319,7 +333,6 @@ fn a_benchmark_folder_runs_row_by_row() {
         "3 fields",
         "sixty",
         "is not a file",
-        "compressed",
         "-1",
         "nothing was run",
     ] {
@@ -367,4 +380,167 @@ fn instance_rows_are_parsed_without_panics() {
             }
         }
     }
+}
+
+#[test]
+fn compressed_files_give_the_plain_files_answers() {
+    let d = scratch("gz");
+    std::fs::create_dir_all(d.join("onnx")).expect("dir");
+    std::fs::create_dir_all(d.join("vnnlib")).expect("dir");
+    let net = linear_net(&d.join("onnx"));
+    let sat = property(&d.join("vnnlib"), "sat.vnnlib", "(assert (>= Y_0 1.5))");
+    let unsat = property(&d.join("vnnlib"), "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    let (net_gz, sat_gz, unsat_gz) = (gzip(&net), gzip(&sat), gzip(&unsat));
+    // the direct form: every mix of plain and compressed files, the same
+    // answer (the same counterexample for `sat`)
+    for (prop, prop_gz, code) in [(&sat, &sat_gz, 1), (&unsat, &unsat_gz, 0)] {
+        let plain = ravel(&["verify", "--network", s(&net), "--vnnlib", s(prop)]);
+        assert_eq!(plain.0, code, "{}", plain.2);
+        for (n, p) in [(&net_gz, prop_gz), (&net, prop_gz), (&net_gz, prop)] {
+            let got = ravel(&["verify", "--network", s(n), "--vnnlib", s(p)]);
+            assert_eq!((got.0, &got.1), (code, &plain.1), "{}", got.2);
+        }
+    }
+    // an instance list naming compressed files, itself compressed too
+    std::fs::write(
+        d.join("instances.csv"),
+        "onnx/net.onnx.gz,vnnlib/sat.vnnlib.gz,60\nonnx/net.onnx.GZ,vnnlib/unsat.vnnlib.gz,60\n",
+    )
+    .expect("write");
+    std::fs::copy(&net_gz, d.join("onnx/net.onnx.GZ")).expect("copy");
+    let list_gz = gzip(&d.join("instances.csv"));
+    for list in [d.join("instances.csv"), list_gz] {
+        let (code, stdout, stderr) = ravel(&["vnncomp", s(&list)]);
+        assert_eq!(code, 0, "{stderr}");
+        let results: Vec<&str> = stdout
+            .lines()
+            .map(|l| l.split(',').nth(2).expect("result"))
+            .collect();
+        assert_eq!(results, ["sat", "unsat"], "{stdout}");
+    }
+    // import-vnnlib names the spec after the property without `.gz`, and
+    // the spec reads the compressed network
+    let (code, stdout, stderr) = ravel(&["import-vnnlib", s(&unsat_gz), "--network", s(&net_gz)]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains("unsat") && !stdout.contains("unsat_vnnlib"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("net.onnx.gz"), "{stdout}");
+}
+
+#[test]
+fn a_compressed_models_external_data_lies_beside_it_uncompressed() {
+    let d = scratch("gz-external");
+    let mut g = GraphBuilder::new(2, Storage::External).external_file("net.onnx.data");
+    g.gemm(
+        &DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, -1.0]),
+        &DVector::zeros(2),
+    );
+    let (model, data) = g.finish(2);
+    assert!(!data.is_empty());
+    std::fs::write(d.join("net.onnx"), model).expect("write");
+    std::fs::write(d.join("net.onnx.data"), data).expect("write");
+    let net_gz = gzip(&d.join("net.onnx"));
+    std::fs::remove_file(d.join("net.onnx")).expect("remove");
+    let unsat = property(&d, "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    let sat = property(&d, "sat.vnnlib", "(assert (>= Y_0 1.5))");
+    for (prop, code, word) in [(&unsat, 0, "unsat\n"), (&sat, 1, "sat\n")] {
+        let (exit, stdout, stderr) =
+            ravel(&["verify", "--network", s(&net_gz), "--vnnlib", s(prop)]);
+        assert_eq!(exit, code, "{stderr}");
+        assert!(stdout.starts_with(word), "{stdout}");
+    }
+}
+
+/// Writes a gzip stream of `zeros` zero bytes to `path`, a chunk at a time
+/// (the decompressed data is never held).
+fn gzip_zeros(path: &Path, zeros: u64) {
+    use std::io::Write;
+    let mut e = flate2::write::GzEncoder::new(
+        std::fs::File::create(path).expect("create"),
+        flate2::Compression::best(),
+    );
+    let chunk = vec![0u8; 1 << 16];
+    let mut left = zeros;
+    while left > 0 {
+        let n = left.min(chunk.len() as u64) as usize;
+        e.write_all(&chunk[..n]).expect("compress");
+        left -= n as u64;
+    }
+    e.finish().expect("finish");
+}
+
+/// A rendered diagnostic's words on one line (the renderer wraps long
+/// messages behind a `│`).
+fn unwrapped(rendered: &str) -> String {
+    rendered
+        .split_whitespace()
+        .filter(|w| *w != "│")
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[test]
+fn broken_and_oversized_compressed_files_are_diagnostics() {
+    let d = scratch("gz-bad");
+    let net = linear_net(&d);
+    let unsat = property(&d, "unsat.vnnlib", "(assert (>= Y_0 2.5))");
+    let net_gz = gzip(&net);
+    let unsat_gz = gzip(&unsat);
+    // truncated: the property, and the network
+    let whole = std::fs::read(&unsat_gz).expect("read");
+    let cut = d.join("cut.vnnlib.gz");
+    std::fs::write(&cut, &whole[..whole.len() / 2]).expect("write");
+    let whole_net = std::fs::read(&net_gz).expect("read");
+    let cut_net = d.join("cut.onnx.gz");
+    std::fs::write(&cut_net, &whole_net[..whole_net.len() - 3]).expect("write");
+    // named .gz but plain text
+    let not_gz = d.join("plain.vnnlib.gz");
+    std::fs::copy(&unsat, &not_gz).expect("copy");
+    // a bomb: 64 MiB of zeros (about 64 KiB compressed), beyond the
+    // property limit of 16 MiB
+    let limit = ravel_base::limits::MAX_SPEC_BYTES;
+    assert!(64 << 20 > limit);
+    let bomb = d.join("bomb.vnnlib.gz");
+    gzip_zeros(&bomb, 64 << 20);
+    assert!(std::fs::metadata(&bomb).expect("bomb").len() < limit);
+    let out = d.join("result.txt");
+    for (n, p, code, what) in [
+        (&net, &cut, "E0401", "is not valid gzip ("),
+        (&net, &not_gz, "E0401", "is not valid gzip ("),
+        (&cut_net, &unsat, "E0301", "is not valid gzip ("),
+        (
+            &net,
+            &bomb,
+            "E0401",
+            &format!("decompresses to more than the limit of {limit} bytes") as &str,
+        ),
+    ] {
+        let (exit, stdout, stderr) = ravel(&[
+            "verify",
+            "--network",
+            s(n),
+            "--vnnlib",
+            s(p),
+            "--result-file",
+            s(&out),
+        ]);
+        assert_eq!(exit, 2, "{stdout}{stderr}");
+        assert!(
+            stderr.contains(code) && unwrapped(&stderr).contains(what),
+            "{what}: {stderr}"
+        );
+        assert!(!out.exists(), "no result for an error");
+    }
+    // the same bomb as an instance list
+    let (exit, _, stderr) = ravel(&["vnncomp", s(&bomb)]);
+    assert_eq!(exit, 2, "{stderr}");
+    assert!(
+        stderr.contains("E0402")
+            && unwrapped(&stderr).contains(&format!(
+                "decompresses to more than the limit of {limit} bytes"
+            )),
+        "{stderr}"
+    );
 }

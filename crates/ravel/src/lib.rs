@@ -44,7 +44,10 @@ pub struct ReadRequest {
     /// is read only as far as the model's tensors need).
     pub max_bytes: u64,
     /// Whether a file longer than `max_bytes` is an error (the controller)
-    /// or simply read up to `max_bytes` (external data).
+    /// or simply read up to `max_bytes` (external data). A whole file whose
+    /// name ends in `.gz` is decompressed by the entry points' reader, its
+    /// decompressed size limited by `max_bytes`; a prefix (external data) is
+    /// read as stored.
     pub whole: bool,
 }
 
@@ -74,6 +77,15 @@ pub enum ReadError {
         /// The request's limit.
         limit: u64,
     },
+    /// The file is compressed (`.gz`) and decompresses to more than the
+    /// request allows (reading stopped at the limit).
+    DecompressedTooLarge {
+        /// The request's limit.
+        limit: u64,
+    },
+    /// The file is named `.gz` but is not a complete, valid gzip stream
+    /// (not gzip at all, truncated or corrupt), with the decoder's reason.
+    Compressed(String),
 }
 
 impl std::fmt::Display for ReadError {
@@ -90,6 +102,11 @@ impl std::fmt::Display for ReadError {
             ReadError::TooLarge { bytes, limit } => {
                 write!(f, "it has {bytes} bytes, more than the limit of {limit}")
             }
+            // short: a controller's reason is cut at 80 characters
+            ReadError::DecompressedTooLarge { limit } => {
+                write!(f, "it decompresses to more than the limit of {limit} bytes")
+            }
+            ReadError::Compressed(e) => write!(f, "it is not valid gzip ({e})"),
         }
     }
 }

@@ -58,6 +58,51 @@ pub struct ReluChain {
     b: Vec<DVector<f64>>,
 }
 
+/// `net` with ReLUs between every two consecutive affine layers, or
+/// `None` when it has another activation than ReLU: affine layers `A`
+/// then `B` become `[A; −A]`, a ReLU, and `[B, −B]`, since
+/// `z = max(z, 0) − max(−z, 0)` for every `z` (the rewritten network is
+/// the same real function, its weights the stored ones up to sign). A
+/// normalisation before the first `Gemm`, or a pooling before the last,
+/// then leaves a chain [`ReluChain::of`] takes; the pairs' relaxation is
+/// exact where `z` keeps its sign on the domain (a normalised pixel), and
+/// a pair that changes sign is an unstable neuron like any other.
+pub fn alternating(net: &Network) -> Option<Network> {
+    let mut out: Vec<Layer> = Vec::with_capacity(net.layers.len());
+    for layer in &net.layers {
+        match layer {
+            Layer::Act(Activation::Relu) => out.push(layer.clone()),
+            Layer::Act(_) => return None,
+            Layer::Affine { w, b } => {
+                let (w, b) = (w.clone(), b.clone());
+                match out.pop() {
+                    Some(Layer::Affine { w: wa, b: ba }) => {
+                        let (r, c) = wa.shape();
+                        let mut w2 = DMatrix::zeros(2 * r, c);
+                        w2.rows_mut(0, r).copy_from(&wa);
+                        w2.rows_mut(r, r).copy_from(&(-&wa));
+                        let mut b2 = DVector::zeros(2 * r);
+                        b2.rows_mut(0, r).copy_from(&ba);
+                        b2.rows_mut(r, r).copy_from(&(-&ba));
+                        out.push(Layer::Affine { w: w2, b: b2 });
+                        out.push(Layer::Act(Activation::Relu));
+                        let mut wn = DMatrix::zeros(w.nrows(), 2 * r);
+                        wn.columns_mut(0, r).copy_from(&w);
+                        wn.columns_mut(r, r).copy_from(&(-&w));
+                        out.push(Layer::Affine { w: wn, b });
+                    }
+                    Some(prev) => {
+                        out.push(prev);
+                        out.push(Layer::Affine { w, b });
+                    }
+                    None => out.push(Layer::Affine { w, b }),
+                }
+            }
+        }
+    }
+    Some(Network::new(net.inputs, out).with_input_type(net.input_type))
+}
+
 impl ReluChain {
     /// `net` as a chain, if it is one (affine, then ReLU and affine
     /// alternating) with finite weights.

@@ -402,3 +402,69 @@ fn tightened_bounds_hold_do_not_depend_on_threads_and_stop_when_asked() {
     assert_eq!(stopped.lo, root.lo);
     assert_eq!(stopped.hi, root.hi);
 }
+
+#[test]
+fn relu_pairs_between_affine_layers_keep_the_function_and_its_bounds() {
+    // a normalisation (diagonal) before the first layer, and a pooling-like
+    // averaging before the last: consecutive affine layers
+    let mut rng = Rng::new(21);
+    let inner = net(&mut rng, &[6, 12, 12, 3]);
+    let diag = Layer::Affine {
+        w: DMatrix::from_diagonal(&DVector::from_fn(6, |_, _| rng.uniform(0.5, 3.0))),
+        b: DVector::from_fn(6, |_, _| rng.uniform(-1.0, 1.0)),
+    };
+    let pool = Layer::Affine {
+        w: DMatrix::from_fn(2, 3, |_, _| rng.uniform(-1.0, 1.0)),
+        b: DVector::from_fn(2, |_, _| rng.normal()),
+    };
+    let mut layers = vec![diag];
+    layers.extend(inner.layers.iter().cloned());
+    layers.push(pool);
+    let original = Network::new(6, layers);
+    assert!(ReluChain::of(&original).is_none());
+    let paired = alternating(&original).unwrap();
+    assert_eq!(paired.layers.len(), original.layers.len() + 2);
+    let chain = ReluChain::of(&paired).unwrap();
+    let input = IBox::new(vec![-0.4; 6], vec![0.3; 6]);
+    let root = Domain::root(&paired, &input).unwrap();
+    let obj = DMatrix::from_fn(2, 2, |_, _| rng.normal());
+    let o = optimise(
+        &chain,
+        &input,
+        &root,
+        &obj,
+        Slopes::crown(&chain, &root, 2),
+        40,
+    );
+    for _ in 0..3000 {
+        let x: Vec<f64> = (0..6).map(|_| rng.uniform(-0.4, 0.3)).collect();
+        let (a, b) = (original.forward(&x), paired.forward(&x));
+        for (u, v) in a.iter().zip(&b) {
+            assert!((u - v).abs() <= 1e-12 * (1.0 + u.abs()), "{a:?} vs {b:?}");
+        }
+        for c in 0..2 {
+            let value: f64 = (0..2).map(|i| obj[(i, c)] * a[i]).sum();
+            assert!(
+                o.bounds[c] <= value + 1e-9,
+                "bound {} above {value}",
+                o.bounds[c]
+            );
+        }
+    }
+    // another activation than ReLU: no rewriting
+    let tanh = Network::new(
+        1,
+        vec![
+            Layer::Affine {
+                w: DMatrix::from_element(1, 1, 1.0),
+                b: DVector::zeros(1),
+            },
+            Layer::Act(Activation::Tanh),
+            Layer::Affine {
+                w: DMatrix::from_element(1, 1, 1.0),
+                b: DVector::zeros(1),
+            },
+        ],
+    );
+    assert!(alternating(&tanh).is_none());
+}

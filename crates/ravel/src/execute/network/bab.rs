@@ -546,9 +546,10 @@ pub(super) fn search(
 
     // many inputs: split activations instead (where the network allows)
     if rootbox.dim() > LOOK_AHEAD_DIMS && !settled.iter().all(|s| *s) {
-        if let Some((chain, bx)) = activations::applies(&cx, region) {
+        if let Some((chain, net, bx)) = activations::applies(&cx, region) {
             return activations::search(
-                &cx, &chain, &bx, root_b, &full, issues, budget, settled, witnesses, real_only,
+                &cx, &chain, &net, &bx, root_b, &full, issues, budget, settled, witnesses,
+                real_only,
             );
         }
     }

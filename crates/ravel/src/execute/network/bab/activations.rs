@@ -14,7 +14,9 @@
 //! sign or the other), so the leaves cover the input box and the largest
 //! bound of a row over the leaves bounds it over the box: that is the one
 //! cell the search returns. Only for a box input set and a network of
-//! affine layers and ReLUs; otherwise the caller splits inputs.
+//! affine layers and ReLUs (consecutive affine layers, a normalisation or
+//! a pooling, get ReLU pairs between them: [`dual::alternating`]);
+//! otherwise the caller splits inputs.
 
 use std::ops::Not;
 
@@ -27,6 +29,7 @@ use ravel_analysis::dual::{self, Domain, Phase, ReluChain, Slopes};
 use ravel_analysis::issue::Issue;
 use ravel_analysis::partition::{Budget, Stop};
 use ravel_analysis::sets::{IBox, Region};
+use ravel_base::nn::Network;
 
 /// Ascent steps on the root.
 const ROOT_STEPS: usize = 100;
@@ -99,9 +102,12 @@ fn sub_bytes(dom: &Domain, rows: usize) -> usize {
 
 /// Whether the search splits activations for this run: a box input set
 /// and a network of affine layers with ReLUs between them.
-pub(super) fn applies(cx: &Ctx, region: &Region) -> Option<(ReluChain, IBox)> {
+pub(super) fn applies(cx: &Ctx, region: &Region) -> Option<(ReluChain, Network, IBox)> {
     match region {
-        Region::Box(b) if b.is_finite() => ReluChain::of(&cx.plan.net).map(|c| (c, b.clone())),
+        Region::Box(b) if b.is_finite() => {
+            let net = dual::alternating(&cx.plan.net)?;
+            ReluChain::of(&net).map(|c| (c, net, b.clone()))
+        }
         _ => None,
     }
 }
@@ -159,6 +165,7 @@ fn uppers(lower_of_neg: &[f64]) -> Vec<f64> {
 pub(super) fn search(
     cx: &Ctx,
     chain: &ReluChain,
+    net: &Network,
     rootbox: &IBox,
     root_b: Vec<f64>,
     full: &dyn Fn(&[f64]) -> Vec<f64>,
@@ -168,7 +175,6 @@ pub(super) fn search(
     mut witnesses: Vec<Option<Witness>>,
     mut real_only: Vec<Option<Vec<f64>>>,
 ) -> Searched {
-    let plan = cx.plan;
     let ctl = cx.ctl;
     let out_of_time = || ctl.out_of_time() || budget.seconds.is_some_and(|s| (ctl.elapsed)() > s);
     // objectives: −d for every property row d (a lower bound of −d·y is
@@ -185,7 +191,7 @@ pub(super) fn search(
             *u = u.max(*v);
         }
     };
-    let Some(mut root_dom) = Domain::root(&plan.net, rootbox) else {
+    let Some(mut root_dom) = Domain::root(net, rootbox) else {
         // no finite pre-activation bounds: the root's bounds stand
         let cells = vec![(rootbox.clone(), full(&root_b))];
         let union = full(&root_b);

@@ -17,7 +17,9 @@
 //!    input is tried: both children of every candidate split are bounded
 //!    in the batch, and the split kept is the one whose children's open
 //!    margins sum highest (a proved child counts 0; ties: the better worse
-//!    child). With more inputs, the input with the largest *smear* for the
+//!    child), unless no candidate gains [`STALL`] of the parent's margin:
+//!    then the widest input (rounding noise would otherwise keep halving
+//!    one thin input). With more inputs, the input with the largest *smear* for the
 //!    cell's worst property row: the gradient of that row at the cell's
 //!    centre times the cell's width along the input. Measured on ACAS Xu
 //!    (docs/language.md): look-ahead decided all 15 property-1 instances
@@ -70,6 +72,10 @@ pub const QUEUE_BYTES: usize = 1 << 30;
 
 /// The most inputs for which [`Branching::LookAhead`] tries every split.
 pub const LOOK_AHEAD_DIMS: usize = 8;
+
+/// The least gain, relative to the parent's margin, that makes a
+/// look-ahead option better than splitting the widest input.
+const STALL: f64 = 1e-3;
 
 /// Gradient steps per start of the opening attack.
 const PGD_STEPS: usize = 50;
@@ -203,6 +209,40 @@ fn halt(
     } else {
         None
     }
+}
+
+/// A look-ahead option's score: whether both children were bounded, the
+/// sum of their open margins (a proved child counts 0), the worse one.
+type Score = (bool, f64, f64);
+
+/// The look-ahead option to keep among `options` (each its [`Score`] and
+/// the split input's width relative to the input set) for a parent of
+/// margin `parent`: the best score (lexicographic, NaN never wins); but
+/// when that gains no more than [`STALL`] of the parent's margin over the
+/// parent (the scores then differ by rounding noise, and following it
+/// keeps halving one thin input around a cell where two `avoid` rows
+/// cross), the widest input among the options bounded on both sides.
+fn pick(options: &[(Score, f64)], parent: f64) -> usize {
+    let mut at = 0;
+    let Some(&(mut best, _)) = options.first() else {
+        return 0;
+    };
+    for (o, &(s, _)) in options.iter().enumerate().skip(1) {
+        if (s.0, s.1, s.2) > (best.0, best.1, best.2) && !(s.1.is_nan() || s.2.is_nan()) {
+            (at, best) = (o, s);
+        }
+    }
+    let pw = parent.min(0.0);
+    if options.len() > 1 && best.0 && best.1 - 2.0 * pw <= STALL * -pw {
+        let mut widest = (at, options[at].1);
+        for (o, &(s, r)) in options.iter().enumerate() {
+            if s.0 && r > widest.1 {
+                widest = (o, r);
+            }
+        }
+        at = widest.0;
+    }
+    at
 }
 
 /// Whether margin `v` proves `kind` on a cell.
@@ -652,16 +692,16 @@ pub(super) fn search(
                 let (a, b) = (cx.worst(&p[0].1, &settled).0, cx.worst(&p[1].1, &settled).0);
                 (p[0].3 && p[1].3, a.min(0.0) + b.min(0.0), a.min(b))
             };
-            let mut at = 0;
-            let mut best = score(&pairs[0]);
-            for (o, p) in pairs.iter().enumerate().skip(1) {
-                let s = score(p);
-                let better =
-                    (s.0, s.1, s.2) > (best.0, best.1, best.2) && !(s.1.is_nan() || s.2.is_nan());
-                if better {
-                    (at, best) = (o, s);
-                }
-            }
+            let rel = |p: &[Child; 2]| {
+                (0..node.cell.dim())
+                    .find(|&i| p[0].0.hi[i] != node.cell.hi[i])
+                    .map_or(0.0, |i| {
+                        (node.cell.hi[i] - node.cell.lo[i])
+                            / (rootbox.hi[i] - rootbox.lo[i]).max(f64::MIN_POSITIVE)
+                    })
+            };
+            let scores: Vec<(Score, f64)> = pairs.iter().map(|p| (score(p), rel(p))).collect();
+            let at = pick(&scores, cx.worst(parent, &settled).0);
             let chosen = pairs.swap_remove(at);
             made += 2;
             for (cell, b, iss, _) in chosen {
@@ -885,6 +925,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The look-ahead keeps the best-scoring split when it gains, and the
+    /// widest input when no option gains more than `STALL` of the parent's
+    /// margin (rounding noise), never an option with a child not bounded.
+    #[test]
+    fn the_look_ahead_splits_the_widest_input_when_nothing_gains() {
+        let p = -0.0165;
+        // a real gain on the thin input (index 1): kept
+        let gains = [((true, 2.0 * p, p), 1.0), ((true, 2.0 * p + 1e-4, p), 1e-6)];
+        assert_eq!(pick(&gains, p), 1);
+        // noise (a gain of 1e-5 of the margin) on the thin input: the widest
+        let noise = [
+            ((true, 2.0 * p, p), 0.5),
+            ((true, 2.0 * p + 3e-7, p), 1e-6),
+            ((true, 2.0 * p + 1e-9, p), 1.0),
+            ((false, 2.0 * p, p), 2.0),
+        ];
+        assert_eq!(pick(&noise, p), 2);
+        // a proved child is a gain
+        let proved = [((true, 2.0 * p, p), 1.0), ((true, p, p), 1e-3)];
+        assert_eq!(pick(&proved, p), 1);
+        // one option: it
+        assert_eq!(pick(&noise[..1], p), 0);
     }
 
     #[test]

@@ -27,9 +27,10 @@
 //! layers (a pooling before a `Gemm`, normalisation before a `Conv`) are
 //! kept as they are, not multiplied together: their product would be
 //! rounded, and counterexamples are replayed layer by layer in the stored
-//! precision as a runtime evaluates them (the analyses that need affine
-//! layers and activations to alternate — the batched CROWN kernel, branch
-//! and bound on activations — fall back to their general paths). A node combining two computed values (`Add` of a residual or
+//! precision as a runtime evaluates them (the batched CROWN kernel, which
+//! needs affine layers and activations to alternate, falls back to its
+//! general path; branch and bound on activations puts ReLU pairs between
+//! them, `ravel_analysis::dual::alternating`). A node combining two computed values (`Add` of a residual or
 //! skip connection, `Concat`) is refused, naming it: the network is a
 //! chain of layers on one running value. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed

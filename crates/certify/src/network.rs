@@ -316,20 +316,52 @@ fn stored_forward(net: &Network, x: &[f64]) -> Vec<f64> {
     }
 }
 
+/// At most this many multiply-adds per affine layer for the symbols of
+/// [`stored_enclosure`]; a larger layer first turns them into intervals.
+const SYMBOL_WORK: usize = 1 << 27;
+
 /// The checker's own enclosure of every evaluation of the model as stored
-/// at `x`, in its input type's precision and any summation order: an affine
-/// output of `n` inputs within `γ(n+1)·(Σ|w||h| + |b|) + n·η` of its exact
-/// value over the previous enclosure (`u` the type's unit roundoff, `η` its
-/// smallest subnormal; weights rounded to the type); ReLU exact; `tanh` and
-/// the sigmoid within the runtime's assumed error
+/// at `x`, in its input type's precision and any summation order, as an
+/// affine form: value `i` is `cᵢ + Σₖ gₖ[i]·εₖ ± rᵢ` with one `ε ∈ [−1, 1]^m`
+/// shared by all values. An affine layer (weights rounded to the type)
+/// first gives every `rⱼ` a symbol of its own, then maps the centre and
+/// every symbol's column with the signed weights (each entry an outward-
+/// rounded interval whose half-width joins `rᵢ`); its runtime's rounding
+/// error, at most `γ(n+1)·(Σ|w||h| + |b|) + n·η` for `n` inputs (`u` the
+/// type's unit roundoff, `η` its smallest subnormal, `|h|` bounded by the
+/// enclosure), is the new `rᵢ`. ReLU is exact: a value `≥ 0` keeps its
+/// form, one `≤ 0` is 0, one that straddles becomes `[0, hi]`. `tanh` and
+/// the sigmoid become intervals, within the runtime's assumed error
 /// ([`InputType::activation_error`]) and libm's. `None` when a value may
 /// overflow the type or a bound is not finite.
 fn stored_enclosure(net: &Network, x: &[f64]) -> Option<Bx> {
     let t = net.input_type;
     let u = t.unit_roundoff();
-    let mut y = Bx::point(x);
+    let mut c = x.to_vec();
+    // one column per symbol
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut r = vec![0.0; x.len()];
+    // upper bounds of Σₖ|gₖ[i]| + rᵢ (a missing entry: no bound)
+    let spreads = |cols: &[Vec<f64>], r: &[f64]| -> Vec<f64> {
+        r.iter()
+            .enumerate()
+            .map(|(i, ri)| {
+                let g = cols
+                    .iter()
+                    .map(|g| g.get(i).map_or(f64::INFINITY, |v| v.abs()));
+                sum_upper(g.chain([*ri]))
+            })
+            .collect()
+    };
+    let ends = |cols: &[Vec<f64>], c: &[f64], r: &[f64]| {
+        let s = spreads(cols, r);
+        Bx {
+            lo: c.iter().zip(&s).map(|(c, s)| sum_lower([*c, -s])).collect(),
+            hi: c.iter().zip(&s).map(|(c, s)| sum_upper([*c, *s])).collect(),
+        }
+    };
     for layer in &net.layers {
-        y = match layer {
+        match layer {
             Layer::Affine { w, b } => {
                 let n = w.ncols();
                 // γ(n+1), rounded up; k·u < 1/2 or nothing is claimed
@@ -338,11 +370,20 @@ fn stored_enclosure(net: &Network, x: &[f64]) -> Option<Bx> {
                     return None;
                 }
                 let g = (ku / (1.0 - ku).next_down()).next_up();
-                let size = y.abs_max();
-                let mut out = Bx {
-                    lo: Vec::with_capacity(w.nrows()),
-                    hi: Vec::with_capacity(w.nrows()),
-                };
+                let size = ends(&cols, &c, &r).abs_max();
+                if w.nrows().saturating_mul(n).saturating_mul(cols.len()) > SYMBOL_WORK {
+                    r = spreads(&cols, &r);
+                    cols.clear();
+                }
+                for (j, rj) in r.iter().enumerate() {
+                    if *rj > 0.0 {
+                        let col = (0..c.len()).map(|i| if i == j { *rj } else { 0.0 });
+                        cols.push(col.collect());
+                    }
+                }
+                let mut next_c = Vec::with_capacity(w.nrows());
+                let mut next_r = Vec::with_capacity(w.nrows());
+                let mut next_cols = vec![Vec::with_capacity(w.nrows()); cols.len()];
                 for (i, bi) in b.iter().enumerate() {
                     let row: Vec<f64> = (0..n).map(|j| t.round(w[(i, j)])).collect();
                     let bias = t.round(*bi);
@@ -356,42 +397,65 @@ fn stored_enclosure(net: &Network, x: &[f64]) -> Option<Bx> {
                         (g * abs_sum).next_up(),
                         (n as f64 * t.min_positive()).next_up(),
                     ]);
-                    let hi = sum_upper([dot_box_upper(&row, &y.lo, &y.hi), bias, err]);
-                    let neg: Vec<f64> = row.iter().map(|v| -v).collect();
-                    let lo = sum_lower([-dot_box_upper(&neg, &y.lo, &y.hi), bias, -err]);
-                    if !(lo.is_finite() && hi.is_finite() && sum_upper([abs_sum, err]) <= t.max()) {
+                    if !(abs_sum.is_finite() && sum_upper([abs_sum, err]) <= t.max()) {
                         return None;
                     }
-                    out.lo.push(lo);
-                    out.hi.push(hi);
+                    // an outward interval of Σ aⱼ vⱼ (+ bias), as midpoint and half-width
+                    let mid_half = |v: &[f64], bias: f64| {
+                        let hi = sum_upper(row.iter().zip(v).map(|(a, x)| a * x).chain([bias]));
+                        let lo = sum_lower(row.iter().zip(v).map(|(a, x)| a * x).chain([bias]));
+                        let m = lo + 0.5 * (hi - lo);
+                        (m, sum_upper([hi, -m]).max(sum_upper([m, -lo])))
+                    };
+                    let mut extra = vec![err];
+                    let (ci, h) = mid_half(&c, bias);
+                    next_c.push(ci);
+                    extra.push(h);
+                    for (col, next) in cols.iter().zip(next_cols.iter_mut()) {
+                        let (gi, h) = mid_half(col, 0.0);
+                        next.push(gi);
+                        extra.push(h);
+                    }
+                    next_r.push(sum_upper(extra));
                 }
-                out
+                (c, cols, r) = (next_c, next_cols, next_r);
             }
-            Layer::Act(Activation::Relu) => Bx {
-                lo: y.lo.iter().map(|v| v.max(0.0)).collect(),
-                hi: y.hi.iter().map(|v| v.max(0.0)).collect(),
-            },
+            Layer::Act(Activation::Relu) => {
+                let y = ends(&cols, &c, &r);
+                let values = c.iter_mut().zip(r.iter_mut()).zip(y.lo.iter().zip(&y.hi));
+                for (i, ((ci, ri), (lo, hi))) in values.enumerate() {
+                    if *lo >= 0.0 {
+                        continue;
+                    }
+                    cols.iter_mut()
+                        .filter_map(|g| g.get_mut(i))
+                        .for_each(|v| *v = 0.0);
+                    let top = hi.max(0.0);
+                    *ci = 0.5 * top;
+                    *ri = sum_upper([top, -*ci]).max(*ci);
+                }
+            }
             Layer::Act(a) => {
                 let d = t.activation_error();
-                let end = |v: f64, up: bool| {
-                    let e = a.eval(v);
-                    if up {
-                        sum_upper([e, a.eval_error(e), d])
-                    } else {
-                        sum_lower([e, -a.eval_error(e), -d])
-                    }
-                };
-                Bx {
-                    lo: y.lo.iter().map(|v| end(*v, false)).collect(),
-                    hi: y.hi.iter().map(|v| end(*v, true)).collect(),
+                let y = ends(&cols, &c, &r);
+                let values = c.iter_mut().zip(r.iter_mut()).zip(y.lo.iter().zip(&y.hi));
+                for ((ci, ri), (lo, hi)) in values {
+                    let (el, eh) = (a.eval(*lo), a.eval(*hi));
+                    let lo = sum_lower([el, -a.eval_error(el), -d]);
+                    let hi = sum_upper([eh, a.eval_error(eh), d]);
+                    *ci = lo + 0.5 * (hi - lo);
+                    *ri = sum_upper([hi, -*ci]).max(sum_upper([*ci, -lo]));
                 }
+                cols.clear();
             }
-        };
-        if !y.is_proper() {
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !(finite(&c) && finite(&r) && cols.iter().all(|g| finite(g))) {
             return None;
         }
     }
-    Some(y)
+    let y = ends(&cols, &c, &r);
+    y.is_proper().then_some(y)
 }
 
 /// Why a recorded counterexample input does not falsify the property for
@@ -895,6 +959,36 @@ mod tests {
             Answer::Unreadable(m) => assert!(m.contains("could not be decided"), "{m}"),
             other => panic!("expected UNREADABLE, got {other:?}"),
         }
+    }
+
+    /// Left to right in float32, `1` plus `k` halves of its unit in the
+    /// last place loses every half, in both affine layers: nearly the worst
+    /// case of the error bound, which the checker's enclosure must hold (a
+    /// layer's error halved or forgotten would not).
+    #[test]
+    fn the_stored_enclosure_holds_the_worst_case_order() {
+        let k = 40;
+        let tiny = 2f64.powi(-24);
+        let mut x = vec![tiny; k + 1];
+        x[0] = 1.0;
+        let w1 = DMatrix::from_fn(k + 1, k + 1, |i, j| f64::from(u8::from(i == 0 || i == j)));
+        let net = Network::new(
+            k + 1,
+            vec![
+                Layer::Affine {
+                    w: w1,
+                    b: DVector::zeros(k + 1),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_element(1, k + 1, 1.0),
+                    b: DVector::zeros(1),
+                },
+            ],
+        );
+        assert_eq!(stored_forward(&net, &x), vec![1.0]);
+        let e = stored_enclosure(&net, &x).expect("finite");
+        assert!(e.lo[0] <= 1.0 && e.lo[0] > 1.0 - 8.0 * tiny, "{e:?}");
     }
 
     /// The float32 evaluations of random networks in other orders (the

@@ -39,7 +39,7 @@ use ravel_analysis::sdp;
 use ravel_analysis::sets::{IBox, Norm, Region};
 use ravel_analysis::shape::{excess, extent_of_points, support_of_box, support_of_points};
 use ravel_base::nn::{Activation, InputType, Layer, Network};
-use ravel_base::num::{dot_box_lower, dot_box_upper, gamma, sum_lower, sum_upper};
+use ravel_base::num::{dot_box_upper, error_bound, gamma, sum_lower, sum_upper, Acc};
 use ravel_base::rng::Rng;
 
 mod bab;
@@ -732,73 +732,195 @@ fn gamma_of(k: usize, u: f64) -> Option<f64> {
     (ku < 0.5).then(|| (ku / (1.0 - ku).next_down()).next_up())
 }
 
+/// At most this many multiply-adds per affine layer for the generators of
+/// [`stored_enclosure`]: a larger layer first folds its generators into
+/// per-neuron radii (an interval step; sound, only coarser).
+const ZONOTOPE_BUDGET: usize = 1 << 27;
+
 /// An enclosure of every evaluation of the stored model at `x` (a value of
 /// its input type) in the precision of that type, whatever order a runtime
-/// sums in: each weight and bias rounded to the type; an affine output of
-/// `n` inputs is off its exact value (over the previous enclosure) by at
-/// most `γ(n+1)·(Σ|w||h| + |b|) + n·η` (products and sums rounded to
-/// nearest in any order, with or without fused multiply-add; `η` the
-/// smallest subnormal, for products that underflow); ReLU is exact; `tanh`
-/// and the sigmoid are within [`InputType::activation_error`] of the exact
-/// function. Every bound is rounded outward in `f64`. `None` when a value
-/// may overflow the type (some partial sum of some order could reach
-/// infinity) or a bound is not finite.
+/// sums in, as an affine form (a zonotope) per layer: every computed value
+/// vector is `c + G·ε + δ` for some `ε ∈ [−1, 1]^m` shared by the neurons
+/// and `|δᵢ| ≤ radᵢ`.
+///
+/// * An affine layer first turns every `radⱼ` into a symbol of its own (a
+///   column of `G`), then maps `c ↦ W c + b`, `G ↦ W G` with the signed
+///   weights and biases rounded to the type, so the errors of earlier
+///   layers cancel as they do in the runtime. Its new `radᵢ` is the
+///   rounding error of the runtime's output `i` — at most
+///   `γ(n+1)·(Σ|w||h| + |b|) + n·η` for `n` inputs (products and sums
+///   rounded to nearest in any order, with or without fused multiply-add;
+///   `η` the smallest subnormal; `|h|` bounded by the enclosure) — plus the
+///   `f64` rounding of `W c + b` (an interval from [`Acc`]) and of `W G`
+///   (at most `γ₆₄(n)·Σⱼ|wᵢⱼ|·Σₖ|Gⱼₖ|` over the row, for any order).
+/// * ReLU is exact: a neuron whose enclosure is `≥ 0` keeps its form, one
+///   `≤ 0` becomes 0, one that straddles becomes the interval `[0, u]`.
+/// * `tanh` and the sigmoid are within [`InputType::activation_error`] of
+///   the exact function: the layer's enclosure becomes intervals (its ends'
+///   values, widened by libm's error and the runtime's).
+///
+/// Every bound is rounded outward in `f64`. `None` when a value may overflow
+/// the type (some partial sum of some order could reach infinity) or a
+/// bound is not finite.
 fn stored_enclosure(net: &Network, x: &[f64]) -> Option<IBox> {
     let t = net.input_type;
     let (u, eta, top) = (t.unit_roundoff(), t.min_positive(), t.max());
-    let (mut lo, mut hi) = (x.to_vec(), x.to_vec());
+    let mut z = Zonotope {
+        c: x.to_vec(),
+        g: vec![Vec::new(); x.len()],
+        rad: vec![0.0; x.len()],
+    };
     for layer in &net.layers {
         match layer {
             Layer::Affine { w, b } => {
                 let n = w.ncols();
-                let g = gamma_of(n + 1, u)?;
-                let mag: Vec<f64> = lo
-                    .iter()
-                    .zip(&hi)
-                    .map(|(l, h)| l.abs().max(h.abs()))
-                    .collect();
-                let (mut next_lo, mut next_hi) = (Vec::new(), Vec::new());
+                let gam = gamma_of(n + 1, u)?;
+                let mag = z.magnitudes();
+                let m = z.g.first().map_or(0, Vec::len);
+                if w.nrows().saturating_mul(n).saturating_mul(m) > ZONOTOPE_BUDGET {
+                    z.fold_generators();
+                }
+                z.fold_radii();
+                let m = z.g.first().map_or(0, Vec::len);
+                // Σₖ|Gⱼₖ|, an upper bound
+                let gabs: Vec<f64> =
+                    z.g.iter()
+                        .map(|r| sum_upper(r.iter().map(|v| v.abs())))
+                        .collect();
+                let mut next = Zonotope {
+                    c: Vec::with_capacity(w.nrows()),
+                    g: Vec::with_capacity(w.nrows()),
+                    rad: Vec::with_capacity(w.nrows()),
+                };
                 for i in 0..w.nrows() {
                     let row: Vec<f64> = (0..n).map(|j| t.round(w[(i, j)])).collect();
                     let bias = t.round(b[i]);
                     let abs_row: Vec<f64> = row.iter().map(|v| v.abs()).collect();
                     let abs_sum = sum_upper([dot_box_upper(&abs_row, &mag, &mag), bias.abs()]);
-                    let err = sum_upper([(g * abs_sum).next_up(), (n as f64 * eta).next_up()]);
-                    let up = sum_upper([dot_box_upper(&row, &lo, &hi), bias, err]);
-                    let down = sum_lower([dot_box_lower(&row, &lo, &hi), bias, -err]);
+                    let err = sum_upper([(gam * abs_sum).next_up(), (n as f64 * eta).next_up()]);
                     // every product and partial sum of every order lies within
                     // abs_sum + err of zero: within range, nothing overflows
                     let reach = sum_upper([abs_sum, err]);
-                    if !(up.is_finite() && down.is_finite() && reach <= top) {
+                    if reach.is_nan() || reach > top {
                         return None;
                     }
-                    next_lo.push(down);
-                    next_hi.push(up);
+                    // W c + b: an interval around its rounded value
+                    let mut acc = Acc::ZERO;
+                    acc.add_products(&row, &z.c);
+                    acc.add(bias);
+                    let (lo, hi) = (acc.lower(), acc.upper());
+                    let ci = lo + 0.5 * (hi - lo);
+                    let c_err = sum_upper([hi, -ci]).max(sum_upper([ci, -lo]));
+                    // W G, row i, summed in the order j for every k
+                    let mut gi = vec![0.0; m];
+                    for (wij, gj) in row.iter().zip(&z.g) {
+                        if *wij != 0.0 {
+                            for (a, g) in gi.iter_mut().zip(gj) {
+                                *a += wij * g;
+                            }
+                        }
+                    }
+                    let g_err = error_bound(n, dot_box_upper(&abs_row, &gabs, &gabs));
+                    let rad = sum_upper([err, c_err, g_err]);
+                    if !(ci.is_finite() && rad.is_finite() && gi.iter().all(|v| v.is_finite())) {
+                        return None;
+                    }
+                    next.c.push(ci);
+                    next.g.push(gi);
+                    next.rad.push(rad);
                 }
-                (lo, hi) = (next_lo, next_hi);
+                z = next;
             }
             Layer::Act(Activation::Relu) => {
-                lo.iter_mut().for_each(|v| *v = v.max(0.0));
-                hi.iter_mut().for_each(|v| *v = v.max(0.0));
+                for i in 0..z.c.len() {
+                    let (lo, hi) = z.bounds(i);
+                    if lo >= 0.0 {
+                        continue;
+                    }
+                    z.g[i].iter_mut().for_each(|v| *v = 0.0);
+                    if hi <= 0.0 {
+                        (z.c[i], z.rad[i]) = (0.0, 0.0);
+                    } else {
+                        // [0, hi] ⊆ [c − rad, c + rad]
+                        let c = 0.5 * hi;
+                        (z.c[i], z.rad[i]) = (c, sum_upper([hi, -c]).max(c));
+                    }
+                }
             }
             Layer::Act(a) => {
                 // monotone: the ends' values, widened by libm's error and the runtime's
                 let d = t.activation_error();
-                for v in lo.iter_mut() {
-                    let e = a.eval(*v);
-                    *v = sum_lower([e, -a.eval_error(e), -d]);
+                for i in 0..z.c.len() {
+                    let (lo, hi) = z.bounds(i);
+                    let (el, eh) = (a.eval(lo), a.eval(hi));
+                    let lo = sum_lower([el, -a.eval_error(el), -d]);
+                    let hi = sum_upper([eh, a.eval_error(eh), d]);
+                    if !(lo.is_finite() && hi.is_finite()) {
+                        return None;
+                    }
+                    let c = lo + 0.5 * (hi - lo);
+                    z.c[i] = c;
+                    z.rad[i] = sum_upper([hi, -c]).max(sum_upper([c, -lo]));
                 }
-                for v in hi.iter_mut() {
-                    let e = a.eval(*v);
-                    *v = sum_upper([e, a.eval_error(e), d]);
-                }
-                if lo.iter().chain(&hi).any(|v| !v.is_finite()) {
-                    return None;
-                }
+                z.g.iter_mut().for_each(Vec::clear);
             }
         }
     }
-    Some(IBox::new(lo, hi))
+    let (lo, hi): (Vec<f64>, Vec<f64>) = (0..z.c.len()).map(|i| z.bounds(i)).unzip();
+    lo.iter()
+        .chain(&hi)
+        .all(|v| v.is_finite())
+        .then(|| IBox::new(lo, hi))
+}
+
+/// The affine form of [`stored_enclosure`]: value `i` is
+/// `cᵢ + Σₖ Gᵢₖ εₖ + δᵢ` with `ε ∈ [−1, 1]^m` and `|δᵢ| ≤ radᵢ`.
+struct Zonotope {
+    c: Vec<f64>,
+    /// `G`, one row per value.
+    g: Vec<Vec<f64>>,
+    rad: Vec<f64>,
+}
+
+impl Zonotope {
+    /// An upper bound of `Σₖ|Gᵢₖ| + radᵢ`.
+    fn spread(&self, i: usize) -> f64 {
+        sum_upper(self.g[i].iter().map(|v| v.abs()).chain([self.rad[i]]))
+    }
+
+    /// Outward-rounded bounds of value `i`.
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        let s = self.spread(i);
+        (sum_lower([self.c[i], -s]), sum_upper([self.c[i], s]))
+    }
+
+    /// Upper bounds of `|value|`.
+    fn magnitudes(&self) -> Vec<f64> {
+        (0..self.c.len())
+            .map(|i| sum_upper([self.c[i].abs(), self.spread(i)]))
+            .collect()
+    }
+
+    /// Every `radⱼ > 0` becomes a symbol of its own.
+    fn fold_radii(&mut self) {
+        let fresh: Vec<usize> = (0..self.rad.len()).filter(|&j| self.rad[j] > 0.0).collect();
+        for (i, row) in self.g.iter_mut().enumerate() {
+            row.extend(
+                fresh
+                    .iter()
+                    .map(|&j| if j == i { self.rad[i] } else { 0.0 }),
+            );
+        }
+        self.rad.iter_mut().for_each(|r| *r = 0.0);
+    }
+
+    /// The symbols become per-value radii (the interval hull).
+    fn fold_generators(&mut self) {
+        for i in 0..self.c.len() {
+            self.rad[i] = self.spread(i);
+            self.g[i].clear();
+        }
+    }
 }
 
 /// Whether the input `x` of `region` provably violates the property for
@@ -1549,6 +1671,7 @@ fn radius_search(
 mod tests {
     use super::*;
     use nalgebra::DVector;
+    use ravel_base::num::dot_box_lower;
 
     #[test]
     fn candidates_become_float32_values_inside_the_set() {
@@ -1624,6 +1747,208 @@ mod tests {
             for y in [net.forward_stored(&x), rev] {
                 assert!(e.contains_point(&y), "case {case}: {y:?} outside {e:?}");
             }
+        }
+    }
+    /// The interval enclosure `stored_enclosure` used before the affine
+    /// forms: a reference for their width (ReLU networks only).
+    fn interval_enclosure(net: &Network, x: &[f64]) -> IBox {
+        let t = net.input_type;
+        let (u, eta) = (t.unit_roundoff(), t.min_positive());
+        let (mut lo, mut hi) = (x.to_vec(), x.to_vec());
+        for layer in &net.layers {
+            match layer {
+                Layer::Affine { w, b } => {
+                    let n = w.ncols();
+                    let g = gamma_of(n + 1, u).expect("small layers");
+                    let mag: Vec<f64> = lo
+                        .iter()
+                        .zip(&hi)
+                        .map(|(l, h)| l.abs().max(h.abs()))
+                        .collect();
+                    let (mut nl, mut nh) = (Vec::new(), Vec::new());
+                    for i in 0..w.nrows() {
+                        let row: Vec<f64> = (0..n).map(|j| t.round(w[(i, j)])).collect();
+                        let bias = t.round(b[i]);
+                        let abs_row: Vec<f64> = row.iter().map(|v| v.abs()).collect();
+                        let abs_sum = sum_upper([dot_box_upper(&abs_row, &mag, &mag), bias.abs()]);
+                        let err = sum_upper([(g * abs_sum).next_up(), (n as f64 * eta).next_up()]);
+                        nh.push(sum_upper([dot_box_upper(&row, &lo, &hi), bias, err]));
+                        nl.push(sum_lower([dot_box_lower(&row, &lo, &hi), bias, -err]));
+                    }
+                    (lo, hi) = (nl, nh);
+                }
+                Layer::Act(a) => {
+                    assert_eq!(*a, Activation::Relu);
+                    lo.iter_mut().for_each(|v| *v = v.max(0.0));
+                    hi.iter_mut().for_each(|v| *v = v.max(0.0));
+                }
+            }
+        }
+        IBox::new(lo, hi)
+    }
+
+    /// How a float32 runtime may sum a dot product with its bias.
+    #[derive(Clone, Copy)]
+    enum Order {
+        /// Left to right, the bias last.
+        Ascending,
+        /// A random binary tree over the rounded products and the bias.
+        Tree,
+        /// A random sequence of fused multiply-adds, the bias at a random place.
+        Fma,
+    }
+
+    /// The network in float32, each dot product summed in `order`.
+    fn eval_f32(net: &Network, x: &[f64], order: Order, rng: &mut Rng) -> Vec<f64> {
+        let mut h: Vec<f32> = x.iter().map(|v| *v as f32).collect();
+        for layer in &net.layers {
+            match layer {
+                Layer::Affine { w, b } => {
+                    h = (0..w.nrows())
+                        .map(|i| {
+                            let bias = b[i] as f32;
+                            let wi = |j: usize| w[(i, j)] as f32;
+                            match order {
+                                Order::Ascending => {
+                                    (0..w.ncols()).fold(0.0f32, |s, j| s + wi(j) * h[j]) + bias
+                                }
+                                Order::Tree => {
+                                    let mut terms: Vec<f32> =
+                                        (0..w.ncols()).map(|j| wi(j) * h[j]).collect();
+                                    terms.push(bias);
+                                    while terms.len() > 1 {
+                                        let a = terms.swap_remove(rng.below(terms.len()));
+                                        let k = rng.below(terms.len());
+                                        terms[k] += a;
+                                    }
+                                    terms[0]
+                                }
+                                Order::Fma => {
+                                    let mut idx: Vec<usize> = (0..=w.ncols()).collect();
+                                    for k in (1..idx.len()).rev() {
+                                        idx.swap(k, rng.below(k + 1));
+                                    }
+                                    idx.iter().fold(0.0f32, |s, &j| {
+                                        if j == w.ncols() {
+                                            s + bias
+                                        } else {
+                                            wi(j).mul_add(h[j], s)
+                                        }
+                                    })
+                                }
+                            }
+                        })
+                        .collect();
+                }
+                Layer::Act(a) => h.iter_mut().for_each(|v| *v = a.eval(f64::from(*v)) as f32),
+            }
+        }
+        h.into_iter().map(f64::from).collect()
+    }
+
+    /// A random ReLU network of the given widths with float32 weights of
+    /// scale about `1/√fan-in`.
+    fn relu_net(widths: &[usize], rng: &mut Rng) -> Network {
+        let mut layers = Vec::new();
+        for (k, pair) in widths.windows(2).enumerate() {
+            let s = 1.5 / (pair[0] as f64).sqrt();
+            let f = |v: f64| f64::from(v as f32);
+            layers.push(Layer::Affine {
+                w: DMatrix::from_fn(pair[1], pair[0], |_, _| f(s * rng.normal())),
+                b: DVector::from_fn(pair[1], |_, _| f(0.1 * rng.normal())),
+            });
+            if k + 2 < widths.len() {
+                layers.push(Layer::Act(Activation::Relu));
+            }
+        }
+        Network::new(widths[0], layers)
+    }
+
+    /// Every float32 evaluation tried — random summation trees, random
+    /// orders of fused multiply-adds, left to right — lies in the affine
+    /// enclosure, on random ReLU networks.
+    #[test]
+    fn the_affine_enclosure_holds_random_summation_orders() {
+        let mut rng = Rng::new(17);
+        for case in 0..60 {
+            let widths = [
+                3,
+                2 + rng.below(12),
+                2 + rng.below(12),
+                2 + rng.below(12),
+                2,
+            ];
+            let net = relu_net(&widths, &mut rng);
+            let x: Vec<f64> = (0..3).map(|_| f64::from(rng.normal() as f32)).collect();
+            let e = stored_enclosure(&net, &x).expect("no overflow at these sizes");
+            for k in 0..60 {
+                let order = [Order::Ascending, Order::Tree, Order::Fma][k % 3];
+                let y = eval_f32(&net, &x, order, &mut rng);
+                assert!(e.contains_point(&y), "case {case}: {y:?} outside {e:?}");
+            }
+        }
+    }
+
+    /// A network whose float32 evaluation left to right reaches nearly
+    /// the worst case of the error bound in both affine layers: `1` plus
+    /// `k` halves of its unit in the last place, each rounded away. The
+    /// enclosure must hold it (a layer's error halved, or its symbol
+    /// dropped, would not).
+    #[test]
+    fn the_affine_enclosure_holds_the_worst_case_order() {
+        let k = 40;
+        let tiny = 2f64.powi(-24);
+        let mut x = vec![tiny; k + 1];
+        x[0] = 1.0;
+        // layer 1: h₀ = Σ xⱼ, hⱼ = xⱼ; layer 2: Σ hⱼ
+        let w1 = DMatrix::from_fn(
+            k + 1,
+            k + 1,
+            |i, j| {
+                if i == 0 || i == j {
+                    1.0
+                } else {
+                    0.0
+                }
+            },
+        );
+        let layers = vec![
+            Layer::Affine {
+                w: w1,
+                b: DVector::zeros(k + 1),
+            },
+            Layer::Act(Activation::Relu),
+            Layer::Affine {
+                w: DMatrix::from_element(1, k + 1, 1.0),
+                b: DVector::zeros(1),
+            },
+        ];
+        let net = Network::new(k + 1, layers);
+        let e = stored_enclosure(&net, &x).expect("finite");
+        let y = eval_f32(&net, &x, Order::Ascending, &mut Rng::new(1));
+        assert_eq!(y, vec![1.0]);
+        assert!(e.contains_point(&y), "{y:?} outside {e:?}");
+        // the exact value is 1 + 2k·tiny, the bound of each layer's error
+        // about (k + 2)·tiny: the enclosure reaches barely below 1
+        assert!(e.lo[0] > 1.0 - 8.0 * tiny, "{e:?}");
+    }
+
+    /// On a 5 → 6×50 → 5 ReLU network the affine enclosure is at least ten
+    /// times narrower than the interval one.
+    #[test]
+    fn the_affine_enclosure_is_tighter_than_intervals() {
+        let mut rng = Rng::new(5);
+        let mut widths = vec![5];
+        widths.extend([50; 6]);
+        widths.push(5);
+        for _ in 0..5 {
+            let net = relu_net(&widths, &mut rng);
+            let x: Vec<f64> = (0..5).map(|_| f64::from(rng.normal() as f32)).collect();
+            let e = stored_enclosure(&net, &x).expect("finite");
+            let old = interval_enclosure(&net, &x);
+            let width = |b: &IBox| (0..5).map(|i| b.hi[i] - b.lo[i]).fold(0.0, f64::max);
+            let (new_w, old_w) = (width(&e), width(&old));
+            assert!(10.0 * new_w <= old_w, "{new_w} vs {old_w}");
         }
     }
 }

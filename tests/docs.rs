@@ -645,6 +645,7 @@ fn documented_limits() -> Vec<(&'static str, Vec<String>)> {
                 int(l::MAX_WIDTH),
                 int(l::MAX_NODES as u64),
                 int(l::MAX_PARAMETERS),
+                int(l::MAX_LAYER_ENTRIES),
             ],
         ),
         ("E0306", vec![format!("±{mag}")]),

@@ -277,9 +277,11 @@ fn subproblems_optimised_together_get_the_bounds_they_get_apart() {
         .map(|d| (d, cs.obj.clone(), start.clone()))
         .collect();
     let together = optimise_many(&chain, &cs.input, jobs, 30);
+    // the ascent multiplies in f32, whose products may round differently
+    // with the number of columns: the same ascent up to that rounding
     for (a, t) in apart.iter().zip(&together) {
         for (x, y) in a.iter().zip(&t.bounds) {
-            assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+            assert!((x - y).abs() <= 1e-6 * x.abs().max(1.0), "{x} vs {y}");
         }
     }
 }

@@ -53,6 +53,7 @@ pub mod bounds;
 mod cover;
 pub mod network;
 pub mod nonlinear;
+pub mod splits;
 pub mod tape;
 
 /// Exact sums of `f64` values for the property tests of directed rounding

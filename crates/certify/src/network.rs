@@ -825,7 +825,7 @@ impl Problem {
             }
         }
         let ev = Evidence::read(get(ev, "splits")?, &chain, rows.len())?;
-        report.cells = ev.nodes();
+        report.subproblems = ev.nodes();
         Ok(super::splits::check(
             &chain, &ev, input, &rows, &needs, slopes, proved,
         ))

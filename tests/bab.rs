@@ -562,7 +562,9 @@ fn drop_subtree(nodes: &[serde_json::Value], at: usize) -> Vec<serde_json::Value
 /// shrunk by twice the writer's margin, the root's subtree dropped,
 /// multipliers perturbed or overflowing, never give VALID; swapped
 /// children (a leaf's phase flipped) give VALID only where the proofs hold
-/// on both sides, and some do not; malformed trees are UNREADABLE.
+/// on both sides, and some do not; malformed trees are UNREADABLE; a
+/// search record dropped past its memory limit, or without its proofs,
+/// makes the writer's evidence UNSUPPORTED.
 #[test]
 fn activation_split_certificates_catch_tampering() {
     use ravel_certify::{check, Answer};
@@ -581,6 +583,18 @@ fn activation_split_certificates_catch_tampering() {
         }
         assert_eq!(check(&cert, &c.net).answer, Answer::Valid, "case {case}");
         tried += 1;
+        // a record dropped past its memory limit, or one whose proofs are
+        // lost: the writer says UNSUPPORTED, never VALID
+        let mut dropped = out.clone();
+        let mut bare = (**out.split_record.as_ref().unwrap()).clone();
+        bare.nodes.iter_mut().for_each(|n| n.proofs.clear());
+        let mut gone = bare.clone();
+        gone.dropped = Some("outgrew".into());
+        for r in [bare, gone] {
+            dropped.split_record = Some(std::sync::Arc::new(r));
+            let a = check(&net_certificate(&c.p, &dropped), &c.net).answer;
+            assert!(matches!(a, Answer::Unsupported(_)), "case {case}: {a:?}");
+        }
         let answer = |v: &Value| check(v, &c.net).answer;
         let invalid = |v: &Value, what: &str| {
             let a = answer(v);

@@ -1748,6 +1748,26 @@ mod tests {
     use nalgebra::DVector;
     use ravel_base::num::dot_box_lower;
 
+    /// Past its byte limit the split record drops everything it holds and
+    /// takes nothing more: a certificate's evidence is then unsupported,
+    /// and the memory it held is freed.
+    #[test]
+    fn the_split_record_is_dropped_past_its_limit() {
+        let mut r = SplitRecord {
+            nodes: vec![SplitNode::default(); 3],
+            ..SplitRecord::default()
+        };
+        let quarter = SplitRecord::MAX_BYTES / 16;
+        for _ in 0..4 {
+            assert!(r.charge(quarter));
+        }
+        assert!(r.dropped.is_none() && r.nodes.len() == 3);
+        assert!(!r.charge(1));
+        assert!(r.dropped.is_some() && r.nodes.is_empty() && r.neurons.is_empty());
+        assert!(!r.charge(0));
+        assert!(!r.charge(usize::MAX));
+    }
+
     #[test]
     fn candidates_become_float32_values_inside_the_set() {
         let t = InputType::F32;

@@ -564,7 +564,8 @@ fn drop_subtree(nodes: &[serde_json::Value], at: usize) -> Vec<serde_json::Value
 /// children (a leaf's phase flipped) give VALID only where the proofs hold
 /// on both sides, and some do not; malformed trees are UNREADABLE; a
 /// search record dropped past its memory limit, or without its proofs,
-/// makes the writer's evidence UNSUPPORTED.
+/// makes the writer's evidence UNSUPPORTED; random junk in the tree of a
+/// false threshold is never VALID and never panics.
 #[test]
 fn activation_split_certificates_catch_tampering() {
     use ravel_certify::{check, Answer};
@@ -713,10 +714,59 @@ fn activation_split_certificates_catch_tampering() {
         let mut t = nodes.clone();
         t.push(json!({}));
         unreadable(&with_nodes(t), "an orphan node");
+        // random junk in the false threshold's evidence: never VALID, no panic
+        let mut leaves = Vec::new();
+        pointers(
+            &lie["evidence"]["splits"],
+            "/evidence/splits".into(),
+            &mut leaves,
+        );
+        let junk = [
+            json!(null),
+            json!("x"),
+            json!(-1),
+            json!(1e308),
+            json!(-1e308),
+            json!(0),
+            json!(u64::MAX),
+            json!([]),
+            json!({}),
+            json!([[1e308]]),
+        ];
+        for _ in 0..100 {
+            let mut t = lie.clone();
+            for _ in 0..1 + rng.below(3) {
+                let at = &leaves[rng.below(leaves.len())];
+                // (a pointer under a value replaced before: gone)
+                if let Some(x) = t.pointer_mut(at) {
+                    *x = junk[rng.below(junk.len())].clone();
+                }
+            }
+            let a = answer(&t);
+            assert!(!matches!(a, Answer::Valid), "case {case}: junk gave VALID");
+        }
     }
     assert!(tried >= 3, "{tried} certificates with split trees");
     assert!(
         swaps_caught > 0 && drops_caught > 0,
         "{swaps_caught} swaps, {drops_caught} drops caught"
     );
+}
+
+/// The JSON pointers of every value under `v` (arrays and objects too).
+fn pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
+    out.push(at.clone());
+    match v {
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                pointers(x, format!("{at}/{i}"), out);
+            }
+        }
+        serde_json::Value::Object(o) => {
+            for (k, x) in o {
+                pointers(x, format!("{at}/{k}"), out);
+            }
+        }
+        _ => {}
+    }
 }

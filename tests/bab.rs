@@ -571,8 +571,11 @@ fn activation_split_certificates_catch_tampering() {
     use ravel_certify::{check, Answer};
     use serde_json::{json, Value};
     let mut rng = Rng::new(41);
-    let (mut tried, mut swaps_caught, mut drops_caught) = (0, 0, 0);
-    for case in 0..24 {
+    // the tampering's own random numbers (the cases stay those of the
+    // test above, and more)
+    let mut noise = Rng::new(7);
+    let (mut tried, mut swaps_caught, mut drops_caught, mut deep) = (0, 0, 0, 0);
+    for case in 0..40 {
         let c = activation_case(&mut rng, case);
         if !c.holds {
             continue;
@@ -584,6 +587,9 @@ fn activation_split_certificates_catch_tampering() {
         }
         assert_eq!(check(&cert, &c.net).answer, Answer::Valid, "case {case}");
         tried += 1;
+        // (claims proved by multipliers past the first hidden layer)
+        let splits = &cert["evidence"]["splits"];
+        deep += usize::from(splits["neurons"].as_array().is_some_and(|n| !n.is_empty()));
         // a record dropped past its memory limit, or one whose proofs are
         // lost: the writer says UNSUPPORTED, never VALID
         let mut dropped = out.clone();
@@ -689,7 +695,7 @@ fn activation_split_certificates_catch_tampering() {
                             *v = json!(if big {
                                 1e308
                             } else {
-                                x * (1.0 + 0.5 * rng.normal())
+                                x * (1.0 + 0.5 * noise.normal())
                             });
                         }
                     }
@@ -735,18 +741,21 @@ fn activation_split_certificates_catch_tampering() {
         ];
         for _ in 0..100 {
             let mut t = lie.clone();
-            for _ in 0..1 + rng.below(3) {
-                let at = &leaves[rng.below(leaves.len())];
+            for _ in 0..1 + noise.below(3) {
+                let at = &leaves[noise.below(leaves.len())];
                 // (a pointer under a value replaced before: gone)
                 if let Some(x) = t.pointer_mut(at) {
-                    *x = junk[rng.below(junk.len())].clone();
+                    *x = junk[noise.below(junk.len())].clone();
                 }
             }
             let a = answer(&t);
             assert!(!matches!(a, Answer::Valid), "case {case}: junk gave VALID");
         }
     }
-    assert!(tried >= 3, "{tried} certificates with split trees");
+    assert!(
+        tried >= 6 && deep >= 2,
+        "{tried} certificates with split trees, {deep} with neurons' multipliers"
+    );
     assert!(
         swaps_caught > 0 && drops_caught > 0,
         "{swaps_caught} swaps, {drops_caught} drops caught"

@@ -972,7 +972,9 @@ fn split_evidence(
         })
         .collect();
     let claims = certify::splits::derive_claims(&plan.net, &input, &neurons)?;
-    let mut nodes: Vec<Value> = record
+    // (built once and moved into the candidate: a large tree's JSON is
+    // the writer's largest memory)
+    let nodes: Vec<Value> = record
         .nodes
         .iter()
         .map(|n| {
@@ -996,6 +998,7 @@ fn split_evidence(
             v
         })
         .collect();
+    let count = nodes.len();
     let splits = json!({
         "layers": claims.iter().map(|c| json!({ "lo": c.lo, "hi": c.hi })).collect::<Vec<_>>(),
         "neurons": neurons
@@ -1007,35 +1010,37 @@ fn split_evidence(
                 "nu": n.nu,
             }))
             .collect::<Vec<_>>(),
-        "nodes": [],
+        "nodes": Value::Array(nodes),
     });
-    let evidence = |nodes: &[Value]| {
-        let mut s = splits.clone();
-        s["nodes"] = json!(nodes);
-        json!({ "status": "checkable", "slope_steps": plan.slope_steps, "splits": s })
-    };
     let mut candidate = cert.clone();
-    candidate["evidence"] = evidence(&nodes);
+    candidate["evidence"] =
+        json!({ "status": "checkable", "slope_steps": plan.slope_steps, "splits": splits });
+    // the checker's whole check, saying which proofs proved their rows
     let (report, proved) = certify::network::check_split_proofs(&candidate, &plan.net);
     if let Answer::Unreadable(e) = &report.answer {
         return Err(format!("internal: {e}"));
     }
-    if proved.len() == nodes.len() {
-        for (node, flags) in nodes.iter_mut().zip(&proved) {
-            if let Some(list) = node.get_mut("proofs").and_then(Value::as_array_mut) {
+    let failed = proved.iter().flatten().any(|ok| !ok);
+    let report = if failed && proved.len() == count {
+        // a proof that proves nothing adds nothing: dropped, and the
+        // lighter certificate checked again
+        let list = candidate["evidence"]["splits"]["nodes"].as_array_mut();
+        for (node, flags) in list.into_iter().flatten().zip(&proved) {
+            if let Some(proofs) = node.get_mut("proofs").and_then(Value::as_array_mut) {
                 let mut keep = flags.iter();
-                list.retain(|_| keep.next().copied().unwrap_or(false));
-                if list.is_empty() {
+                proofs.retain(|_| keep.next().copied().unwrap_or(false));
+                if proofs.is_empty() {
                     if let Some(o) = node.as_object_mut() {
                         o.remove("proofs");
                     }
                 }
             }
         }
-        candidate["evidence"] = evidence(&nodes);
-    }
-    let last = certify::check(&candidate, &plan.net);
-    match (last.evidence_failure, last.answer) {
+        certify::check(&candidate, &plan.net)
+    } else {
+        report
+    };
+    match (report.evidence_failure, report.answer) {
         (Some(why), _) => Err(why),
         (None, Answer::Unreadable(e)) => Err(format!("internal: {e}")),
         (None, _) => Ok(candidate["evidence"].take()),

@@ -820,6 +820,8 @@ impl Certifying {
             text += &format!(", {} cell(s) × {} step(s)", report.cells, report.steps);
         } else if report.cells > 0 {
             text += &format!(", {} cell(s)", report.cells);
+        } else if report.subproblems > 0 {
+            text += &format!(", {} split subproblem(s)", report.subproblems);
         }
         text += ")";
         match &report.answer {

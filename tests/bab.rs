@@ -381,60 +381,104 @@ fn widen(net: &Network, n: usize, a: usize, b: usize) -> Network {
     Network::new(n, layers)
 }
 
+/// One case of [`bab_on_activations_agrees_with_exhaustive_enumeration`]: a
+/// random two-input ReLU network widened to 10 inputs (every third behind a
+/// normalisation), a `require` row 2 % of the range above (case even) or
+/// below (odd) its true maximum over the box; with the plan, the network
+/// and the threshold on the other side of the maximum.
+struct Case {
+    p: ravel::lower::NetworkPlan,
+    net: Network,
+    holds: bool,
+    top: f64,
+    h: f64,
+    other: f64,
+    dir: Vec<f64>,
+    input: Region,
+}
+
+fn activation_case(rng: &mut Rng, case: usize) -> Case {
+    let m = 1 + rng.below(2);
+    let small = random_network(rng, 2, m, Activation::Relu, (2, 5));
+    let c0 = [rng.normal(), rng.normal()];
+    let r = [0.3 + rng.unit(), 0.3 + rng.unit()];
+    let (lo, hi) = ([c0[0] - r[0], c0[1] - r[1]], [c0[0] + r[0], c0[1] + r[1]]);
+    let verts = region_vertices(&small, lo, hi);
+    let dir: Vec<f64> = (0..m).map(|_| rng.normal()).collect();
+    let top = exact_max(&small, &verts, &dir);
+    let delta = 0.02 * (1.0 + top.abs());
+    let holds = case % 2 == 0;
+    let (h, other) = if holds {
+        (top + delta, top - delta)
+    } else {
+        (top - delta, top + delta)
+    };
+    let net = widen(&small, 10, 3, 7);
+    let (mut blo, mut bhi) = (vec![-1.0; 10], vec![1.0; 10]);
+    (blo[3], bhi[3], blo[7], bhi[7]) = (lo[0], hi[0], lo[1], hi[1]);
+    // every third case behind a normalisation x ↦ 4x − 1 (consecutive
+    // affine layers: searched on activations through ReLU pairs), on
+    // the box that it maps onto the same one (up to rounding, far
+    // inside the cases' 2 % margins)
+    let normalised = case % 3 == 0;
+    let net = if normalised {
+        let mut layers = vec![Layer::Affine {
+            w: nalgebra::DMatrix::from_diagonal_element(10, 10, 4.0),
+            b: nalgebra::DVector::from_element(10, -1.0),
+        }];
+        layers.extend(net.layers.iter().cloned());
+        blo.iter_mut().for_each(|v| *v = (*v + 1.0) / 4.0);
+        bhi.iter_mut().for_each(|v| *v = (*v + 1.0) / 4.0);
+        Network::new(10, layers)
+    } else {
+        net
+    };
+    let input = Region::Box(IBox::new(blo, bhi));
+    let p = bab_plan(
+        net.clone(),
+        input.clone(),
+        vec![NetProperty {
+            name: "p".into(),
+            kind: NetPropertyKind::Require(Polytope {
+                rows: vec![(dir.clone(), h)],
+            }),
+        }],
+    );
+    Case {
+        p,
+        net,
+        holds,
+        top,
+        h,
+        other,
+        dir,
+        input,
+    }
+}
+
 /// With more than 8 inputs branch and bound splits ReLU activations: on
 /// random two-input networks widened to 10 inputs (8 of them ignored),
 /// its answers agree with the exhaustive enumeration of the two-input
-/// network's linear regions, counterexamples are real, a FALSIFIED
-/// certificate is VALID and a VERIFIED one VALID or UNSUPPORTED (the
-/// checker does not re-bound split subproblems), never INVALID.
+/// network's linear regions, counterexamples are real, and every
+/// certificate is VALID (a VERIFIED one's evidence the split tree with its
+/// multipliers, or input cells where the checker's bounds over the box
+/// prove it).
 #[test]
 fn bab_on_activations_agrees_with_exhaustive_enumeration() {
     use ravel_certify::{check, Answer};
     let mut rng = Rng::new(41);
-    let (mut verified, mut falsified) = (0, 0);
+    let (mut verified, mut falsified, mut trees) = (0, 0, 0);
     for case in 0..24 {
-        let m = 1 + rng.below(2);
-        let small = random_network(&mut rng, 2, m, Activation::Relu, (2, 5));
-        let c0 = [rng.normal(), rng.normal()];
-        let r = [0.3 + rng.unit(), 0.3 + rng.unit()];
-        let (lo, hi) = ([c0[0] - r[0], c0[1] - r[1]], [c0[0] + r[0], c0[1] + r[1]]);
-        let verts = region_vertices(&small, lo, hi);
-        let dir: Vec<f64> = (0..m).map(|_| rng.normal()).collect();
-        let top = exact_max(&small, &verts, &dir);
-        let delta = 0.02 * (1.0 + top.abs());
-        let holds = case % 2 == 0;
-        let h = if holds { top + delta } else { top - delta };
-        let net = widen(&small, 10, 3, 7);
-        let (mut blo, mut bhi) = (vec![-1.0; 10], vec![1.0; 10]);
-        (blo[3], bhi[3], blo[7], bhi[7]) = (lo[0], hi[0], lo[1], hi[1]);
-        // every third case behind a normalisation x ↦ 4x − 1 (consecutive
-        // affine layers: searched on activations through ReLU pairs), on
-        // the box that it maps onto the same one (up to rounding, far
-        // inside the cases' 2 % margins)
-        let normalised = case % 3 == 0;
-        let net = if normalised {
-            let mut layers = vec![Layer::Affine {
-                w: nalgebra::DMatrix::from_diagonal_element(10, 10, 4.0),
-                b: nalgebra::DVector::from_element(10, -1.0),
-            }];
-            layers.extend(net.layers.iter().cloned());
-            blo.iter_mut().for_each(|v| *v = (*v + 1.0) / 4.0);
-            bhi.iter_mut().for_each(|v| *v = (*v + 1.0) / 4.0);
-            Network::new(10, layers)
-        } else {
-            net
-        };
-        let input = Region::Box(IBox::new(blo, bhi));
-        let p = bab_plan(
-            net.clone(),
-            input.clone(),
-            vec![NetProperty {
-                name: "p".into(),
-                kind: NetPropertyKind::Require(Polytope {
-                    rows: vec![(dir.clone(), h)],
-                }),
-            }],
-        );
+        let Case {
+            p,
+            net,
+            holds,
+            top,
+            h,
+            dir,
+            input,
+            ..
+        } = activation_case(&mut rng, case);
         let out = run(&p);
         let got = out.properties[0].status;
         let want = if holds {
@@ -456,15 +500,14 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
                 .sum();
             assert!(v > h, "case {case}");
         }
-        let answer = check(&net_certificate(&p, &out), &net).answer;
+        let cert = net_certificate(&p, &out);
+        let answer = check(&cert, &net).answer;
         match got {
             Verdict::Verified => {
                 verified += 1;
                 assert!(out.split_activations, "case {case}: inputs were split");
-                assert!(
-                    matches!(answer, Answer::Valid | Answer::Unsupported(_)),
-                    "case {case}: {answer:?}"
-                );
+                assert_eq!(answer, Answer::Valid, "case {case}: {}", cert["evidence"]);
+                trees += usize::from(cert["evidence"].get("splits").is_some());
             }
             _ => {
                 falsified += 1;
@@ -473,7 +516,266 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
         }
     }
     assert!(
-        verified >= 10 && falsified >= 10,
-        "{verified} verified, {falsified} falsified"
+        verified >= 10 && falsified >= 10 && trees >= 3,
+        "{verified} verified ({trees} by split trees), {falsified} falsified"
     );
+}
+
+/// The split tree `nodes` without the strict descendants of node `at`,
+/// which becomes a leaf (children renumbered).
+fn drop_subtree(nodes: &[serde_json::Value], at: usize) -> Vec<serde_json::Value> {
+    let mut gone = vec![false; nodes.len()];
+    let mut todo = vec![at];
+    while let Some(i) = todo.pop() {
+        if let Some(s) = nodes[i].get("split") {
+            for c in [s[2].as_u64().unwrap(), s[3].as_u64().unwrap()] {
+                gone[c as usize] = true;
+                todo.push(c as usize);
+            }
+        }
+    }
+    let mut index = vec![0; nodes.len()];
+    let mut n = 0;
+    for (i, g) in gone.iter().enumerate() {
+        index[i] = n;
+        n += usize::from(!g);
+    }
+    let mut out = Vec::new();
+    for (i, node) in nodes.iter().enumerate() {
+        if gone[i] {
+            continue;
+        }
+        let mut node = node.clone();
+        if i == at {
+            node.as_object_mut().unwrap().remove("split");
+        } else if let Some(s) = node.get("split").cloned() {
+            let c = |k: usize| index[s[k].as_u64().unwrap() as usize];
+            node["split"] = serde_json::json!([s[0], s[1], c(2), c(3)]);
+        }
+        out.push(node);
+    }
+    out
+}
+
+/// Tampering with activation-split evidence is caught: the true
+/// threshold's evidence for a false one, every claimed pre-activation bound
+/// shrunk by twice the writer's margin, the root's subtree dropped,
+/// multipliers perturbed or overflowing, never give VALID; swapped
+/// children (a leaf's phase flipped) give VALID only where the proofs hold
+/// on both sides, and some do not; malformed trees are UNREADABLE; a
+/// search record dropped past its memory limit, or without its proofs,
+/// makes the writer's evidence UNSUPPORTED; random junk in the tree of a
+/// false threshold is never VALID and never panics.
+#[test]
+fn activation_split_certificates_catch_tampering() {
+    use ravel_certify::{check, Answer};
+    use serde_json::{json, Value};
+    let mut rng = Rng::new(41);
+    // the tampering's own random numbers (the cases stay those of the
+    // test above, and more)
+    let mut noise = Rng::new(7);
+    let (mut tried, mut swaps_caught, mut drops_caught, mut deep) = (0, 0, 0, 0);
+    for case in 0..40 {
+        let c = activation_case(&mut rng, case);
+        if !c.holds {
+            continue;
+        }
+        let out = run(&c.p);
+        let cert = net_certificate(&c.p, &out);
+        if cert["evidence"].get("splits").is_none() {
+            continue;
+        }
+        assert_eq!(check(&cert, &c.net).answer, Answer::Valid, "case {case}");
+        tried += 1;
+        // (claims proved by multipliers past the first hidden layer)
+        let splits = &cert["evidence"]["splits"];
+        deep += usize::from(splits["neurons"].as_array().is_some_and(|n| !n.is_empty()));
+        // a record dropped past its memory limit, or one whose proofs are
+        // lost: the writer says UNSUPPORTED, never VALID
+        let mut dropped = out.clone();
+        let mut bare = (**out.split_record.as_ref().unwrap()).clone();
+        bare.nodes.iter_mut().for_each(|n| n.proofs.clear());
+        let mut gone = bare.clone();
+        gone.dropped = Some("outgrew".into());
+        for r in [bare, gone] {
+            dropped.split_record = Some(std::sync::Arc::new(r));
+            let a = check(&net_certificate(&c.p, &dropped), &c.net).answer;
+            assert!(matches!(a, Answer::Unsupported(_)), "case {case}: {a:?}");
+        }
+        let answer = |v: &Value| check(v, &c.net).answer;
+        let invalid = |v: &Value, what: &str| {
+            let a = answer(v);
+            assert!(
+                matches!(a, Answer::Invalid(_)),
+                "case {case}: {what}: {a:?}"
+            );
+        };
+        let unreadable = |v: &Value, what: &str| {
+            let a = answer(v);
+            assert!(
+                matches!(a, Answer::Unreadable(_)),
+                "case {case}: {what}: {a:?}"
+            );
+        };
+        // the evidence of the true threshold does not prove a false one
+        let mut lie = cert.clone();
+        lie["problem"]["properties"][0]["rows"][0]["b"] = json!(c.other);
+        invalid(&lie, "a false threshold");
+        // every claimed pre-activation bound shrunk by twice the margin
+        let hair = |v: f64| 2.0 * (1.0 + v.abs()) / 68_719_476_736.0;
+        let layers = cert["evidence"]["splits"]["layers"]
+            .as_array()
+            .unwrap()
+            .len();
+        for k in 0..layers {
+            let n = cert["evidence"]["splits"]["layers"][k]["lo"]
+                .as_array()
+                .unwrap()
+                .len();
+            for j in 0..n {
+                for (side, sign) in [("lo", 1.0), ("hi", -1.0)] {
+                    let mut t = cert.clone();
+                    let at = &mut t["evidence"]["splits"]["layers"][k][side][j];
+                    let v = at.as_f64().unwrap();
+                    *at = json!(v + sign * hair(v));
+                    invalid(&t, &format!("layer {k} neuron {j} {side} shrunk"));
+                }
+            }
+        }
+        let nodes = cert["evidence"]["splits"]["nodes"]
+            .as_array()
+            .unwrap()
+            .clone();
+        let with_nodes = |nodes: Vec<Value>| {
+            let mut t = cert.clone();
+            t["evidence"]["splits"]["nodes"] = json!(nodes);
+            t
+        };
+        // the whole tree dropped: the root proves nothing on its own (else
+        // the search would not have split it); any other subtree dropped
+        // gives VALID only where its root's path proves the row
+        if nodes[0].get("split").is_some() {
+            invalid(
+                &with_nodes(drop_subtree(&nodes, 0)),
+                "the root's subtree dropped",
+            );
+        }
+        for (i, node) in nodes.iter().enumerate().skip(1) {
+            if node.get("split").is_some() {
+                let a = answer(&with_nodes(drop_subtree(&nodes, i)));
+                assert!(matches!(a, Answer::Invalid(_) | Answer::Valid), "{a:?}");
+                drops_caught += usize::from(matches!(a, Answer::Invalid(_)));
+            }
+        }
+        // children swapped: each leaf's proofs evaluated on the other phase
+        for (i, node) in nodes.iter().enumerate() {
+            if let Some(s) = node.get("split") {
+                let mut t = nodes.clone();
+                t[i]["split"] = json!([s[0], s[1], s[3], s[2]]);
+                let a = answer(&with_nodes(t));
+                assert!(matches!(a, Answer::Invalid(_) | Answer::Valid), "{a:?}");
+                swaps_caught += usize::from(matches!(a, Answer::Invalid(_)));
+            }
+        }
+        // multipliers perturbed: never VALID for the false threshold;
+        // overflowing ones (1e308) prove nothing
+        let mut noisy = lie.clone();
+        let mut huge = cert.clone();
+        for (t, big) in [(&mut noisy, false), (&mut huge, true)] {
+            for node in t["evidence"]["splits"]["nodes"].as_array_mut().unwrap() {
+                for p in node
+                    .get_mut("proofs")
+                    .and_then(Value::as_array_mut)
+                    .into_iter()
+                    .flatten()
+                {
+                    for layer in p["nu"].as_array_mut().unwrap() {
+                        for v in layer.as_array_mut().unwrap() {
+                            let x = v.as_f64().unwrap();
+                            *v = json!(if big {
+                                1e308
+                            } else {
+                                x * (1.0 + 0.5 * noise.normal())
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        invalid(&noisy, "perturbed multipliers for a false threshold");
+        invalid(&huge, "multipliers of 1e308");
+        // malformed trees
+        let mut t = nodes.clone();
+        if let Some(i) = nodes.iter().position(|n| n.get("split").is_some()) {
+            let s = nodes[i]["split"].clone();
+            t[i]["split"] = json!([s[0], s[1], i, s[3]]);
+            unreadable(&with_nodes(t.clone()), "a child before its parent");
+            t[i]["split"] = json!([s[0], s[1], nodes.len(), s[3]]);
+            unreadable(&with_nodes(t.clone()), "a child out of range");
+            t[i]["split"] = json!([s[0], s[1], s[2], s[2]]);
+            unreadable(&with_nodes(t.clone()), "one child twice");
+            t[i]["split"] = json!([99, s[1], s[2], s[3]]);
+            unreadable(&with_nodes(t.clone()), "no such layer");
+        }
+        let mut t = nodes.clone();
+        t.push(json!({}));
+        unreadable(&with_nodes(t), "an orphan node");
+        // random junk in the false threshold's evidence: never VALID, no panic
+        let mut leaves = Vec::new();
+        pointers(
+            &lie["evidence"]["splits"],
+            "/evidence/splits".into(),
+            &mut leaves,
+        );
+        let junk = [
+            json!(null),
+            json!("x"),
+            json!(-1),
+            json!(1e308),
+            json!(-1e308),
+            json!(0),
+            json!(u64::MAX),
+            json!([]),
+            json!({}),
+            json!([[1e308]]),
+        ];
+        for _ in 0..100 {
+            let mut t = lie.clone();
+            for _ in 0..1 + noise.below(3) {
+                let at = &leaves[noise.below(leaves.len())];
+                // (a pointer under a value replaced before: gone)
+                if let Some(x) = t.pointer_mut(at) {
+                    *x = junk[noise.below(junk.len())].clone();
+                }
+            }
+            let a = answer(&t);
+            assert!(!matches!(a, Answer::Valid), "case {case}: junk gave VALID");
+        }
+    }
+    assert!(
+        tried >= 6 && deep >= 2,
+        "{tried} certificates with split trees, {deep} with neurons' multipliers"
+    );
+    assert!(
+        swaps_caught > 0 && drops_caught > 0,
+        "{swaps_caught} swaps, {drops_caught} drops caught"
+    );
+}
+
+/// The JSON pointers of every value under `v` (arrays and objects too).
+fn pointers(v: &serde_json::Value, at: String, out: &mut Vec<String>) {
+    out.push(at.clone());
+    match v {
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                pointers(x, format!("{at}/{i}"), out);
+            }
+        }
+        serde_json::Value::Object(o) => {
+            for (k, x) in o {
+                pointers(x, format!("{at}/{k}"), out);
+            }
+        }
+        _ => {}
+    }
 }

@@ -269,6 +269,21 @@ impl Domain {
         threads: usize,
         stop: &(dyn Fn() -> bool + Sync),
     ) -> bool {
+        self.tighten_recorded(chain, input, steps, threads, stop, None)
+    }
+
+    /// [`Domain::tighten`], pushing onto `record` (when given) the
+    /// multipliers of every bound it keeps: a certificate's evidence that
+    /// the bound holds (see [`NeuronDual`]).
+    pub fn tighten_recorded(
+        &mut self,
+        chain: &ReluChain,
+        input: &IBox,
+        steps: usize,
+        threads: usize,
+        stop: &(dyn Fn() -> bool + Sync),
+        mut record: Option<&mut Vec<NeuronDual>>,
+    ) -> bool {
         for k in 1..self.lo.len() {
             let open: Vec<usize> = (0..self.lo[k].len())
                 .filter(|&j| self.unstable(k, j))
@@ -318,11 +333,34 @@ impl Domain {
                 let m = g.len();
                 for (c, &j) in g.iter().enumerate() {
                     let (lo, hi) = (o.bounds[c], -o.bounds[m + c]);
+                    let nu = |col: usize| -> Vec<Vec<f64>> {
+                        o.dual
+                            .nu
+                            .iter()
+                            .map(|n| n.column(col).iter().copied().collect())
+                            .collect()
+                    };
                     if lo.is_finite() && lo > self.lo[k][j] {
                         self.lo[k][j] = lo;
+                        if let Some(r) = record.as_deref_mut() {
+                            r.push(NeuronDual {
+                                layer: k,
+                                neuron: j,
+                                upper: false,
+                                nu: nu(c),
+                            });
+                        }
                     }
                     if hi.is_finite() && hi < self.hi[k][j] {
                         self.hi[k][j] = hi;
+                        if let Some(r) = record.as_deref_mut() {
+                            r.push(NeuronDual {
+                                layer: k,
+                                neuron: j,
+                                upper: true,
+                                nu: nu(m + c),
+                            });
+                        }
                     }
                 }
             }
@@ -342,6 +380,22 @@ impl Domain {
         }
         d
     }
+}
+
+/// The multipliers that proved one tightened bound of [`Domain::tighten`]:
+/// `L(ν)` on the network up to hidden layer `layer`, over the domain of
+/// the layers before it, with the objective `z_j` (a lower bound) or `−z_j`
+/// (minus an upper bound).
+#[derive(Clone, Debug)]
+pub struct NeuronDual {
+    /// The hidden layer.
+    pub layer: usize,
+    /// The neuron.
+    pub neuron: usize,
+    /// Whether it bounds `z_j` from above.
+    pub upper: bool,
+    /// `ν_i` of every hidden layer `i < layer`.
+    pub nu: Vec<Vec<f64>>,
 }
 
 /// Neurons per ascent in [`Domain::tighten`] (each gives two objective

@@ -119,6 +119,11 @@ impl std::fmt::Display for Trouble {
 /// [`NetBounds::with_hook`]).
 type Hook<'h> = &'h dyn Fn(&Linear) -> Vec<f64>;
 
+/// Other proven upper bounds of activation layer `k`'s rows `[I; −I]`
+/// (`+∞` where none), from the boxes of the layers before it: the split
+/// checker's Lagrangian bounds ([`super::splits`]).
+pub type Extra<'h> = &'h dyn Fn(usize, &[Bx]) -> Vec<f64>;
+
 /// Rows `sᵣ ≤ coefᵣ·z + offᵣ`, valid for every feasible `z`.
 #[derive(Clone, Debug)]
 struct Linear {
@@ -557,7 +562,20 @@ impl<'a> NetBounds<'a> {
     /// previous claims (IBP intersected with back-substitution), and the
     /// claimed box is used from then on; without, the proven box is used.
     pub fn new(net: &'a Network, y: &Bx, claimed: Option<&[Bx]>) -> Result<NetBounds<'a>, Trouble> {
-        NetBounds::with_hook(net, y, claimed, None, false)
+        NetBounds::with_hook(net, y, claimed, None, None, false)
+    }
+
+    /// [`NetBounds::new`] where every activation layer's bounds are also
+    /// intersected with `extra`'s (when `widened`, and no claims are
+    /// given, each proven box is widened as the writer claims it).
+    pub fn with_extra(
+        net: &'a Network,
+        y: &Bx,
+        claimed: Option<&[Bx]>,
+        extra: Extra,
+        widened: bool,
+    ) -> Result<NetBounds<'a>, Trouble> {
+        NetBounds::with_hook(net, y, claimed, None, Some(extra), widened)
     }
 
     /// [`NetBounds::new`], where every pre-activation bound (a linear bound
@@ -569,6 +587,7 @@ impl<'a> NetBounds<'a> {
         y: &Bx,
         claimed: Option<&[Bx]>,
         hook: Option<Hook>,
+        extra: Option<Extra>,
         widened: bool,
     ) -> Result<NetBounds<'a>, Trouble> {
         let mut s = NetBounds {
@@ -613,6 +632,14 @@ impl<'a> NetBounds<'a> {
                         let mut up = back.over(y);
                         if let Some(h) = hook {
                             for (u, o) in up.iter_mut().zip(h(&back)) {
+                                if !o.is_nan() {
+                                    *u = u.min(o);
+                                }
+                            }
+                        }
+                        if let Some(e) = extra {
+                            let more = e(s.witness.len(), &s.witness);
+                            for (u, o) in up.iter_mut().zip(more) {
                                 if !o.is_nan() {
                                     *u = u.min(o);
                                 }
@@ -1521,7 +1548,7 @@ impl<'a> Chain<'a> {
         } else {
             None
         };
-        NetBounds::with_hook(lp.net, &y, claimed, hook, widened)
+        NetBounds::with_hook(lp.net, &y, claimed, hook, None, widened)
     }
 
     /// Pre-activation bounds for the next step from `x` as the certificate

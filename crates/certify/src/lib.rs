@@ -53,6 +53,7 @@ pub mod bounds;
 mod cover;
 pub mod network;
 pub mod nonlinear;
+pub mod splits;
 pub mod tape;
 
 /// Exact sums of `f64` values for the property tests of directed rounding
@@ -95,6 +96,9 @@ pub struct Report {
     pub cells: usize,
     /// Steps per cell.
     pub steps: usize,
+    /// Nodes of an activation-split tree that were checked (network
+    /// certificates whose evidence is a split tree; `cells` is then 0).
+    pub subproblems: usize,
     /// The first false claim of the VERIFIED evidence, if one was found
     /// (the certificate writer uses it to tell a checkable certificate from
     /// one the checker's bounds cannot establish).
@@ -139,6 +143,7 @@ impl Report {
             properties: Vec::new(),
             cells: 0,
             steps: 0,
+            subproblems: 0,
             evidence_failure: None,
             duals: Vec::new(),
         }

@@ -584,7 +584,7 @@ pub fn check_cells(
 ) -> Report {
     let mut report = Report::empty();
     let work = coverage.then_some(MAX_WORK);
-    match inner(cert, net, &mut report, work, solve) {
+    match inner(cert, net, &mut report, work, solve, None) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
@@ -597,11 +597,24 @@ pub type CellSolver<'a> = &'a dyn Fn(&[f64], &Bx) -> Option<Vec<f64>>;
 
 fn check_within(cert: &Value, net: &Network, cover_work: usize) -> Report {
     let mut report = Report::empty();
-    match inner(cert, net, &mut report, Some(cover_work), None) {
+    match inner(cert, net, &mut report, Some(cover_work), None, None) {
         Ok(a) => report.answer = a,
         Err(e) => report.answer = Answer::Unreadable(e),
     }
     report
+}
+
+/// For the certificate writer: check `cert` (activation-split evidence)
+/// as [`check`] does, and say per node of the split tree and per proof
+/// whether the proof proved its row.
+pub fn check_split_proofs(cert: &Value, net: &Network) -> (Report, Vec<Vec<bool>>) {
+    let mut report = Report::empty();
+    let mut proved = Vec::new();
+    match inner(cert, net, &mut report, None, None, Some(&mut proved)) {
+        Ok(a) => report.answer = a,
+        Err(e) => report.answer = Answer::Unreadable(e),
+    }
+    (report, proved)
 }
 
 /// A network certificate's problem as read: the input and output sizes,
@@ -625,6 +638,7 @@ fn inner(
     report: &mut Report,
     cover_work: Option<usize>,
     solve: Option<CellSolver>,
+    proved: Option<&mut Vec<Vec<bool>>>,
 ) -> R<Answer> {
     let problem = get(cert, "problem")?;
     let (n, m) = sizes(problem, net)?;
@@ -657,7 +671,11 @@ fn inner(
         let ev = get(cert, "evidence")?;
         match get(ev, "status")?.as_str() {
             Some("checkable") => {
-                let failure = problem.evidence(net, ev, &verified, report, (cover_work, solve))?;
+                let failure = if ev.get("splits").is_some() {
+                    problem.split_evidence(net, ev, &verified, report, proved)?
+                } else {
+                    problem.evidence(net, ev, &verified, report, (cover_work, solve))?
+                };
                 for ((name, _), _) in &verified {
                     let shown = ravel_base::text::sanitize(name);
                     report.properties.push(match failure {
@@ -731,6 +749,88 @@ fn read_props(problem: &Value, m: usize) -> R<Vec<(String, Prop)>> {
 }
 
 impl Problem {
+    /// Check activation-split evidence ([`super::splits`]) for the
+    /// `verified` properties; `proved` receives, per node and proof,
+    /// whether it proved its row (for the writer).
+    fn split_evidence(
+        &self,
+        net: &Network,
+        ev: &Value,
+        verified: &Verified,
+        report: &mut Report,
+        proved: Option<&mut Vec<Vec<bool>>>,
+    ) -> R<Option<String>> {
+        use super::splits::{Chain, Evidence, Need, Row, Test};
+        let slopes = super::slope_steps(ev)?;
+        let Input::Box(input) = &self.input else {
+            return Err("activation splits are checked over a box input set only".into());
+        };
+        let chain = Chain::of(net)?;
+        // every property's rows, in order (the VERIFIED ones' directions
+        // and tests; the others only hold their places)
+        let mut rows: Vec<Option<Row>> = Vec::new();
+        let mut needs: Vec<Need> = Vec::new();
+        for named in &self.props {
+            let (name, p) = named;
+            let label = verified
+                .iter()
+                .find(|(q, _)| std::ptr::eq(*q, named))
+                .map(|(_, l)| *l);
+            let mut need = Need {
+                name: name.clone(),
+                ..Need::default()
+            };
+            let push = |row: Option<Row>, rows: &mut Vec<Option<Row>>| -> usize {
+                rows.push(row);
+                rows.len() - 1
+            };
+            match p {
+                Prop::Require(list) => {
+                    for (a, b) in list {
+                        let row = label.map(|_| Row {
+                            d: a.clone(),
+                            test: Test::AtMost(*b),
+                        });
+                        need.all.push(push(row, &mut rows));
+                    }
+                }
+                Prop::Avoid(members) => {
+                    for list in members {
+                        let mut group = Vec::new();
+                        for (a, b) in list {
+                            // separated: a·y > b, i.e. (−a)·y < −b
+                            let row = label.map(|_| Row {
+                                d: a.iter().map(|v| -v).collect(),
+                                test: Test::Below(-b),
+                            });
+                            group.push(push(row, &mut rows));
+                        }
+                        need.any.push(group);
+                    }
+                }
+                Prop::Robust(_) => {
+                    let k = label.unwrap_or(0);
+                    let r = robust_rows(k, self.m);
+                    for i in 0..r.nrows() {
+                        let row = label.map(|_| Row {
+                            d: r.row(i).iter().copied().collect(),
+                            test: Test::Below(0.0),
+                        });
+                        need.all.push(push(row, &mut rows));
+                    }
+                }
+            }
+            if label.is_some() {
+                needs.push(need);
+            }
+        }
+        let ev = Evidence::read(get(ev, "splits")?, &chain, rows.len())?;
+        report.subproblems = ev.nodes();
+        Ok(super::splits::check(
+            &chain, &ev, input, &rows, &needs, slopes, proved,
+        ))
+    }
+
     /// Read the verdicts (one per property, in order) into the report,
     /// replaying every FALSIFIED one: the VERIFIED properties with their
     /// labels, and the first invalid counterexample's message.

@@ -584,6 +584,7 @@ fn certify<'py>(
             use ravel_certify::Answer;
             out.set_item("cells", report.cells)?;
             out.set_item("steps", report.steps)?;
+            out.set_item("subproblems", report.subproblems)?;
             let props: Vec<String> = report
                 .properties
                 .iter()

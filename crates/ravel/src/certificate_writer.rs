@@ -842,13 +842,17 @@ pub fn build_network(
     let mut failure = first.evidence_failure;
     if let (Some(why), true) = (&failure, outcome.split_activations) {
         // bisecting inputs does not reach bounds proved by splitting
-        // activations (and would bisect hundreds of inputs in vain)
-        cert["evidence"] = json!({
-            "status": "unsupported",
-            "reason": format!(
-                "the analysis proved it by branch and bound on ReLU activations, whose subproblems (the input box with neurons' signs fixed) the checker does not re-bound yet: it re-bounds input cells, and its bounds over the whole input box fall short ({why})"
-            ),
-        });
+        // activations (and would bisect hundreds of inputs in vain): the
+        // evidence is the split tree with its multipliers
+        cert["evidence"] = match split_evidence(plan, outcome, &cert) {
+            Ok(ev) => ev,
+            Err(e) => json!({
+                "status": "unsupported",
+                "reason": format!(
+                    "the analysis proved it by branch and bound on ReLU activations; the checker's bounds over the whole input box fall short ({why}), and the split tree is no evidence: {e}"
+                ),
+            }),
+        };
         return cert;
     }
     if failure.is_some() {
@@ -911,6 +915,136 @@ pub fn build_network(
         });
     }
     cert
+}
+
+/// `v` rounded to the nearest `f32` and written in that type's shortest
+/// decimal form (a smaller file; a multiplier is no claim, any value is
+/// sound), as the `f64` that form reads back as.
+fn short(v: f32) -> f64 {
+    if v.is_finite() {
+        format!("{v}").parse::<f64>().unwrap_or(f64::from(v))
+    } else {
+        0.0
+    }
+}
+
+/// The activation-split evidence of a search on activations
+/// (`docs/certificates.md`): the root's pre-activation bounds as the
+/// checker proves them with the search's tightening multipliers (widened
+/// as every claim), and the split tree with each node's proofs, their
+/// multipliers rounded to `f32`. Every proof is evaluated by the checker's
+/// own code; the ones that do not prove their row (rounding, or the
+/// checker's domain a hair looser than the analysis's) are dropped, and
+/// the whole certificate must then check VALID, else the reason is the
+/// error.
+fn split_evidence(
+    plan: &crate::lower::NetworkPlan,
+    outcome: &crate::execute::network::NetworkOutcome,
+    cert: &Value,
+) -> Result<Value, String> {
+    let record = outcome
+        .split_record
+        .as_ref()
+        .ok_or("the search kept no record (no finite pre-activation bounds)")?;
+    if let Some(why) = &record.dropped {
+        return Err(why.clone());
+    }
+    let Some(Region::Box(b)) = &plan.input else {
+        return Err("the input set is not a box".into());
+    };
+    let input = Bx {
+        lo: b.lo.clone(),
+        hi: b.hi.clone(),
+    };
+    let round = |nu: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        nu.iter()
+            .map(|v| v.iter().map(|x| short(*x as f32)).collect())
+            .collect()
+    };
+    let neurons: Vec<certify::splits::NeuronNu> = record
+        .neurons
+        .iter()
+        .map(|n| certify::splits::NeuronNu {
+            layer: n.layer,
+            neuron: n.neuron,
+            upper: n.upper,
+            nu: round(&n.nu),
+        })
+        .collect();
+    let claims = certify::splits::derive_claims(&plan.net, &input, &neurons)?;
+    // (built once and moved into the candidate: a large tree's JSON is
+    // the writer's largest memory)
+    let nodes: Vec<Value> = record
+        .nodes
+        .iter()
+        .map(|n| {
+            let mut v = json!({});
+            if let Some((k, j, a, b)) = n.split {
+                v["split"] = json!([k, j, a, b]);
+            }
+            if !n.proofs.is_empty() {
+                v["proofs"] = n
+                    .proofs
+                    .iter()
+                    .map(|(row, nu)| {
+                        let nu: Vec<Vec<f64>> = nu
+                            .iter()
+                            .map(|v| v.iter().map(|x| short(*x)).collect())
+                            .collect();
+                        json!({ "row": row, "nu": nu })
+                    })
+                    .collect();
+            }
+            v
+        })
+        .collect();
+    let count = nodes.len();
+    let splits = json!({
+        "layers": claims.iter().map(|c| json!({ "lo": c.lo, "hi": c.hi })).collect::<Vec<_>>(),
+        "neurons": neurons
+            .iter()
+            .map(|n| json!({
+                "layer": n.layer,
+                "neuron": n.neuron,
+                "bound": if n.upper { "hi" } else { "lo" },
+                "nu": n.nu,
+            }))
+            .collect::<Vec<_>>(),
+        "nodes": Value::Array(nodes),
+    });
+    let mut candidate = cert.clone();
+    candidate["evidence"] =
+        json!({ "status": "checkable", "slope_steps": plan.slope_steps, "splits": splits });
+    // the checker's whole check, saying which proofs proved their rows
+    let (report, proved) = certify::network::check_split_proofs(&candidate, &plan.net);
+    if let Answer::Unreadable(e) = &report.answer {
+        return Err(format!("internal: {e}"));
+    }
+    let failed = proved.iter().flatten().any(|ok| !ok);
+    let report = if failed && proved.len() == count {
+        // a proof that proves nothing adds nothing: dropped, and the
+        // lighter certificate checked again
+        let list = candidate["evidence"]["splits"]["nodes"].as_array_mut();
+        for (node, flags) in list.into_iter().flatten().zip(&proved) {
+            if let Some(proofs) = node.get_mut("proofs").and_then(Value::as_array_mut) {
+                let mut keep = flags.iter();
+                proofs.retain(|_| keep.next().copied().unwrap_or(false));
+                if proofs.is_empty() {
+                    if let Some(o) = node.as_object_mut() {
+                        o.remove("proofs");
+                    }
+                }
+            }
+        }
+        certify::check(&candidate, &plan.net)
+    } else {
+        report
+    };
+    match (report.evidence_failure, report.answer) {
+        (Some(why), _) => Err(why),
+        (None, Answer::Unreadable(e)) => Err(format!("internal: {e}")),
+        (None, _) => Ok(candidate["evidence"].take()),
+    }
 }
 
 /// The certificate of a run: its problem, its verdicts and the evidence a

@@ -210,7 +210,8 @@ def certify(
 
     Returns a dict: ``answer`` (``"VALID"``, ``"INVALID"``,
     ``"UNSUPPORTED"`` or ``"UNREADABLE"``), ``reason`` (why, or ``None``),
-    ``cells`` and ``steps`` checked, ``properties`` (one line per
+    ``cells`` and ``steps`` checked (``subproblems``: the nodes of a
+    network's activation-split tree), ``properties`` (one line per
     property) and ``spec_text_differs`` (the spec's text is not the
     certified one; its problem may still be). A spec or controller that
     does not check raises :class:`RavelError`.

@@ -160,6 +160,9 @@ pub struct NetworkOutcome {
     /// Whether branch and bound split ReLU activations (then `partition`
     /// is the whole input box, bounded over the split subproblems).
     pub split_activations: bool,
+    /// What a certificate needs of a search on activations (`None`
+    /// without one): the root's tightening multipliers and the tree.
+    pub split_record: Option<std::sync::Arc<SplitRecord>>,
     /// Cells bounded (parents included).
     pub calls: usize,
     /// Solver statuses that forced a fallback bound.
@@ -170,6 +173,70 @@ pub struct NetworkOutcome {
     pub samples_drawn: usize,
     /// Per select block: the robust action selection of every observation.
     pub selections: Vec<Selection>,
+}
+
+/// What branch and bound on activations proved, as a certificate records
+/// it (`certificate_writer`): kept while searching, within
+/// [`SplitRecord::MAX_BYTES`] (past it the record is dropped, the search
+/// goes on, and the certificate's evidence is unsupported).
+#[derive(Clone, Default)]
+pub struct SplitRecord {
+    /// The multipliers of the root's tightened pre-activation bounds.
+    pub neurons: Vec<ravel_analysis::dual::NeuronDual>,
+    /// The split tree, the root first; children come after their parent.
+    pub nodes: Vec<SplitNode>,
+    /// Bytes held by the multipliers recorded.
+    pub bytes: usize,
+    /// Why the record is not usable, if it is not.
+    pub dropped: Option<String>,
+}
+
+impl SplitRecord {
+    /// The most bytes of multipliers kept (beyond: dropped).
+    pub const MAX_BYTES: usize = 1 << 29;
+
+    /// Account for `n` more numbers; past the limit, drop everything.
+    pub fn charge(&mut self, n: usize) -> bool {
+        if self.dropped.is_some() {
+            return false;
+        }
+        self.bytes = self.bytes.saturating_add(n.saturating_mul(4));
+        if self.bytes > Self::MAX_BYTES {
+            self.dropped = Some(format!(
+                "the proof's multipliers outgrew {} MiB while searching",
+                Self::MAX_BYTES >> 20
+            ));
+            self.neurons = Vec::new();
+            self.nodes = Vec::new();
+            return false;
+        }
+        true
+    }
+}
+
+impl std::fmt::Debug for SplitRecord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "SplitRecord {{ {} neuron duals, {} nodes, {} bytes }}",
+            self.neurons.len(),
+            self.nodes.len(),
+            self.bytes
+        )
+    }
+}
+
+/// A node of the split tree: its split (layer, neuron, the inactive
+/// child's index, the active child's) or none (a leaf), and the rows of
+/// the properties (indices over every property's rows, in order) that it
+/// proved, each with its multipliers `ν` (one vector per hidden layer,
+/// rounded to `f32`).
+#[derive(Clone, Debug, Default)]
+pub struct SplitNode {
+    /// `(layer, neuron, inactive child, active child)`.
+    pub split: Option<(usize, usize, usize, usize)>,
+    /// `(row, ν)`.
+    pub proofs: Vec<(usize, Vec<Vec<f32>>)>,
 }
 
 /// One observation's robust action selection (CARRL).
@@ -1256,6 +1323,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
             partition: Vec::new(),
             partition_stop: Stop::Grid,
             split_activations: false,
+            split_record: None,
             calls: 0,
             solver_issues: Vec::new(),
             overflow: false,
@@ -1274,7 +1342,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
     let rows = stack(&shape_dirs, &prop_rows, m);
     let sampled = support_of_points(&rows.dirs, &mc.outputs);
     let extent = extent_of_points(&rows.dirs, &mc.outputs);
-    let (b, found, split_activations) = match &plan.partitioner {
+    let (b, found, split_activations, split_record) = match &plan.partitioner {
         Partitioner::Guided {
             guide: Guide::Bab,
             budget,
@@ -1304,12 +1372,18 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
                     plan.properties.len(),
                 ),
             );
-            (s.bounded, Some((s.witnesses, s.real_only)), s.activations)
+            (
+                s.bounded,
+                Some((s.witnesses, s.real_only)),
+                s.activations,
+                s.record.map(std::sync::Arc::new),
+            )
         }
         _ => (
             bound_all(plan, input, &rows.dirs, &sampled, &extent, ctl),
             None,
             false,
+            None,
         ),
     };
     let overflow = b.union.iter().any(|v| !v.is_finite());
@@ -1348,6 +1422,7 @@ pub fn execute_network(plan: &NetworkPlan, ctl: &Control) -> NetworkOutcome {
         partition: b.cells.iter().map(|c| c.0.clone()).collect(),
         partition_stop: b.stop,
         split_activations,
+        split_record,
         calls: b.calls,
         solver_issues: b.issues,
         overflow,
@@ -1672,6 +1747,26 @@ mod tests {
     use super::*;
     use nalgebra::DVector;
     use ravel_base::num::dot_box_lower;
+
+    /// Past its byte limit the split record drops everything it holds and
+    /// takes nothing more: a certificate's evidence is then unsupported,
+    /// and the memory it held is freed.
+    #[test]
+    fn the_split_record_is_dropped_past_its_limit() {
+        let mut r = SplitRecord {
+            nodes: vec![SplitNode::default(); 3],
+            ..SplitRecord::default()
+        };
+        let quarter = SplitRecord::MAX_BYTES / 16;
+        for _ in 0..4 {
+            assert!(r.charge(quarter));
+        }
+        assert!(r.dropped.is_none() && r.nodes.len() == 3);
+        assert!(!r.charge(1));
+        assert!(r.dropped.is_some() && r.nodes.is_empty() && r.neurons.is_empty());
+        assert!(!r.charge(0));
+        assert!(!r.charge(usize::MAX));
+    }
 
     #[test]
     fn candidates_become_float32_values_inside_the_set() {

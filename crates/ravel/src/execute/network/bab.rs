@@ -103,6 +103,8 @@ pub(super) struct Searched {
     pub real_only: Vec<Option<Vec<f64>>>,
     /// Whether the search split ReLU activations ([`activations`]).
     pub activations: bool,
+    /// What it proved, for a certificate (a search on activations only).
+    pub record: Option<super::SplitRecord>,
 }
 
 /// A child of a split: its box, its bounds, the issues met bounding it,
@@ -770,6 +772,7 @@ pub(super) fn search(
         witnesses,
         real_only,
         activations: false,
+        record: None,
     }
 }
 

@@ -18,12 +18,20 @@
 //! affine layers and ReLUs (consecutive affine layers, a normalisation or
 //! a pooling, get ReLU pairs between them: [`dual::alternating`]);
 //! otherwise the caller splits inputs.
+//!
+//! The search keeps a [`SplitRecord`] for a certificate: the multipliers of
+//! the root's tightened pre-activation bounds, the split tree, and at each
+//! node the multipliers of every property row its bound proved there
+//! (rounded to `f32`), within [`SplitRecord::MAX_BYTES`] (past it the record
+//! is dropped; the search goes on unchanged). The certificate writer turns
+//! it into evidence the checker re-evaluates (docs/certificates.md).
 
 use std::ops::Not;
 
 use nalgebra::DMatrix;
 
 use super::{cell_margin, halt, proved, Bounded, Ctx, Searched, Witness, BATCH};
+use crate::execute::network::{SplitNode, SplitRecord};
 use crate::execute::{Phase as Stage, Progress};
 use crate::ir::NetPropertyKind;
 use ravel_analysis::dual::{self, Domain, Phase, ReluChain, Slopes};
@@ -66,11 +74,13 @@ const ATTACK_STEPS: usize = 4;
 /// child took a fifth of the search's time.
 const ATTACKS_PER_ROUND: usize = 4;
 
-/// An open subproblem: its domain, multipliers and property-row bounds.
+/// An open subproblem: its domain, multipliers and property-row bounds,
+/// and its node in the record's tree.
 struct Sub {
     dom: Domain,
     slopes: Slopes,
     bounds: Vec<f64>,
+    node: usize,
 }
 
 /// A queued subproblem: its index in the store and its worst open margin
@@ -101,8 +111,66 @@ impl Ord for Open {
 }
 
 /// A child to bound: its domain, its parent's slopes (the ascent's start)
-/// and bounds (which hold on it too), and the rows still open.
-type Kid = (Domain, Slopes, Vec<f64>, Vec<usize>);
+/// and bounds (which hold on it too), the rows still open, and its node.
+type Kid = (Domain, Slopes, Vec<f64>, Vec<usize>, usize);
+
+/// Whether the upper bound `v` of property row `r` (an index of `pdirs`)
+/// proves that row: a `require` row within its right-hand side, a
+/// robustness comparison negative, an `avoid` member's row separating it.
+fn row_proves(cx: &Ctx, r: usize, v: f64) -> bool {
+    for (k, p) in cx.props().iter().enumerate() {
+        let range = cx.ranges[k].clone();
+        if !range.contains(&r) {
+            continue;
+        }
+        let i = r - range.start;
+        return match &p.kind {
+            NetPropertyKind::Require(poly) => poly.rows.get(i).is_some_and(|(_, h)| v <= *h),
+            NetPropertyKind::Robust(_) => v < 0.0,
+            NetPropertyKind::Avoid(members) => members
+                .iter()
+                .flat_map(|m| m.rows.iter())
+                .nth(i)
+                .is_some_and(|(_, h)| -v - h > 0.0),
+        };
+    }
+    false
+}
+
+/// Record at `node` the multipliers of every objective column of `o`
+/// (the rows `cols`) whose bound proves its row and that `node` has not
+/// proved yet (rounded to `f32`, within the record's limit).
+fn record_proofs(
+    cx: &Ctx,
+    record: &mut SplitRecord,
+    node: usize,
+    cols: &[usize],
+    o: &dual::Optimised,
+) {
+    for (i, &c) in cols.iter().enumerate() {
+        let v = -o.bounds[i];
+        if !row_proves(cx, c, v) {
+            continue;
+        }
+        if record
+            .nodes
+            .get(node)
+            .is_none_or(|n| n.proofs.iter().any(|(r, _)| *r == c))
+        {
+            continue;
+        }
+        let nu: Vec<Vec<f32>> = o
+            .dual
+            .nu
+            .iter()
+            .map(|m| m.column(i).iter().map(|v| *v as f32).collect())
+            .collect();
+        if !record.charge(nu.iter().map(Vec::len).sum()) {
+            return;
+        }
+        record.nodes[node].proofs.push((c, nu));
+    }
+}
 
 /// The memory one subproblem holds, in bytes (for the queue's limit).
 fn sub_bytes(dom: &Domain, rows: usize) -> usize {
@@ -214,8 +282,16 @@ pub(super) fn search(
             issues,
             witnesses,
             real_only,
+            None,
         );
     };
+    // what a certificate needs: the root's tightening multipliers, the
+    // tree, and each node's proofs
+    let mut record = SplitRecord {
+        nodes: vec![SplitNode::default()],
+        ..SplitRecord::default()
+    };
+    let all_rows: Vec<usize> = (0..rows).collect();
     // the root's bounds from the ascent alone first: when they settle
     // everything, the tightening (most of an easy instance's time) is not
     // needed
@@ -229,6 +305,7 @@ pub(super) fn search(
     let start = Slopes::crown(chain, &root_dom, rows);
     let mut opt = dual::optimise(chain, rootbox, &root_dom, &obj, start, ROOT_STEPS);
     calls += 1;
+    record_proofs(cx, &mut record, 0, &all_rows, &opt);
     let mut root_bounds = rows_bounds(&opt);
     // the relaxation's worst inputs, as counterexample candidates
     attack(
@@ -240,7 +317,20 @@ pub(super) fn search(
         &mut real_only,
     );
     if cx.worst(&root_bounds, &settled).0 < f64::INFINITY && !out_of_time() {
-        root_dom.tighten(chain, rootbox, TIGHTEN_STEPS, ctl.threads, &out_of_time);
+        let mut neurons = Vec::new();
+        root_dom.tighten_recorded(
+            chain,
+            rootbox,
+            TIGHTEN_STEPS,
+            ctl.threads,
+            &out_of_time,
+            Some(&mut neurons),
+        );
+        // (kept in f64: twice an f32's bytes)
+        let numbers: usize = neurons.iter().flat_map(|n| &n.nu).map(Vec::len).sum();
+        if record.charge(2 * numbers) {
+            record.neurons = neurons;
+        }
         // the slopes found stay a valid start on the tightened domain
         let again = dual::optimise(
             chain,
@@ -251,6 +341,7 @@ pub(super) fn search(
             ROOT_STEPS,
         );
         calls += 1;
+        record_proofs(cx, &mut record, 0, &all_rows, &again);
         let b = rows_bounds(&again);
         // the tighter domain's bounds hold too (every domain bound is
         // valid): keep the better of the two per row
@@ -274,6 +365,7 @@ pub(super) fn search(
             dom: root_dom,
             slopes: opt.slopes,
             bounds: root_bounds.clone(),
+            node: 0,
         }));
         queue.push(Open { at: 0, worst: w0 });
     } else {
@@ -320,12 +412,19 @@ pub(super) fn search(
                 Some((k, j)) => {
                     let cols = open_rows(cx, &sub.bounds, &settled);
                     let bounds = sub.bounds;
-                    for p in [Phase::Inactive, Phase::Active] {
+                    let first = record.nodes.len();
+                    if record.dropped.is_none() {
+                        record.nodes[sub.node].split = Some((k, j, first, first + 1));
+                        record.nodes.push(SplitNode::default());
+                        record.nodes.push(SplitNode::default());
+                    }
+                    for (i, p) in [Phase::Inactive, Phase::Active].into_iter().enumerate() {
                         kids.push((
                             sub.dom.split(k, j, p),
                             sub.slopes.clone(),
                             bounds.clone(),
                             cols.clone(),
+                            first + i,
                         ));
                     }
                 }
@@ -345,6 +444,7 @@ pub(super) fn search(
                         LEAF_STEPS,
                     );
                     calls += 1;
+                    record_proofs(cx, &mut record, sub.node, &cols, &o);
                     let mut b = sub.bounds;
                     for (i, &c) in cols.iter().enumerate() {
                         let v = -o.bounds[i];
@@ -374,7 +474,7 @@ pub(super) fn search(
                 }
                 let jobs = g
                     .iter()
-                    .map(|(dom, start, _, cols)| {
+                    .map(|(dom, start, _, cols, _)| {
                         (dom, obj.select_columns(cols.iter()), start.columns(cols))
                     })
                     .collect();
@@ -396,9 +496,10 @@ pub(super) fn search(
         // the open children's relaxed worst inputs, attacked after the
         // round: only the [`ATTACKS_PER_ROUND`] worst
         let mut targets: Vec<(f64, Vec<f64>, Vec<f64>)> = Vec::new();
-        for ((dom, start, parent, cols), got) in kids.into_iter().zip(bounded) {
+        for ((dom, start, parent, cols, node), got) in kids.into_iter().zip(bounded) {
             let (b, slopes, worst_inputs) = match got {
                 Some(o) => {
+                    record_proofs(cx, &mut record, node, &cols, &o);
                     let mut b = parent.clone();
                     for (i, &c) in cols.iter().enumerate() {
                         let v = -o.bounds[i];
@@ -429,6 +530,7 @@ pub(super) fn search(
                 dom,
                 slopes,
                 bounds: b,
+                node,
             }));
             queue.push(Open {
                 at: subs.len() - 1,
@@ -465,7 +567,15 @@ pub(super) fn search(
     issues.sort_by_key(|i| format!("{i:?}"));
     issues.dedup();
     finish(
-        cells, union, calls, made, stop, issues, witnesses, real_only,
+        cells,
+        union,
+        calls,
+        made,
+        stop,
+        issues,
+        witnesses,
+        real_only,
+        Some(record),
     )
 }
 
@@ -507,6 +617,7 @@ fn finish(
     issues: Vec<Issue>,
     witnesses: Vec<Option<Witness>>,
     real_only: Vec<Option<Vec<f64>>>,
+    record: Option<SplitRecord>,
 ) -> Searched {
     Searched {
         bounded: Bounded {
@@ -520,5 +631,6 @@ fn finish(
         witnesses,
         real_only,
         activations: true,
+        record,
     }
 }

@@ -7,12 +7,26 @@
 //! 1. **Attack first.** Projected gradient ascent on each falsifiable
 //!    property's violation, from the centre and the worst sampled inputs,
 //!    before any bound is computed ([`pgd`]); a confirmed counterexample
-//!    settles the property at once.
+//!    settles the property at once. When splitting inputs, once
+//!    [`LOCAL_CALLS`] cells have been bounded, a seeded derivative-free
+//!    local search ([`local`]: random samples of the cells still open,
+//!    then shrinking-box random walks from the best of them), which finds
+//!    the thin violating regions the gradient misses (ACAS Xu 5_3
+//!    property 2 and 1_9 property 7, at the input box's faces); again with
+//!    twice the samples each time the count of cells bounded doubles, so
+//!    it costs about a fixed share of the time (10–20 % on ACAS Xu).
 //! 2. **Bound in batches.** Up to [`BATCH`] cells are taken from the queue
 //!    at a time, each is split in two along one input, and the children are
 //!    bounded together (CROWN's batched pass over the threads, or the
 //!    spec's propagator cell by cell). A child's bounds are intersected with
-//!    its parent's (both hold on the child).
+//!    its parent's (both hold on the child). Late in the search (from
+//!    [`DUAL_MADE`] subproblems made), on a box input set and a network of
+//!    affine layers and ReLUs, the children still open after CROWN are also
+//!    bounded by the optimised Lagrangian dual of [`dual::optimise`] over
+//!    their box ([`tighten`]; certified, [`DUAL_STEPS`] steps from CROWN's
+//!    slopes), and each row keeps the smaller bound: on ACAS Xu it closes
+//!    about a quarter of them, and proves 4_2 property 2 (71 s; not proved
+//!    in 116 s without it) and 1_1 property 5 (2.5 s; 60 s without).
 //! 3. **Aim the split.** With at most [`LOOK_AHEAD_DIMS`] inputs, every
 //!    input is tried: both children of every candidate split are bounded
 //!    in the batch, and the split kept is the one whose children's open
@@ -49,6 +63,7 @@
 use std::collections::BinaryHeap;
 
 mod activations;
+mod local;
 
 use nalgebra::DMatrix;
 
@@ -60,6 +75,7 @@ use crate::execute::Control;
 use crate::ir::{Branching, NetProperty, NetPropertyKind};
 use crate::lower::NetworkPlan;
 use ravel_analysis::batch;
+use ravel_analysis::dual;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::partition::{Budget, Stop};
 use ravel_analysis::sets::{IBox, Region};
@@ -82,6 +98,34 @@ const PGD_STEPS: usize = 50;
 
 /// Gradient steps of the attack on each open child.
 const CHILD_STEPS: usize = 4;
+
+/// Samples of the first stage of the local search ([`local`]); each
+/// later stage draws twice as many as the one before, up to
+/// [`LOCAL_MAX_SAMPLES`].
+const LOCAL_SAMPLES: usize = 4096;
+
+/// The most samples of one stage of the local search.
+const LOCAL_MAX_SAMPLES: usize = 1 << 18;
+
+/// Starts walked by the first stage of the local search (the later ones:
+/// [`LOCAL_STARTS`]).
+const LOCAL_FIRST_STARTS: usize = 4;
+
+/// Starts walked by every later stage of the local search.
+const LOCAL_STARTS: usize = 16;
+
+/// Subproblems made before the children still open after CROWN are
+/// bounded by the optimised Lagrangian dual too ([`tighten`]).
+const DUAL_MADE: usize = 2000;
+
+/// Ascent steps of the dual bound of a late child.
+const DUAL_STEPS: usize = 30;
+
+/// Cells bounded before the first stage of the local search (an instance
+/// decided sooner does not pay for it); each later stage starts when the
+/// count has doubled again, so the search's share of the time stays about
+/// constant.
+const LOCAL_CALLS: usize = 1000;
 
 /// The most open cells the queue may hold for inputs of dimension `n` and
 /// `rows` bounded rows per cell (each cell's box, bounds and flags).
@@ -520,6 +564,88 @@ fn ascent_row(kind: &NetPropertyKind, label: Option<usize>, y: &[f64]) -> Vec<f6
     }
 }
 
+/// The children in `kids` still open on some property get the bounds of
+/// [`dual::optimise`] over their box (the network as the ReLU chain
+/// `chain` of `anet`, its pre-activation bounds CROWN's over the box, the
+/// Lagrangian's slopes optimised from CROWN's for [`DUAL_STEPS`] steps;
+/// certified, see [`dual::certified`]); each row keeps the smaller of its
+/// two bounds. Children not bounded (the time ran out) are left alone, and
+/// so is every child once `late()` says the time is up.
+fn tighten(
+    cx: &Ctx,
+    chain: &dual::ReluChain,
+    anet: &ravel_base::nn::Network,
+    kids: &mut [Child],
+    settled: &[bool],
+    late: &(dyn Fn() -> bool + Sync),
+) {
+    let open: Vec<usize> = (0..kids.len())
+        .filter(|&i| kids[i].3 && cx.worst(&kids[i].1, settled).0 < f64::INFINITY)
+        .collect();
+    if open.is_empty() {
+        return;
+    }
+    let obj: DMatrix<f64> = -cx.pdirs.transpose();
+    let rows = obj.ncols();
+    let cells: Vec<&IBox> = open.iter().map(|&i| &kids[i].0).collect();
+    let got = map_ordered(&cells, cx.ctl.threads, &|c: &&IBox| {
+        if late() {
+            return None;
+        }
+        let dom = dual::Domain::root(anet, c)?;
+        let start = dual::Slopes::crown(chain, &dom, rows);
+        let o = dual::optimise(chain, c, &dom, &obj, start, DUAL_STEPS);
+        // upper bounds of the rows from lower bounds of their negations
+        Some(o.bounds.iter().map(|v| -v).collect::<Vec<f64>>())
+    });
+    for (&i, g) in open.iter().zip(got) {
+        let Some(g) = g else { continue };
+        for (b, u) in kids[i].1.iter_mut().zip(g) {
+            if u < *b {
+                *b = u;
+            }
+        }
+    }
+}
+
+/// Stage `stage` of the local search ([`local`]) for every property
+/// still open that may be falsified, over the cells `cells(k)` where
+/// property `k` is open; a confirmed counterexample settles it.
+#[allow(clippy::too_many_arguments)]
+fn local_stage(
+    cx: &Ctx,
+    stage: usize,
+    cells: &dyn Fn(usize) -> Vec<IBox>,
+    settled: &mut [bool],
+    witnesses: &mut [Option<Witness>],
+    real_only: &mut [Option<Vec<f64>>],
+    late: &(dyn Fn() -> bool + Sync),
+) {
+    for k in 0..settled.len() {
+        if settled[k] || !cx.may_falsify[k] || late() {
+            continue;
+        }
+        let cells = cells(k);
+        let st = local::Stage {
+            k,
+            cells: &cells,
+            samples: LOCAL_SAMPLES
+                .saturating_mul(1 << stage.min(20))
+                .min(LOCAL_MAX_SAMPLES),
+            starts: if stage == 0 {
+                LOCAL_FIRST_STARTS
+            } else {
+                LOCAL_STARTS
+            },
+            seed: local::stage_seed(cx.plan.seed, stage, k),
+        };
+        if let Some(w) = cx.local_search(&st, late, &mut real_only[k]) {
+            witnesses[k] = Some(w);
+            settled[k] = true;
+        }
+    }
+}
+
 /// Branch and bound over `region` for the plan's properties (see the
 /// module documentation). `rows` are the stacked rows of the run
 /// (`root` their bounds over the whole set, one call), `starts` the inputs
@@ -595,10 +721,18 @@ pub(super) fn search(
             );
         }
     }
+    // the local search's stages: the next one when `calls` reaches this
+    let mut stage = 0;
+    let mut next_stage = LOCAL_CALLS;
+    // the network as a ReLU chain, for the late cells' dual bounds
+    let tight = match region {
+        Region::Box(_) => activations::applies(&cx, region).map(|(c, n, _)| (c, n)),
+        _ => None,
+    };
     let min_width: Vec<f64> = (0..rootbox.dim())
         .map(|i| budget.min_size * (rootbox.hi[i] - rootbox.lo[i]))
         .collect();
-    let mut queue = BinaryHeap::new();
+    let mut queue: BinaryHeap<Node> = BinaryHeap::new();
     let (w0, _) = cx.worst(&root_b, &settled);
     let mut stop = Stop::Done;
     if w0 < f64::INFINITY {
@@ -618,6 +752,21 @@ pub(super) fn search(
         if let Some(why) = halt(&settled, out_of_time(), made, budget, queue.len(), limit) {
             stop = why;
             break;
+        }
+        // the next stage of the local search, over the open cells
+        if calls >= next_stage {
+            next_stage = next_stage.saturating_mul(2).max(calls.saturating_add(1));
+            local_stage(
+                &cx,
+                stage,
+                &|k| cx.open_for(k, queue.iter().map(|n| (&n.cell, &n.bounds[..]))),
+                &mut settled,
+                &mut witnesses,
+                &mut real_only,
+                &out_of_time,
+            );
+            stage += 1;
+            continue;
         }
         // take a batch; split each (along each candidate input: one, but
         // every splittable one under look-ahead branching)
@@ -663,6 +812,7 @@ pub(super) fn search(
             total: Some(budget.calls),
         });
         let mut pending = kids.into_iter().zip(bounded);
+        let mut picked: Vec<Child> = Vec::with_capacity(2 * parents.len());
         for (node, &n_opts) in parents.iter().zip(&options) {
             let parent = &node.bounds;
             // each child's bounds: its own intersected with its parent's
@@ -704,53 +854,60 @@ pub(super) fn search(
             };
             let scores: Vec<(Score, f64)> = pairs.iter().map(|p| (score(p), rel(p))).collect();
             let at = pick(&scores, cx.worst(parent, &settled).0);
-            let chosen = pairs.swap_remove(at);
+            picked.extend(pairs.swap_remove(at));
             made += 2;
-            for (cell, b, iss, _) in chosen {
-                issues.extend(iss);
-                let (w, _) = cx.worst(&b, &settled);
-                if w == f64::INFINITY {
-                    leaves.push((cell, full(&b)));
-                    continue;
-                }
-                if out_of_time() {
-                    queue.push(Node {
-                        cell,
-                        bounds: b,
-                        worst: w,
-                    });
-                    continue;
-                }
-                // attack the child
-                let centre: Vec<f64> = (0..cell.dim())
-                    .map(|i| cell.lo[i] + 0.5 * (cell.hi[i] - cell.lo[i]))
-                    .collect();
-                for k in 0..np {
-                    if settled[k] || !cx.may_falsify[k] {
-                        continue;
-                    }
-                    let (v, _) = cell_margin(&plan.properties[k].kind, &b, &cx.ranges[k]);
-                    if proved(&plan.properties[k].kind, v) {
-                        continue;
-                    }
-                    let within = cell_region(region, &cell);
-                    if let Some(wit) = cx.pgd(
-                        k,
-                        &within,
-                        std::slice::from_ref(&centre),
-                        CHILD_STEPS,
-                        &mut real_only[k],
-                    ) {
-                        witnesses[k] = Some(wit);
-                        settled[k] = true;
-                    }
-                }
+        }
+        // late in the search, the children still open get the optimised
+        // dual's bounds too (both certified: each row keeps the smaller)
+        if let Some((chain, anet)) = &tight {
+            if made >= DUAL_MADE && !out_of_time() {
+                tighten(&cx, chain, anet, &mut picked, &settled, &out_of_time);
+            }
+        }
+        for (cell, b, iss, _) in picked {
+            issues.extend(iss);
+            let (w, _) = cx.worst(&b, &settled);
+            if w == f64::INFINITY {
+                leaves.push((cell, full(&b)));
+                continue;
+            }
+            if out_of_time() {
                 queue.push(Node {
                     cell,
                     bounds: b,
                     worst: w,
                 });
+                continue;
             }
+            // attack the child
+            let centre: Vec<f64> = (0..cell.dim())
+                .map(|i| cell.lo[i] + 0.5 * (cell.hi[i] - cell.lo[i]))
+                .collect();
+            for k in 0..np {
+                if settled[k] || !cx.may_falsify[k] {
+                    continue;
+                }
+                let (v, _) = cell_margin(&plan.properties[k].kind, &b, &cx.ranges[k]);
+                if proved(&plan.properties[k].kind, v) {
+                    continue;
+                }
+                let within = cell_region(region, &cell);
+                if let Some(wit) = cx.pgd(
+                    k,
+                    &within,
+                    std::slice::from_ref(&centre),
+                    CHILD_STEPS,
+                    &mut real_only[k],
+                ) {
+                    witnesses[k] = Some(wit);
+                    settled[k] = true;
+                }
+            }
+            queue.push(Node {
+                cell,
+                bounds: b,
+                worst: w,
+            });
         }
     }
     leaves.extend(queue.into_iter().map(|n| {
@@ -863,6 +1020,189 @@ mod tests {
             ctl,
             limit,
         )
+    }
+
+    /// `y = relu(1 − |x − p|₁/0.3) − 0.999` on `[−1, 1]²` with `p` away
+    /// from the centre: `y ≤ 0` fails only within `|x − p|₁ < 3·10⁻⁴`, a
+    /// region no sample of a few thousand hits, on a tent whose gradient is
+    /// zero at the centre and off its base (so the gradient attack from the
+    /// centre does not move). Its plan and `p`.
+    fn tent_plan() -> (NetworkPlan, [f64; 2]) {
+        let p = [0.71, -0.62];
+        let net = Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(4, 2, &[1.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, -1.0]),
+                    b: nalgebra::DVector::from_vec(vec![-p[0], p[0], -p[1], p[1]]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 4, &[-1.0 / 0.3; 4]),
+                    b: nalgebra::DVector::from_vec(vec![1.0]),
+                },
+                Layer::Act(Activation::Relu),
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 1, &[1.0]),
+                    b: nalgebra::DVector::from_vec(vec![-0.999]),
+                },
+            ],
+        );
+        let mut plan = tight_plan();
+        plan.net = net;
+        (plan, p)
+    }
+
+    /// The local search's first stage over the whole set finds the tent's
+    /// thin violating region, where the gradient attack from the centre
+    /// finds nothing; the same point whatever the thread count. The search
+    /// settles the property too (its splits alone would reach the region
+    /// as well, later).
+    #[test]
+    fn the_local_search_finds_a_thin_violation_the_gradient_misses() {
+        let (plan, p) = tent_plan();
+        let region = plan.input.clone().unwrap();
+        let whole = [region.bbox()];
+        let found = |threads: usize, pgd: bool| {
+            let mut ctl = Control::unlimited();
+            ctl.threads = threads;
+            let cx = Ctx {
+                plan: &plan,
+                region: &region,
+                pdirs: DMatrix::from_row_slice(1, 1, &[1.0]),
+                ranges: std::iter::once(0..1).collect(),
+                labels: &[None],
+                may_falsify: &[true],
+                ctl: &ctl,
+            };
+            let mut real = None;
+            if pgd {
+                return cx.pgd(0, &region, &[vec![0.0, 0.0]], PGD_STEPS, &mut real);
+            }
+            let st = local::Stage {
+                k: 0,
+                cells: &whole,
+                samples: LOCAL_SAMPLES,
+                starts: LOCAL_FIRST_STARTS,
+                seed: local::stage_seed(plan.seed, 0, 0),
+            };
+            cx.local_search(&st, &|| false, &mut real)
+        };
+        assert_eq!(found(1, true), None);
+        let w = found(1, false).expect("a counterexample");
+        assert!(w.output[0] > 0.0, "{w:?}");
+        let dist = (w.input[0] - p[0]).abs() + (w.input[1] - p[1]).abs();
+        assert!(dist < 3e-4, "{w:?}");
+        // float32 inputs (the model's type), confirmed
+        assert!(w.input.iter().all(|v| f64::from(*v as f32) == *v));
+        assert_eq!(found(3, false), Some(w));
+        // the search
+        let rows = super::super::stack(&DMatrix::zeros(0, 1), &[vec![vec![1.0]]], 1);
+        let (root, issues) = cell_bounds(&plan.net, &region, plan.propagator, 0, &rows.dirs);
+        let budget = Budget {
+            calls: 100_000,
+            min_size: 1e-9,
+            seconds: None,
+        };
+        let s = search(
+            &plan,
+            &region,
+            &rows,
+            root,
+            issues,
+            &[vec![0.0, 0.0]],
+            &[None],
+            &[true],
+            &budget,
+            &Control::unlimited(),
+            usize::MAX,
+        );
+        assert_eq!(s.bounded.stop, Stop::Decided);
+        assert!(s.witnesses[0].is_some());
+    }
+
+    /// The late cells' dual bounds ([`tighten`]) hold on their cells: on
+    /// random ReLU networks (every third with two consecutive affine
+    /// layers, which get a ReLU pair) and random cells, every sampled
+    /// output's row value lies below its cell's bound, and some bounds are
+    /// tighter than CROWN's.
+    #[test]
+    fn the_late_cells_dual_bounds_contain_their_sampled_outputs() {
+        let mut rng = ravel_base::rng::Rng::new(29);
+        let mut tighter = 0;
+        for case in 0..12 {
+            let widths = [3, 4 + rng.below(5), 4 + rng.below(5), 2];
+            let mut layers = Vec::new();
+            if case % 3 == 0 {
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(3, 3, |i, j| if i == j { 1.5 } else { 0.0 }),
+                    b: nalgebra::DVector::from_fn(3, |_, _| rng.normal() * 0.2),
+                });
+            }
+            for (k, w) in widths.windows(2).enumerate() {
+                let s = 1.5 / (w[0] as f64).sqrt();
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(w[1], w[0], |_, _| rng.normal() * s),
+                    b: nalgebra::DVector::from_fn(w[1], |_, _| rng.normal() * 0.3),
+                });
+                if k + 2 < widths.len() {
+                    layers.push(Layer::Act(Activation::Relu));
+                }
+            }
+            let mut plan = tight_plan();
+            plan.net = Network::new(3, layers);
+            plan.input = Some(Region::Box(IBox::new(vec![-1.0; 3], vec![1.0; 3])));
+            let d = DMatrix::from_fn(2, 2, |_, _| rng.normal());
+            plan.properties[0].kind = NetPropertyKind::Require(Polytope {
+                rows: (0..2)
+                    .map(|r| (d.row(r).iter().copied().collect(), 0.0))
+                    .collect(),
+            });
+            let region = plan.input.clone().unwrap();
+            let ctl = Control::unlimited();
+            let cx = Ctx {
+                plan: &plan,
+                region: &region,
+                pdirs: d.clone(),
+                ranges: std::iter::once(0..2).collect(),
+                labels: &[None],
+                may_falsify: &[false],
+                ctl: &ctl,
+            };
+            let (chain, anet, _) = activations::applies(&cx, &region).expect("a ReLU chain");
+            let mut kids: Vec<Child> = (0..6)
+                .map(|_| {
+                    let (mut lo, mut hi) = (Vec::new(), Vec::new());
+                    for _ in 0..3 {
+                        let w = rng.uniform(0.05, 1.0);
+                        let l = rng.uniform(-1.0, 1.0 - w);
+                        lo.push(l);
+                        hi.push(l + w);
+                    }
+                    (IBox::new(lo, hi), vec![f64::INFINITY; 2], Vec::new(), true)
+                })
+                .collect();
+            tighten(&cx, &chain, &anet, &mut kids, &[false], &|| false);
+            for (c, b, _, _) in &kids {
+                assert!(b.iter().all(|v| v.is_finite()), "case {case}: {b:?}");
+                let (crown, _) =
+                    cell_bounds(&plan.net, &Region::Box(c.clone()), plan.propagator, 0, &d);
+                tighter += (0..2).filter(|&r| b[r] < crown[r] - 1e-9).count();
+                for _ in 0..200 {
+                    let x: Vec<f64> = (0..3).map(|i| rng.uniform(c.lo[i], c.hi[i])).collect();
+                    let y = plan.net.forward(&x);
+                    for r in 0..2 {
+                        let v = d[(r, 0)] * y[0] + d[(r, 1)] * y[1];
+                        assert!(
+                            v <= b[r] + 1e-9 * (1.0 + v.abs()),
+                            "case {case}: {c:?} row {r}: bound {} below {v}",
+                            b[r]
+                        );
+                    }
+                }
+            }
+        }
+        assert!(tighter > 0, "the dual never beat CROWN");
     }
 
     /// Every final cell's bounds contain the outputs sampled on that cell

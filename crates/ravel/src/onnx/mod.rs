@@ -598,8 +598,8 @@ impl Lowering {
         .ok_or_else(|| {
             err(
                 OnnxErrorKind::Unsupported,
-                format!("{} combines two computed values (a residual or skip connection); ravel supports only chains with constant operands", node_label(n)),
-                "export a plain feed-forward network (no skip connections)",
+                format!("{} combines two computed values; ravel supports chains with constant operands and residual Adds", node_label(n)),
+                "export a feed-forward network whose only skip connections are residual Adds (x + F(x))",
             )
         })
     }

@@ -34,7 +34,7 @@
 //! residual `Add` (`x + F(x)`: the running value and an earlier value `x`
 //! of the chain, of one shape) is lowered into it exactly when the branch
 //! `F` (the layers since `x`) has only affine layers and ReLUs
-//! ([`Lowering::residual`]): the branch carries `[x; −x]` beside its value
+//! (`Lowering::residual`): the branch carries `[x; −x]` beside its value
 //! (after a ReLU `(relu x, relu −x)`, which later ReLUs keep), and the
 //! `Add` takes `x` back as `relu x − relu −x` in extra columns `[I, −I]` of
 //! the branch's last affine layer. A one-layer affine branch `x + A x + b`
@@ -51,7 +51,8 @@
 //! one summation order of the merged row `W h + b + 1·relu x − 1·relu −x`
 //! (the products by ±1 are exact, and one of the pair is 0, so adding it is
 //! exact), so the enclosure of every summation order used to confirm
-//! counterexamples (`execute::network`) covers it; the identity rows that
+//! counterexamples (`execute::network`) covers it (an `Add` layer of its
+//! own, `h + relu x − relu −x`, is likewise `fl(h + x)`); the identity rows that
 //! carry the pair are exact in any order and only widen the enclosure. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed
 //! fields, or in external data files.

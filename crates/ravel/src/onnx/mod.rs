@@ -30,9 +30,30 @@
 //! precision as a runtime evaluates them (the batched CROWN kernel, which
 //! needs affine layers and activations to alternate, falls back to its
 //! general path; branch and bound on activations puts ReLU pairs between
-//! them, `ravel_analysis::dual::alternating`). A node combining two computed values (`Add` of a residual or
-//! skip connection, `Concat`) is refused, naming it: the network is a
-//! chain of layers on one running value. Weights may be float32, float64
+//! them, `ravel_analysis::dual::alternating`). The network is a chain of layers on one running value; a
+//! residual `Add` (`x + F(x)`: the running value and an earlier value `x`
+//! of the chain, of one shape) is lowered into it exactly when the branch
+//! `F` (the layers since `x`) has only affine layers and ReLUs
+//! (`Lowering::residual`): the branch carries `[x; −x]` beside its value
+//! (after a ReLU `(relu x, relu −x)`, which later ReLUs keep), and the
+//! `Add` takes `x` back as `relu x − relu −x` in extra columns `[I, −I]` of
+//! the branch's last affine layer. A one-layer affine branch `x + A x + b`
+//! keeps its layer and gets an `Add` layer `[I, I, 0]` of its own (not one
+//! layer `I + A`, whose diagonal would be rounded); so does a branch ending
+//! in a ReLU. Skips nest and follow each other; a value inside a finished
+//! block can no longer be skipped from (its layers now carry the pair).
+//! Refused, naming the node: `Tanh`/`Sigmoid` in the branch (the pair does
+//! not pass through them), an `Add` of two computed values neither of which
+//! is an earlier chain value, `Concat` and other ops on two computed
+//! values, shapes that differ, and a widened branch past [`MAX_WIDTH`] or
+//! [`MAX_LAYER_ENTRIES`] (checked before it is built). The merged layer's
+//! float32 semantics: a runtime computes `fl(fl(W h + b) + x)`, which is
+//! one summation order of the merged row `W h + b + 1·relu x − 1·relu −x`
+//! (the products by ±1 are exact, and one of the pair is 0, so adding it is
+//! exact), so the enclosure of every summation order used to confirm
+//! counterexamples (`execute::network`) covers it (an `Add` layer of its
+//! own, `h + relu x − relu −x`, is likewise `fl(h + x)`); the identity rows that
+//! carry the pair are exact in any order and only widen the enclosure. Weights may be float32, float64
 //! (or integer and bool constants), stored in `raw_data`, in the typed
 //! fields, or in external data files.
 //!
@@ -536,6 +557,19 @@ struct Lowering {
     /// Entries of the dense matrices of the convolutions and poolings so
     /// far (see [`Lowering::reserve`]).
     dense: u64,
+    /// The values of the chain a residual `Add` may take as its skip: each
+    /// value's name, with the number of layers before it and its width
+    /// and shape (see [`Lowering::residual`]).
+    values: HashMap<String, ChainValue>,
+}
+
+/// A value of the layer chain: the input of layer `at` (the chain's output
+/// when `at` is the number of layers), of width `width` and shape `shape`.
+#[derive(Clone, Debug)]
+struct ChainValue {
+    at: usize,
+    width: Option<usize>,
+    shape: Option<Vec<usize>>,
 }
 
 impl Lowering {
@@ -565,8 +599,8 @@ impl Lowering {
         .ok_or_else(|| {
             err(
                 OnnxErrorKind::Unsupported,
-                format!("{} combines two computed values (a residual or skip connection); ravel supports only chains with constant operands", node_label(n)),
-                "export a plain feed-forward network (no skip connections)",
+                format!("{} combines two computed values; ravel supports chains with constant operands and residual Adds", node_label(n)),
+                "export a feed-forward network whose only skip connections are residual Adds (x + F(x))",
             )
         })
     }
@@ -903,14 +937,270 @@ impl Lowering {
     }
 
     fn add_bias(&mut self, bias: DVector<f64>) {
+        let len = self.layers.len();
         if let Some(Layer::Affine { b, .. }) = self.layers.last_mut() {
             if b.iter().all(|v| *v == 0.0) && b.len() == bias.len() {
                 *b = bias; // exact: the previous bias is zero
+                           // the values after that layer (without the bias) are gone
+                self.values.retain(|_, v| v.at != len);
                 return;
             }
         }
         let n = bias.len();
         self.push_affine(DMatrix::identity(n, n), bias);
+    }
+
+    /// The other operand of an `Add` of the running value and a computed
+    /// value (a residual connection): `None` for any other node.
+    fn computed_operand(&self, n: &NodeProto, op: &str) -> Option<String> {
+        if op != "Add" {
+            return None;
+        }
+        let [a, b] = n.input.as_slice() else {
+            return None;
+        };
+        let other = if a == &self.current { b } else { a };
+        (!self.consts.contains_key(other)).then(|| other.clone())
+    }
+
+    /// A residual `Add` of the running value `h` (width `n`) and the
+    /// earlier chain value `x` (same width and shape), lowered exactly into
+    /// the chain: the layers since `x` (the branch, affine layers and ReLUs
+    /// only) carry the pair `[x; −x]` beside their own value — the first
+    /// affine layer also outputs it (identity rows; a branch that starts
+    /// with a ReLU gets an identity layer `[I; I; −I]` first), every later
+    /// affine layer passes it with identity blocks, and every ReLU maps it
+    /// to `(relu x, relu −x)`, which later ReLUs keep. The `Add` then takes
+    /// `x` back as `relu x − relu −x` (or the pair's first half when the
+    /// branch has no ReLU): it joins the branch's last affine layer as the
+    /// extra columns `[I, −I]` (`W h' + b + relu x − relu −x`), or is an
+    /// affine layer `[I, I, −I]` of its own when that last layer is the
+    /// fork's (a purely affine branch of one layer: its weights are not
+    /// added to the identity) or a ReLU. Sizes are checked before anything
+    /// is allocated.
+    fn residual(&mut self, n: &NodeProto, skip: &str) -> Result<(), OnnxError> {
+        let refuse = |kind: OnnxErrorKind, what: String, hint: &str| {
+            err(kind, format!("{} {what}", node_label(n)), hint)
+        };
+        let chain_hint = "ravel supports residual Adds whose skip comes from an earlier value of the layer chain (x + F(x), F of affine layers and ReLUs); export other graphs as a plain chain";
+        let Some(fork) = self.values.get(skip).cloned() else {
+            return Err(refuse(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "adds '{}', which is not an earlier value of the layer chain (two computed values, neither descending from the other, or a skip across another skip's end)",
+                    sanitize(skip)
+                ),
+                chain_hint,
+            ));
+        };
+        let start = fork.at;
+        let branch = self.layers.get(start..).unwrap_or_default();
+        if branch.is_empty() {
+            return Err(refuse(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "adds '{}' to a value with no layer between them",
+                    sanitize(skip)
+                ),
+                "fold the doubling into the next layer before export",
+            ));
+        }
+        if let Some(a) = branch.iter().find_map(|l| match l {
+            Layer::Act(a) if *a != Activation::Relu => Some(*a),
+            _ => None,
+        }) {
+            return Err(refuse(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "closes a skip connection across a {} activation, which ravel cannot carry the skipped value through exactly",
+                    match a {
+                        Activation::Tanh => "Tanh",
+                        _ => "Sigmoid",
+                    }
+                ),
+                "ravel supports residual blocks whose branch has only affine layers and ReLU (or LeakyRelu, Clip) activations",
+            ));
+        }
+        let h = self.width()?;
+        let first_cols = match branch.first() {
+            Some(Layer::Affine { w, .. }) => Some(w.ncols()),
+            _ => None,
+        };
+        let Some(width) = fork.width.or(first_cols) else {
+            return Err(refuse(
+                OnnxErrorKind::Malformed,
+                format!("adds '{}', a value of unknown size", sanitize(skip)),
+                "give the graph input a static shape",
+            ));
+        };
+        // the flat layouts agree, and broadcasting cannot enlarge either
+        let strip = |s: &[usize]| {
+            s.iter()
+                .skip_while(|d| **d == 1)
+                .copied()
+                .collect::<Vec<_>>()
+        };
+        let shapes_differ = match (&fork.shape, &self.shape) {
+            (Some(a), Some(b)) => strip(a) != strip(b),
+            _ => false,
+        };
+        if width != h || shapes_differ {
+            let shown = |s: &Option<Vec<usize>>, w: usize| {
+                s.as_ref().map_or(format!("of width {w}"), |s| {
+                    format!("of shape {}", shape_text(s))
+                })
+            };
+            return Err(refuse(
+                OnnxErrorKind::Malformed,
+                format!(
+                    "adds a value {} to '{}', a value {}",
+                    shown(&self.shape, h),
+                    sanitize(skip),
+                    shown(&fork.shape, width)
+                ),
+                "a residual connection adds values of one shape",
+            ));
+        }
+        // sizes of the new layers, checked before they are built
+        let k = width.checked_mul(2);
+        let last = branch.len() - 1;
+        let merge = last > 0 && matches!(branch.last(), Some(Layer::Affine { .. }));
+        let mut dims: Vec<(Option<usize>, Option<usize>)> = Vec::new();
+        for (i, l) in branch.iter().enumerate() {
+            match l {
+                Layer::Act(_) if i == 0 => {
+                    dims.push((k.and_then(|k| k.checked_add(width)), Some(width)))
+                }
+                Layer::Act(_) => {}
+                Layer::Affine { w, .. } if i == 0 => {
+                    dims.push((k.and_then(|k| k.checked_add(w.nrows())), Some(w.ncols())))
+                }
+                Layer::Affine { w, .. } if i == last && merge => {
+                    dims.push((Some(w.nrows()), k.and_then(|k| k.checked_add(w.ncols()))))
+                }
+                Layer::Affine { w, .. } => dims.push((
+                    k.and_then(|k| k.checked_add(w.nrows())),
+                    k.and_then(|k| k.checked_add(w.ncols())),
+                )),
+            }
+        }
+        if !merge {
+            dims.push((Some(width), k.and_then(|k| k.checked_add(width))));
+        }
+        let too_wide = || {
+            refuse(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "carries a skipped value of width {width} beside its branch, which takes a layer past ravel's limit of {MAX_WIDTH} neurons"
+                ),
+                "ravel verifies small networks: a residual block widens its branch by twice the skipped width",
+            )
+        };
+        let mut entries = self
+            .layers
+            .get(..start)
+            .unwrap_or_default()
+            .iter()
+            .fold(0u64, |t, l| match l {
+                Layer::Affine { w, .. } => {
+                    t.saturating_add((w.nrows() as u64).saturating_mul(w.ncols() as u64))
+                }
+                Layer::Act(_) => t,
+            });
+        for (r, c) in &dims {
+            let (Some(r), Some(c)) = (r, c) else {
+                return Err(too_wide());
+            };
+            if *r as u64 > MAX_WIDTH || *c as u64 > MAX_WIDTH {
+                return Err(too_wide());
+            }
+            entries = entries.saturating_add((*r as u64).saturating_mul(*c as u64));
+        }
+        if entries > MAX_LAYER_ENTRIES {
+            return Err(refuse(
+                OnnxErrorKind::Unsupported,
+                format!(
+                    "carries a skipped value of width {width} beside its branch, which brings the network's layers to {entries} matrix entries, more than ravel's limit of {MAX_LAYER_ENTRIES}"
+                ),
+                "ravel verifies small networks: a residual block widens its branch by twice the skipped width",
+            ));
+        }
+        let relu = branch.iter().any(|l| matches!(l, Layer::Act(_)));
+        let eye = DMatrix::<f64>::identity(width, width);
+        // x from the pair: relu x − relu −x after a ReLU, else the first half
+        let mut back = DMatrix::<f64>::zeros(width, 2 * width);
+        back.view_mut((0, 0), (width, width)).copy_from(&eye);
+        if relu {
+            back.view_mut((0, width), (width, width))
+                .copy_from(&(-&eye));
+        }
+        let tail = self.layers.split_off(start);
+        let mut out = Vec::with_capacity(tail.len() + 2);
+        for (i, l) in tail.into_iter().enumerate() {
+            match l {
+                Layer::Act(a) => {
+                    if i == 0 {
+                        let mut w = DMatrix::<f64>::zeros(3 * width, width);
+                        w.view_mut((0, 0), (width, width)).copy_from(&eye);
+                        w.view_mut((width, 0), (width, width)).copy_from(&eye);
+                        w.view_mut((2 * width, 0), (width, width))
+                            .copy_from(&(-&eye));
+                        out.push(Layer::Affine {
+                            w,
+                            b: DVector::zeros(3 * width),
+                        });
+                    }
+                    out.push(Layer::Act(a));
+                }
+                Layer::Affine { w, b } if i == 0 => {
+                    let (r, c) = (w.nrows(), w.ncols());
+                    let mut wide = DMatrix::<f64>::zeros(r + 2 * width, c);
+                    wide.view_mut((0, 0), (r, c)).copy_from(&w);
+                    wide.view_mut((r, 0), (width, width)).copy_from(&eye);
+                    wide.view_mut((r + width, 0), (width, width))
+                        .copy_from(&(-&eye));
+                    let bias = b.clone().resize_vertically(r + 2 * width, 0.0);
+                    out.push(Layer::Affine { w: wide, b: bias });
+                }
+                Layer::Affine { w, b } if i == last && merge => {
+                    let (r, c) = (w.nrows(), w.ncols());
+                    let mut wide = DMatrix::<f64>::zeros(r, c + 2 * width);
+                    wide.view_mut((0, 0), (r, c)).copy_from(&w);
+                    wide.view_mut((0, c), (width, 2 * width)).copy_from(&back);
+                    out.push(Layer::Affine { w: wide, b });
+                }
+                Layer::Affine { w, b } => {
+                    let (r, c) = (w.nrows(), w.ncols());
+                    let mut wide = DMatrix::<f64>::zeros(r + 2 * width, c + 2 * width);
+                    wide.view_mut((0, 0), (r, c)).copy_from(&w);
+                    wide.view_mut((r, c), (2 * width, 2 * width))
+                        .copy_from(&DMatrix::<f64>::identity(2 * width, 2 * width));
+                    let bias = b.resize_vertically(r + 2 * width, 0.0);
+                    out.push(Layer::Affine { w: wide, b: bias });
+                }
+            }
+        }
+        if !merge {
+            let mut w = DMatrix::<f64>::zeros(width, 3 * width);
+            w.view_mut((0, 0), (width, width)).copy_from(&eye);
+            w.view_mut((0, width), (width, 2 * width)).copy_from(&back);
+            out.push(Layer::Affine {
+                w,
+                b: DVector::zeros(width),
+            });
+        }
+        self.layers.extend(out);
+        // the values inside the branch now carry the pair: no later skip
+        // may start there
+        self.values.retain(|_, v| v.at <= start);
+        self.width = Some(width);
+        if let (Some(a), Some(b)) = (&fork.shape, &self.shape) {
+            if a.len() > b.len() {
+                self.shape = Some(a.clone());
+            }
+        }
+        self.notes.push("residual connection".to_string());
+        Ok(())
     }
 
     /// Lower one node onto the chain: a constant is recorded, any other
@@ -949,6 +1239,10 @@ impl Lowering {
             ));
         }
         let data_first = first == self.current;
+        if let Some(skip) = self.computed_operand(n, &op) {
+            self.residual(n, &skip)?;
+            return self.advance(out);
+        }
         match op.as_str() {
             "Gemm" => self.gemm(n, data_first)?,
             "MatMul" => self.matmul(n)?,
@@ -984,6 +1278,19 @@ impl Lowering {
                 ))
             }
         }
+        self.advance(out)
+    }
+
+    /// `out` becomes the running value, recorded as a value of the chain.
+    fn advance(&mut self, out: String) -> Result<(), OnnxError> {
+        self.values.insert(
+            out.clone(),
+            ChainValue {
+                at: self.layers.len(),
+                width: self.width,
+                shape: self.shape.clone(),
+            },
+        );
         self.current = out;
         Ok(())
     }
@@ -1518,7 +1825,16 @@ pub fn load(bytes: &[u8], external: &ExternalFiles) -> Result<Controller, OnnxEr
         layers: Vec::new(),
         notes: Vec::new(),
         dense: 0,
+        values: HashMap::new(),
     };
+    low.values.insert(
+        low.current.clone(),
+        ChainValue {
+            at: 0,
+            width: low.width,
+            shape: low.shape.clone(),
+        },
+    );
     for n in &graph.node {
         low.node(n)?;
         // every layer is a dense matrix (a normalisation's diagonal too):

@@ -487,6 +487,7 @@ impl Evidence {
             Ok(())
         };
         let mut neurons = Vec::new();
+        let mut seen = std::collections::BTreeSet::new();
         for (i, p) in get(v, "neurons")?
             .as_array()
             .ok_or("`splits.neurons` must be an array")?
@@ -504,6 +505,13 @@ impl Evidence {
                 Some("hi") => true,
                 _ => return Err(format!("{what}: `bound` must be \"lo\" or \"hi\"")),
             };
+            // one proof per bound: a repeated entry would only cost work
+            if !seen.insert((layer, neuron, upper)) {
+                return Err(format!(
+                    "{what}: a second proof of the {} bound of neuron ({layer}, {neuron})",
+                    if upper { "upper" } else { "lower" }
+                ));
+            }
             spend(chain.work(layer))?;
             let nu = read_nu(get(p, "nu")?, chain, layer, &what)?;
             neurons.push(NeuronNu {
@@ -878,5 +886,14 @@ mod tests {
             1001
         ]));
         err(&huge, (1000, MAX_WORK), "nodes");
+        // a neuron bound proved twice: refused (each entry costs work)
+        let entry = json!({ "layer": 0, "neuron": 0, "bound": "lo", "nu": [] });
+        let with = |neurons: serde_json::Value| json!({ "layers": layers, "neurons": neurons, "nodes": [{}] });
+        assert!(Evidence::read(&with(json!([entry])), &c, 1).is_ok());
+        err(
+            &with(json!([entry, entry])),
+            (MAX_NODES, MAX_WORK),
+            "second proof",
+        );
     }
 }

@@ -201,6 +201,12 @@ fn counterexamples_between_the_instants_are_replayed_on_pieces() {
     assert_eq!(cert["verdicts"][i]["between"], true);
     assert_eq!(answer(&cert, &plan), Answer::Valid);
     let step = cert["verdicts"][i]["step"].as_u64().expect("step");
+    let j = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "avoid")
+        .expect("an avoid property");
     // the instant that ends the period: x0 is back near 0 there
     let mut bad = cert.clone();
     bad["verdicts"][i]["between"] = Value::from(false);
@@ -217,13 +223,14 @@ fn counterexamples_between_the_instants_are_replayed_on_pieces() {
     let mut bad = cert.clone();
     bad["verdicts"][i]["trajectory"]["initial"][1] = Value::from(1.0);
     not_valid(&bad, &plan, "initial state outside X0");
+    // a window in seconds ending inside the period (`during [0, 0.5]`:
+    // instant 0, period 1): the violation may lie after its end
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][j]["steps"] = serde_json::json!({ "first": 0, "last": 0 });
+    bad["problem"]["properties"][j]["periods"] = serde_json::json!({ "first": 1, "last": 1 });
+    bad["verdicts"][i]["step"] = Value::from(1);
+    not_valid(&bad, &plan, "a period the window ends inside");
     // x0 ≥ 0.9: the swing (about 0.8) never reaches it
-    let j = cert["problem"]["properties"]
-        .as_array()
-        .expect("properties")
-        .iter()
-        .position(|p| p["kind"] == "avoid")
-        .expect("an avoid property");
     let mut bad = cert.clone();
     bad["problem"]["properties"][j]["members"][0] =
         serde_json::json!([{ "a": [-1.0, 0.0], "b": -0.9 }]);

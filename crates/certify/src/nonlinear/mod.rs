@@ -944,7 +944,7 @@ fn replay(
 
 /// Replay a recorded trajectory that violates an "always" goal or an avoid
 /// set between the instants, in the period ending at `step` (continuous
-/// time): the checker's own enclosure of the trajectory up to step
+/// time; the whole period inside the window): the checker's own enclosure of the trajectory up to step
 /// `step − 1`, then of that period in pieces of `1/s` of it for each `s` of
 /// [`flow::SUBSTEPS`] in turn; some piece must lie wholly outside the goal
 /// (or inside an avoid member).
@@ -957,7 +957,7 @@ fn replay_between(
 ) -> R<Result<(), String>> {
     let n = problem.n();
     let (d, q) = (problem.w.len(), problem.v.len());
-    let periods = match prop {
+    let (steps, periods) = match prop {
         Prop::Goal {
             eventually: true, ..
         } => {
@@ -965,12 +965,17 @@ fn replay_between(
                 "claims to violate an eventually goal between the instants".into(),
             ))
         }
-        Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
+        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
+            (*steps, *periods)
+        }
     };
+    // the whole period in the window (both its instants are the window's):
+    // a window in seconds may end inside a period it covers
     if problem.field.period.is_none()
         || step == 0
         || step > problem.horizon
         || !(periods.0..=periods.1).contains(&step)
+        || !(steps.0 < step && step <= steps.1)
     {
         return Ok(Err(format!(
             "does not certainly violate the property between steps {} and {step}: the property does not apply there",

@@ -529,7 +529,8 @@ const CONFIRM_PIECES: [usize; 3] = [8, 32, 128];
 
 /// Whether a simulated trajectory certainly violates an "always" goal or an
 /// avoid set between two instants, in the period ending at `step` (a
-/// continuous-time nonlinear plant, the period in the property's window):
+/// continuous-time nonlinear plant, the whole period in the property's
+/// window: both its instants are the window's):
 /// its initial state and noise values lie in their sets, the rigorous
 /// enclosure of the trajectory up to step `step − 1` is
 /// [`certainly_violates`]'s, and the validated flow of that period, cut into
@@ -553,8 +554,10 @@ pub fn certainly_violates_between(
             ..
         }
     );
-    if eventually || !has_between(plan) || step == 0 || !(w.periods.0..=w.periods.1).contains(&step)
-    {
+    // the whole period in the window: a window in seconds may end inside a
+    // period it covers, and a violation after its end is none
+    let inside = step > w.steps.0 && step <= w.steps.1 && w.has_period(step);
+    if eventually || !has_between(plan) || !inside {
         return false;
     }
     let Some(x0) = tr.states.first() else {

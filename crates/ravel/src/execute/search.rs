@@ -81,8 +81,8 @@ impl Space {
 /// Instants simulated inside each control period by [`between_violations`].
 const INSIDE: usize = 8;
 
-/// A continuous-time nonlinear plant: per period of the window (in time
-/// order), the deepest violation of an "always" goal or an avoid set
+/// A continuous-time nonlinear plant: per period wholly inside the window
+/// (in time order), the deepest violation of an "always" goal or an avoid set
 /// strictly between its two instants, from the trajectory's state, control
 /// and disturbance at the period's start simulated to `INSIDE − 1` instants
 /// inside it, with the period (ending at that step); empty for other
@@ -109,8 +109,10 @@ fn between_violations(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Ve
                 .fold(f64::NEG_INFINITY, f64::max),
         }
     };
+    // the periods wholly inside the window (both instants in it)
     let w = prop.window();
-    for p in w.periods.0.max(1)..=w.periods.1.min(tr.states.len().saturating_sub(1)) {
+    let (first, last) = (w.periods.0.max(w.steps.0 + 1), w.periods.1.min(w.steps.1));
+    for p in first..=last.min(tr.states.len().saturating_sub(1)) {
         let (Some(x), Some(u), Some(wn)) = (
             tr.states.get(p - 1),
             tr.controls.get(p - 1),

@@ -185,6 +185,62 @@ fn counterexamples_are_replayed_by_the_checkers_own_integration() {
     not_valid(&bad, &plan, "initial state outside X0");
 }
 
+/// A counterexample that violates its avoid set only between two instants
+/// is replayed on the checker's own pieces of that period: VALID as
+/// written, never VALID when it claims another period, the instant instead
+/// of the period, or a start outside X0.
+#[test]
+fn counterexamples_between_the_instants_are_replayed_on_pieces() {
+    let (plan, cert) = run("specs/oscillator_between_falsified.ravel");
+    let i = cert["verdicts"]
+        .as_array()
+        .expect("verdicts")
+        .iter()
+        .position(|v| v["status"] == "FALSIFIED")
+        .expect("a falsified property");
+    assert_eq!(cert["verdicts"][i]["between"], true);
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let step = cert["verdicts"][i]["step"].as_u64().expect("step");
+    let j = cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "avoid")
+        .expect("an avoid property");
+    // the instant that ends the period: x0 is back near 0 there
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["between"] = Value::from(false);
+    not_valid(&bad, &plan, "the instant instead of the period");
+    // step 0 ends no period
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["step"] = Value::from(0);
+    not_valid(&bad, &plan, "period 0 named");
+    // a period after the window (horizon 3)
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["step"] = Value::from(step + 10);
+    not_valid(&bad, &plan, "a period past the horizon");
+    // a start outside X0
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["trajectory"]["initial"][1] = Value::from(1.0);
+    not_valid(&bad, &plan, "initial state outside X0");
+    // a window in seconds ending inside the period (`during [0, 0.5]`:
+    // instant 0, period 1): the violation may lie after its end
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][j]["steps"] = serde_json::json!({ "first": 0, "last": 0 });
+    bad["problem"]["properties"][j]["periods"] = serde_json::json!({ "first": 1, "last": 1 });
+    bad["verdicts"][i]["step"] = Value::from(1);
+    not_valid(&bad, &plan, "a period the window ends inside");
+    // x0 ≥ 0.9: the swing (about 0.8) never reaches it
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][j]["members"][0] =
+        serde_json::json!([{ "a": [-1.0, 0.0], "b": -0.9 }]);
+    not_valid(&bad, &plan, "a set the trajectory does not reach");
+    // `between` must be a boolean
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["between"] = Value::from(1);
+    assert!(matches!(answer(&bad, &plan), Answer::Unreadable(_)));
+}
+
 #[test]
 fn linear_plants_in_continuous_time_are_checked_between_samples() {
     let (plan, cert) = run("specs/double_integrator_continuous.ravel");

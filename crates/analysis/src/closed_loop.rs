@@ -201,10 +201,13 @@ pub struct Step {
     pub issues: Vec<Issue>,
     /// Why the set is the whole space, if it is.
     pub cut: Option<Cut>,
-    /// A continuous-time nonlinear plant's states over the control period
-    /// that ends at this step, both sampling instants included (the
-    /// intersample enclosure); `None` for other plants.
-    pub between: Option<IBox>,
+    /// A continuous-time plant's states over the control period that ends
+    /// at this step, both sampling instants included (the intersample
+    /// enclosure): boxes whose union holds every state of the period, in
+    /// time order — a nonlinear plant's one per eighth of the period
+    /// ([`crate::nonlinear::integrate::FlowOut::pieces`]), a linear plant's
+    /// one for the whole period; `None` for other plants and periods.
+    pub between: Option<Vec<IBox>>,
 }
 
 impl Step {

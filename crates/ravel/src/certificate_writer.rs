@@ -635,6 +635,10 @@ pub fn build_system(plan: &SystemPlan, outcome: &SystemOutcome, id: &Identity) -
                 json!({ "property": p.name, "kind": r.kind.as_str(), "status": r.status.as_str() });
             if r.status == Verdict::Falsified {
                 v["step"] = json!(r.step);
+                if r.between {
+                    // violated in the period ending at `step`
+                    v["between"] = json!(true);
+                }
                 v["trajectory"] = r
                     .counterexample
                     .as_ref()

@@ -60,12 +60,13 @@ impl Claim {
 /// state dimension (see [`resymbolize`]).
 const EXTRA_SYMBOLS: usize = 4;
 
-/// The state after one step, and the hull of the states in between.
+/// The state after one step, and the states in between.
 struct Advanced {
     /// The state at the next sampling instant.
     next: Vec<Tm>,
-    /// The states over the period (continuous time), including both ends.
-    pipe: Option<IBox>,
+    /// The states over the period (continuous time), including both ends,
+    /// in the flow's pieces ([`integrate::FlowOut::pieces`]).
+    pipe: Option<Vec<IBox>>,
 }
 
 impl NonlinearLoop {
@@ -105,7 +106,10 @@ impl NonlinearLoop {
                         if p.cut().is_none() && step.cut().is_none() {
                             step.set = step.set.intersect(&p.set);
                             step.between = match (step.between, &p.between) {
-                                (Some(a), Some(b)) => Some(a.intersect(b)),
+                                // the same pieces of the same period
+                                (Some(a), Some(b)) if a.len() == b.len() => {
+                                    Some(a.iter().zip(b).map(|(a, b)| a.intersect(b)).collect())
+                                }
                                 (a, _) => a,
                             };
                         }
@@ -155,7 +159,10 @@ impl NonlinearLoop {
     /// cannot be enclosed or the plant is in discrete time.
     pub fn pipe(&self, x: &IBox) -> Option<IBox> {
         let state = symbols(x)?;
-        self.advance(&state).ok()?.pipe.filter(IBox::is_finite)
+        let pieces = self.advance(&state).ok()?.pipe?;
+        let mut it = pieces.iter();
+        let first = it.next()?.clone();
+        Some(it.fold(first, |h, b| h.hull(b))).filter(IBox::is_finite)
     }
 
     /// One closed-loop step of the Taylor-model state `x`.
@@ -177,7 +184,7 @@ impl NonlinearLoop {
                     integrate::flow(field, x, &u, &w, period, &self.settings).map_err(cut_of)?;
                 Ok(Advanced {
                     next: out.end,
-                    pipe: Some(interval_box(&out.pipe)),
+                    pipe: Some(out.pieces.iter().map(|p| interval_box(p)).collect()),
                 })
             }
             Time::Discrete => Ok(Advanced {
@@ -298,6 +305,24 @@ impl NonlinearLoop {
     /// with these noise values (interval bounds of the controller, the
     /// validated flow of the plant); `None` when it cannot be bounded.
     pub fn enclose_step(&self, x: &IBox, w: &[f64], v: &[f64]) -> Option<IBox> {
+        self.enclose_period(x, w, v, self.settings.substeps)
+            .map(|(end, _)| end)
+    }
+
+    /// [`NonlinearLoop::enclose_step`] with the states in between: the
+    /// next state's box and, in continuous time, one box per
+    /// `1/substeps` of the period (in time order; see
+    /// [`integrate::FlowOut::pieces`]), each containing every state from
+    /// `x` over its part of the period. More substeps give shorter pieces,
+    /// which a single trajectory needs to be shown inside a set it only
+    /// passes through. In discrete time the pieces are empty.
+    pub fn enclose_period(
+        &self,
+        x: &IBox,
+        w: &[f64],
+        v: &[f64],
+        substeps: usize,
+    ) -> Option<(IBox, Vec<IBox>)> {
         let syms = 0;
         let xs: Vec<Tm> = (0..x.dim())
             .map(|i| Tm::from_interval(Interval::new(x.lo[i], x.hi[i]), syms))
@@ -326,16 +351,20 @@ impl NonlinearLoop {
             .map(|&wi| Tm::from_interval(Interval::new(wi, wi), syms))
             .collect();
         let field = &self.plant.field;
-        let next = match field.time {
+        let (next, pieces) = match field.time {
             Time::Continuous { period } => {
-                integrate::flow(field, &xs, &u, &ws, period, &self.settings)
-                    .ok()?
-                    .end
+                let s = integrate::Settings {
+                    substeps,
+                    ..self.settings
+                };
+                let out = integrate::flow(field, &xs, &u, &ws, period, &s).ok()?;
+                let pieces: Vec<IBox> = out.pieces.iter().map(|p| interval_box(p)).collect();
+                (out.end, pieces)
             }
-            Time::Discrete => integrate::image(field, &xs, &u, &ws).ok()?,
+            Time::Discrete => (integrate::image(field, &xs, &u, &ws).ok()?, Vec::new()),
         };
         let b = range_box(&next);
-        b.is_finite().then_some(b)
+        (b.is_finite() && pieces.iter().all(IBox::is_finite)).then_some((b, pieces))
     }
 }
 

@@ -1,6 +1,6 @@
 //! The nonlinear closed loop against simulation: every simulated state
 //! inside its step's set, every intersample state inside the period's
-//! enclosure; and the linear double integrator run through the integrator
+//! piece for its time; and the linear double integrator run through the integrator
 //! against its closed form.
 
 use super::integrate;
@@ -109,19 +109,26 @@ fn simulated_trajectories_stay_inside_the_reachable_sets() {
                 let y = [x[0] + v[0], x[1]];
                 let u = nl.net.forward(&y);
                 if let Time::Continuous { period } = time {
-                    let pipe = step.between.as_ref().expect("continuous time has a pipe");
-                    for j in 1..=9 {
+                    let pieces = step.between.as_ref().expect("continuous time has pieces");
+                    assert_eq!(pieces.len(), 8);
+                    // 40 instants per period, each against the piece of its
+                    // eighth (both pieces at their common end)
+                    for j in 1..40usize {
                         let at = integrate::simulate(
                             &nl.plant.field,
                             &x,
                             &u,
                             &w,
-                            period * j as f64 / 10.0,
+                            period * j as f64 / 40.0,
                         );
-                        assert!(
-                            pipe.contains_point(&at),
-                            "{time:?} step {t}: {at:?} leaves {pipe:?}"
-                        );
+                        // at an edge (j a multiple of 5), the two pieces it ends and starts
+                        let first = (j - 1) / 5;
+                        for (k, piece) in pieces.iter().enumerate().take(j / 5 + 1).skip(first) {
+                            assert!(
+                                piece.contains_point(&at),
+                                "{time:?} step {t}: {at:?} at {j}/40 leaves piece {k} {piece:?}"
+                            );
+                        }
                     }
                 }
                 let (_, next) = nl.simulate_batch(&x, &w, &v, 1);

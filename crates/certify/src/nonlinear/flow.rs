@@ -16,6 +16,12 @@
 //!    intersected with `E`.
 //!
 //! A substep without an enclosure is halved (up to [`MAX_HALVINGS`] times).
+//!
+//! The states between the instants are kept per initial substep
+//! ([`Period::between`]: the period cut into `substeps` equal pieces, each
+//! piece the hull of its substep's halvings), so a property is checked on
+//! boxes a `substeps`-th of the period long; the analysis cuts the period
+//! into 8 pieces, and every try of [`SUBSTEPS`] cuts it at least as finely.
 
 use super::arith::{Fail, Iv, Num};
 use ravel_base::expr::Func;
@@ -492,12 +498,22 @@ fn conv_range<T: Num>(
     acc.ok_or(Fail::Overflow)
 }
 
-/// The state after one period and the box of the states in between.
+/// The state after one period and the boxes of the states in between.
 pub struct Period<T> {
     /// The state at the end of the period.
     pub end: Vec<T>,
-    /// Every state over the period, ends included (continuous time).
-    pub between: Option<Vec<Iv>>,
+    /// Every state over the period, ends included (continuous time): one
+    /// box per substep, `between[j]` holding the states over
+    /// `[j·T/substeps, (j+1)·T/substeps]`.
+    pub between: Option<Vec<Vec<Iv>>>,
+}
+
+/// The hull of a period's pieces.
+pub fn hull(pieces: &[Vec<Iv>]) -> Option<Vec<Iv>> {
+    let (first, rest) = pieces.split_first()?;
+    Some(rest.iter().fold(first.clone(), |h, b| {
+        h.iter().zip(b).map(|(a, b)| a.hull(b)).collect()
+    }))
 }
 
 /// One period of the plant from `x` with controls `u` and disturbances `w`
@@ -518,13 +534,15 @@ pub fn period<T: Num>(
     let substeps = substeps.max(1);
     let h = t / f64::from(substeps);
     let mut state = x.to_vec();
-    let mut pipe: Option<Vec<Iv>> = None;
+    let mut pieces = Vec::with_capacity(substeps as usize);
     for _ in 0..substeps {
-        state = substep(f, &state, u, w, h, 0, &mut pipe)?;
+        let mut piece: Option<Vec<Iv>> = None;
+        state = substep(f, &state, u, w, h, 0, &mut piece)?;
+        pieces.push(piece.ok_or(Fail::NoEnclosure)?);
     }
     Ok(Period {
         end: state,
-        between: pipe,
+        between: Some(pieces),
     })
 }
 

@@ -157,7 +157,8 @@ pub(crate) fn intersample(
         w: &[],
     };
     let out = compose(&parts, net, xs, 0, flow::SUBSTEPS[0]).ok()?;
-    let pipe = out.between?;
+    // a linear plant's period is checked as one box
+    let pipe = flow::hull(&out.between?)?;
     let b = Bx {
         lo: pipe.iter().map(|i| i.lo).collect(),
         hi: pipe.iter().map(|i| i.hi).collect(),
@@ -225,7 +226,21 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                 .push(format!("{shown}: UNSURE (no claim)")),
             Some("FALSIFIED") => {
                 let step = uint(get(v, "step")?, "step")?;
-                match replay(&problem, net, prop, step, get(v, "trajectory")?)? {
+                let between = match v.get("between") {
+                    None => false,
+                    Some(Value::Bool(b)) => *b,
+                    Some(_) => return Err(format!("verdict {i}: `between` must be a boolean")),
+                };
+                let replayed = if between {
+                    replay_between(&problem, net, prop, step, get(v, "trajectory")?)?
+                } else {
+                    replay(&problem, net, prop, step, get(v, "trajectory")?)?
+                };
+                match replayed {
+                    Ok(()) if between => report.properties.push(format!(
+                        "{shown}: FALSIFIED (trajectory replayed, violates between steps {} and {step})",
+                        step.saturating_sub(1)
+                    )),
                     Ok(()) => report.properties.push(format!(
                         "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
                     )),
@@ -447,11 +462,11 @@ fn inside(image: &[Af], prev: &[u64], claim: &Zono) -> Result<(), String> {
 }
 
 /// One cell's checked claims and the checker's own period enclosures
-/// (`between[t]`: the period ending at step `t`; none at step 0).
+/// (`between[t]`: the period ending at step `t`, in pieces; none at step 0).
 struct CellChain {
     start: Bx,
     claims: Vec<Zono>,
-    between: Vec<Option<Vec<Iv>>>,
+    between: Vec<Option<Vec<Vec<Iv>>>>,
 }
 
 /// Check the evidence; `Ok(Err(msg))` is the first false claim.
@@ -496,7 +511,7 @@ fn evidence(
     }
     for (name, prop) in verified {
         for (c, chain) in chains.iter().enumerate() {
-            if let Err(why) = proves(problem, prop, chain) {
+            if let Err(why) = proves(problem, net, slopes, prop, chain) {
                 return Ok(Err(format!(
                     "property `{}`, cell {c}: {why}",
                     sanitize(name)
@@ -702,8 +717,16 @@ fn claim_misses(z: &Zono, s: &CSet) -> bool {
     s.rows.iter().any(|(a, b)| z.support_lower(a) > *b) || s.missed_by(&z.bbox())
 }
 
-/// Whether one cell's chain proves the property; why not.
-fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), String> {
+/// Whether one cell's chain proves the property; why not. A period whose
+/// pieces do not show it is enclosed again from the claim before it with
+/// the finer substeps of [`flow::SUBSTEPS`] (shorter pieces).
+fn proves(
+    problem: &Problem,
+    net: &Network,
+    slopes: usize,
+    prop: &Prop,
+    chain: &CellChain,
+) -> Result<(), String> {
     let (first, last) = match prop {
         Prop::Goal { steps, .. } | Prop::Avoid { steps, .. } => {
             (steps.0, steps.1.min(problem.horizon))
@@ -749,9 +772,21 @@ fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), Strin
     let periods = match prop {
         Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
     };
+    let fine = |pieces: &[Vec<Iv>]| {
+        pieces.iter().all(|piece| {
+            let b = Bx {
+                lo: piece.iter().map(|i| i.lo).collect(),
+                hi: piece.iter().map(|i| i.hi).collect(),
+            };
+            match prop {
+                Prop::Goal { set, .. } => set.holds_on(&b),
+                Prop::Avoid { members, .. } => members.iter().all(|m| m.missed_by(&b)),
+            }
+        })
+    };
     for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
-        let pipe = match chain.between.get(p) {
-            Some(Some(pipe)) => pipe,
+        let pieces = match chain.between.get(p) {
+            Some(Some(pieces)) => pieces,
             // discrete time: no states between the instants
             Some(None) => continue,
             None => {
@@ -760,15 +795,18 @@ fn proves(problem: &Problem, prop: &Prop, chain: &CellChain) -> Result<(), Strin
                 ))
             }
         };
-        let b = Bx {
-            lo: pipe.iter().map(|i| i.lo).collect(),
-            hi: pipe.iter().map(|i| i.hi).collect(),
-        };
-        let fine = match prop {
-            Prop::Goal { set, .. } => set.holds_on(&b),
-            Prop::Avoid { members, .. } => members.iter().all(|m| m.missed_by(&b)),
-        };
-        if !fine {
+        if fine(pieces) {
+            continue;
+        }
+        let finer = flow::SUBSTEPS.iter().any(|&substeps| {
+            chain.claims.get(p - 1).is_some_and(|before| {
+                advance(problem, net, before, slopes, substeps)
+                    .ok()
+                    .and_then(|s| s.between)
+                    .is_some_and(|pieces| fine(&pieces))
+            })
+        });
+        if !finer {
             return Err(format!(
                 "between steps {} and {p}: the checker's enclosure is not shown to satisfy the property",
                 p - 1
@@ -864,10 +902,10 @@ fn replay(
         match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
             Ok(p) => {
                 x = p.end;
-                // the period ending at step t + 1
-                if let Some(pipe) = p.between {
+                // the period ending at step t + 1, piece by piece
+                if let Some(pieces) = p.between {
                     if (periods.0..=periods.1).contains(&(t + 1)) {
-                        window.push(to_box(&pipe));
+                        window.extend(pieces.iter().map(|piece| to_box(piece)));
                     }
                 }
             }
@@ -902,6 +940,125 @@ fn replay(
             xb.lo, xb.hi
         ))
     })
+}
+
+/// Replay a recorded trajectory that violates an "always" goal or an avoid
+/// set between the instants, in the period ending at `step` (continuous
+/// time; the whole period inside the window): the checker's own enclosure of the trajectory up to step
+/// `step − 1`, then of that period in pieces of `1/s` of it for each `s` of
+/// [`flow::SUBSTEPS`] in turn; some piece must lie wholly outside the goal
+/// (or inside an avoid member).
+fn replay_between(
+    problem: &Problem,
+    net: &Network,
+    prop: &Prop,
+    step: usize,
+    tr: &Value,
+) -> R<Result<(), String>> {
+    let n = problem.n();
+    let (d, q) = (problem.w.len(), problem.v.len());
+    let (steps, periods) = match prop {
+        Prop::Goal {
+            eventually: true, ..
+        } => {
+            return Ok(Err(
+                "claims to violate an eventually goal between the instants".into(),
+            ))
+        }
+        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
+            (*steps, *periods)
+        }
+    };
+    // the whole period in the window (both its instants are the window's):
+    // a window in seconds may end inside a period it covers
+    if problem.field.period.is_none()
+        || step == 0
+        || step > problem.horizon
+        || !(periods.0..=periods.1).contains(&step)
+        || !(steps.0 < step && step <= steps.1)
+    {
+        return Ok(Err(format!(
+            "does not certainly violate the property between steps {} and {step}: the property does not apply there",
+            step.saturating_sub(1)
+        )));
+    }
+    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < step || vs.len() < step {
+        return Err(format!(
+            "the trajectory has noise for fewer than {step} steps"
+        ));
+    }
+    if !problem.initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    let to_box = |x: &[Iv]| Bx {
+        lo: x.iter().map(|i| i.lo).collect(),
+        hi: x.iter().map(|i| i.hi).collect(),
+    };
+    let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+        let w = vector(w, d, "process_noise")?;
+        let v = vector(v, q, "sensor_noise")?;
+        if !w
+            .iter()
+            .zip(&problem.w)
+            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
+        {
+            return Ok(Err(format!(
+                "has a disturbance outside its box at step {t}"
+            )));
+        }
+        if !v
+            .iter()
+            .zip(&problem.v)
+            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
+        {
+            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+        }
+        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
+        let y = problem.observe(&x, &noise);
+        let ub = network_box(net, &to_box(&y));
+        let u: Vec<Iv> = ub
+            .lo
+            .iter()
+            .zip(&ub.hi)
+            .map(|(&l, &h)| Iv::new(l, h))
+            .collect();
+        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+        if t + 1 < step {
+            match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
+                Ok(p) => x = p.end,
+                Err(e) => return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1))),
+            }
+            continue;
+        }
+        // the period ending at `step`, in ever shorter pieces
+        for substeps in flow::SUBSTEPS {
+            let Ok(p) = flow::period(&problem.field, &x, &u, &wi, substeps) else {
+                continue;
+            };
+            let violated = p.between.iter().flatten().any(|piece| {
+                let b = to_box(piece);
+                match prop {
+                    Prop::Goal { set, .. } => set.missed_by(&b),
+                    Prop::Avoid { members, .. } => members.iter().any(|m| m.holds_on(&b)),
+                }
+            });
+            if violated {
+                return Ok(Ok(()));
+            }
+        }
+    }
+    Ok(Err(format!(
+        "does not certainly violate the property between steps {} and {step}: no piece of the checker's enclosure of that period lies wholly in the violation",
+        step - 1
+    )))
 }
 
 /// The enclosures of one trajectory over every control period between
@@ -943,13 +1100,13 @@ fn eventually_periods(
         };
         x = p.end;
         if t >= first {
-            let Some(pipe) = p.between else {
+            let Some(pieces) = p.between else {
                 return Ok(None);
             };
-            out.push(Bx {
-                lo: pipe.iter().map(|i| i.lo).collect(),
-                hi: pipe.iter().map(|i| i.hi).collect(),
-            });
+            out.extend(pieces.iter().map(|piece| Bx {
+                lo: piece.iter().map(|i| i.lo).collect(),
+                hi: piece.iter().map(|i| i.hi).collect(),
+            }));
         }
     }
     Ok(Some(out))

@@ -76,7 +76,8 @@ pub fn propagate_cell_until(
 }
 
 /// A linear plant in continuous time: the states over every control period
-/// that a property's window covers (the period `t` ends at step `t`), from
+/// that a property's window covers (the period `t` ends at step `t`), one
+/// box for the whole period, from
 /// the box of step `t − 1` by the validated flow of `ẋ = A x + B u + c`,
 /// the controls composed with the state through CROWN's linear bounds over
 /// the observation box (`NonlinearLoop::pipe`). A period that cannot be enclosed is the whole
@@ -101,7 +102,7 @@ fn intersample(plan: &SystemPlan, cl: &ClosedLoop, steps: &mut [Step]) {
         } else {
             lp.pipe(&before.set.bbox())
         };
-        steps[t].between = Some(pipe.unwrap_or_else(|| IBox::whole(n)));
+        steps[t].between = Some(vec![pipe.unwrap_or_else(|| IBox::whole(n))]);
     }
 }
 
@@ -139,7 +140,7 @@ pub(super) fn certainly_empty(cell: &Region) -> bool {
 ///
 /// A goal that must hold always and an avoid set take the least margin over
 /// the window's instants and the periods between them (a continuous-time
-/// nonlinear plant's intersample enclosures); a goal that must hold
+/// plant's intersample enclosures, every piece of a period); a goal that must hold
 /// eventually takes the largest containment margin over the window's
 /// instants: one instant whose set lies inside proves it on the cell.
 pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
@@ -148,8 +149,8 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
             set,
             window,
             mode: GoalMode::Always,
-        } => worst_over(window, sets, &|instant, pipe, out| {
-            for r in [instant, pipe].into_iter().flatten() {
+        } => worst_over(window, sets, &|instant, pieces, out| {
+            for r in instant.into_iter().chain(pieces) {
                 out.push(constraints::containment(set, r));
             }
         }),
@@ -159,9 +160,9 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
             mode: GoalMode::Eventually,
         } => best_over(window, sets, &|r| constraints::containment(set, r)),
         PropertyKind::Avoid { members, window } => {
-            worst_over(window, sets, &|instant, pipe, out| {
+            worst_over(window, sets, &|instant, pieces, out| {
                 for m in members {
-                    for r in [instant, pipe].into_iter().flatten() {
+                    for r in instant.into_iter().chain(pieces) {
                         out.push(constraints::separation(m, r));
                     }
                 }
@@ -171,9 +172,10 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
 }
 
 /// The margins of one step: the instant's set (when the step is one of
-/// the window's instants) and the period's intersample enclosure (when
-/// the period ending at the step is one of the window's), pushed in order.
-type StepMargins<'a> = dyn Fn(Option<&Region>, Option<&Region>, &mut Vec<(f64, bool)>) + 'a;
+/// the window's instants) and the period's intersample enclosure, piece by
+/// piece (when the period ending at the step is one of the window's),
+/// pushed in order.
+type StepMargins<'a> = dyn Fn(Option<&Region>, &[Region], &mut Vec<(f64, bool)>) + 'a;
 
 /// The least margin over a window (see [`cell_margin`]): the first cut
 /// step in the window ends the scan with `−∞`.
@@ -201,15 +203,17 @@ fn worst_over(window: &Window, sets: &[Step], margins: &StepMargins) -> Margin {
             }
             break;
         }
-        // a continuous-time nonlinear plant: the period that ends at step
-        // t lies in the window too
-        let pipe = step
+        // a continuous-time plant: the period that ends at step t lies in
+        // the window too, its states in the union of the pieces
+        let pieces: Vec<Region> = step
             .between
-            .as_ref()
+            .iter()
             .filter(|_| at_period)
-            .map(|b| Region::Box(b.clone()));
+            .flatten()
+            .map(|b| Region::Box(b.clone()))
+            .collect();
         found.clear();
-        margins(at_instant.then_some(&step.set), pipe.as_ref(), &mut found);
+        margins(at_instant.then_some(&step.set), &pieces, &mut found);
         for &(s, issue) in &found {
             let s = sane(s);
             let issue = issue || !step.issues.is_empty();

@@ -24,7 +24,7 @@ mod search;
 use cells::{partition_guided, partition_uniform, Gathered};
 
 pub use cells::{propagate_cell, propagate_cell_until};
-pub use sampling::{certainly_violates, simulate, simulate_states};
+pub use sampling::{certainly_violates, certainly_violates_between, simulate, simulate_states};
 use sampling::{confirm, monte_carlo, resolve_boundary, sampled_shapes, MonteCarlo};
 
 use crate::lower::{NetworkPlan, Partitioner, Plan, Property, PropertyKind, SystemPlan};
@@ -102,6 +102,10 @@ pub struct PropertyResult {
     pub margin: f64,
     /// The step the margin refers to.
     pub step: usize,
+    /// FALSIFIED only: the counterexample violates the property between the
+    /// sampling instants, in the control period ending at `step` (a
+    /// continuous-time nonlinear plant), rather than at `step`.
+    pub between: bool,
     /// The counterexample (FALSIFIED only).
     pub counterexample: Option<Trajectory>,
     /// UNSURE only: the first step (at or before the property's last step)
@@ -119,7 +123,8 @@ pub struct SystemOutcome {
     /// `cells[c][t]`: the set of cell `c` at step `t`.
     pub cells: Vec<Vec<Region>>,
     /// `between[c][t]`: cell `c`'s states over the control period ending at
-    /// step `t` (continuous-time nonlinear plants; `None` otherwise).
+    /// step `t` (continuous-time plants; `None` otherwise): the hull of the
+    /// pieces the properties were checked on.
     pub between: Vec<Vec<Option<IBox>>>,
     /// LP solver statuses that forced a fallback bound, with the step (sorted, unique).
     pub solver_issues: Vec<(usize, Issue)>,
@@ -314,6 +319,7 @@ fn verdicts(plan: &SystemPlan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<Prop
                         status: Verdict::Falsified,
                         margin: -depth,
                         step: t,
+                        between: false,
                         counterexample: Some(tr),
                         cut: None,
                     }
@@ -328,6 +334,7 @@ fn verdicts(plan: &SystemPlan, gathered: &Gathered, mc: &MonteCarlo) -> Vec<Prop
                     },
                     margin,
                     step,
+                    between: false,
                     counterexample: None,
                     cut,
                 },
@@ -347,18 +354,25 @@ fn falsify_unsure(plan: &SystemPlan, properties: &mut [PropertyResult], ctl: &Co
         if r.status != Verdict::Unsure {
             continue;
         }
-        if let Some((depth, tr, t)) = search::search(plan, prop, ctl) {
+        if let Some((depth, tr, t, between)) = search::search(plan, prop, ctl) {
             *r = PropertyResult {
                 name: r.name.clone(),
                 kind: r.kind,
                 status: Verdict::Falsified,
                 margin: -depth,
                 step: t,
+                between,
                 counterexample: Some(tr),
                 cut: None,
             };
         }
     }
+}
+
+/// The hull of a period's pieces (`None` for none).
+fn hull_of(pieces: &[IBox]) -> Option<IBox> {
+    let (first, rest) = pieces.split_first()?;
+    Some(rest.iter().fold(first.clone(), |h, b| h.hull(b)))
 }
 
 /// Execute a plan under a [`Control`]: Monte Carlo, then the partition and
@@ -378,7 +392,11 @@ pub fn execute_system(plan: &SystemPlan, ctl: &Control) -> SystemOutcome {
     let (cells, between): (Vec<Vec<Region>>, Vec<Vec<Option<IBox>>>) = part
         .sets
         .into_iter()
-        .map(|c| c.into_iter().map(|s| (s.set, s.between)).unzip())
+        .map(|c| {
+            c.into_iter()
+                .map(|s| (s.set, s.between.as_deref().and_then(hull_of)))
+                .unzip()
+        })
         .unzip();
     let mut properties = verdicts(plan, &part.gathered, &mc);
     falsify_unsure(plan, &mut properties, ctl);

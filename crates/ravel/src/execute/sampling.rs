@@ -522,6 +522,82 @@ pub fn certainly_violates(
     }
 }
 
+/// The pieces a period is cut into to confirm a violation between the
+/// instants, tried in turn (shorter pieces for a trajectory that only
+/// passes through the set): the certificate checker's substeps.
+const CONFIRM_PIECES: [usize; 3] = [8, 32, 128];
+
+/// Whether a simulated trajectory certainly violates an "always" goal or an
+/// avoid set between two instants, in the period ending at `step` (a
+/// continuous-time nonlinear plant, the whole period in the property's
+/// window: both its instants are the window's):
+/// its initial state and noise values lie in their sets, the rigorous
+/// enclosure of the trajectory up to step `step − 1` is
+/// [`certainly_violates`]'s, and the validated flow of that period, cut into
+/// pieces of `1/s` of it for each `s` of [`CONFIRM_PIECES`] in turn, has a
+/// piece lying wholly outside the goal (or inside an avoid member): every
+/// true state over that part of the period violates the property.
+pub fn certainly_violates_between(
+    plan: &SystemPlan,
+    tr: &Trajectory,
+    prop: &Property,
+    step: usize,
+) -> bool {
+    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
+        return false;
+    };
+    let w = prop.window();
+    let eventually = matches!(
+        prop.kind,
+        PropertyKind::Goal {
+            mode: GoalMode::Eventually,
+            ..
+        }
+    );
+    // the whole period in the window: a window in seconds may end inside a
+    // period it covers, and a violation after its end is none
+    let inside = step > w.steps.0 && step <= w.steps.1 && w.has_period(step);
+    if eventually || !has_between(plan) || !inside {
+        return false;
+    }
+    let Some(x0) = tr.states.first() else {
+        return false;
+    };
+    if !plan.initial.contains_point(x0) {
+        return false;
+    }
+    let violated = |b: &IBox| match &prop.kind {
+        PropertyKind::Goal { set, .. } => constraints::box_outside(set, b),
+        PropertyKind::Avoid { members, .. } => {
+            members.iter().any(|m| constraints::box_inside(m, b))
+        }
+    };
+    let mut x = IBox::point(x0);
+    for t in 0..step {
+        let (Some(wn), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+            return false;
+        };
+        if !(nl.plant.w.contains_point(wn) && nl.plant.v.contains_point(v)) {
+            return false;
+        }
+        if t + 1 < step {
+            match nl.enclose_step(&x, wn, v) {
+                Some(next) => x = next,
+                None => return false,
+            }
+            continue;
+        }
+        for substeps in CONFIRM_PIECES {
+            if let Some((_, pieces)) = nl.enclose_period(&x, wn, v, substeps) {
+                if pieces.iter().any(violated) {
+                    return true;
+                }
+            }
+        }
+    }
+    false
+}
+
 /// Keep only the sampled violations that [`certainly_violates`] confirms
 /// (before any partitioning, so a property-guided partitioner still works on
 /// a property whose violation was not confirmed).

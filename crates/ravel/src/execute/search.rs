@@ -5,13 +5,20 @@
 //! only when [`certainly_violates`] confirms it with a validated enclosure
 //! of the trajectory, as for Monte Carlo.
 //!
+//! For a continuous-time nonlinear plant the trajectories at each start and
+//! at the end of its search are also looked at between the instants
+//! ([`between_violations`]; the search itself climbs on the instants, so
+//! this costs two trajectories per start): a violation there counts when
+//! [`certainly_violates_between`] confirms it on a piece of the period's
+//! validated enclosure.
+//!
 //! It runs after the analysis and only on UNSURE properties, so a VERIFIED
 //! property costs nothing more; its budget is fixed ([`STARTS`] starting
 //! points, [`BUDGET`] simulations each), so its cost is bounded, and it is
 //! deterministic.
 
 use super::constraints;
-use super::sampling::{certainly_violates, has_between, simulate};
+use super::sampling::{certainly_violates, certainly_violates_between, has_between, simulate};
 use super::{tolerance, Control, Property, PropertyKind, SystemPlan, Trajectory};
 use crate::lower::GoalMode;
 use ravel_analysis::sets::IBox;
@@ -71,10 +78,76 @@ impl Space {
     }
 }
 
-/// How deeply a trajectory violates the property (positive: violated),
-/// and at which step; `None` when no state in the window is finite (for
-/// an "eventually" goal: when some state of the window is not, or the
-/// plant is a continuous-time nonlinear one, see
+/// Instants simulated inside each control period by [`between_violations`].
+const INSIDE: usize = 8;
+
+/// A continuous-time nonlinear plant: per period wholly inside the window
+/// (in time order), the deepest violation of an "always" goal or an avoid set
+/// strictly between its two instants, from the trajectory's state, control
+/// and disturbance at the period's start simulated to `INSIDE − 1` instants
+/// inside it, with the period (ending at that step); empty for other
+/// plants and properties, and from the first state that is not finite on.
+fn between_violations(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Vec<(f64, usize)> {
+    let mut out = Vec::new();
+    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
+        return out;
+    };
+    let ravel_base::expr::Time::Continuous { period } = nl.plant.field.time else {
+        return out;
+    };
+    let depth = |x: &[f64]| -> f64 {
+        match &prop.kind {
+            PropertyKind::Goal {
+                set,
+                mode: GoalMode::Always,
+                ..
+            } => -constraints::depth(set, x),
+            PropertyKind::Goal { .. } => f64::NAN,
+            PropertyKind::Avoid { members, .. } => members
+                .iter()
+                .map(|m| constraints::depth(m, x))
+                .fold(f64::NEG_INFINITY, f64::max),
+        }
+    };
+    // the periods wholly inside the window (both instants in it)
+    let w = prop.window();
+    let (first, last) = (w.periods.0.max(w.steps.0 + 1), w.periods.1.min(w.steps.1));
+    for p in first..=last.min(tr.states.len().saturating_sub(1)) {
+        let (Some(x), Some(u), Some(wn)) = (
+            tr.states.get(p - 1),
+            tr.controls.get(p - 1),
+            tr.process_noise.get(p - 1),
+        ) else {
+            break;
+        };
+        let mut y = x.clone();
+        let mut best: Option<f64> = None;
+        for _ in 1..INSIDE {
+            y = ravel_analysis::nonlinear::integrate::simulate(
+                &nl.plant.field,
+                &y,
+                u,
+                wn,
+                period / INSIDE as f64,
+            );
+            if !y.iter().all(|v| v.is_finite()) {
+                out.extend(best.map(|d| (d, p)));
+                return out;
+            }
+            let d = depth(&y);
+            if !d.is_nan() && best.is_none_or(|b| d > b) {
+                best = Some(d);
+            }
+        }
+        out.extend(best.map(|d| (d, p)));
+    }
+    out
+}
+
+/// How deeply a trajectory violates the property at its instants
+/// (positive: violated), and at which step; `None` when no state in the
+/// window is finite (for an "eventually" goal: when some state of the
+/// window is not, or the plant is a continuous-time nonlinear one, see
 /// [`super::sampling::violation_of`]).
 fn violation(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64, usize)> {
     let finite = |x: &Vec<f64>| x.iter().all(|v| v.is_finite());
@@ -125,12 +198,13 @@ fn violation(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64
 }
 
 /// The deepest confirmed violation of `prop` the search finds: its depth,
-/// the trajectory and the step.
+/// the trajectory, the step, and whether the violation lies between the
+/// instants (in the period ending at the step).
 pub(super) fn search(
     plan: &SystemPlan,
     prop: &Property,
     ctl: &Control,
-) -> Option<(f64, Trajectory, usize)> {
+) -> Option<(f64, Trajectory, usize, bool)> {
     let space = Space::of(plan);
     let (n, _, _) = space.dims;
     let centre: Vec<f64> = space
@@ -147,25 +221,55 @@ pub(super) fn search(
         .filter_map(|tr| tr.states.first().cloned())
         .map(|x0| [x0.as_slice(), &centre[n..]].concat())
         .collect();
-    let mut best: Option<(f64, Trajectory, usize)> = None;
+    let mut best: Option<(f64, Trajectory, usize, bool)> = None;
     for start in starts {
         if ctl.out_of_time() {
             break;
         }
-        let Some(found) = climb(plan, prop, &space, start, ctl) else {
-            continue;
+        let at_start = if has_between(plan) {
+            space.trajectory(plan, &start)
+        } else {
+            None
         };
-        let (depth, tr, t) = found;
-        let rhs = 0.0f64;
-        let x = tr.states.get(t).cloned().unwrap_or_default();
-        if depth > tolerance(&x, rhs)
-            && best.as_ref().is_none_or(|b| depth > b.0)
-            && certainly_violates(plan, &tr, prop, t)
-        {
-            best = Some((depth, tr, t));
+        let climbed = climb(plan, prop, &space, start, ctl);
+        if let Some((depth, tr, t)) = &climbed {
+            let x = tr.states.get(*t).cloned().unwrap_or_default();
+            if *depth > tolerance(&x, 0.0)
+                && best.as_ref().is_none_or(|b| *depth > b.0)
+                && certainly_violates(plan, tr, prop, *t)
+            {
+                best = Some((*depth, tr.clone(), *t, false));
+            }
+        }
+        for tr in at_start.iter().chain(climbed.as_ref().map(|c| &c.1)) {
+            if let Some(found) = confirmed_between(plan, prop, tr) {
+                if best.as_ref().is_none_or(|b| found.0 > b.0) {
+                    best = Some((found.0, tr.clone(), found.1, true));
+                }
+            }
         }
     }
     best
+}
+
+/// The deepest violation of a trajectory between two instants that
+/// [`certainly_violates_between`] confirms: its depth and period. The
+/// periods are tried deepest first, then in time order (the trajectory's
+/// enclosure is tightest early), until one is confirmed.
+fn confirmed_between(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64, usize)> {
+    let mut periods: Vec<(f64, usize)> = between_violations(plan, prop, tr)
+        .into_iter()
+        .filter(|&(d, p)| d > tolerance(tr.states.get(p).map_or(&[], |x| x), 0.0))
+        .collect();
+    let deepest = periods
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0))
+        .map(|(i, _)| i)?;
+    let first = periods.remove(deepest);
+    std::iter::once(first)
+        .chain(periods)
+        .find(|&(_, p)| certainly_violates_between(plan, tr, prop, p))
 }
 
 /// A pattern search from `start`: each coordinate moved by its step both

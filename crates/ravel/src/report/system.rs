@@ -232,6 +232,12 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
         ""
     };
     let windowed = p.kind == Kind::Goal && window != Window::at(plan.horizon);
+    // a violation between two instants, in the period ending at the step
+    let when = if p.between {
+        format!("between steps {} and {}", p.step.saturating_sub(1), p.step)
+    } else {
+        format!("at step {}", p.step)
+    };
     match (p.status, p.kind) {
         (Verdict::Verified, Kind::Goal) if eventually => format!(
             "on every cell a reachable box at some step of {a}..={b} is inside, least margin {}",
@@ -260,11 +266,9 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             "a trajectory is at least {} outside at every step of {a}..={b}",
             num(-p.margin)
         ),
-        (Verdict::Falsified, Kind::Goal) if windowed => format!(
-            "a trajectory is {} outside at step {}",
-            num(-p.margin),
-            p.step
-        ),
+        (Verdict::Falsified, Kind::Goal) if windowed || p.between => {
+            format!("a trajectory is {} outside {when}", num(-p.margin))
+        }
         (Verdict::Verified, Kind::Goal) => format!(
             "every reachable box at step {} is inside, margin {}",
             p.step,
@@ -308,11 +312,7 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             num(-p.margin),
             p.step
         ),
-        (Verdict::Falsified, _) => format!(
-            "a trajectory is {} inside at step {}",
-            num(-p.margin),
-            p.step
-        ),
+        (Verdict::Falsified, _) => format!("a trajectory is {} inside {when}", num(-p.margin)),
     }
 }
 
@@ -407,6 +407,10 @@ pub fn json(
                 "counterexample": p.counterexample.as_ref().map(traj_json),
                 "unfinished": p.cut.map(cut_json),
             });
+            // a counterexample that violates the property between instants
+            if p.between {
+                v["between"] = json!(true);
+            }
             // a goal not at the horizon alone: its steps and mode
             if let Some(PropertyKind::Goal { window, mode, .. }) = plan
                 .properties

@@ -15,6 +15,15 @@
 //!    arithmetic over `B`;
 //! 3. the intersample enclosure `B ∩ (Σ x_[i]·[0, h]ⁱ + [0, h]ᵏ·x_[k](B))`.
 //!
+//! The period's intersample enclosure is kept in pieces ([`FlowOut::pieces`]):
+//! one box per initial substep, `[j·T/s, (j+1)·T/s]` for `s = substeps`
+//! (8 by default), the hull of the enclosures of that substep's halvings.
+//! The pieces cost nothing beyond the substeps the flow takes anyway, and a
+//! property checked on each piece sees how far a fast state moves in an
+//! eighth of the period rather than in the whole period. `s` is fixed (not
+//! adapted to the pieces' widths) so that the analysis and the
+//! certificate's checker cut the period at the same instants.
+//!
 //! A substep whose enclosure fails (or meets a domain error or an overflow,
 //! which a smaller step may avoid) is halved, at most [`MAX_HALVINGS`]
 //! times below the initial step; after a success the step grows back when
@@ -60,8 +69,13 @@ pub struct FlowOut {
     /// symbols.
     pub end: Vec<Tm>,
     /// A box containing `x(t)` for every `t ∈ [0, period]` and every
-    /// initial state.
+    /// initial state (the hull of the pieces).
     pub pipe: Vec<Interval>,
+    /// `pieces[j]`: a box containing `x(t)` for every
+    /// `t ∈ [j·period/s, (j+1)·period/s]` and every initial state, `s` the
+    /// settings' initial substeps (clamped); the first piece contains the
+    /// initial states' box, the last the end models' ranges.
+    pub pieces: Vec<Vec<Interval>>,
 }
 
 /// Why no enclosure of the flow was found.
@@ -179,12 +193,22 @@ pub(crate) fn flow_scaled(
         .map(|t| t.clone().checked())
         .collect::<Result<_, _>>()?;
     let pr = ranges(&p)?;
-    let mut pipe = ranges(&cur)?;
+    let start = ranges(&cur)?;
+    let substeps = s.substeps.clamp(1, 1 << 16) as u64;
     if period == 0.0 {
-        return Ok(FlowOut { end: cur, pipe });
+        let pieces = vec![start.clone(); substeps as usize];
+        return Ok(FlowOut {
+            end: cur,
+            pipe: start,
+            pieces,
+        });
+    }
+    // every piece starts as the first enclosure that falls in it
+    let mut pieces: Vec<Option<Vec<Interval>>> = vec![None; substeps as usize];
+    if let Some(first) = pieces.first_mut() {
+        *first = Some(start);
     }
     let order = s.order.clamp(2, 20);
-    let substeps = s.substeps.clamp(1, 1 << 16) as u64;
     let total = substeps << MAX_HALVINGS;
     let (mut pos, mut depth) = (0u64, 0u32);
     let ctx = Step {
@@ -201,7 +225,15 @@ pub(crate) fn flow_scaled(
         match ctx.run(&cur, h) {
             Ok((next, enclosure)) => {
                 cur = next;
-                pipe = hull(&pipe, &enclosure)?;
+                // a substep `[pos, pos + units)` lies in the initial
+                // substep `pos / 2^MAX_HALVINGS` (the halvings are dyadic)
+                let piece = pieces
+                    .get_mut((pos >> MAX_HALVINGS) as usize)
+                    .ok_or(FlowError::Malformed)?;
+                *piece = Some(match piece.take() {
+                    None => enclosure,
+                    Some(b) => hull(&b, &enclosure)?,
+                });
                 pos += units;
                 if depth > 0 && pos % (2 * units) == 0 {
                     depth -= 1;
@@ -212,8 +244,21 @@ pub(crate) fn flow_scaled(
             Err(_) => depth += 1,
         }
     }
-    pipe = hull(&pipe, &ranges(&cur)?)?;
-    Ok(FlowOut { end: cur, pipe })
+    let mut pieces: Vec<Vec<Interval>> = pieces
+        .into_iter()
+        .collect::<Option<_>>()
+        .ok_or(FlowError::Malformed)?;
+    let last = pieces.last_mut().ok_or(FlowError::Malformed)?;
+    *last = hull(last, &ranges(&cur)?)?;
+    let mut pipe = pieces.first().cloned().ok_or(FlowError::Malformed)?;
+    for b in pieces.iter().skip(1) {
+        pipe = hull(&pipe, b)?;
+    }
+    Ok(FlowOut {
+        end: cur,
+        pipe,
+        pieces,
+    })
 }
 
 /// What every substep shares.

@@ -137,7 +137,7 @@ impl NonlinearLoop {
     /// The chain of claimed sets of one cell for a certificate: the states
     /// the analysis carries from step to step (`c + G s`, remainders made
     /// symbols), steps `0..=steps`, with every fresh remainder widened by
-    /// the relative `inflate` so that the checker's own arithmetic, which
+    /// the relative `inflate` (and an absolute floor) so that the checker's own arithmetic, which
     /// re-derives each claim from the previous one, has room. `None` when
     /// the cell is cut before `steps`.
     pub fn claims(&self, cell: &IBox, steps: usize, inflate: f64) -> Option<Vec<Claim>> {
@@ -530,7 +530,10 @@ fn resymbolize(x: &[Tm], keep: usize, cap: usize, ids: &mut Ids) -> Option<Vec<T
             let r = (hi - c).max(c - lo).next_up();
             let r = if ids.inflate > 0.0 {
                 let scale = t.c.abs() + t.g.iter().map(|v| v.abs()).sum::<f64>();
-                (r * (1.0 + ids.inflate) + ids.inflate * 1e-9 * scale).next_up()
+                // the floor: a state that stays 0 (QUAD's yaw rate) has no
+                // scale, while the checker's every rounding costs `TINY`
+                let floor = ids.inflate * 1e8 * ravel_base::num::TINY;
+                (r * (1.0 + ids.inflate) + ids.inflate * 1e-9 * scale + floor).next_up()
             } else {
                 r
             };

@@ -62,6 +62,17 @@ fn valid_nonlinear_certificates_are_valid() {
     }
 }
 
+/// A state that stays exactly 0 has no scale for the writer's relative
+/// widening, while the checker's roundings cost the smallest normal number
+/// each: the writer's absolute floor makes its certificate VALID (without
+/// it, UNSUPPORTED: QUAD's yaw rate).
+#[test]
+fn a_state_that_stays_zero_is_certified() {
+    let (plan, cert) = run("tests/data/zero_state.ravel");
+    assert_eq!(cert["evidence"]["status"], "checkable");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+}
+
 #[test]
 fn shrunk_claims_are_rejected() {
     let (plan, cert) = run("specs/damped_pendulum.ravel");

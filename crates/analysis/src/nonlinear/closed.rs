@@ -1,17 +1,21 @@
 //! The nonlinear closed loop, step after step: the state as first-order
 //! Taylor models over the initial cell, the controller's CROWN bounds over
-//! the step's observation box composed with them, and the plant's
+//! the step's observation set composed with them, and the plant's
 //! validated flow (or map) over one control period.
 //!
 //! Per step `t`, with the state `x(z) ∈ c + G z + R` (`z ∈ [−1, 1]ⁿ` the
 //! cell's own coordinates):
-//! 1. the observation `y = Cᵀ x + v` as Taylor models, and its box `Y`;
-//! 2. CROWN over `Y`: `L y + l ≤ u ≤ U y + ū` for every control (the
-//!    saturation is part of the network);
-//! 3. `u ∈ M y + m + E` with `M`, `m` the middle of the two bounds (any
+//! 1. the observation `y = Cᵀ x + v` as Taylor models `c + G z + ρ`;
+//! 2. CROWN over the observation set itself, not its box: the network
+//!    preceded by the exact affine layer `(z, ρ) ↦ c + G z + ρ`, over the
+//!    box `S` of `(z, ρ)` (`z ∈ [−1, 1]ᴺ`, `ρ` in the remainders), gives
+//!    `L s + l ≤ u ≤ U s + ū` for every control (the saturation is part
+//!    of the network); a thin set's box is far wider than the set, and
+//!    CROWN over it lost the state's correlations (QUAD's altitude);
+//! 3. `u ∈ M s + m + E` with `M`, `m` the middle of the two bounds (any
 //!    floats: `E` is bounded in outward-rounded interval arithmetic over
-//!    `Y` from the two bounds themselves), so the control keeps its linear
-//!    dependency on `z`;
+//!    `S` from the two bounds themselves), so the control keeps its linear
+//!    dependency on `z` (its part on `ρ` joins `E`);
 //! 4. the plant over the period, controls and disturbances held:
 //!    [`integrate::flow`] (continuous time, with the intersample
 //!    enclosure) or [`integrate::image`] (discrete time).
@@ -25,8 +29,9 @@ use super::NonlinearLoop;
 use crate::closed_loop::{Boundary, Cut, Step};
 use crate::crown::{Mode, Relaxation};
 use crate::sets::{IBox, Region};
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use ravel_base::expr::Time;
+use ravel_base::nn::{Layer, Network};
 
 /// One claimed set of a certificate: `{c + G s : s ∈ [−1, 1]ᵏ}`, the
 /// columns named by symbol ids (see `ravel_certify::nonlinear`).
@@ -136,7 +141,7 @@ impl NonlinearLoop {
     /// The chain of claimed sets of one cell for a certificate: the states
     /// the analysis carries from step to step (`c + G s`, remainders made
     /// symbols), steps `0..=steps`, with every fresh remainder widened by
-    /// the relative `inflate` so that the checker's own arithmetic, which
+    /// the relative `inflate` (and an absolute floor) so that the checker's own arithmetic, which
     /// re-derives each claim from the previous one, has room. `None` when
     /// the cell is cut before `steps`.
     pub fn claims(&self, cell: &IBox, steps: usize, inflate: f64) -> Option<Vec<Claim>> {
@@ -169,11 +174,10 @@ impl NonlinearLoop {
     fn advance(&self, x: &[Tm]) -> Result<Advanced, Cut> {
         let syms = x.first().map_or(0, |t| t.g.len());
         let y = self.observe(x, syms).map_err(|_| Cut::Overflow)?;
-        let ybox = range_box(&y);
-        if !ybox.is_finite() {
+        if !range_box(&y).is_finite() {
             return Err(Cut::Overflow);
         }
-        let u = self.control(&y, &ybox, syms)?;
+        let u = self.control(&y, syms)?;
         let w: Vec<Tm> = (0..self.plant.w.dim())
             .map(|i| Tm::from_interval(Interval::new(self.plant.w.lo[i], self.plant.w.hi[i]), syms))
             .collect();
@@ -211,12 +215,20 @@ impl NonlinearLoop {
             .collect()
     }
 
-    /// The controls as Taylor models: the middle of CROWN's two linear
-    /// bounds over `ybox`, composed with `y`, plus an interval holding the
-    /// distance to either bound.
-    fn control(&self, y: &[Tm], ybox: &IBox, syms: usize) -> Result<Vec<Tm>, Cut> {
+    /// The controls as Taylor models: CROWN's two linear bounds of the
+    /// controller over the observation's own parametrisation
+    /// `y = c + G z + ρ` (`z ∈ [−1, 1]ᴺ` the state's symbols, `ρ` in `y`'s
+    /// remainder box), not over its box: the network is preceded by the
+    /// exact affine layer `(z, ρ) ↦ c + G z + ρ`, so every neuron is bounded
+    /// over the set itself (a thin set's box is far wider than the set),
+    /// and the bounds come out linear in `z`. The control is their middle,
+    /// plus an interval holding the distance to either bound over the box
+    /// of `(z, ρ)` and the middle's part on `ρ`.
+    pub(super) fn control(&self, y: &[Tm], syms: usize) -> Result<Vec<Tm>, Cut> {
         let m = self.plant.field.controls;
-        let rel = Relaxation::new(&self.net, ybox, Mode::Crown);
+        let k = y.len();
+        let (net, sbox) = over_symbols(&self.net, y, syms).ok_or(Cut::Overflow)?;
+        let rel = Relaxation::new(&net, &sbox, Mode::Crown);
         if !rel.is_finite() {
             return Err(Cut::Overflow);
         }
@@ -227,9 +239,8 @@ impl NonlinearLoop {
             _ => 0.0,
         });
         let b = rel.upper_optimised(&spec, self.slope_steps, None);
-        let refs: Vec<&Tm> = y.iter().collect();
-        let yiv: Vec<Interval> = (0..ybox.dim())
-            .map(|j| Interval::new(ybox.lo[j], ybox.hi[j]))
+        let siv: Vec<Interval> = (0..sbox.dim())
+            .map(|j| Interval::new(sbox.lo[j], sbox.hi[j]))
             .collect();
         let mut out = Vec::with_capacity(m);
         for i in 0..m {
@@ -242,16 +253,24 @@ impl NonlinearLoop {
                 .map(|(a, c)| 0.5 * a + 0.5 * c)
                 .collect();
             let m0 = 0.5 * ou + 0.5 * ol;
-            // u − (M y + m) ∈ [(L − M) y + l − m, (U − M) y + ū − m] over Y
-            let hi = gap(&up, &mid, &yiv, ou, m0).hi;
-            let lo = gap(&low, &mid, &yiv, ol, m0).lo;
-            if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+            // u − (M s + m) ∈ [(L − M) s + l − m, (U − M) s + ū − m] over S
+            let hi = gap(&up, &mid, &siv, ou, m0).hi;
+            let lo = gap(&low, &mid, &siv, ol, m0).lo;
+            if !(lo.is_finite() && hi.is_finite()) || lo > hi || mid.len() != syms + k {
                 return Err(Cut::Overflow);
             }
-            let u = integrate::combine(&mid, &refs, m0)
-                .and_then(|u| u.add_interval(Interval::new(lo, hi)))
-                .map_err(|_| Cut::Overflow)?;
-            debug_assert_eq!(u.g.len(), syms);
+            // M s = M_z z + M_ρ ρ: the first part kept, the second an interval
+            let mut rest = Interval::new(lo, hi);
+            for (a, r) in mid[syms..].iter().zip(&siv[syms..]) {
+                rest = rest + Interval::point(*a) * *r;
+            }
+            let u = Tm {
+                c: m0,
+                g: mid[..syms].to_vec(),
+                r: Interval::ZERO,
+            }
+            .add_interval(rest)
+            .map_err(|_| Cut::Overflow)?;
             out.push(u);
         }
         Ok(out)
@@ -366,6 +385,36 @@ impl NonlinearLoop {
         let b = range_box(&next);
         (b.is_finite() && pieces.iter().all(IBox::is_finite)).then_some((b, pieces))
     }
+}
+
+/// The network preceded by the affine layer `(z, ρ) ↦ c + G z + ρ` of the
+/// models `y` over `syms` symbols, and the box of its inputs: `z ∈ [−1, 1]`,
+/// `ρ` in each model's remainder. `None` when a bound is not finite.
+fn over_symbols(net: &Network, y: &[Tm], syms: usize) -> Option<(Network, IBox)> {
+    let k = y.len();
+    let w = DMatrix::from_fn(k, syms + k, |j, i| {
+        if i < syms {
+            y[j].g.get(i).copied().unwrap_or(0.0)
+        } else if i - syms == j {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let b = DVector::from_iterator(k, y.iter().map(|t| t.c));
+    let mut layers = Vec::with_capacity(net.layers.len() + 1);
+    layers.push(Layer::Affine { w, b });
+    layers.extend(net.layers.iter().cloned());
+    let lo = (0..syms).map(|_| -1.0).chain(y.iter().map(|t| t.r.lo));
+    let hi = (0..syms).map(|_| 1.0).chain(y.iter().map(|t| t.r.hi));
+    let sbox = IBox::new(lo.collect(), hi.collect());
+    let finite = sbox.is_finite() && y.iter().all(Tm::is_finite);
+    finite.then(|| {
+        (
+            Network::new(syms + k, layers).with_input_type(net.input_type),
+            sbox,
+        )
+    })
 }
 
 /// The bound `a − mid` applied to `y`, plus `off − m0`, in outward-rounded
@@ -510,7 +559,10 @@ fn resymbolize(x: &[Tm], keep: usize, cap: usize, ids: &mut Ids) -> Option<Vec<T
             let r = (hi - c).max(c - lo).next_up();
             let r = if ids.inflate > 0.0 {
                 let scale = t.c.abs() + t.g.iter().map(|v| v.abs()).sum::<f64>();
-                (r * (1.0 + ids.inflate) + ids.inflate * 1e-9 * scale).next_up()
+                // the floor: a state that stays 0 (QUAD's yaw rate) has no
+                // scale, while the checker's every rounding costs `TINY`
+                let floor = ids.inflate * 1e8 * ravel_base::num::TINY;
+                (r * (1.0 + ids.inflate) + ids.inflate * 1e-9 * scale + floor).next_up()
             } else {
                 r
             };

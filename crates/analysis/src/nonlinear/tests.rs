@@ -250,3 +250,91 @@ fn blow_up_and_undefined_plants_cut_the_cell() {
         steps[1].cut()
     );
 }
+
+/// The controls' models hold the network's output at every point of a
+/// thin, tilted observation set with remainders (`y = c + G z + ρ`, three
+/// symbols over two observations, so the set is much smaller than its
+/// box): at every corner of `(z, ρ)` and at random points,
+/// `net(y) ∈ m + M z + E`. The last networks are one unstable ReLU, where
+/// CROWN's upper bound is met at a corner, so the check is tight: leaving
+/// out the part of the middle on `ρ`, bounding over a box of `z` a tenth
+/// too small, or making `E` a tenth narrower, each makes this fail.
+#[test]
+fn the_controls_hold_the_network_over_the_observation_set() {
+    use integrate::{Interval, Tm};
+    let relu = |w: [f64; 2]| {
+        Network::new(
+            2,
+            vec![
+                Layer::Affine {
+                    w: DMatrix::from_row_slice(1, 2, &w),
+                    b: DVector::from_element(1, 0.1),
+                },
+                Layer::Act(Activation::Relu),
+            ],
+        )
+    };
+    let nets = (0..6u64).map(|seed| controller(2, 11 + seed, 2.0)).chain([
+        relu([1.0, 0.5]),
+        relu([-0.7, 1.3]),
+        relu([0.4, -1.1]),
+    ]);
+    for (seed, net) in (0u64..).zip(nets) {
+        let nl = NonlinearLoop::new(
+            NonlinearPlant {
+                field: field(false, Time::Discrete),
+                w: IBox::new(vec![], vec![]),
+                obs: DMatrix::identity(2, 2),
+                v: IBox::new(vec![0.0, 0.0], vec![0.0, 0.0]),
+            },
+            net,
+        );
+        let mut rng = Rng::new(seed);
+        let y: Vec<Tm> = (0..2)
+            .map(|j| Tm {
+                c: rng.uniform(-0.3, 0.3),
+                g: vec![
+                    0.8 * if j == 0 { 1.0 } else { -1.0 },
+                    rng.uniform(-0.3, 0.3),
+                    0.02,
+                ],
+                r: Interval::new(-0.15, 0.05 + 0.1 * j as f64),
+            })
+            .collect();
+        let u = nl.control(&y, 3).expect("the controls are bounded");
+        let u0 = &u[0];
+        let mut worst = f64::INFINITY;
+        for k in 0..4000 {
+            // the first 32: every corner of (z, ρ)
+            let z: Vec<f64> = (0..3)
+                .map(|i| match k {
+                    0..=31 => [-1.0, 1.0][(k >> i) & 1],
+                    _ => rng.uniform(-1.0, 1.0),
+                })
+                .collect();
+            let rho: Vec<f64> = y
+                .iter()
+                .enumerate()
+                .map(|(j, t)| match k {
+                    0..=31 => [t.r.lo, t.r.hi][(k >> (3 + j)) & 1],
+                    _ => rng.uniform(t.r.lo, t.r.hi),
+                })
+                .collect();
+            let yv: Vec<f64> = y
+                .iter()
+                .zip(&rho)
+                .map(|(t, r)| t.c + t.g.iter().zip(&z).map(|(g, zi)| g * zi).sum::<f64>() + r)
+                .collect();
+            let out = nl.net.forward(&yv)[0];
+            let lin = u0.c + u0.g.iter().zip(&z).map(|(g, zi)| g * zi).sum::<f64>();
+            let slack = (out - lin - u0.r.lo).min(u0.r.hi - (out - lin));
+            assert!(
+                slack >= -1e-12,
+                "network {seed}: {out} at z = {z:?}, ρ = {rho:?} leaves {lin} + {:?}",
+                u0.r
+            );
+            worst = worst.min(slack);
+        }
+        assert!(worst.is_finite());
+    }
+}

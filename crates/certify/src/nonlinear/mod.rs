@@ -15,9 +15,11 @@
 //! # The check of one step
 //!
 //! The checker writes the state of step `t` as affine forms over step
-//! `t`'s symbols, bounds the controller over the observation box with its
-//! own back-substitution (`bounds.rs`), composes the middle of the two
-//! linear bounds with the state (the distance to either bound an interval)
+//! `t`'s symbols, bounds the controller over the observation set with its
+//! own back-substitution (`bounds.rs`; the network preceded by the exact
+//! affine layer from the symbols and error intervals to the observation),
+//! composes the middle of the two linear bounds, which are linear in the
+//! symbols, with the state (the distance to either bound an interval)
 //! and integrates the plant over the period (or applies the map). The
 //! image `c' + A s + ε` is inside the claim of step `t + 1` when, in every
 //! component `i`,
@@ -49,7 +51,7 @@ use crate::bounds::{network_box, Bx, NetBounds};
 use crate::cover;
 use arith::{Af, Fail, Iv, Num};
 use flow::Field;
-use ravel_base::nn::Network;
+use ravel_base::nn::{Layer, Network};
 use ravel_base::text::sanitize;
 
 /// A nonlinear problem as the checker reads it.
@@ -120,7 +122,7 @@ impl Problem {
 /// A box of the states of a linear plant in continuous time over the
 /// period after step `t`, from the claimed box `x` of step `t` (its own
 /// symbols) with the controls in the checker's bound of the network over
-/// the observation box (sensor noise `v`); `None` when the flow cannot be
+/// the observation set (sensor noise `v`); `None` when the flow cannot be
 /// enclosed.
 pub(crate) fn intersample(
     flows: &[Field],
@@ -637,8 +639,9 @@ struct Parts<'a> {
 
 /// The state `x` (forms over its symbols) over one period: the controls
 /// the middle of the checker's two linear bounds of the network over the
-/// observation box composed with `x` (the distance to either bound an
-/// interval), the plant integrated (or mapped) with them held.
+/// observation set (see [`over_symbols`]), linear in `x`'s symbols (the
+/// distance to either bound an interval), the plant integrated (or mapped)
+/// with them held.
 fn compose(
     parts: &Parts,
     net: &Network,
@@ -648,19 +651,13 @@ fn compose(
 ) -> Result<flow::Period<Af>, String> {
     let k = x.first().map_or(0, |f| f.g.len());
     let y = observe(parts.obs, &x, parts.v);
-    let ybox = Bx {
-        lo: y.iter().map(|v| v.range().lo).collect(),
-        hi: y.iter().map(|v| v.range().hi).collect(),
-    };
-    if !ybox.lo.iter().chain(&ybox.hi).all(|v| v.is_finite()) {
-        return Err("the observation is not finite".into());
-    }
-    let nb = NetBounds::new(net, &ybox, None).map_err(|t| t.to_string())?;
+    let (snet, sbox) = over_symbols(net, &y, k)?;
+    let nb = NetBounds::new(&snet, &sbox, None).map_err(|t| t.to_string())?;
     let (up, up_off, low, low_off) = nb.output_lines(slopes);
-    let yiv: Vec<Iv> = ybox
+    let siv: Vec<Iv> = sbox
         .lo
         .iter()
-        .zip(&ybox.hi)
+        .zip(&sbox.hi)
         .map(|(&l, &h)| Iv::new(l, h))
         .collect();
     let mut u = Vec::with_capacity(up.nrows());
@@ -676,20 +673,56 @@ fn compose(
             .map(|(a, b)| 0.5 * a + 0.5 * b)
             .collect();
         let m0 = 0.5 * ou + 0.5 * ol;
-        // u − (M y + m₀) ∈ [(L − M) y + l − m₀, (U − M) y + ū − m₀] over Y
-        let hi = gap(up.row(r).iter(), &mid, &yiv, ou, m0).hi;
-        let lo = gap(low.row(r).iter(), &mid, &yiv, ol, m0).lo;
-        if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+        // u − (M s + m₀) ∈ [(L − M) s + l − m₀, (U − M) s + ū − m₀] over S
+        let hi = gap(up.row(r).iter(), &mid, &siv, ou, m0).hi;
+        let lo = gap(low.row(r).iter(), &mid, &siv, ol, m0).lo;
+        if !(lo.is_finite() && hi.is_finite()) || lo > hi || mid.len() != siv.len() {
             return Err("the controller's bounds are not finite".into());
         }
-        let mut ur = Af::constant(m0, k);
-        for (a, yj) in mid.iter().zip(&y) {
-            ur = ur.add(&yj.scale(*a));
+        // M s = M_z z + M_ε ε: the first part kept, the second an interval
+        let mut rest = Iv::new(lo, hi);
+        for (a, e) in mid.iter().zip(&siv).skip(k) {
+            rest = rest.add(&e.scale(*a));
         }
-        u.push(ur.add_iv(&Iv::new(lo, hi)));
+        let (Some(mz), true) = (mid.get(..k), rest.is_finite()) else {
+            return Err("the controller's bounds are not finite".into());
+        };
+        u.push(Af::exact(m0, mz.to_vec()).add_iv(&rest));
     }
     let w: Vec<Af> = parts.w.iter().map(|i| Af::of_iv(i, k)).collect();
     flow::period(parts.field, &x, &u, &w, substeps).map_err(|e: Fail| e.to_string())
+}
+
+/// The network preceded by the exact affine layer `(s, ε) ↦ c + G s + ε`
+/// of the observation's forms `y` over `k` symbols, and the box of its
+/// inputs (`s ∈ [−1, 1]ᵏ`, `ε` in each form's error interval): the
+/// controller bounded over the observation set itself, not its box, with
+/// bounds linear in the symbols.
+fn over_symbols(net: &Network, y: &[Af], k: usize) -> Result<(Network, Bx), String> {
+    let q = y.len();
+    let ok = y
+        .iter()
+        .all(|f| f.g.len() == k && f.c.is_finite() && f.lo.is_finite() && f.hi.is_finite());
+    if !ok || y.iter().any(|f| f.g.iter().any(|v| !v.is_finite())) {
+        return Err("the observation is not finite".into());
+    }
+    let w = DMatrix::from_fn(q, k + q, |j, i| match (y.get(j), i.checked_sub(k)) {
+        (Some(f), None) => f.g.get(i).copied().unwrap_or(0.0),
+        (_, Some(e)) if e == j => 1.0,
+        _ => 0.0,
+    });
+    let b = nalgebra::DVector::from_iterator(q, y.iter().map(|f| f.c));
+    let mut layers = Vec::with_capacity(net.layers.len() + 1);
+    layers.push(Layer::Affine { w, b });
+    layers.extend(net.layers.iter().cloned());
+    let sbox = Bx {
+        lo: (0..k).map(|_| -1.0).chain(y.iter().map(|f| f.lo)).collect(),
+        hi: (0..k).map(|_| 1.0).chain(y.iter().map(|f| f.hi)).collect(),
+    };
+    Ok((
+        Network::new(k + q, layers).with_input_type(net.input_type),
+        sbox,
+    ))
 }
 
 /// `(A − M)·Y + a − m₀` as an outward-rounded interval.

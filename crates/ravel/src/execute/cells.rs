@@ -80,7 +80,7 @@ pub fn propagate_cell_until(
 /// box for the whole period, from
 /// the box of step `t − 1` by the validated flow of `ẋ = A x + B u + c`,
 /// the controls composed with the state through CROWN's linear bounds over
-/// the observation box (`NonlinearLoop::pipe`). A period that cannot be enclosed is the whole
+/// the observation set (`NonlinearLoop::pipe`). A period that cannot be enclosed is the whole
 /// space (it proves nothing).
 fn intersample(plan: &SystemPlan, cl: &ClosedLoop, steps: &mut [Step]) {
     let Some(loops) = plan.intersample.as_ref().map(|i| &i.loops) else {

@@ -11,7 +11,7 @@ mod common;
 use common::{net_certificate, net_plan as plan, random_network, run_net as run};
 use ravel::execute::network::execute_network;
 use ravel::execute::{Control, Verdict};
-use ravel::ir::{Branching, Guide, NetProperty, NetPropertyKind, Partitioner};
+use ravel::ir::{ActivationPhases, Branching, Guide, NetProperty, NetPropertyKind, Partitioner};
 use ravel_analysis::partition::{Budget, Stop};
 use ravel_analysis::sets::{IBox, Polytope, Region};
 use ravel_base::nn::{Activation, Layer, Network};
@@ -465,12 +465,18 @@ fn activation_case(rng: &mut Rng, case: usize) -> Case {
 /// prove it).
 #[test]
 fn bab_on_activations_agrees_with_exhaustive_enumeration() {
+    for phases in ActivationPhases::ALL {
+        activations_agree_with_enumeration(phases);
+    }
+}
+
+fn activations_agree_with_enumeration(phases: ActivationPhases) {
     use ravel_certify::{check, Answer};
     let mut rng = Rng::new(41);
     let (mut verified, mut falsified, mut trees) = (0, 0, 0);
     for case in 0..24 {
         let Case {
-            p,
+            mut p,
             net,
             holds,
             top,
@@ -479,6 +485,7 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
             input,
             ..
         } = activation_case(&mut rng, case);
+        p.phases = phases;
         let out = run(&p);
         let got = out.properties[0].status;
         let want = if holds {
@@ -488,7 +495,7 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
         };
         assert_eq!(
             got, want,
-            "case {case}: truth {want:?} (max {top}, threshold {h}), bab says {got:?} after {} calls, stop {:?}",
+            "{phases:?} case {case}: truth {want:?} (max {top}, threshold {h}), bab says {got:?} after {} calls, stop {:?}",
             out.calls, out.partition_stop
         );
         if let Some(w) = &out.properties[0].counterexample {
@@ -506,7 +513,12 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
             Verdict::Verified => {
                 verified += 1;
                 assert!(out.split_activations, "case {case}: inputs were split");
-                assert_eq!(answer, Answer::Valid, "case {case}: {}", cert["evidence"]);
+                assert_eq!(
+                    answer,
+                    Answer::Valid,
+                    "{phases:?} case {case}: {}",
+                    cert["evidence"]
+                );
                 trees += usize::from(cert["evidence"].get("splits").is_some());
             }
             _ => {
@@ -517,7 +529,7 @@ fn bab_on_activations_agrees_with_exhaustive_enumeration() {
     }
     assert!(
         verified >= 10 && falsified >= 10 && trees >= 3,
-        "{verified} verified ({trees} by split trees), {falsified} falsified"
+        "{phases:?}: {verified} verified ({trees} by split trees), {falsified} falsified"
     );
 }
 

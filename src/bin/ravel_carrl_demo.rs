@@ -217,6 +217,7 @@ fn main() -> ExitCode {
         seed: 0,
         slope_steps: 0,
         branching: Default::default(),
+        phases: Default::default(),
     };
     let mut rows: Vec<(String, Vec<f64>)> = Vec::new();
     let policies: Vec<(String, Option<f64>)> = std::iter::once(("nominal".to_string(), None))

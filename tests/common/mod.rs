@@ -86,6 +86,7 @@ pub fn net_plan(net: Network, input: Region, properties: Vec<NetProperty>) -> Ne
         seed: 7,
         slope_steps: 0,
         branching: Default::default(),
+        phases: Default::default(),
     }
 }
 

@@ -207,7 +207,7 @@ pub enum Phase {
 
 /// Bounds `lo ≤ z_k ≤ hi` of every hidden pre-activation that hold on a
 /// domain (the splits made so far are in them as clamps).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Domain {
     /// Per hidden layer, lower bounds.
     pub lo: Vec<Vec<f64>>,
@@ -231,6 +231,15 @@ impl Domain {
             .map(|k| (boxes[2 * k + 1].lo.clone(), boxes[2 * k + 1].hi.clone()))
             .unzip();
         Some(Domain { lo, hi })
+    }
+
+    /// Whether some bound crossed its other end (`lo > hi`): no input
+    /// reaches this domain (its bounds are all valid on it).
+    pub fn is_empty(&self) -> bool {
+        self.lo
+            .iter()
+            .zip(&self.hi)
+            .any(|(l, h)| l.iter().zip(h).any(|(l, h)| l > h))
     }
 
     /// Whether neuron `j` of hidden layer `k` is unstable (its sign unknown).
@@ -794,6 +803,102 @@ fn certified_cols(
         .collect()
 }
 
+/// Re-bound, after a split at hidden layer `k`, the unstable neurons of the
+/// hidden layers after `k` on each domain: `L` at CROWN's multipliers
+/// ([`Slopes::crown`], no ascent) for `z_j` and `−z_j`, [`certified`], layer
+/// by layer (each layer's relaxation uses the re-bounded layers before
+/// it); a bound is kept only where tighter. A split fixes one neuron's
+/// relaxation, and the layers after it see a smaller set: this is where a
+/// split pays off (VeriNet's and β-CROWN's children re-bound their later
+/// layers too). Measured on MNIST-FC 256×4, property 5 at ε = 0.03 with
+/// the splits in the first unstable layer: the worst open margin went
+/// from −0.196 to proved in 603 subproblems, where without re-bounding it
+/// was still −0.18 after 3 000.
+///
+/// The domains go through one pass per layer together (their columns
+/// share the products); the result does not depend on how the caller
+/// groups them only if it groups them the same way, so callers use fixed
+/// groups. A bound may cross its other end (`lo > hi`): no input reaches
+/// that domain ([`Domain::is_empty`]).
+pub fn rebound_after(chain: &ReluChain, input: &IBox, doms: &mut [(Domain, usize)]) {
+    let hidden = chain.depth() - 1;
+    let first = doms.iter().map(|d| d.1 + 1).min().unwrap_or(hidden).max(1);
+    for m in first..hidden {
+        // per domain, its open neurons of layer m
+        let open: Vec<Vec<usize>> = doms
+            .iter()
+            .map(|(d, k)| {
+                if *k >= m || d.is_empty() {
+                    Vec::new()
+                } else {
+                    (0..d.lo[m].len()).filter(|&j| d.unstable(m, j)).collect()
+                }
+            })
+            .collect();
+        let r: usize = open.iter().map(|o| 2 * o.len()).sum();
+        if r == 0 {
+            continue;
+        }
+        let sub = chain.prefix(m);
+        let n = chain.w[m].nrows();
+        let prefixes: Vec<Domain> = doms
+            .iter()
+            .map(|(d, _)| Domain {
+                lo: d.lo[..m].to_vec(),
+                hi: d.hi[..m].to_vec(),
+            })
+            .collect();
+        let refs: Vec<&Domain> = prefixes.iter().collect();
+        let mut owner = Vec::with_capacity(r);
+        let mut obj = DMatrix::zeros(n, r);
+        let mut alpha: Vec<DMatrix<f64>> = (0..m)
+            .map(|i| DMatrix::zeros(chain.w[i].nrows(), r))
+            .collect();
+        let mut c = 0;
+        for (i, o) in open.iter().enumerate() {
+            for (sign, &j) in o
+                .iter()
+                .map(|j| (1.0, j))
+                .chain(o.iter().map(|j| (-1.0, j)))
+            {
+                obj[(j, c)] = sign;
+                owner.push(i);
+                for (a, (lo, hi)) in alpha
+                    .iter_mut()
+                    .zip(prefixes[i].lo.iter().zip(&prefixes[i].hi))
+                {
+                    for (t, (l, u)) in lo.iter().zip(hi).enumerate() {
+                        a[(t, c)] = if *u >= -*l { 1.0 } else { 0.0 };
+                    }
+                }
+                c += 1;
+            }
+        }
+        let cols = Cols::new(&refs, &owner);
+        let slopes = Slopes {
+            beta: alpha.iter().map(|a| DMatrix::zeros(a.nrows(), r)).collect(),
+            alpha,
+        };
+        let dual = slopes.multipliers(&sub, &cols, &obj, Prec::F64).dual;
+        let bounds = certified_cols(&sub, input, &cols, &obj, &dual);
+        let mut c = 0;
+        for (i, o) in open.iter().enumerate() {
+            let w = o.len();
+            let d = &mut doms[i].0;
+            for (t, &j) in o.iter().enumerate() {
+                let (lo, hi) = (bounds[c + t], -bounds[c + w + t]);
+                if lo.is_finite() && lo > d.lo[m][j] {
+                    d.lo[m][j] = lo;
+                }
+                if hi.is_finite() && hi < d.hi[m][j] {
+                    d.hi[m][j] = hi;
+                }
+            }
+            c += 2 * w;
+        }
+    }
+}
+
 /// What [`optimise`] found per objective: the certified lower bound, the
 /// parameters and multipliers that give it, and the input minimising
 /// their relaxed objective (where the relaxation expects the worst output:
@@ -977,10 +1082,21 @@ pub fn optimise_many(
     out
 }
 
+/// The share of the best split score a neuron of an earlier layer needs
+/// for [`candidates`]' first-layer rule to take its layer.
+const FIRST_LAYER_SHARE: f64 = 1e-3;
+
 /// The unstable neurons most worth splitting for objective column `c`
-/// under `slopes`, best first, at most `top` of them: the largest
+/// under `slopes`, best first, at most `top` of them (with `first_layer`,
+/// all from the first hidden layer that has an unstable neuron worth a
+/// split, [`FIRST_LAYER_SHARE`]: splitting
+/// there lets [`rebound_after`] tighten every later layer; measured on
+/// MNIST-FC 256×4, property 5 at ε = 0.03: neither the first-layer rule
+/// alone nor re-bounding alone moved the worst margin, both together
+/// proved it): the largest
 /// `|g|·(−l·u)/(u − l)`, the area a neuron's relaxation adds times the
 /// weight its output carries (`g = (W_{k+1}ᵀ ν_{k+1})_j`; BaBSR's score).
+#[allow(clippy::too_many_arguments)]
 pub fn candidates(
     chain: &ReluChain,
     dom: &Domain,
@@ -988,6 +1104,7 @@ pub fn candidates(
     slopes: &Slopes,
     c: usize,
     top: usize,
+    first_layer: bool,
 ) -> Vec<(usize, usize)> {
     let hidden = chain.depth() - 1;
     let one = obj.columns(c, 1).into_owned();
@@ -1008,6 +1125,27 @@ pub fn candidates(
             scored.push((if s.is_finite() { s } else { 0.0 }, k, j));
         }
     }
+    if first_layer {
+        // only the first layer with a neuron scoring at least
+        // [`FIRST_LAYER_SHARE`] of the best score (a neuron whose output
+        // weighs nothing, an input the network ignores, is never worth a
+        // split): its split re-bounds every later layer ([`rebound_after`])
+        let best = scored.iter().map(|s| s.0).fold(0.0, f64::max);
+        let floor = best * FIRST_LAYER_SHARE;
+        if let Some(k) = scored
+            .iter()
+            .filter(|s| s.0 > 0.0 && s.0 >= floor)
+            .map(|s| s.1)
+            .min()
+        {
+            scored.retain(|s| s.1 == k && s.0 > 0.0 && s.0 >= floor);
+        } else {
+            // no unstable neuron weighs anything under these multipliers
+            // (those left feed nothing, as an ignored input's): the
+            // subproblem is a leaf, and its long ascent decides it
+            scored.clear();
+        }
+    }
     // best first; ties by position, so the order is fixed
     scored.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
     scored.truncate(top);
@@ -1018,6 +1156,8 @@ pub fn candidates(
 /// [`candidates`], the one whose worse child bounds highest with the
 /// parent's slopes re-substituted (one pass per child, no ascent; as
 /// filtered smart branching); `None` when no neuron is unstable.
+/// `first_layer` as for [`candidates`].
+#[allow(clippy::too_many_arguments)]
 pub fn branch(
     chain: &ReluChain,
     input: &IBox,
@@ -1026,8 +1166,9 @@ pub fn branch(
     slopes: &Slopes,
     c: usize,
     top: usize,
+    first_layer: bool,
 ) -> Option<(usize, usize)> {
-    let list = candidates(chain, dom, obj, slopes, c, top);
+    let list = candidates(chain, dom, obj, slopes, c, top, first_layer);
     if list.len() <= 1 {
         return list.first().copied();
     }

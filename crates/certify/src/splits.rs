@@ -372,6 +372,104 @@ fn neuron_bounds(
     up
 }
 
+/// Whether some bound of `dom` crossed its other end: no input reaches it.
+fn is_void(dom: &[Bx]) -> bool {
+    dom.iter()
+        .any(|b| b.lo.iter().zip(&b.hi).any(|(l, h)| l > h))
+}
+
+/// CROWN's multipliers for the objective `o·z_k` over `dom` (plain floating
+/// point: any `ν` gives a valid [`lagrangian`], which certifies): from
+/// `ν_k = o` back, `ν_i = D_i (W_{i+1}ᵀ ν_{i+1})` with `D` 0 for an inactive
+/// neuron, 1 for an active one, and for an unstable one the upper line's
+/// slope `u/(u − l)` where the coefficient is negative, else 1 when
+/// `u ≥ −l` and 0 otherwise.
+fn crown_nu(chain: &Chain, k: usize, o: &[f64], dom: &[Bx]) -> Vec<Vec<f64>> {
+    let mut nu: Vec<Vec<f64>> = vec![Vec::new(); k];
+    let mut next: Vec<f64> = o.to_vec();
+    for i in (0..k).rev() {
+        let (Some(w), Some(d)) = (chain.w.get(i + 1), dom.get(i)) else {
+            return nu;
+        };
+        let g = w.tr_mul(&DVector::from_column_slice(&next));
+        let v: Vec<f64> = g
+            .iter()
+            .zip(d.lo.iter().zip(&d.hi))
+            .map(|(&gj, (&l, &u))| {
+                if u <= 0.0 {
+                    0.0
+                } else if l >= 0.0 {
+                    gj
+                } else if gj < 0.0 {
+                    u / (u - l) * gj
+                } else if u >= -l {
+                    gj
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        if let Some(slot) = nu.get_mut(i) {
+            slot.clone_from(&v);
+        }
+        next = v;
+    }
+    nu
+}
+
+/// Re-bound, after a split in hidden layer `from − 1`, the unstable neurons
+/// of hidden layers `from..` on `dom`, layer by layer: each bound of `z_j`
+/// and of `−z_j` is [`lagrangian`] at CROWN's multipliers ([`crown_nu`]) over
+/// the input box and the layers before it, kept where tighter. This is how
+/// the analysis derives a child's domain (`rebound_after` there); the
+/// checker's arithmetic is its own, and a bound it finds looser only makes
+/// a proof fail. `work` counts the multiply-adds.
+fn rebound(chain: &Chain, input: &Bx, dom: &mut [Bx], from: usize, work: &mut u64) {
+    let hidden = chain.hidden();
+    for m in from.max(1)..hidden {
+        let n = chain.width(m);
+        // the products of one back-substitution and one evaluation
+        let cost: u64 = (0..=m)
+            .filter_map(|i| chain.w.get(i))
+            .map(|w| 2 * (w.nrows() * w.ncols()) as u64)
+            .sum();
+        for j in 0..n {
+            for sign in [1.0, -1.0] {
+                let Some(b) = dom.get(m) else {
+                    return;
+                };
+                let (Some(&l), Some(&u)) = (b.lo.get(j), b.hi.get(j)) else {
+                    return;
+                };
+                if !(l < 0.0 && u > 0.0) {
+                    continue;
+                }
+                let mut o = vec![0.0; n];
+                if let Some(x) = o.get_mut(j) {
+                    *x = sign;
+                }
+                let (before, _) = dom.split_at(m);
+                let nu = crown_nu(chain, m, &o, before);
+                let v = lagrangian(chain, m, &o, &nu, input, before);
+                *work = work.saturating_add(cost);
+                if let Some(b) = dom.get_mut(m) {
+                    if sign > 0.0 {
+                        if let Some(lo) = b.lo.get_mut(j) {
+                            if v.is_finite() && v > *lo {
+                                *lo = v;
+                            }
+                        }
+                    } else if let Some(hi) = b.hi.get_mut(j) {
+                        if v.is_finite() && -v < *hi {
+                            *hi = -v;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The root's pre-activation bounds the checker proves over `input` with
 /// the neurons' multipliers (its own bounds, each intersected with theirs),
 /// widened as a writer claims them (so that a checker elsewhere proves
@@ -397,6 +495,9 @@ pub struct Evidence {
     claims: Vec<Bx>,
     neurons: Vec<NeuronNu>,
     nodes: Vec<Node>,
+    /// Whether each child's later layers are re-bounded after its split
+    /// (`"rebound": true`; see [`rebound`]).
+    rebound: bool,
 }
 
 /// Read a `ν`: one vector per hidden layer `< k`, each of its layer's width.
@@ -603,10 +704,17 @@ impl Evidence {
                 }
             }
         }
+        let rebound = match v.get("rebound") {
+            None => false,
+            Some(b) => b
+                .as_bool()
+                .ok_or("`splits.rebound` must be true or false")?,
+        };
         Ok(Evidence {
             claims,
             neurons,
             nodes,
+            rebound,
         })
     }
 }
@@ -672,7 +780,79 @@ pub fn check(
     if let Some(r) = own_rows.first_mut() {
         r.extend(own.iter().copied());
     }
+    let prove = |node: &Node, dom: &[Bx]| -> Vec<(usize, bool)> {
+        node.proofs
+            .iter()
+            .map(|(row, nu)| {
+                let ok = rows.get(*row).and_then(Option::as_ref).is_some_and(|r| {
+                    let o: Vec<f64> = r.d.iter().map(|v| -v).collect();
+                    let l = lagrangian(chain, hidden, &o, nu, input, dom);
+                    r.test.holds(-l)
+                });
+                (*row, ok)
+            })
+            .collect()
+    };
+    if ev.rebound {
+        // every node's domain from its parent's: the clamp, then the later
+        // layers re-bounded; depth first, so only a path's domains are held
+        let mut flags_of: Vec<Vec<(usize, bool)>> = vec![Vec::new(); n];
+        let mut work = 0u64;
+        let mut stack: Vec<(usize, Vec<Bx>)> = vec![(0, ev.claims.clone())];
+        while let Some((i, dom)) = stack.pop() {
+            let Some(node) = ev.nodes.get(i) else {
+                continue;
+            };
+            if is_void(&dom) {
+                if let Some(e) = empty.get_mut(i) {
+                    *e = true;
+                }
+                continue;
+            }
+            if let Some(f) = flags_of.get_mut(i) {
+                *f = prove(node, &dom);
+            }
+            if let Some((k, j, c0, c1)) = node.split {
+                for (c, active) in [(c0, false), (c1, true)] {
+                    let mut d = dom.clone();
+                    if let Some(b) = d.get_mut(k) {
+                        if active {
+                            if let Some(lo) = b.lo.get_mut(j) {
+                                *lo = lo.max(0.0);
+                            }
+                        } else if let Some(hi) = b.hi.get_mut(j) {
+                            *hi = hi.min(0.0);
+                        }
+                    }
+                    if !is_void(&d) {
+                        rebound(chain, input, &mut d, k + 1, &mut work);
+                    }
+                    if work > MAX_WORK {
+                        return Some(format!(
+                            "re-bounding the split tree's domains needs more than {MAX_WORK} multiply-adds"
+                        ));
+                    }
+                    stack.push((c, d));
+                }
+            }
+        }
+        for (i, flags) in flags_of.into_iter().enumerate() {
+            if let Some(mine) = own_rows.get_mut(i) {
+                mine.extend(flags.iter().filter(|f| f.1).map(|f| f.0));
+            }
+            if let Some(p) = proved.as_deref_mut() {
+                // (a void node's proofs are not needed: they count as not proved)
+                let len = ev.nodes.get(i).map_or(0, |x| x.proofs.len());
+                let mut v: Vec<bool> = flags.iter().map(|f| f.1).collect();
+                v.resize(len, false);
+                p.push(v);
+            }
+        }
+    }
     for (i, node) in ev.nodes.iter().enumerate() {
+        if ev.rebound {
+            break;
+        }
         if let (Some(&Some((_, k, j, active))), Some(e)) = (parent.get(i), empty.get_mut(i)) {
             // (a neuron the reader found in range)
             let c = ev.claims.get(k);
@@ -895,5 +1075,88 @@ mod tests {
             (MAX_NODES, MAX_WORK),
             "second proof",
         );
+    }
+
+    /// The checker's re-bounding of a child's later layers keeps every
+    /// sampled input of the child inside (its bounds hold), tightens some
+    /// bounds, and never loosens one.
+    #[test]
+    fn rebounded_domains_hold_every_sampled_input() {
+        use ravel_base::rng::Rng;
+        let mut tightened = 0;
+        for seed in 0..8 {
+            let mut rng = Rng::new(seed);
+            let sizes = [3usize, 10, 8, 6, 2];
+            let mut layers = Vec::new();
+            for (g, win) in sizes.windows(2).enumerate() {
+                if g > 0 {
+                    layers.push(Layer::Act(Activation::Relu));
+                }
+                let s = 1.0 / (win[0] as f64).sqrt();
+                layers.push(Layer::Affine {
+                    w: DMatrix::from_fn(win[1], win[0], |_, _| rng.normal() * s),
+                    b: DVector::from_fn(win[1], |_, _| 0.3 * rng.normal()),
+                });
+            }
+            let net = Network::new(3, layers);
+            let c = Chain::of(&net).unwrap();
+            let centre: Vec<f64> = (0..3).map(|_| rng.uniform(-1.0, 1.0)).collect();
+            let input = Bx {
+                lo: centre.iter().map(|v| v - 0.4).collect(),
+                hi: centre.iter().map(|v| v + 0.4).collect(),
+            };
+            let root = derive_claims(&net, &input, &[]).unwrap();
+            let Some(j) =
+                (0..root[0].lo.len()).find(|&j| root[0].lo[j] < 0.0 && root[0].hi[j] > 0.0)
+            else {
+                continue;
+            };
+            for active in [false, true] {
+                let mut plain = root.clone();
+                if active {
+                    plain[0].lo[j] = 0.0;
+                } else {
+                    plain[0].hi[j] = 0.0;
+                }
+                let mut re = plain.clone();
+                let mut work = 0;
+                rebound(&c, &input, &mut re, 1, &mut work);
+                assert!(work > 0);
+                for (p, r) in plain.iter().zip(&re) {
+                    for n in 0..p.lo.len() {
+                        assert!(r.lo[n] >= p.lo[n] && r.hi[n] <= p.hi[n]);
+                        tightened += usize::from(r.lo[n] > p.lo[n] || r.hi[n] < p.hi[n]);
+                    }
+                }
+                for _ in 0..3000 {
+                    let x: Vec<f64> = (0..3)
+                        .map(|d| rng.uniform(input.lo[d], input.hi[d]))
+                        .collect();
+                    // the pre-activations at x
+                    let mut h = DVector::from_column_slice(&x);
+                    let mut pre = Vec::new();
+                    for layer in &net.layers {
+                        match layer {
+                            Layer::Affine { w, b } => h = w * &h + b,
+                            Layer::Act(_) => {
+                                pre.push(h.clone());
+                                h = h.map(|v| v.max(0.0));
+                            }
+                        }
+                    }
+                    let within = |d: &[Bx]| {
+                        d.iter().zip(&pre).all(|(b, z)| {
+                            z.iter()
+                                .enumerate()
+                                .all(|(n, &v)| b.lo[n] <= v && v <= b.hi[n])
+                        })
+                    };
+                    if within(&plain) {
+                        assert!(within(&re), "seed {seed}: {x:?} left the re-bounded domain");
+                    }
+                }
+            }
+        }
+        assert!(tightened > 10, "only {tightened} bounds tightened");
     }
 }

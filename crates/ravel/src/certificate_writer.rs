@@ -975,6 +975,7 @@ fn split_evidence(
         .split_record
         .as_ref()
         .ok_or("the search kept no record (no finite pre-activation bounds)")?;
+    let rebound = record.rebound;
     if let Some(why) = &record.dropped {
         return Err(why.clone());
     }
@@ -1040,6 +1041,7 @@ fn split_evidence(
             }))
             .collect::<Vec<_>>(),
         "nodes": Value::Array(nodes),
+        "rebound": rebound,
     });
     let mut candidate = cert.clone();
     candidate["evidence"] =

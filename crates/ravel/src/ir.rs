@@ -70,6 +70,33 @@ impl Branching {
     pub const ALL: [Branching; 3] = [Branching::Smear, Branching::Widest, Branching::LookAhead];
 }
 
+/// How branch and bound on ReLU activations spends its budget. Not part of
+/// the language: [`lower`](crate::lower) always chooses the default,
+/// [`ActivationPhases::Portfolio`]; the others exist so each phase can be
+/// tested and measured alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ActivationPhases {
+    /// Splits anywhere (the best-scored neuron of any layer) for the first
+    /// half of the budget (calls, and time when limited), then the search
+    /// again from the root as [`ActivationPhases::Rebound`] for the rest.
+    #[default]
+    Portfolio,
+    /// Splits anywhere, children keep their parent's bounds but the split.
+    Split,
+    /// Splits only in the first layer with an unstable neuron, and each
+    /// child's later layers are re-bounded.
+    Rebound,
+}
+
+impl ActivationPhases {
+    /// Every schedule.
+    pub const ALL: [ActivationPhases; 3] = [
+        ActivationPhases::Portfolio,
+        ActivationPhases::Split,
+        ActivationPhases::Rebound,
+    ];
+}
+
 /// How the initial set is split.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Partitioner {

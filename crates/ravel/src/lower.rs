@@ -301,6 +301,9 @@ pub struct NetworkPlan {
     pub slope_steps: usize,
     /// How `partitioner bab` picks a split (always the default from a spec).
     pub branching: crate::ir::Branching,
+    /// How `partitioner bab` on activations spends its budget (always the
+    /// default from a spec).
+    pub phases: crate::ir::ActivationPhases,
 }
 
 /// Lower a checked network spec to its plan.
@@ -330,6 +333,7 @@ pub fn lower_network(c: &NetworkChecked) -> NetworkPlan {
         seed: c.seed,
         slope_steps: c.slope_steps,
         branching: crate::ir::Branching::default(),
+        phases: crate::ir::ActivationPhases::default(),
     }
 }
 

@@ -189,6 +189,10 @@ pub struct SplitRecord {
     pub bytes: usize,
     /// Why the record is not usable, if it is not.
     pub dropped: Option<String>,
+    /// Whether each child's later layers were re-bounded after its split
+    /// ([`ravel_analysis::dual::rebound_after`]): the checker then derives
+    /// every node's domain the same way.
+    pub rebound: bool,
 }
 
 impl SplitRecord {

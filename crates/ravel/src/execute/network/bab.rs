@@ -988,6 +988,7 @@ mod tests {
             seed: 0,
             slope_steps: 0,
             branching: Default::default(),
+            phases: Default::default(),
         }
     }
 

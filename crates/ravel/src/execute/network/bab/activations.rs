@@ -33,7 +33,7 @@ use nalgebra::DMatrix;
 use super::{cell_margin, halt, proved, Bounded, Ctx, Searched, Witness, BATCH};
 use crate::execute::network::{SplitNode, SplitRecord};
 use crate::execute::{Phase as Stage, Progress};
-use crate::ir::NetPropertyKind;
+use crate::ir::{ActivationPhases, NetPropertyKind};
 use ravel_analysis::dual::{self, Domain, Phase, ReluChain, Slopes};
 use ravel_analysis::issue::Issue;
 use ravel_analysis::partition::{Budget, Stop};
@@ -360,10 +360,11 @@ pub(super) fn search(
     let mut subs: Vec<Option<Sub>> = Vec::new();
     let (w0, _) = cx.worst(&root_bounds, &settled);
     let limit = (super::QUEUE_BYTES / sub_bytes(&root_dom, rows)).max(1);
+    let root_slopes = opt.slopes;
     if w0 < f64::INFINITY {
         subs.push(Some(Sub {
-            dom: root_dom,
-            slopes: opt.slopes,
+            dom: root_dom.clone(),
+            slopes: root_slopes.clone(),
             bounds: root_bounds.clone(),
             node: 0,
         }));
@@ -373,7 +374,45 @@ pub(super) fn search(
     }
     // open subproblems kept when the search stops with no split left
     let mut stuck: Vec<Vec<f64>> = Vec::new();
+    // the first phase's end: half the calls, and half the time left
+    let started = (ctl.elapsed)();
+    let limit_s = match (ctl.time_limit, budget.seconds) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    };
+    let phases = cx.plan.phases;
+    let switch_due = |made: usize| {
+        phases == ActivationPhases::Portfolio
+            && (made >= budget.calls / 2
+                || limit_s.is_some_and(|t| (ctl.elapsed)() >= started + (t - started) / 2.0))
+    };
+    let mut rebound = phases == ActivationPhases::Rebound;
+    record.rebound = rebound;
     while !queue.is_empty() {
+        if !rebound && switch_due(made) {
+            // the second phase: the search again from the root, splitting
+            // in the first unstable layer and re-bounding the later ones
+            rebound = true;
+            queue.clear();
+            subs.clear();
+            stuck.clear();
+            proved_union = vec![f64::NEG_INFINITY; rows];
+            if record.dropped.is_none() {
+                record.nodes.truncate(1);
+                if let Some(n) = record.nodes.first_mut() {
+                    n.split = None;
+                }
+            }
+            record.rebound = true;
+            subs.push(Some(Sub {
+                dom: root_dom.clone(),
+                slopes: root_slopes.clone(),
+                bounds: root_bounds.clone(),
+                node: 0,
+            }));
+            queue.push(Open { at: 0, worst: w0 });
+            continue;
+        }
         if let Some(why) = halt(&settled, out_of_time(), made, budget, queue.len(), limit) {
             stop = why;
             break;
@@ -383,6 +422,8 @@ pub(super) fn search(
         // the children: their domain, their parent's multipliers (the
         // ascent's start) and bounds (which hold on them too)
         let mut kids: Vec<Kid> = Vec::with_capacity(2 * take);
+        // the layer each child's split is in
+        let mut kids_layer: Vec<usize> = Vec::with_capacity(2 * take);
         let mut popped: Vec<(Sub, usize)> = Vec::with_capacity(take);
         while popped.len() < take {
             let Some(node) = queue.pop() else { break };
@@ -405,6 +446,7 @@ pub(super) fn search(
                 &sub.slopes,
                 *row,
                 BRANCH_TOP,
+                rebound,
             )
         });
         for ((sub, _), choice) in popped.into_iter().zip(choices) {
@@ -419,6 +461,7 @@ pub(super) fn search(
                         record.nodes.push(SplitNode::default());
                     }
                     for (i, p) in [Phase::Inactive, Phase::Active].into_iter().enumerate() {
+                        kids_layer.push(k);
                         kids.push((
                             sub.dom.split(k, j, p),
                             sub.slopes.clone(),
@@ -463,6 +506,38 @@ pub(super) fn search(
         if kids.is_empty() {
             continue;
         }
+        // the children's later layers re-bounded, in the fixed groups
+        // below (so the bounds never depend on the thread count)
+        let mut layers: Vec<usize> = kids_layer;
+        let packed: Vec<Vec<(Domain, usize)>> = {
+            let mut out = Vec::new();
+            let mut it = kids.iter_mut().zip(layers.drain(..));
+            loop {
+                let g: Vec<(Domain, usize)> = it
+                    .by_ref()
+                    .take(GROUP)
+                    .map(|(kid, k)| (std::mem::take(&mut kid.0), k))
+                    .collect();
+                if g.is_empty() {
+                    break;
+                }
+                out.push(g);
+            }
+            out
+        };
+        let rebounded = super::super::map_ordered(&packed, ctl.threads, &|g| {
+            let mut g = g.clone();
+            if rebound {
+                dual::rebound_after(chain, rootbox, &mut g);
+            }
+            g
+        });
+        for (kid, (d, _)) in kids.iter_mut().zip(rebounded.into_iter().flatten()) {
+            kid.0 = d;
+        }
+        // a child no input reaches holds every row: a leaf (the checker
+        // finds it empty the same way)
+        kids.retain(|kid| !kid.0.is_empty());
         let late = &out_of_time;
         // groups of a fixed size (never set by the threads: a group's
         // columns share products, so its bounds may depend on it)

@@ -55,6 +55,9 @@ pub struct ReluChain {
     wt: Vec<DMatrix<f64>>,
     /// `|W_k|ᵀ`, for their error bounds.
     abs_wt: Vec<DMatrix<f64>>,
+    /// Per `W_k`, the largest magnitude of each column (for the cheap
+    /// error bound of [`certified_cols`]).
+    colmax: Vec<DVector<f64>>,
     /// `W_k` and `W_kᵀ` rounded to `f32`, for the ascent's products.
     w32: Vec<DMatrix<f32>>,
     wt32: Vec<DMatrix<f32>>,
@@ -148,6 +151,10 @@ impl ReluChain {
         }
         let wt: Vec<DMatrix<f64>> = w.iter().map(|m| m.transpose()).collect();
         let abs_wt = w.iter().map(|m| m.transpose().abs()).collect();
+        let colmax = w
+            .iter()
+            .map(|m| DVector::from_iterator(m.ncols(), m.column_iter().map(|c| c.amax())))
+            .collect();
         let single = |m: &DMatrix<f64>| m.map(|v| v as f32);
         let w32 = w.iter().map(single).collect();
         let wt32 = wt.iter().map(single).collect();
@@ -155,6 +162,7 @@ impl ReluChain {
             w,
             wt,
             abs_wt,
+            colmax,
             w32,
             wt32,
             b,
@@ -184,6 +192,7 @@ impl ReluChain {
             w: self.w[..=k].to_vec(),
             wt: self.wt[..=k].to_vec(),
             abs_wt: self.abs_wt[..=k].to_vec(),
+            colmax: self.colmax[..=k].to_vec(),
             w32: self.w32[..=k].to_vec(),
             wt32: self.wt32[..=k].to_vec(),
             b: self.b[..=k].to_vec(),
@@ -698,14 +707,36 @@ fn evaluate(
     (value, grads, xs)
 }
 
+/// How [`certified_cols`] bounds the rounding of `W_kᵀ ν`.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ErrorBound {
+    /// From `|W_k|ᵀ|ν|` (a second product).
+    Product,
+    /// From `max_i |W_ij| · Σ_i |ν_i|` per entry `j` (no second product;
+    /// larger by at most the layer's width, on an error of about 10⁻¹⁶ of
+    /// the terms: for the many bounds of [`rebound_after`]).
+    Norms,
+}
+
 /// `W_kᵀ ν` (columns) and a bound on its rounding error per entry.
 fn product_with_error(
     chain: &ReluChain,
     k: usize,
     nu: &DMatrix<f64>,
+    how: ErrorBound,
 ) -> (DMatrix<f64>, DMatrix<f64>) {
     let g = &chain.wt[k] * nu;
-    let s = &chain.abs_wt[k] * nu.abs();
+    let s = match how {
+        ErrorBound::Product => &chain.abs_wt[k] * nu.abs(),
+        ErrorBound::Norms => {
+            // Σ_i |ν_i| per column, then the column maxima of W_k
+            let l1: Vec<f64> = nu
+                .column_iter()
+                .map(|c| c.iter().map(|v| v.abs()).sum())
+                .collect();
+            DMatrix::from_fn(g.nrows(), g.ncols(), |j, c| chain.colmax[k][j] * l1[c])
+        }
+    };
     let terms = chain.wt[k].ncols();
     let e = s.map(|a| error_bound(terms, a));
     (g, e)
@@ -723,7 +754,7 @@ pub fn certified(
 ) -> Vec<f64> {
     let owner = vec![0; obj.ncols()];
     let cols = Cols::new(&[dom], &owner);
-    certified_cols(chain, input, &cols, obj, dual)
+    certified_cols(chain, input, &cols, obj, dual, ErrorBound::Product)
 }
 
 /// [`certified`], each column against its own domain.
@@ -733,6 +764,7 @@ fn certified_cols(
     cols: &Cols,
     obj: &DMatrix<f64>,
     dual: &Dual,
+    how: ErrorBound,
 ) -> Vec<f64> {
     let depth = chain.depth();
     let hidden = depth - 1;
@@ -752,7 +784,7 @@ fn certified_cols(
     // each term below is a lower bound already (rounded down), added as a
     // term of the sum: Acc bounds the sum's own rounding
     let down = |v: f64| v.next_down();
-    let (d, e) = product_with_error(chain, 0, nu(0));
+    let (d, e) = product_with_error(chain, 0, nu(0), how);
     for (c, a) in acc.iter_mut().enumerate() {
         for i in 0..input.dim() {
             let (dl, dh) = (
@@ -768,7 +800,7 @@ fn certified_cols(
         }
     }
     for k in 0..hidden {
-        let (g, e) = product_with_error(chain, k + 1, nu(k + 1));
+        let (g, e) = product_with_error(chain, k + 1, nu(k + 1), how);
         let v = nu(k);
         for (c, acc) in acc.iter_mut().enumerate() {
             for j in 0..g.nrows() {
@@ -879,8 +911,10 @@ pub fn rebound_after(chain: &ReluChain, input: &IBox, doms: &mut [(Domain, usize
             beta: alpha.iter().map(|a| DMatrix::zeros(a.nrows(), r)).collect(),
             alpha,
         };
-        let dual = slopes.multipliers(&sub, &cols, &obj, Prec::F64).dual;
-        let bounds = certified_cols(&sub, input, &cols, &obj, &dual);
+        // (any multipliers give a valid bound: single-precision products
+        // find them, the certification is in f64)
+        let dual = slopes.multipliers(&sub, &cols, &obj, Prec::F32).dual;
+        let bounds = certified_cols(&sub, input, &cols, &obj, &dual, ErrorBound::Norms);
         let mut c = 0;
         for (i, o) in open.iter().enumerate() {
             let w = o.len();
@@ -1057,7 +1091,7 @@ pub fn optimise_many(
         }
     }
     let dual = best.multipliers(chain, &cols, &obj, Prec::F64).dual;
-    let bounds = certified_cols(chain, input, &cols, &obj, &dual);
+    let bounds = certified_cols(chain, input, &cols, &obj, &dual, ErrorBound::Product);
     let mut out = Vec::with_capacity(jobs.len());
     let mut at = 0;
     for w in widths {

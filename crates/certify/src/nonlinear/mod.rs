@@ -849,6 +849,51 @@ fn proves(
     Ok(())
 }
 
+/// A replayed step's controls and disturbance, as intervals.
+type Inputs = (Vec<Iv>, Vec<Iv>);
+
+/// One step of a replayed trajectory: its recorded disturbance `w` and
+/// sensor noise `v` at step `t` read and checked against their boxes, and
+/// the enclosure of the controls the network gives at `x` (`y = Cᵀx + v`,
+/// the noise as a point) with `w` as points; `Ok(Err(why))` when the noise
+/// leaves its box.
+fn step_inputs(
+    problem: &Problem,
+    net: &Network,
+    x: &[Iv],
+    w: &Value,
+    v: &Value,
+    t: usize,
+) -> R<Result<Inputs, String>> {
+    let (d, q) = (problem.w.len(), problem.v.len());
+    let w = vector(w, d, "process_noise")?;
+    let v = vector(v, q, "sensor_noise")?;
+    let within = |p: &[f64], b: &[Iv]| p.iter().zip(b).all(|(x, b)| b.lo <= *x && *x <= b.hi);
+    if !within(&w, &problem.w) {
+        return Ok(Err(format!(
+            "has a disturbance outside its box at step {t}"
+        )));
+    }
+    if !within(&v, &problem.v) {
+        return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+    }
+    let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
+    let y = problem.observe(x, &noise);
+    let yb = Bx {
+        lo: y.iter().map(|i| i.lo).collect(),
+        hi: y.iter().map(|i| i.hi).collect(),
+    };
+    let ub = network_box(net, &yb);
+    let u: Vec<Iv> = ub
+        .lo
+        .iter()
+        .zip(&ub.hi)
+        .map(|(&l, &h)| Iv::new(l, h))
+        .collect();
+    let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+    Ok(Ok((u, wi)))
+}
+
 /// Replay a recorded trajectory with the checker's own enclosure.
 fn replay(
     problem: &Problem,
@@ -858,7 +903,6 @@ fn replay(
     tr: &Value,
 ) -> R<Result<(), String>> {
     let n = problem.n();
-    let (d, q) = (problem.w.len(), problem.v.len());
     let (first, last_step, eventually, periods) = match prop {
         Prop::Goal {
             steps,
@@ -903,35 +947,10 @@ fn replay(
         if t >= first {
             window.push(to_box(&x));
         }
-        let w = vector(w, d, "process_noise")?;
-        let v = vector(v, q, "sensor_noise")?;
-        if !w
-            .iter()
-            .zip(&problem.w)
-            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
-        {
-            return Ok(Err(format!(
-                "has a disturbance outside its box at step {t}"
-            )));
-        }
-        if !v
-            .iter()
-            .zip(&problem.v)
-            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
-        {
-            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
-        }
-        // y = Cᵀx + v (the recorded noise, as a point)
-        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
-        let y = problem.observe(&x, &noise);
-        let ub = network_box(net, &to_box(&y));
-        let u: Vec<Iv> = ub
-            .lo
-            .iter()
-            .zip(&ub.hi)
-            .map(|(&l, &h)| Iv::new(l, h))
-            .collect();
-        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+        let (u, wi) = match step_inputs(problem, net, &x, w, v, t)? {
+            Ok(p) => p,
+            Err(e) => return Ok(Err(e)),
+        };
         match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
             Ok(p) => {
                 x = p.end;
@@ -989,7 +1008,6 @@ fn replay_between(
     tr: &Value,
 ) -> R<Result<(), String>> {
     let n = problem.n();
-    let (d, q) = (problem.w.len(), problem.v.len());
     let (steps, periods) = match prop {
         Prop::Goal {
             eventually: true, ..
@@ -1036,34 +1054,10 @@ fn replay_between(
     };
     let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
-        let w = vector(w, d, "process_noise")?;
-        let v = vector(v, q, "sensor_noise")?;
-        if !w
-            .iter()
-            .zip(&problem.w)
-            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
-        {
-            return Ok(Err(format!(
-                "has a disturbance outside its box at step {t}"
-            )));
-        }
-        if !v
-            .iter()
-            .zip(&problem.v)
-            .all(|(x, b)| b.lo <= *x && *x <= b.hi)
-        {
-            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
-        }
-        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
-        let y = problem.observe(&x, &noise);
-        let ub = network_box(net, &to_box(&y));
-        let u: Vec<Iv> = ub
-            .lo
-            .iter()
-            .zip(&ub.hi)
-            .map(|(&l, &h)| Iv::new(l, h))
-            .collect();
-        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
+        let (u, wi) = match step_inputs(problem, net, &x, w, v, t)? {
+            Ok(p) => p,
+            Err(e) => return Ok(Err(e)),
+        };
         if t + 1 < step {
             match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
                 Ok(p) => x = p.end,

@@ -361,13 +361,15 @@ pub(super) fn search(
     let (w0, _) = cx.worst(&root_bounds, &settled);
     let limit = (super::QUEUE_BYTES / sub_bytes(&root_dom, rows)).max(1);
     let root_slopes = opt.slopes;
+    // the root as the one open subproblem (each phase starts from it)
+    let root_sub = || Sub {
+        dom: root_dom.clone(),
+        slopes: root_slopes.clone(),
+        bounds: root_bounds.clone(),
+        node: 0,
+    };
     if w0 < f64::INFINITY {
-        subs.push(Some(Sub {
-            dom: root_dom.clone(),
-            slopes: root_slopes.clone(),
-            bounds: root_bounds.clone(),
-            node: 0,
-        }));
+        subs.push(Some(root_sub()));
         queue.push(Open { at: 0, worst: w0 });
     } else {
         absorb(&mut proved_union, &root_bounds);
@@ -404,12 +406,7 @@ pub(super) fn search(
                 }
             }
             record.rebound = true;
-            subs.push(Some(Sub {
-                dom: root_dom.clone(),
-                slopes: root_slopes.clone(),
-                bounds: root_bounds.clone(),
-                node: 0,
-            }));
+            subs.push(Some(root_sub()));
             queue.push(Open { at: 0, worst: w0 });
             continue;
         }

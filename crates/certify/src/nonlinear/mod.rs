@@ -849,6 +849,38 @@ fn proves(
     Ok(())
 }
 
+/// The box of an interval vector.
+fn hull_box(x: &[Iv]) -> Bx {
+    Bx {
+        lo: x.iter().map(|i| i.lo).collect(),
+        hi: x.iter().map(|i| i.hi).collect(),
+    }
+}
+
+/// A recorded trajectory's start (in the initial set) and its noise
+/// sequences, at least `steps` long; `Ok(Err(why))` when it starts outside.
+fn trajectory<'a>(problem: &Problem, tr: &'a Value, steps: usize) -> R<Result<Start<'a>, String>> {
+    let x0 = vector(get(tr, "initial")?, problem.n(), "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < steps || vs.len() < steps {
+        return Err(format!(
+            "the trajectory has noise for fewer than {steps} steps"
+        ));
+    }
+    if !problem.initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    Ok(Ok((x0, ws, vs)))
+}
+
+/// A trajectory's start and its process and sensor noise per step.
+type Start<'a> = (Vec<f64>, &'a Vec<Value>, &'a Vec<Value>);
+
 /// A replayed step's controls and disturbance, as intervals.
 type Inputs = (Vec<Iv>, Vec<Iv>);
 
@@ -879,11 +911,7 @@ fn step_inputs(
     }
     let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
     let y = problem.observe(x, &noise);
-    let yb = Bx {
-        lo: y.iter().map(|i| i.lo).collect(),
-        hi: y.iter().map(|i| i.hi).collect(),
-    };
-    let ub = network_box(net, &yb);
+    let ub = network_box(net, &hull_box(&y));
     let u: Vec<Iv> = ub
         .lo
         .iter()
@@ -902,7 +930,6 @@ fn replay(
     step: usize,
     tr: &Value,
 ) -> R<Result<(), String>> {
-    let n = problem.n();
     let (first, last_step, eventually, periods) = match prop {
         Prop::Goal {
             steps,
@@ -921,31 +948,16 @@ fn replay(
     }
     // an eventually goal is violated only by the whole window
     let last = if eventually { last_step } else { step };
-    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
-    let ws = get(tr, "process_noise")?
-        .as_array()
-        .ok_or("`process_noise` must be an array")?;
-    let vs = get(tr, "sensor_noise")?
-        .as_array()
-        .ok_or("`sensor_noise` must be an array")?;
-    if ws.len() < last || vs.len() < last {
-        return Err(format!(
-            "the trajectory has noise for fewer than {last} steps"
-        ));
-    }
-    if !problem.initial.contains(&x0) {
-        return Ok(Err("starts outside the initial set".into()));
-    }
-    let to_box = |x: &[Iv]| Bx {
-        lo: x.iter().map(|i| i.lo).collect(),
-        hi: x.iter().map(|i| i.hi).collect(),
+    let (x0, ws, vs) = match trajectory(problem, tr, last)? {
+        Ok(t) => t,
+        Err(e) => return Ok(Err(e)),
     };
     let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
     // the enclosures at the window's instants and over its periods
     let mut window: Vec<Bx> = Vec::new();
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
         if t >= first {
-            window.push(to_box(&x));
+            window.push(hull_box(&x));
         }
         let (u, wi) = match step_inputs(problem, net, &x, w, v, t)? {
             Ok(p) => p,
@@ -957,14 +969,14 @@ fn replay(
                 // the period ending at step t + 1, piece by piece
                 if let Some(pieces) = p.between {
                     if (periods.0..=periods.1).contains(&(t + 1)) {
-                        window.extend(pieces.iter().map(|piece| to_box(piece)));
+                        window.extend(pieces.iter().map(|piece| hull_box(piece)));
                     }
                 }
             }
             Err(e) => return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1))),
         }
     }
-    let xb = to_box(&x);
+    let xb = hull_box(&x);
     window.push(xb.clone());
     let violated = match prop {
         Prop::Goal { set, .. } if eventually => {
@@ -1007,7 +1019,6 @@ fn replay_between(
     step: usize,
     tr: &Value,
 ) -> R<Result<(), String>> {
-    let n = problem.n();
     let (steps, periods) = match prop {
         Prop::Goal {
             eventually: true, ..
@@ -1033,24 +1044,9 @@ fn replay_between(
             step.saturating_sub(1)
         )));
     }
-    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
-    let ws = get(tr, "process_noise")?
-        .as_array()
-        .ok_or("`process_noise` must be an array")?;
-    let vs = get(tr, "sensor_noise")?
-        .as_array()
-        .ok_or("`sensor_noise` must be an array")?;
-    if ws.len() < step || vs.len() < step {
-        return Err(format!(
-            "the trajectory has noise for fewer than {step} steps"
-        ));
-    }
-    if !problem.initial.contains(&x0) {
-        return Ok(Err("starts outside the initial set".into()));
-    }
-    let to_box = |x: &[Iv]| Bx {
-        lo: x.iter().map(|i| i.lo).collect(),
-        hi: x.iter().map(|i| i.hi).collect(),
+    let (x0, ws, vs) = match trajectory(problem, tr, step)? {
+        Ok(t) => t,
+        Err(e) => return Ok(Err(e)),
     };
     let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
@@ -1071,7 +1067,7 @@ fn replay_between(
                 continue;
             };
             let violated = p.between.iter().flatten().any(|piece| {
-                let b = to_box(piece);
+                let b = hull_box(piece);
                 match prop {
                     Prop::Goal { set, .. } => set.missed_by(&b),
                     Prop::Avoid { members, .. } => members.iter().any(|m| m.holds_on(&b)),

@@ -474,7 +474,8 @@ fn relu_pairs_between_affine_layers_keep_the_function_and_its_bounds() {
 /// After a split in the first hidden layer, re-bounding the later layers
 /// keeps every sampled input of the child inside the child's domain
 /// (every bound certified), tightens some bounds, never loosens one, and
-/// gives the same domains in one batch as apart (up to an ulp).
+/// gives the same domains in one batch as apart (up to single-precision
+/// rounding).
 #[test]
 fn rebounded_children_hold_every_sampled_input_and_tighten() {
     let mut tightened = 0;
@@ -494,12 +495,13 @@ fn rebounded_children_hold_every_sampled_input_and_tighten() {
         for (i, (plain, _)) in kids.iter().enumerate() {
             let mut alone = vec![kids[i].clone()];
             rebound_after(&chain, &cs.input, &mut alone);
-            // (the products' summation order depends on the columns: an ulp)
+            // (the multipliers are found with single-precision products,
+            // whose summation order depends on the columns)
             let near = |a: &[Vec<f64>], b: &[Vec<f64>]| {
                 a.iter()
                     .flatten()
                     .zip(b.iter().flatten())
-                    .all(|(x, y)| (x - y).abs() <= 1e-12 * x.abs().max(1.0))
+                    .all(|(x, y)| (x - y).abs() <= 1e-5 * x.abs().max(1.0))
             };
             assert!(
                 near(&alone[0].0.lo, &together[i].0.lo) && near(&alone[0].0.hi, &together[i].0.hi),

@@ -734,7 +734,16 @@ fn product_with_error(
                 .column_iter()
                 .map(|c| c.iter().map(|v| v.abs()).sum())
                 .collect();
-            DMatrix::from_fn(g.nrows(), g.ncols(), |j, c| chain.colmax[k][j] * l1[c])
+            // a zero column's products are exactly 0 (and 0·∞ would be
+            // NaN); an overflowed sum gives an infinite error: no bound
+            DMatrix::from_fn(g.nrows(), g.ncols(), |j, c| {
+                let m = chain.colmax[k][j];
+                if m == 0.0 {
+                    0.0
+                } else {
+                    m * l1[c]
+                }
+            })
         }
     };
     let terms = chain.wt[k].ncols();

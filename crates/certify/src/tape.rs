@@ -35,6 +35,16 @@ fn out(lo: f64, hi: f64) -> Option<Iv> {
     iv(lo.next_down(), hi.next_up())
 }
 
+/// A sum's (or difference's) ends rounded to nearest, moved out by one ulp
+/// unless exactly 0: with gradual underflow a sum of two doubles rounds to
+/// ±0 only when it is exactly 0, so a zero end is exact (and `x² + y²`
+/// over a box around the origin stays non-negative, inside `√`'s domain).
+fn out_sum(lo: f64, hi: f64) -> Option<Iv> {
+    let lo = if lo == 0.0 { 0.0 } else { lo.next_down() };
+    let hi = if hi == 0.0 { 0.0 } else { hi.next_up() };
+    iv(lo, hi)
+}
+
 /// The relative widening of a `libm` value.
 const LIBM_REL: f64 = 4.0 * f64::EPSILON;
 
@@ -199,11 +209,11 @@ pub fn range(tape: &Tape, lo: &[f64], hi: &[f64]) -> Option<Iv> {
             }
             Node::Add(a, b) => {
                 let (a, b) = (at(a)?, at(b)?);
-                out(a.lo + b.lo, a.hi + b.hi)?
+                out_sum(a.lo + b.lo, a.hi + b.hi)?
             }
             Node::Sub(a, b) => {
                 let (a, b) = (at(a)?, at(b)?);
-                out(a.lo - b.hi, a.hi - b.lo)?
+                out_sum(a.lo - b.hi, a.hi - b.lo)?
             }
             Node::Mul(a, b) => mul(at(a)?, at(b)?)?,
             Node::Div(a, b) => div(at(a)?, at(b)?)?,
@@ -320,6 +330,26 @@ mod tests {
         let sin = read(&json!([["var", 0], ["sin", 0]]), 1).unwrap();
         let s = range(&sin, &[1.0], &[2.0]).unwrap();
         assert!(s.hi == 1.0 && s.lo <= 1.0f64.sin());
+        // √(x0² + x1²) over a box around the origin: the sum's lower end is
+        // an exact 0, not moved below it, so the root is defined
+        let norm = read(
+            &json!([
+                ["var", 0],
+                ["powi", 0, 2],
+                ["var", 1],
+                ["powi", 2, 2],
+                ["add", 1, 3],
+                ["sqrt", 4]
+            ]),
+            2,
+        )
+        .unwrap();
+        let n = range(&norm, &[-0.14, -0.14], &[0.14, 0.14]).unwrap();
+        assert!(n.lo == 0.0 && n.hi >= 0.14 * 2f64.sqrt() && n.hi < 0.1981);
+        // a sum that only rounds to a tiny number is still moved out
+        let shifted = read(&json!([["var", 0], ["const", 1e-300], ["sub", 0, 1]]), 1).unwrap();
+        let z = range(&shifted, &[2e-300], &[2e-300]).unwrap();
+        assert!(z.lo < 1e-300 && z.hi > 1e-300);
         // malformed tapes are refused
         assert!(read(&json!([["add", 0, 1]]), 1).is_err());
         assert!(read(&json!([["var", 3]]), 2).is_err());

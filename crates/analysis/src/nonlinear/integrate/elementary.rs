@@ -239,6 +239,31 @@ mod tape_range_tests {
     }
 
     #[test]
+    fn a_norm_around_the_origin_is_defined() {
+        // √(x0² + x1²) over a box around 0: the sum's lower end is an exact
+        // 0 (not moved below it by outward rounding), so √ is defined there
+        let norm = tape(&[
+            Node::Var(0),
+            Node::Powi(0, 2),
+            Node::Var(1),
+            Node::Powi(2, 2),
+            Node::Add(1, 3),
+            Node::Func(Func::Sqrt, 4),
+        ]);
+        let b = [Interval::new(-0.14, 0.14), Interval::new(-0.14, 0.14)];
+        let r = tape_range(&norm, &b).expect("defined");
+        assert!(
+            r.lo == 0.0 && r.hi >= 0.14 * 2f64.sqrt() && r.hi < 0.1981,
+            "{r:?}"
+        );
+        // a difference that cancels exactly is 0; one that does not is moved
+        let d = Interval::point(0.3) - Interval::point(0.3);
+        assert!(d.lo == 0.0 && d.hi == 0.0);
+        let e = Interval::point(0.3) - Interval::point(0.1);
+        assert!(e.lo < 0.3 - 0.1 && e.hi > 0.3 - 0.1);
+    }
+
+    #[test]
     fn domain_errors_are_not_bounds() {
         // 1 / x0 over a box containing 0; log(x0) and sqrt(x0) over negatives
         let div = tape(&[Node::Const(1.0), Node::Var(0), Node::Div(0, 1)]);

@@ -270,12 +270,35 @@ fn min_max_outward(v: [f64; 4]) -> Interval {
     }
 }
 
+/// A sum or difference rounded to nearest, moved down by one ulp unless it
+/// is exactly 0: with gradual underflow, `a ± b` rounds to ±0 only when it
+/// *is* 0 (a non-zero sum of two doubles below the normal range is exactly
+/// representable), so a zero result is exact. Keeping it lets a sum of
+/// non-negative terms that may be 0 (`x² + y²` over a box around the
+/// origin) stay non-negative, so `√` and `log` of it are not refused.
+fn sum_down(s: f64) -> f64 {
+    if s == 0.0 {
+        0.0
+    } else {
+        s.next_down()
+    }
+}
+
+/// [`sum_down`] upwards.
+fn sum_up(s: f64) -> f64 {
+    if s == 0.0 {
+        0.0
+    } else {
+        s.next_up()
+    }
+}
+
 impl std::ops::Add for Interval {
     type Output = Interval;
     fn add(self, o: Interval) -> Interval {
         Interval {
-            lo: (self.lo + o.lo).next_down(),
-            hi: (self.hi + o.hi).next_up(),
+            lo: sum_down(self.lo + o.lo),
+            hi: sum_up(self.hi + o.hi),
         }
     }
 }
@@ -284,8 +307,8 @@ impl std::ops::Sub for Interval {
     type Output = Interval;
     fn sub(self, o: Interval) -> Interval {
         Interval {
-            lo: (self.lo - o.hi).next_down(),
-            hi: (self.hi - o.lo).next_up(),
+            lo: sum_down(self.lo - o.hi),
+            hi: sum_up(self.hi - o.lo),
         }
     }
 }

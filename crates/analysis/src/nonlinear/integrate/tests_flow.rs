@@ -465,6 +465,37 @@ fn float_simulation_is_accurate() {
 }
 
 #[test]
+fn float_simulation_matches_closed_forms() {
+    // the harmonic oscillator ẋ0 = x1, ẋ1 = −x0 + u (u held): x0 − u = cos t
+    // from (1 + u, 0), over several periods and step lengths
+    let mut b = B::new();
+    let (x0, x1, u) = (b.v(0), b.v(1), b.v(2));
+    let d = b.sub(u, x0);
+    let osc = b.field(vec![x1, d], 1, 0);
+    for &(t, uv) in &[(0.2, 0.0), (1.0, 0.5), (3.0, -2.0), (10.0, 0.0)] {
+        let y = simulate(&osc, &[1.0 + uv, 0.0], &[uv], &[], t);
+        assert!((y[0] - uv - t.cos()).abs() < 1e-11, "{t}: {y:?}");
+        assert!((y[1] + t.sin()).abs() < 1e-11, "{t}: {y:?}");
+    }
+    // Van der Pol over 5 time units: the same end by one period and by ten
+    // tenths (the step control must not change the answer)
+    let vdp = van_der_pol();
+    let whole = simulate(&vdp, &[1.0, 0.5], &[], &[], 5.0);
+    let mut y = vec![1.0, 0.5];
+    for _ in 0..10 {
+        y = simulate(&vdp, &y, &[], &[], 0.5);
+    }
+    assert!((whole[0] - y[0]).abs() < 1e-10 && (whole[1] - y[1]).abs() < 1e-10);
+    // a period of length 0 is the identity; a blow-up is NaN, not a value
+    assert_eq!(simulate(&vdp, &[1.0, 0.5], &[], &[], 0.0), vec![1.0, 0.5]);
+    let mut b = B::new();
+    let x = b.v(0);
+    let sq = b.pow(x, 2);
+    let blow = b.field(vec![sq], 0, 0);
+    assert!(simulate(&blow, &[1.1], &[], &[], 2.0)[0].is_nan());
+}
+
+#[test]
 fn errors_never_bounds() {
     let s = Settings::default();
     // x' = x², blowing up at t = 1/1.1 < 2

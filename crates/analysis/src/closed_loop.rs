@@ -20,7 +20,7 @@ use super::partition::{Budget, Strategy};
 use super::sdp;
 use super::shape::Shape;
 use crate::issue::Issue;
-use crate::sets::{IBox, Region};
+use crate::sets::{Affine, IBox, Region};
 use ravel_base::nn::{mat_batch_into, Network};
 use ravel_base::num::{gamma, mul0, slack, sum_upper};
 
@@ -208,6 +208,13 @@ pub struct Step {
     /// ([`crate::nonlinear::integrate::FlowOut::pieces`]), a linear plant's
     /// one for the whole period; `None` for other plants and periods.
     pub between: Option<Vec<IBox>>,
+    /// A nonlinear plant's affine enclosure of the set (the Taylor models
+    /// it is the box of), for bounding nonlinear constraints with the
+    /// states' correlations; `None` for other plants.
+    pub form: Option<Affine>,
+    /// The same for each piece of `between`, where the integrator had one
+    /// (empty, or one entry per piece).
+    pub between_forms: Vec<Option<Affine>>,
 }
 
 impl Step {
@@ -218,6 +225,8 @@ impl Step {
             issues,
             cut: None,
             between: None,
+            form: None,
+            between_forms: Vec::new(),
         }
     }
 
@@ -229,6 +238,8 @@ impl Step {
             issues,
             cut: Some(Cut::Overflow),
             between: None,
+            form: None,
+            between_forms: Vec::new(),
         }
     }
 
@@ -244,6 +255,8 @@ impl Step {
             issues: Vec::new(),
             cut: Some(cut),
             between: None,
+            form: None,
+            between_forms: Vec::new(),
         }
     }
 

@@ -270,6 +270,24 @@ impl Norm {
     }
 }
 
+/// An affine enclosure of a reachable set, kept beside its box by the
+/// nonlinear closed loop: every state is `c + G s + r` for some
+/// `s ∈ [−1, 1]ᵏ` and `r ∈ [r_lo, r_hi]`. Nonlinear constraints are
+/// bounded over it by a mean value form
+/// ([`crate::nonlinear::integrate::tape_range_affine`]), which keeps the
+/// correlations between the states that the box loses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Affine {
+    /// The centre.
+    pub c: Vec<f64>,
+    /// One row of `k` coefficients per state.
+    pub g: Vec<Vec<f64>>,
+    /// The remainder's lower ends.
+    pub r_lo: Vec<f64>,
+    /// The remainder's upper ends.
+    pub r_hi: Vec<f64>,
+}
+
 /// A set of states: a box, a bounded polytope (rows plus a bounding box that
 /// contains it), or an ℓp ball `{c + diag(r) δ | ‖δ‖ₚ ≤ 1}` with per-dimension radii.
 #[derive(Clone, Debug, PartialEq)]

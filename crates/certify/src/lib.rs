@@ -299,22 +299,75 @@ impl CSet {
 
     /// Whether every constraint's upper bound over the box is at most 0.
     fn constraints_hold_on(&self, b: &Bx) -> bool {
+        self.constraints_hold_on_form(b, None)
+    }
+
+    /// An enclosure of `g` over the box, tightened by the mean value form
+    /// over `form` (an affine set of the same states inside the box) when
+    /// given.
+    fn constraint_range(
+        g: &ravel_base::expr::Tape,
+        b: &Bx,
+        form: Option<&Form>,
+    ) -> Option<tape::Iv> {
+        let plain = tape::range(g, &b.lo, &b.hi);
+        let mean =
+            form.and_then(|f| tape::range_affine(g, f.c, f.g, &f.e_lo, &f.e_hi, &b.lo, &b.hi));
+        match (plain, mean) {
+            (Some(p), Some(m)) => Some(tape::Iv {
+                lo: p.lo.max(m.lo),
+                hi: p.hi.min(m.hi),
+            }),
+            (p, m) => p.or(m),
+        }
+    }
+
+    /// [`CSet::constraints_hold_on`] with the states' affine form.
+    fn constraints_hold_on_form(&self, b: &Bx, form: Option<&Form>) -> bool {
         self.nonlinear
             .iter()
-            .all(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.hi <= 0.0))
+            .all(|g| Self::constraint_range(g, b, form).is_some_and(|r| r.hi <= 0.0))
+    }
+
+    /// Whether one constraint has a positive lower bound over the box
+    /// (with the states' affine form when given).
+    fn constraint_missed_by(&self, b: &Bx, form: Option<&Form>) -> bool {
+        self.nonlinear
+            .iter()
+            .any(|g| Self::constraint_range(g, b, form).is_some_and(|r| r.lo > 0.0))
     }
 
     /// Whether the box certainly misses the set (one row or one
     /// constraint has a positive lower bound over it).
     fn missed_by(&self, b: &Bx) -> bool {
+        self.missed_by_form(b, None)
+    }
+
+    /// [`CSet::missed_by`] with the states' affine form.
+    fn missed_by_form(&self, b: &Bx, form: Option<&Form>) -> bool {
         self.rows
             .iter()
             .any(|(a, c)| sum_lower([dot_box_lower(a, &b.lo, &b.hi), -c]) > 0.0)
-            || self
-                .nonlinear
-                .iter()
-                .any(|g| tape::range(g, &b.lo, &b.hi).is_some_and(|r| r.lo > 0.0))
+            || self.constraint_missed_by(b, form)
     }
+
+    /// [`CSet::holds_on`] with the states' affine form.
+    fn holds_on_form(&self, b: &Bx, form: Option<&Form>) -> bool {
+        self.rows
+            .iter()
+            .all(|(a, c)| sum_upper([dot_box_upper(a, &b.lo, &b.hi), -c]) <= 0.0)
+            && self.constraints_hold_on_form(b, form)
+    }
+}
+
+/// An affine set `{c + G s + e : s ∈ [−1, 1]ᵏ, e ∈ [e_lo, e_hi]}` of
+/// states, for the mean value bound of a set's constraints
+/// ([`tape::range_affine`]).
+struct Form<'a> {
+    c: &'a [f64],
+    g: &'a [Vec<f64>],
+    e_lo: Vec<f64>,
+    e_hi: Vec<f64>,
 }
 
 /// Inequalities `a·x ≤ b`.

@@ -28,7 +28,7 @@ use super::integrate::{self, DomainError, FlowError, Interval, Tm};
 use super::NonlinearLoop;
 use crate::closed_loop::{Boundary, Cut, Step};
 use crate::crown::{Mode, Relaxation};
-use crate::sets::{IBox, Region};
+use crate::sets::{Affine, IBox, Region};
 use nalgebra::{DMatrix, DVector};
 use ravel_base::expr::Time;
 use ravel_base::nn::{Layer, Network};
@@ -72,6 +72,9 @@ struct Advanced {
     /// The states over the period (continuous time), including both ends,
     /// in the flow's pieces ([`integrate::FlowOut::pieces`]).
     pipe: Option<Vec<IBox>>,
+    /// The pieces' models, where the flow kept them
+    /// ([`integrate::FlowOut::piece_forms`]).
+    pipe_forms: Vec<Option<Affine>>,
 }
 
 impl NonlinearLoop {
@@ -107,6 +110,8 @@ impl NonlinearLoop {
                 Ok(a) => {
                     let mut step = Step::new(region_of(&a.next, boundary, t + 1), Vec::new());
                     step.between = a.pipe;
+                    step.form = affine_of(&a.next);
+                    step.between_forms = a.pipe_forms;
                     if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
                         if p.cut().is_none() && step.cut().is_none() {
                             step.set = step.set.intersect(&p.set);
@@ -189,11 +194,17 @@ impl NonlinearLoop {
                 Ok(Advanced {
                     next: out.end,
                     pipe: Some(out.pieces.iter().map(|p| interval_box(p)).collect()),
+                    pipe_forms: out
+                        .piece_forms
+                        .iter()
+                        .map(|f| f.as_deref().and_then(affine_of))
+                        .collect(),
                 })
             }
             Time::Discrete => Ok(Advanced {
                 next: integrate::image(field, x, &u, &w).map_err(cut_of)?,
                 pipe: None,
+                pipe_forms: Vec::new(),
             }),
         }
     }
@@ -451,6 +462,27 @@ fn symbols(b: &IBox) -> Option<Vec<Tm>> {
 fn range_box(x: &[Tm]) -> IBox {
     let r: Vec<Interval> = x.iter().map(Tm::range).collect();
     interval_box(&r)
+}
+
+/// The models as an affine set `c + G s + r` (`None` when one is not
+/// finite).
+fn affine_of(x: &[Tm]) -> Option<Affine> {
+    let k = x.iter().map(|t| t.g.len()).max().unwrap_or(0);
+    if !x.iter().all(Tm::is_finite) {
+        return None;
+    }
+    Some(Affine {
+        c: x.iter().map(|t| t.c).collect(),
+        g: x.iter()
+            .map(|t| {
+                let mut g = t.g.clone();
+                g.resize(k, 0.0);
+                g
+            })
+            .collect(),
+        r_lo: x.iter().map(|t| t.r.lo).collect(),
+        r_hi: x.iter().map(|t| t.r.hi).collect(),
+    })
 }
 
 /// Intervals as a box (NaN ends become infinite: never a bound).

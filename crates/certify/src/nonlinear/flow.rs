@@ -506,6 +506,10 @@ pub struct Period<T> {
     /// box per substep, `between[j]` holding the states over
     /// `[j·T/substeps, (j+1)·T/substeps]`.
     pub between: Option<Vec<Vec<Iv>>>,
+    /// Per piece of `between`, forms holding its states (the form at the
+    /// substep's start plus an interval of the motion over it), where the
+    /// piece is one substep (no halving); empty in discrete time.
+    pub forms: Vec<Option<Vec<T>>>,
 }
 
 /// The hull of a period's pieces.
@@ -529,25 +533,32 @@ pub fn period<T: Num>(
         return Ok(Period {
             end: f.eval(x, u, w)?,
             between: None,
+            forms: Vec::new(),
         });
     };
     let substeps = substeps.max(1);
     let h = t / f64::from(substeps);
     let mut state = x.to_vec();
     let mut pieces = Vec::with_capacity(substeps as usize);
+    let mut forms = Vec::with_capacity(substeps as usize);
     for _ in 0..substeps {
         let mut piece: Option<Vec<Iv>> = None;
-        state = substep(f, &state, u, w, h, 0, &mut piece)?;
+        let mut form: Option<Vec<T>> = None;
+        state = substep(f, &state, u, w, h, 0, &mut piece, &mut form)?;
         pieces.push(piece.ok_or(Fail::NoEnclosure)?);
+        forms.push(form);
     }
     Ok(Period {
         end: state,
         between: Some(pieces),
+        forms,
     })
 }
 
 /// `h` from `x`, halved when no enclosure is found; the states in between
-/// are added to `pipe`.
+/// are added to `pipe`, and their forms set in `form` when the substep is
+/// not halved.
+#[allow(clippy::too_many_arguments)]
 fn substep<T: Num>(
     f: &Field,
     x: &[T],
@@ -556,18 +567,20 @@ fn substep<T: Num>(
     h: f64,
     halvings: u32,
     pipe: &mut Option<Vec<Iv>>,
+    form: &mut Option<Vec<T>>,
 ) -> Result<Vec<T>, Fail> {
     match one_substep(f, x, u, w, h) {
-        Ok((end, between)) => {
+        Ok((end, between, forms)) => {
             *pipe = Some(match pipe.take() {
                 None => between,
                 Some(p) => p.iter().zip(&between).map(|(a, b)| a.hull(b)).collect(),
             });
+            *form = (halvings == 0).then_some(forms);
             Ok(end)
         }
         Err(Fail::NoEnclosure) if halvings < MAX_HALVINGS => {
-            let mid = substep(f, x, u, w, 0.5 * h, halvings + 1, pipe)?;
-            substep(f, &mid, u, w, 0.5 * h, halvings + 1, pipe)
+            let mid = substep(f, x, u, w, 0.5 * h, halvings + 1, pipe, form)?;
+            substep(f, &mid, u, w, 0.5 * h, halvings + 1, pipe, form)
         }
         Err(e) => Err(e),
     }
@@ -609,15 +622,17 @@ fn enclosure(f: &Field, b: &[Iv], u: &[Iv], w: &[Iv], h: f64) -> Result<Vec<Iv>,
     Err(Fail::NoEnclosure)
 }
 
-/// One substep of length `h` (see the module's doc): the end state and the
-/// box of the states in between.
+/// One substep of length `h` (see the module's doc): the end state, the
+/// box of the states in between and forms holding them,
+/// `x(τ) ∈ X₀ + Σ_{0<i<K} range(Xᵢ)·[0, h]ⁱ + x_[K](E)·[0, h]^K`.
+#[allow(clippy::type_complexity)]
 fn one_substep<T: Num>(
     f: &Field,
     x: &[T],
     u: &[T],
     w: &[T],
     h: f64,
-) -> Result<(Vec<T>, Vec<Iv>), Fail> {
+) -> Result<(Vec<T>, Vec<Iv>, Vec<T>), Fail> {
     let b: Vec<Iv> = x.iter().map(Num::range).collect();
     let ui: Vec<Iv> = u.iter().map(Num::range).collect();
     let wi: Vec<Iv> = w.iter().map(Num::range).collect();
@@ -629,6 +644,7 @@ fn one_substep<T: Num>(
     let span = Iv::new(0.0, h);
     let mut end = Vec::with_capacity(x.len());
     let mut between = Vec::with_capacity(x.len());
+    let mut forms = Vec::with_capacity(x.len());
     for ((s, rem), e) in series.iter().zip(&rem).zip(&e) {
         let r = coef(rem, ORDER)?.mul(&hk);
         // Horner in h over the forms
@@ -648,6 +664,13 @@ fn one_substep<T: Num>(
         }
         let inside = poly.meet(e);
         between.push(if inside.lo <= inside.hi { inside } else { *e });
+        // the motion away from X₀ over the substep, Horner in τ ∈ [0, h]
+        let mut motion = *coef(rem, ORDER)?;
+        for j in (1..ORDER).rev() {
+            motion = motion.mul(&span).add(&coef(s, j)?.range());
+        }
+        let form = coef(s, 0)?.add_iv(&motion.mul(&span));
+        forms.push(form);
     }
-    Ok((end, between))
+    Ok((end, between, forms))
 }

@@ -45,7 +45,7 @@ use serde_json::Value;
 
 use super::{
     decide, evidence_cells, get, read_initial, read_properties, slope_steps, uint, vector, Answer,
-    CSet, Initial, Prop, Report, FORMAT, R,
+    CSet, Form, Initial, Prop, Report, FORMAT, R,
 };
 use crate::bounds::{network_box, Bx, NetBounds};
 use crate::cover;
@@ -469,6 +469,9 @@ struct CellChain {
     start: Bx,
     claims: Vec<Zono>,
     between: Vec<Option<Vec<Vec<Iv>>>>,
+    /// `forms[t][j]`: forms holding piece `j` of `between[t]`, where the
+    /// checker's integration kept them.
+    forms: Vec<Vec<Option<Vec<Af>>>>,
 }
 
 /// Check the evidence; `Ok(Err(msg))` is the first false claim.
@@ -581,6 +584,7 @@ fn cell_chain(
         return Ok(Err(format!("step 0: {why}")));
     }
     let mut between = vec![None];
+    let mut forms = vec![Vec::new()];
     for (t, pair) in claims.windows(2).enumerate() {
         let (Some(now), Some(next)) = (pair.first(), pair.get(1)) else {
             continue;
@@ -603,11 +607,13 @@ fn cell_chain(
             return Ok(Err(format!("step {}: {last}", t + 1)));
         };
         between.push(stepped.between);
+        forms.push(stepped.forms);
     }
     Ok(Ok(CellChain {
         start,
         claims,
         between,
+        forms,
     }))
 }
 
@@ -735,19 +741,73 @@ fn gap<'a>(a: impl Iterator<Item = &'a f64>, mid: &[f64], y: &[Iv], off: f64, m0
     acc
 }
 
+/// A claim as an affine form for the constraints' mean value bound.
+fn zono_form(z: &Zono) -> Form<'_> {
+    Form {
+        c: &z.c,
+        g: &z.g,
+        e_lo: vec![0.0; z.c.len()],
+        e_hi: vec![0.0; z.c.len()],
+    }
+}
+
 /// Whether one claimed set lies in the set `s` (rows by the zonotope's
-/// support, constraints over its box).
+/// support, constraints by the mean value form over it).
 fn claim_in(z: &Zono, s: &CSet) -> bool {
     s.rows.iter().all(|(a, b)| {
         let top = z.support(a);
         !top.is_nan() && top <= *b
-    }) && s.constraints_hold_on(&z.bbox())
+    }) && s.constraints_hold_on_form(&z.bbox(), Some(&zono_form(z)))
 }
 
 /// Whether one claimed set misses the set `s` (a row by the zonotope's
-/// support, or anything [`CSet::missed_by`] shows over its box).
+/// support, or anything [`CSet::missed_by_form`] shows over its box).
 fn claim_misses(z: &Zono, s: &CSet) -> bool {
-    s.rows.iter().any(|(a, b)| z.support_lower(a) > *b) || s.missed_by(&z.bbox())
+    s.rows.iter().any(|(a, b)| z.support_lower(a) > *b)
+        || s.missed_by_form(&z.bbox(), Some(&zono_form(z)))
+}
+
+/// Whether one piece of a period shows the property: over its box, or,
+/// for the constraints, by the mean value form over its forms (when kept,
+/// over the box of their ranges cut to the piece's: both hold the states).
+fn piece_shows(prop: &Prop, piece: &[Iv], forms: Option<&Vec<Af>>) -> bool {
+    let b = hull_box(piece);
+    let by_box = match prop {
+        Prop::Goal { set, .. } => set.holds_on(&b),
+        Prop::Avoid { members, .. } => members.iter().all(|m| m.missed_by(&b)),
+    };
+    if by_box {
+        return true;
+    }
+    let Some(x) = forms else {
+        return false;
+    };
+    let k = x.first().map_or(0, |f| f.g.len());
+    if x.len() != piece.len() || x.iter().any(|f| f.g.len() != k) {
+        return false;
+    }
+    let c: Vec<f64> = x.iter().map(|f| f.c).collect();
+    let g: Vec<Vec<f64>> = x.iter().map(|f| f.g.clone()).collect();
+    let form = Form {
+        c: &c,
+        g: &g,
+        e_lo: x.iter().map(|f| f.lo).collect(),
+        e_hi: x.iter().map(|f| f.hi).collect(),
+    };
+    let fb = hull_box(&x.iter().map(Num::range).collect::<Vec<_>>());
+    let cut = Bx {
+        lo: fb.lo.iter().zip(&b.lo).map(|(a, b)| a.max(*b)).collect(),
+        hi: fb.hi.iter().zip(&b.hi).map(|(a, b)| a.min(*b)).collect(),
+    };
+    if !cut.lo.iter().zip(&cut.hi).all(|(l, h)| l <= h) {
+        return false;
+    }
+    match prop {
+        Prop::Goal { set, .. } => set.holds_on_form(&cut, Some(&form)),
+        Prop::Avoid { members, .. } => members
+            .iter()
+            .all(|m| m.missed_by(&b) || m.missed_by_form(&cut, Some(&form))),
+    }
 }
 
 /// Whether one cell's chain proves the property; why not. A period whose
@@ -805,17 +865,11 @@ fn proves(
     let periods = match prop {
         Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
     };
-    let fine = |pieces: &[Vec<Iv>]| {
-        pieces.iter().all(|piece| {
-            let b = Bx {
-                lo: piece.iter().map(|i| i.lo).collect(),
-                hi: piece.iter().map(|i| i.hi).collect(),
-            };
-            match prop {
-                Prop::Goal { set, .. } => set.holds_on(&b),
-                Prop::Avoid { members, .. } => members.iter().all(|m| m.missed_by(&b)),
-            }
-        })
+    let fine = |pieces: &[Vec<Iv>], forms: &[Option<Vec<Af>>]| {
+        pieces
+            .iter()
+            .enumerate()
+            .all(|(j, piece)| piece_shows(prop, piece, forms.get(j).and_then(Option::as_ref)))
     };
     for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
         let pieces = match chain.between.get(p) {
@@ -828,15 +882,19 @@ fn proves(
                 ))
             }
         };
-        if fine(pieces) {
+        let forms = chain.forms.get(p).map_or(&[][..], Vec::as_slice);
+        if fine(pieces, forms) {
             continue;
         }
         let finer = flow::SUBSTEPS.iter().any(|&substeps| {
             chain.claims.get(p - 1).is_some_and(|before| {
                 advance(problem, net, before, slopes, substeps)
                     .ok()
-                    .and_then(|s| s.between)
-                    .is_some_and(|pieces| fine(&pieces))
+                    .is_some_and(|s| {
+                        s.between
+                            .as_ref()
+                            .is_some_and(|pieces| fine(pieces, &s.forms))
+                    })
             })
         });
         if !finer {

@@ -9,7 +9,7 @@ use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
 use ravel_analysis::partition::{refine_parallel, Budget, Stop, Strategy};
-use ravel_analysis::sets::{IBox, Polytope, Region};
+use ravel_analysis::sets::{Affine, IBox, Polytope, Region};
 use ravel_analysis::shape::excess;
 
 use super::constraints;
@@ -150,20 +150,26 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
             window,
             mode: GoalMode::Always,
         } => worst_over(window, sets, &|instant, pieces, out| {
-            for r in instant.into_iter().chain(pieces) {
-                out.push(constraints::containment(set, r));
+            for (r, f) in instant
+                .into_iter()
+                .chain(pieces.iter().map(|(r, f)| (r, *f)))
+            {
+                out.push(constraints::containment(set, r, f));
             }
         }),
         PropertyKind::Goal {
             set,
             window,
             mode: GoalMode::Eventually,
-        } => best_over(window, sets, &|r| constraints::containment(set, r)),
+        } => best_over(window, sets, &|r, f| constraints::containment(set, r, f)),
         PropertyKind::Avoid { members, window } => {
             worst_over(window, sets, &|instant, pieces, out| {
                 for m in members {
-                    for r in instant.into_iter().chain(pieces) {
-                        out.push(constraints::separation(m, r));
+                    for (r, f) in instant
+                        .into_iter()
+                        .chain(pieces.iter().map(|(r, f)| (r, *f)))
+                    {
+                        out.push(constraints::separation(m, r, f));
                     }
                 }
             })
@@ -175,7 +181,9 @@ pub(super) fn cell_margin(prop: &Property, sets: &[Step]) -> Margin {
 /// the window's instants) and the period's intersample enclosure, piece by
 /// piece (when the period ending at the step is one of the window's),
 /// pushed in order.
-type StepMargins<'a> = dyn Fn(Option<&Region>, &[Region], &mut Vec<(f64, bool)>) + 'a;
+/// Each set comes with its affine enclosure, where the analysis kept one.
+type StepMargins<'a> = dyn Fn(Option<(&Region, Option<&Affine>)>, &[(Region, Option<&Affine>)], &mut Vec<(f64, bool)>)
+    + 'a;
 
 /// The least margin over a window (see [`cell_margin`]): the first cut
 /// step in the window ends the scan with `−∞`.
@@ -205,15 +213,23 @@ fn worst_over(window: &Window, sets: &[Step], margins: &StepMargins) -> Margin {
         }
         // a continuous-time plant: the period that ends at step t lies in
         // the window too, its states in the union of the pieces
-        let pieces: Vec<Region> = step
+        let pieces: Vec<(Region, Option<&Affine>)> = step
             .between
             .iter()
             .filter(|_| at_period)
             .flatten()
-            .map(|b| Region::Box(b.clone()))
+            .enumerate()
+            .map(|(j, b)| {
+                let form = step.between_forms.get(j).and_then(Option::as_ref);
+                (Region::Box(b.clone()), form)
+            })
             .collect();
         found.clear();
-        margins(at_instant.then_some(&step.set), &pieces, &mut found);
+        margins(
+            at_instant.then_some((&step.set, step.form.as_ref())),
+            &pieces,
+            &mut found,
+        );
         for &(s, issue) in &found {
             let s = sane(s);
             let issue = issue || !step.issues.is_empty();
@@ -231,10 +247,18 @@ fn worst_over(window: &Window, sets: &[Step], margins: &StepMargins) -> Margin {
     best
 }
 
+/// The margin of one instant's set (with its affine enclosure, where the
+/// analysis kept one) and whether an LP solver issue weakened it.
+type InstantMargin<'a> = dyn Fn(&Region, Option<&Affine>) -> (f64, bool) + 'a;
+
 /// The largest margin over a window's instants (see [`cell_margin`]); a
 /// solver issue at any instant of the window weakens it; the scan stops at
 /// the first cut step.
-fn best_over(window: &Window, sets: &[Step], margin: &dyn Fn(&Region) -> (f64, bool)) -> Margin {
+fn best_over(
+    window: &Window,
+    sets: &[Step],
+    margin: &InstantMargin,
+) -> Margin {
     let mut best = Margin {
         value: f64::NEG_INFINITY,
         step: window.steps.0,
@@ -249,7 +273,7 @@ fn best_over(window: &Window, sets: &[Step], margin: &dyn Fn(&Region) -> (f64, b
         if step.cut().is_some() {
             break;
         }
-        let (m, issue) = margin(&step.set);
+        let (m, issue) = margin(&step.set, step.form.as_ref());
         let m = sane(m);
         best.issue |= issue || !step.issues.is_empty();
         if m > best.value {

@@ -12,9 +12,9 @@
 //! margin a lower bound of how far one row or one constraint keeps the set
 //! out. A NaN never proves anything ([`sane`]).
 
-use ravel_analysis::nonlinear::integrate::elementary::tape_range;
+use ravel_analysis::nonlinear::integrate::elementary::{tape_range, tape_range_affine};
 use ravel_analysis::nonlinear::integrate::Interval;
-use ravel_analysis::sets::{IBox, Region};
+use ravel_analysis::sets::{Affine, IBox, Region};
 use ravel_base::expr::Tape;
 
 use super::cells::{containment_margin, sane, separation_margin};
@@ -46,10 +46,22 @@ pub(super) fn lower(g: &Tape, b: &[Interval]) -> f64 {
     }
 }
 
+/// The enclosure of `g` over the box, tightened by the mean value form
+/// over the region's affine enclosure when there is one (see
+/// [`tape_range_affine`]); `None` when `g` cannot be bounded there.
+fn range_over(g: &Tape, b: &[Interval], form: Option<&Affine>) -> Option<Interval> {
+    match form {
+        Some(f) => tape_range_affine(g, f, b),
+        None => tape_range(g, b).ok(),
+    }
+    .filter(|r| !(r.lo.is_nan() || r.hi.is_nan()))
+}
+
 /// A certified lower bound of how deep the region lies in the set:
 /// non-negative means `region ⊆ set`; whether an LP solver issue weakened
-/// it.
-pub(super) fn containment(set: &StateSet, region: &Region) -> (f64, bool) {
+/// it. `form`, an affine enclosure of the same states (a nonlinear plant's
+/// models), tightens the nonlinear constraints' bounds.
+pub(super) fn containment(set: &StateSet, region: &Region, form: Option<&Affine>) -> (f64, bool) {
     let (m, issue) = if set.poly.rows.is_empty() && !set.nonlinear.is_empty() {
         (f64::INFINITY, false)
     } else {
@@ -59,7 +71,7 @@ pub(super) fn containment(set: &StateSet, region: &Region) -> (f64, bool) {
     if !set.nonlinear.is_empty() {
         let b = intervals(&region.bbox());
         for g in &set.nonlinear {
-            m = m.min(-upper(g, &b));
+            m = m.min(-range_over(g, &b, form).map_or(f64::INFINITY, |r| r.hi));
         }
     }
     (m, issue)
@@ -67,8 +79,8 @@ pub(super) fn containment(set: &StateSet, region: &Region) -> (f64, bool) {
 
 /// A certified lower bound of how far one row or one constraint keeps the
 /// region out of the set: positive means they are disjoint; whether an LP
-/// solver issue weakened it.
-pub(super) fn separation(set: &StateSet, region: &Region) -> (f64, bool) {
+/// solver issue weakened it. `form` as for [`containment`].
+pub(super) fn separation(set: &StateSet, region: &Region, form: Option<&Affine>) -> (f64, bool) {
     let (m, issue) = if set.poly.rows.is_empty() && !set.nonlinear.is_empty() {
         (f64::NEG_INFINITY, false)
     } else {
@@ -78,7 +90,7 @@ pub(super) fn separation(set: &StateSet, region: &Region) -> (f64, bool) {
     if !set.nonlinear.is_empty() {
         let b = intervals(&region.bbox());
         for g in &set.nonlinear {
-            m = m.max(lower(g, &b));
+            m = m.max(range_over(g, &b, form).map_or(f64::NEG_INFINITY, |r| r.lo));
         }
     }
     (m, issue)
@@ -168,17 +180,17 @@ mod tests {
         let d = disc(0.25);
         // far away: separated by a positive margin
         let far = Region::Box(bx([-1.0, -1.0], [0.0, 0.0]));
-        let (s, _) = separation(&d, &far);
+        let (s, _) = separation(&d, &far, None);
         assert!(s > 0.0 && s <= 2.0 - 0.25, "{s}");
-        assert!(containment(&d, &far).0 < 0.0);
+        assert!(containment(&d, &far, None).0 < 0.0);
         // a small box at the centre: contained
         let centre = Region::Box(bx([0.9, 0.9], [1.1, 1.1]));
-        let (c, _) = containment(&d, &centre);
+        let (c, _) = containment(&d, &centre, None);
         assert!(c > 0.0 && c <= 0.25, "{c}");
-        assert!(separation(&d, &centre).0 <= 0.0);
+        assert!(separation(&d, &centre, None).0 <= 0.0);
         // overlapping the rim: neither
         let rim = Region::Box(bx([1.3, 0.9], [1.7, 1.1]));
-        assert!(containment(&d, &rim).0 < 0.0 && separation(&d, &rim).0 <= 0.0);
+        assert!(containment(&d, &rim, None).0 < 0.0 && separation(&d, &rim, None).0 <= 0.0);
         assert!(box_inside(&d, &bx([0.9, 0.9], [1.1, 1.1])));
         assert!(!box_inside(&d, &bx([1.3, 0.9], [1.7, 1.1])));
         assert!(box_outside(&d, &bx([-1.0, -1.0], [0.0, 0.0])));
@@ -197,10 +209,13 @@ mod tests {
         };
         let b = bx([-1.0, 0.0], [0.5, 1.0]);
         assert_eq!(
-            containment(&s, &Region::Box(b.clone())).0,
+            containment(&s, &Region::Box(b.clone()), None).0,
             f64::NEG_INFINITY
         );
-        assert_eq!(separation(&s, &Region::Box(b.clone())).0, f64::NEG_INFINITY);
+        assert_eq!(
+            separation(&s, &Region::Box(b.clone()), None).0,
+            f64::NEG_INFINITY
+        );
         assert!(!box_inside(&s, &b) && !box_outside(&s, &b));
         assert!(depth(&s, &[-1.0, 0.0]).is_nan());
     }

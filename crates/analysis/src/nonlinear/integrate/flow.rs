@@ -76,6 +76,12 @@ pub struct FlowOut {
     /// settings' initial substeps (clamped); the first piece contains the
     /// initial states' box, the last the end models' ranges.
     pub pieces: Vec<Vec<Interval>>,
+    /// `piece_forms[j]`: models over the input's symbols holding `x(t)` for
+    /// every `t` of piece `j` (the time expansion over the substep's whole
+    /// span, `Σ x_[i]·[0, h]ⁱ + [0, h]ᵏ·x_[k](B)`, in model arithmetic), so
+    /// that a property can be checked with the states' correlations;
+    /// `None` for a piece made of several substeps (halvings).
+    pub piece_forms: Vec<Option<Vec<Tm>>>,
 }
 
 /// Why no enclosure of the flow was found.
@@ -201,10 +207,13 @@ pub(crate) fn flow_scaled(
             end: cur,
             pipe: start,
             pieces,
+            piece_forms: vec![None; substeps as usize],
         });
     }
     // every piece starts as the first enclosure that falls in it
     let mut pieces: Vec<Option<Vec<Interval>>> = vec![None; substeps as usize];
+    // per piece: how many substeps fell in it, and the first one's models
+    let mut forms: Vec<(u32, Option<Vec<Tm>>)> = vec![(0, None); substeps as usize];
     if let Some(first) = pieces.first_mut() {
         *first = Some(start);
     }
@@ -223,10 +232,15 @@ pub(crate) fn flow_scaled(
         let parts = (substeps << depth) as f64;
         let h = Interval::point(period).div(Interval::point(parts))?;
         match ctx.run(&cur, h) {
-            Ok((next, enclosure)) => {
+            Ok((next, enclosure, form)) => {
                 cur = next;
                 // a substep `[pos, pos + units)` lies in the initial
                 // substep `pos / 2^MAX_HALVINGS` (the halvings are dyadic)
+                let slot = forms
+                    .get_mut((pos >> MAX_HALVINGS) as usize)
+                    .ok_or(FlowError::Malformed)?;
+                slot.0 += 1;
+                slot.1 = (slot.0 == 1).then_some(form);
                 let piece = pieces
                     .get_mut((pos >> MAX_HALVINGS) as usize)
                     .ok_or(FlowError::Malformed)?;
@@ -258,6 +272,10 @@ pub(crate) fn flow_scaled(
         end: cur,
         pipe,
         pieces,
+        piece_forms: forms
+            .into_iter()
+            .map(|(k, f)| f.filter(|_| k == 1))
+            .collect(),
     })
 }
 
@@ -272,9 +290,10 @@ struct Step<'a> {
 }
 
 impl Step<'_> {
-    /// One substep of size `h`: the models at its end and the enclosure of
-    /// the states over it.
-    fn run(&self, cur: &[Tm], h: Interval) -> Result<(Vec<Tm>, Vec<Interval>), FlowError> {
+    /// One substep of size `h`: the models at its end, the enclosure of
+    /// the states over it, and models holding those states.
+    #[allow(clippy::type_complexity)]
+    fn run(&self, cur: &[Tm], h: Interval) -> Result<(Vec<Tm>, Vec<Interval>, Vec<Tm>), FlowError> {
         let x0 = ranges(cur)?;
         let b = apriori(self.field, &x0, self.pr, h.hi)?;
         // the Lagrange remainder's coefficient x_[k](B)
@@ -289,16 +308,19 @@ impl Step<'_> {
         let (hk, span_k) = (h.powi(order)?, span.powi(order)?);
         let mut end = Vec::with_capacity(cur.len());
         let mut enclosure = Vec::with_capacity(cur.len());
+        let mut forms = Vec::with_capacity(cur.len());
         for ((coeffs, rk), bi) in poly.iter().zip(&rem_k).zip(&b) {
             let rem = self.shrink((hk * *rk).checked()?);
             end.push(horner(coeffs, h)?.add_interval(rem)?);
             let rem_span = self.shrink((span_k * *rk).checked()?);
-            let inter = (horner(coeffs, span)?.range() + rem_span).checked()?;
+            let over = horner(coeffs, span)?.add_interval(rem_span)?;
+            let inter = over.range().checked()?;
+            forms.push(over);
             // both enclose x(t); an empty intersection cannot happen in
             // exact arithmetic, and then B alone is kept
             enclosure.push(inter.intersect(*bi).unwrap_or(*bi));
         }
-        Ok((end, enclosure))
+        Ok((end, enclosure, forms))
     }
 
     /// The remainder scaled around its midpoint by the test knob.

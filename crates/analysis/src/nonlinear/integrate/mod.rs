@@ -49,6 +49,7 @@ mod tests_arith;
 #[cfg(test)]
 mod tests_flow;
 
+pub use elementary::{tape_gradient, tape_range, tape_range_affine};
 pub use flow::{flow, image, FlowError, FlowOut, Settings};
 pub use interval::{DomainError, Interval};
 pub use simulate::simulate;

@@ -224,7 +224,22 @@ fn check_with(
             }
             Ok(())
         };
+        // a piece's models, where the flow kept them, at the sample's z
+        let form_at = |piece: usize| -> Option<Vec<Interval>> {
+            let forms = out.piece_forms.get(piece)?.as_ref()?;
+            Some(forms.iter().map(|t| t.eval_at(&z)).collect())
+        };
+        if out.piece_forms.len() != pieces {
+            return Err(format!(
+                "{}: {} piece forms",
+                case.name,
+                out.piece_forms.len()
+            ));
+        }
         inside(&y, &out.pieces[0], "piece 0", 0)?;
+        if let Some(f) = form_at(0) {
+            inside(&y, &f, "piece 0's models", 0)?;
+        }
         let mut t_prev = 0.0;
         for at in 1..=pieces * TIMES {
             // simulated from the previous instant to this one
@@ -233,7 +248,13 @@ fn check_with(
             t_prev = t;
             let piece = (at - 1) / TIMES;
             inside(&y, &out.pieces[piece], &format!("piece {piece}"), at)?;
+            if let Some(f) = form_at(piece) {
+                inside(&y, &f, &format!("piece {piece}'s models"), at)?;
+            }
             if at % TIMES == 0 && piece + 1 < pieces {
+                if let Some(f) = form_at(piece + 1) {
+                    inside(&y, &f, &format!("piece {}'s models", piece + 1), at)?;
+                }
                 inside(
                     &y,
                     &out.pieces[piece + 1],

@@ -252,6 +252,38 @@ fn counterexamples_between_the_instants_are_replayed_on_pieces() {
     assert!(matches!(answer(&bad, &plan), Answer::Unreadable(_)));
 }
 
+/// A counterexample to an "eventually" goal of a continuous-time plant is
+/// replayed over every period of the window, not only at the instants:
+/// VALID as written (x0 never reaches 0.9), never VALID for a goal the
+/// trajectory reaches only between the instants (x0 ≥ 0.5: near 0 at every
+/// instant, about 0.8 inside every period).
+#[test]
+fn eventually_counterexamples_are_replayed_between_the_instants() {
+    let (plan, cert) = run("specs/oscillator_eventually_falsified.ravel");
+    let i = cert["verdicts"]
+        .as_array()
+        .expect("verdicts")
+        .iter()
+        .position(|v| v["status"] == "FALSIFIED")
+        .expect("a falsified property");
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    assert_eq!(cert["problem"]["properties"][0]["mode"], "eventually");
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][0]["rows"] = serde_json::json!([{ "a": [-1.0, 0.0], "b": -0.5 }]);
+    not_valid(&bad, &plan, "a goal reached only between the instants");
+    // the same goal, only the last period's second half in the window
+    // (`during [0, 2.5]`: instants 0 … 2, periods 1 … 3): still reached
+    let mut bad = bad.clone();
+    bad["problem"]["properties"][0]["steps"] = serde_json::json!({ "first": 0, "last": 2 });
+    bad["problem"]["properties"][0]["periods"] = serde_json::json!({ "first": 3, "last": 3 });
+    bad["verdicts"][i]["step"] = Value::from(2);
+    not_valid(
+        &bad,
+        &plan,
+        "a goal reached in a period past the last instant",
+    );
+}
+
 #[test]
 fn linear_plants_in_continuous_time_are_checked_between_samples() {
     let (plan, cert) = run("specs/double_integrator_continuous.ravel");

@@ -615,6 +615,12 @@ impl Problem {
 /// window in seconds may end inside a period).
 fn needed_step(p: &Prop, horizon: usize) -> usize {
     match p {
+        // proven at an instant of its window
+        Prop::Goal {
+            steps,
+            eventually: true,
+            ..
+        } => steps.1.min(horizon),
         Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
             let last = if periods.0 <= periods.1 {
                 steps.1.max(periods.1)
@@ -735,7 +741,10 @@ fn read_properties(p: &Value, n: usize, horizon: usize) -> R<Vec<(String, Prop)>
                     set,
                     steps,
                     eventually,
-                    periods: if eventually || pr.get("steps").is_none() {
+                    // an eventually goal's periods matter only to a
+                    // counterexample (every period that meets the window
+                    // must miss the goal); a proof is at the instants
+                    periods: if pr.get("steps").is_none() {
                         (1, 0)
                     } else {
                         periods(steps)?
@@ -1370,6 +1379,16 @@ fn cell_proves(
     else {
         return Ok(());
     };
+    // an eventually goal is proven at an instant (above)
+    if matches!(
+        prop,
+        Prop::Goal {
+            eventually: true,
+            ..
+        }
+    ) {
+        return Ok(());
+    }
     for p in periods.0.max(1)..=periods.1.min(problem.horizon) {
         // (the evidence reaches every period's end: `needed_step`)
         let Some(before) = sets.get(p - 1) else {

@@ -492,8 +492,12 @@ fn evidence(
     let slopes = slope_steps(ev)?;
     let cells_json = evidence_cells(ev)?;
     let mut chains = Vec::with_capacity(cells_json.len());
-    for (c, cell) in cells_json.iter().enumerate() {
-        match cell_chain(problem, net, cell, steps, slopes)? {
+    // the cells are independent: re-derived on every core, read in order
+    let derived = par_map(cells_json, |cell| {
+        cell_chain(problem, net, cell, steps, slopes)
+    });
+    for (c, chain) in derived.into_iter().enumerate() {
+        match chain? {
             Ok(ch) => chains.push(ch),
             Err(why) => return Ok(Err(format!("cell {c}, {why}"))),
         }
@@ -527,6 +531,42 @@ fn evidence(
     report.cells = cells.len();
     report.steps = steps;
     Ok(Ok(()))
+}
+
+/// `f` of every item, in the items' order, computed on every available
+/// core (each thread takes the next item not yet taken); the answer is the
+/// same whatever the number of threads.
+fn par_map<T: Sync, U: Send>(items: &[T], f: impl Fn(&T) -> U + Sync) -> Vec<U> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZeroUsize::get)
+        .min(items.len());
+    if threads <= 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut done: Vec<(usize, U)> = std::thread::scope(|s| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else {
+                            break;
+                        };
+                        mine.push((i, f(item)));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    done.sort_by_key(|(i, _)| *i);
+    done.into_iter().map(|(_, u)| u).collect()
 }
 
 /// Read and check one cell's chain: `Ok(Err(why))` for a false claim.
@@ -861,8 +901,12 @@ fn proves(
         }
     }
     // continuous time: the periods of the window, by the checker's own
-    // enclosures (the period p ends at step p)
+    // enclosures (the period p ends at step p); an eventually goal is
+    // proven at an instant (above)
     let periods = match prop {
+        Prop::Goal {
+            eventually: true, ..
+        } => return Ok(()),
         Prop::Goal { periods, .. } | Prop::Avoid { periods, .. } => *periods,
     };
     let fine = |pieces: &[Vec<Iv>], forms: &[Option<Vec<Af>>]| {
@@ -1004,52 +1048,85 @@ fn replay(
             "does not certainly violate the property at step {step}: the property does not apply there"
         )));
     }
-    // an eventually goal is violated only by the whole window
-    let last = if eventually { last_step } else { step };
+    // an eventually goal is violated only by the whole window: its instants
+    // and, in continuous time, every period that meets it (the last may
+    // end after the window's last instant)
+    let continuous = problem.field.period.is_some();
+    let last = match (eventually, continuous) {
+        (true, true) => last_step.max(periods.1.min(problem.horizon)),
+        (true, false) => last_step,
+        (false, _) => step,
+    };
     let (x0, ws, vs) = match trajectory(problem, tr, last)? {
         Ok(t) => t,
         Err(e) => return Ok(Err(e)),
     };
     let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
-    // the enclosures at the window's instants and over its periods
+    // an eventually goal in continuous time: every period that meets the
+    // window must miss it, piece by piece, with one of the checker's cuts
+    // of the period (finer pieces for a fast trajectory)
+    let goal = match prop {
+        Prop::Goal { set, .. } if eventually && continuous => Some(set),
+        _ => None,
+    };
+    let mut periods_missed = true;
+    // the enclosures at the window's instants
     let mut window: Vec<Bx> = Vec::new();
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
-        if t >= first {
+        if t >= first && t <= last_step {
             window.push(hull_box(&x));
         }
         let (u, wi) = match step_inputs(problem, net, &x, w, v, t)? {
             Ok(p) => p,
             Err(e) => return Ok(Err(e)),
         };
-        match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
-            Ok(p) => {
-                x = p.end;
-                // the period ending at step t + 1, piece by piece
-                if let Some(pieces) = p.between {
-                    if (periods.0..=periods.1).contains(&(t + 1)) {
-                        window.extend(pieces.iter().map(|piece| hull_box(piece)));
+        if let Some(set) = goal {
+            // every cut of the period (each encloses the same states): one
+            // must show the goal missed piece by piece if the period meets
+            // the window; the next state is the intersection of the ends
+            let mut tries = Vec::with_capacity(flow::SUBSTEPS.len());
+            for s in flow::SUBSTEPS {
+                match flow::period(&problem.field, &x, &u, &wi, s) {
+                    Ok(p) => tries.push(p),
+                    Err(e) => {
+                        return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1)))
                     }
                 }
             }
+            if (periods.0..=periods.1).contains(&(t + 1)) {
+                periods_missed &= tries.iter().any(|p| {
+                    p.between.as_deref().is_some_and(|pieces| {
+                        pieces.iter().all(|piece| set.missed_by(&hull_box(piece)))
+                    })
+                });
+            }
+            let mut ends = tries.into_iter().map(|p| p.end);
+            let Some(first_end) = ends.next() else {
+                return Ok(Err("no enclosure".into()));
+            };
+            x = ends.fold(first_end, |a, b| {
+                a.iter().zip(&b).map(|(p, q)| p.meet(q)).collect()
+            });
+            if x.iter()
+                .any(|i| i.lo.partial_cmp(&i.hi).is_none_or(|o| o.is_gt()))
+            {
+                return Ok(Err(format!("empty enclosure at step {}", t + 1)));
+            }
+            continue;
+        }
+        match flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) {
+            Ok(p) => x = p.end,
             Err(e) => return Ok(Err(format!("cannot be enclosed at step {} ({e})", t + 1))),
         }
     }
     let xb = hull_box(&x);
-    window.push(xb.clone());
+    if last <= last_step {
+        window.push(xb.clone());
+    }
     let violated = match prop {
+        // every instant and every piece of every period of the window
         Prop::Goal { set, .. } if eventually => {
-            // continuous time: the periods of the window count too
-            let mut all = window;
-            if problem.field.period.is_some() {
-                if let Some(extra) =
-                    eventually_periods(problem, net, &x0, ws, vs, first, last_step)?
-                {
-                    all.extend(extra);
-                } else {
-                    return Ok(Err("cannot be enclosed between the instants".into()));
-                }
-            }
-            all.iter().all(|b| set.missed_by(b))
+            periods_missed && window.iter().all(|b| set.missed_by(b))
         }
         Prop::Goal { set, .. } => set.missed_by(&xb),
         Prop::Avoid { members, .. } => members.iter().any(|mb: &CSet| mb.holds_on(&xb)),
@@ -1140,57 +1217,6 @@ fn replay_between(
         "does not certainly violate the property between steps {} and {step}: no piece of the checker's enclosure of that period lies wholly in the violation",
         step - 1
     )))
-}
-
-/// The enclosures of one trajectory over every control period between
-/// steps `first` and `last` (continuous time), for an eventually goal;
-/// `None` when one cannot be enclosed.
-fn eventually_periods(
-    problem: &Problem,
-    net: &Network,
-    x0: &[f64],
-    ws: &[Value],
-    vs: &[Value],
-    first: usize,
-    last: usize,
-) -> R<Option<Vec<Bx>>> {
-    let (d, q) = (problem.w.len(), problem.v.len());
-    let mut x: Vec<Iv> = x0.iter().map(|&v| Iv::point(v)).collect();
-    let mut out = Vec::new();
-    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
-        let w = vector(w, d, "process_noise")?;
-        let v = vector(v, q, "sensor_noise")?;
-        let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
-        let y = problem.observe(&x, &noise);
-        let ub = network_box(
-            net,
-            &Bx {
-                lo: y.iter().map(|i| i.lo).collect(),
-                hi: y.iter().map(|i| i.hi).collect(),
-            },
-        );
-        let u: Vec<Iv> = ub
-            .lo
-            .iter()
-            .zip(&ub.hi)
-            .map(|(&l, &h)| Iv::new(l, h))
-            .collect();
-        let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
-        let Ok(p) = flow::period(&problem.field, &x, &u, &wi, flow::SUBSTEPS[0]) else {
-            return Ok(None);
-        };
-        x = p.end;
-        if t >= first {
-            let Some(pieces) = p.between else {
-                return Ok(None);
-            };
-            out.extend(pieces.iter().map(|piece| Bx {
-                lo: piece.iter().map(|i| i.lo).collect(),
-                hi: piece.iter().map(|i| i.hi).collect(),
-            }));
-        }
-    }
-    Ok(Some(out))
 }
 
 #[cfg(test)]

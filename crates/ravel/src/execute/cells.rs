@@ -254,11 +254,7 @@ type InstantMargin<'a> = dyn Fn(&Region, Option<&Affine>) -> (f64, bool) + 'a;
 /// The largest margin over a window's instants (see [`cell_margin`]); a
 /// solver issue at any instant of the window weakens it; the scan stops at
 /// the first cut step.
-fn best_over(
-    window: &Window,
-    sets: &[Step],
-    margin: &InstantMargin,
-) -> Margin {
+fn best_over(window: &Window, sets: &[Step], margin: &InstantMargin) -> Margin {
     let mut best = Margin {
         value: f64::NEG_INFINITY,
         step: window.steps.0,

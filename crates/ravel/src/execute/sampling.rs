@@ -317,7 +317,7 @@ pub(super) fn sample_range(
             }
         }
         for (i, prop) in plan.properties.iter().enumerate() {
-            let found = violation_of(plan, prop, &states[..valid]);
+            let found = violation_of(prop, &states[..valid]);
             if let Some((d, t)) = found {
                 if worst[i].is_none_or(|w| d > w.0) {
                     worst[i] = Some((d, k, t));
@@ -361,14 +361,11 @@ pub(super) fn offsets(r: &Region) -> Vec<f64> {
 /// trajectory cut short overflowed) violate `prop`, beyond the simulation
 /// tolerance, and the step: the deepest instant outside an "always" goal or
 /// inside an avoid member; for an "eventually" goal, every instant of the
-/// window outside (the shallowest of them), never for a continuous-time
-/// nonlinear plant (whose trajectory may enter the goal between instants).
+/// window outside (the shallowest of them; for a continuous-time nonlinear
+/// plant, whose trajectory may enter the goal between the instants, only
+/// a candidate that [`certainly_violates`] checks over the periods too).
 /// Instants only: a violation between them is not seen.
-pub(super) fn violation_of(
-    plan: &SystemPlan,
-    prop: &Property,
-    states: &[&[f64]],
-) -> Option<(f64, usize)> {
+pub(super) fn violation_of(prop: &Property, states: &[&[f64]]) -> Option<(f64, usize)> {
     let w = prop.window();
     let window = || {
         states
@@ -397,7 +394,10 @@ pub(super) fn violation_of(
                     best
                 }
                 GoalMode::Eventually => {
-                    if states.len() <= w.steps.1 || has_between(plan) {
+                    // a continuous-time plant may enter the goal between
+                    // the instants: the candidate is confirmed (or not) on
+                    // the periods too, by `certainly_violates`
+                    if states.len() <= w.last() {
                         return None;
                     }
                     let mut least: Option<(f64, usize)> = None;
@@ -452,8 +452,9 @@ pub(super) fn has_between(plan: &SystemPlan) -> bool {
 /// point of the enclosure) or inside an avoid member (every row and every
 /// constraint holds on all of it) at that step. An "eventually" goal is
 /// violated only when the enclosure lies outside at every instant of its
-/// window (and never for a continuous-time nonlinear plant, see
-/// [`violation_of`]). The f64 simulation alone could be off by more than
+/// window (and, for a continuous-time nonlinear plant, over every period
+/// that meets the window too: [`eventually_missed`]). The f64 simulation
+/// alone could be off by more than
 /// any fixed tolerance in an unstable or high-gain loop; this check makes
 /// FALSIFIED independent of it.
 pub fn certainly_violates(
@@ -471,11 +472,11 @@ pub fn certainly_violates(
             ..
         }
     );
-    if eventually && has_between(plan) {
-        return false;
-    }
     if !(w.steps.0..=w.steps.1).contains(&step) {
         return false;
+    }
+    if eventually && has_between(plan) {
+        return eventually_missed(plan, tr, prop);
     }
     let last = if eventually { w.steps.1 } else { step };
     let Some(x0) = tr.states.first() else {
@@ -520,6 +521,75 @@ pub fn certainly_violates(
             members.iter().any(|m| constraints::box_inside(m, &x))
         }
     }
+}
+
+/// An "eventually" goal of a continuous-time nonlinear plant, certainly
+/// never reached by a simulated trajectory during its window: its initial
+/// state and noise values lie in their sets, and the rigorous enclosure of
+/// the true trajectory lies outside the goal at every instant of the
+/// window and on every piece of every period that meets the window (the
+/// period cut into eighths, or finer, as the certificate checker cuts it:
+/// [`CONFIRM_PIECES`]) — the first and the last period may reach past the
+/// window's ends, which only asks more. Each period is enclosed with every
+/// cut, and the state carried to the next is the intersection of their
+/// ends.
+fn eventually_missed(plan: &SystemPlan, tr: &Trajectory, prop: &Property) -> bool {
+    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
+        return false;
+    };
+    let PropertyKind::Goal { set, .. } = &prop.kind else {
+        return false;
+    };
+    let w = prop.window();
+    let last = w.last();
+    let Some(x0) = tr.states.first() else {
+        return false;
+    };
+    if !plan.initial.contains_point(x0) {
+        return false;
+    }
+    let mut x = IBox::point(x0);
+    for t in 0..=last {
+        if (w.steps.0..=w.steps.1).contains(&t) && !constraints::box_outside(set, &x) {
+            return false;
+        }
+        if t == last {
+            break;
+        }
+        let (Some(wn), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+            return false;
+        };
+        if !(nl.plant.w.contains_point(wn) && nl.plant.v.contains_point(v)) {
+            return false;
+        }
+        // the period cut as the checker cuts it, each cut an enclosure of
+        // the same states: the pieces of one cut must all miss the goal,
+        // and the next state is the intersection of the ends (a fast
+        // state's end wraps far less with short substeps)
+        let tries: Vec<(IBox, Vec<IBox>)> = CONFIRM_PIECES
+            .iter()
+            .filter_map(|&s| nl.enclose_period(&x, wn, v, s))
+            .collect();
+        let missed = |pieces: &[IBox]| pieces.iter().all(|b| constraints::box_outside(set, b));
+        if tries.len() != CONFIRM_PIECES.len()
+            || (w.has_period(t + 1) && !tries.iter().any(|(_, p)| missed(p)))
+        {
+            return false;
+        }
+        let mut ends = tries.into_iter().map(|(end, _)| end);
+        let Some(first) = ends.next() else {
+            return false;
+        };
+        x = ends.fold(first, |a, b| a.intersect(&b));
+        if x.lo
+            .iter()
+            .zip(&x.hi)
+            .any(|(l, h)| l.partial_cmp(h).is_none_or(|o| o.is_gt()))
+        {
+            return false;
+        }
+    }
+    true
 }
 
 /// The pieces a period is cut into to confirm a violation between the

@@ -147,9 +147,8 @@ fn between_violations(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Ve
 /// How deeply a trajectory violates the property at its instants
 /// (positive: violated), and at which step; `None` when no state in the
 /// window is finite (for an "eventually" goal: when some state of the
-/// window is not, or the plant is a continuous-time nonlinear one, see
-/// [`super::sampling::violation_of`]).
-fn violation(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64, usize)> {
+/// window is not; see [`super::sampling::violation_of`]).
+fn violation(prop: &Property, tr: &Trajectory) -> Option<(f64, usize)> {
     let finite = |x: &Vec<f64>| x.iter().all(|v| v.is_finite());
     let w = prop.window();
     let window = || {
@@ -175,7 +174,9 @@ fn violation(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Option<(f64
             mode: GoalMode::Eventually,
             ..
         } => {
-            if has_between(plan) || window().count() != w.steps.1 + 1 - w.steps.0 {
+            // a continuous-time plant's candidate is confirmed (or not) on
+            // the periods too, by `certainly_violates`
+            if tr.states.len() <= w.last() || window().count() != w.steps.1 + 1 - w.steps.0 {
                 return None;
             }
             let mut least: Option<(f64, usize)> = None;
@@ -283,7 +284,7 @@ fn climb(
 ) -> Option<(f64, Trajectory, usize)> {
     let eval = |p: &[f64]| {
         let tr = space.trajectory(plan, p)?;
-        let (d, t) = violation(plan, prop, &tr)?;
+        let (d, t) = violation(prop, &tr)?;
         Some((d, tr, t))
     };
     let mut here = start;

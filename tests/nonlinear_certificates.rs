@@ -20,6 +20,16 @@ fn not_valid(cert: &Value, plan: &ravel::lower::SystemPlan, what: &str) -> Answe
     a
 }
 
+/// The index of the certificate's (first) FALSIFIED verdict.
+fn falsified(cert: &Value) -> usize {
+    cert["verdicts"]
+        .as_array()
+        .expect("verdicts")
+        .iter()
+        .position(|v| v["status"] == "FALSIFIED")
+        .expect("a falsified property")
+}
+
 /// The fresh columns of a claim (ids not in the previous step's claim),
 /// with their one non-zero row.
 fn fresh_columns(cert: &Value, cell: usize, step: usize) -> Vec<(usize, usize)> {
@@ -180,12 +190,7 @@ fn hostile_numbers_are_unreadable() {
 fn counterexamples_are_replayed_by_the_checkers_own_integration() {
     let (plan, cert) = run("specs/pendulum_discrete_falsified.ravel");
     assert_eq!(answer(&cert, &plan), Answer::Valid);
-    let i = cert["verdicts"]
-        .as_array()
-        .expect("verdicts")
-        .iter()
-        .position(|v| v["status"] == "FALSIFIED")
-        .expect("a falsified property");
+    let i = falsified(&cert);
     // another step: the trajectory does not violate there
     let mut bad = cert.clone();
     bad["verdicts"][i]["step"] = Value::from(0);
@@ -203,12 +208,7 @@ fn counterexamples_are_replayed_by_the_checkers_own_integration() {
 #[test]
 fn counterexamples_between_the_instants_are_replayed_on_pieces() {
     let (plan, cert) = run("specs/oscillator_between_falsified.ravel");
-    let i = cert["verdicts"]
-        .as_array()
-        .expect("verdicts")
-        .iter()
-        .position(|v| v["status"] == "FALSIFIED")
-        .expect("a falsified property");
+    let i = falsified(&cert);
     assert_eq!(cert["verdicts"][i]["between"], true);
     assert_eq!(answer(&cert, &plan), Answer::Valid);
     let step = cert["verdicts"][i]["step"].as_u64().expect("step");
@@ -260,12 +260,7 @@ fn counterexamples_between_the_instants_are_replayed_on_pieces() {
 #[test]
 fn eventually_counterexamples_are_replayed_between_the_instants() {
     let (plan, cert) = run("specs/oscillator_eventually_falsified.ravel");
-    let i = cert["verdicts"]
-        .as_array()
-        .expect("verdicts")
-        .iter()
-        .position(|v| v["status"] == "FALSIFIED")
-        .expect("a falsified property");
+    let i = falsified(&cert);
     assert_eq!(answer(&cert, &plan), Answer::Valid);
     assert_eq!(cert["problem"]["properties"][0]["mode"], "eventually");
     let mut bad = cert.clone();

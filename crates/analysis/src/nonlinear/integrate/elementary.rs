@@ -426,21 +426,25 @@ mod tape_range_tests {
         }
     }
 
+    /// `√(x0² + x1²)`.
+    fn norm_nodes() -> Vec<Node> {
+        vec![
+            Node::Var(0),
+            Node::Powi(0, 2),
+            Node::Var(1),
+            Node::Powi(2, 2),
+            Node::Add(1, 3),
+            Node::Func(Func::Sqrt, 4),
+        ]
+    }
+
     /// Tapes over two variables: `√(x0² + x1²) − 0.5·x1`,
     /// `sin(x0)·x1 + exp(x1 / 3)`, `(x0 − 1) / (x1 + 3)`, `tanh(x0 − x1)`.
     fn smooth_tapes() -> Vec<Tape> {
+        let mut first = norm_nodes();
+        first.extend([Node::Const(0.5), Node::Mul(6, 2), Node::Sub(5, 7)]);
         vec![
-            tape(&[
-                Node::Var(0),
-                Node::Powi(0, 2),
-                Node::Var(1),
-                Node::Powi(2, 2),
-                Node::Add(1, 3),
-                Node::Func(Func::Sqrt, 4),
-                Node::Const(0.5),
-                Node::Mul(6, 2),
-                Node::Sub(5, 7),
-            ]),
+            tape(&first),
             tape(&[
                 Node::Var(0),
                 Node::Func(Func::Sin, 0),
@@ -558,14 +562,7 @@ mod tape_range_tests {
     fn a_norm_around_the_origin_is_defined() {
         // √(x0² + x1²) over a box around 0: the sum's lower end is an exact
         // 0 (not moved below it by outward rounding), so √ is defined there
-        let norm = tape(&[
-            Node::Var(0),
-            Node::Powi(0, 2),
-            Node::Var(1),
-            Node::Powi(2, 2),
-            Node::Add(1, 3),
-            Node::Func(Func::Sqrt, 4),
-        ]);
+        let norm = tape(&norm_nodes());
         let b = [Interval::new(-0.14, 0.14), Interval::new(-0.14, 0.14)];
         let r = tape_range(&norm, &b).expect("defined");
         assert!(

@@ -153,7 +153,8 @@ impl<'a> Stepper<'a> {
                 self.z0[i] = self.y[i];
                 self.z1[i] = self.y[i] + hs * self.f0[i];
             }
-            for _ in 1..m {
+            // f at z1 after each substep; the last one is for the smoothing
+            for step in 1..=m {
                 Self::eval(
                     self.field,
                     &mut self.vars,
@@ -161,19 +162,15 @@ impl<'a> Stepper<'a> {
                     &self.z1,
                     &mut self.dz,
                 );
+                if step == m {
+                    break;
+                }
                 for i in 0..n {
                     let next = self.z0[i] + 2.0 * hs * self.dz[i];
                     self.z0[i] = self.z1[i];
                     self.z1[i] = next;
                 }
             }
-            Self::eval(
-                self.field,
-                &mut self.vars,
-                &mut self.values,
-                &self.z1,
-                &mut self.dz,
-            );
             // row j of the table, in place: entry k from entries k − 1 of
             // rows j and j − 1 (the previous row's entry k − 1 is read
             // before it is overwritten)

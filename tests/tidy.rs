@@ -137,7 +137,9 @@ const GRAPH: &[(&str, &str, &[&str])] = &[
         "ravel-certify",
         &["ravel-base", "nalgebra", "serde_json"],
     ),
-    // the only crate with solvers, threads and `unsafe` (loading BLAS)
+    // the only crate with solvers, a thread pool and `unsafe` (loading BLAS);
+    // the checker spreads a certificate's independent cells over scoped
+    // std threads only
     (
         "crates/analysis",
         "ravel-analysis",

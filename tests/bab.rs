@@ -533,6 +533,66 @@ fn activations_agree_with_enumeration(phases: ActivationPhases) {
     );
 }
 
+/// The portfolio's switch: with a call budget too small for the first
+/// phase (half of it) to settle the harder cases, the search starts again
+/// from the root with the second phase's rules. Its answers stay true
+/// (VERIFIED only when the property holds, counterexamples real, UNSURE
+/// allowed), and at least one case is proven by the second phase, its
+/// certificate (a split tree marked `rebound`) VALID.
+#[test]
+fn the_portfolio_switches_phases_soundly() {
+    use ravel_certify::{check, Answer};
+    let mut rng = Rng::new(41);
+    let (mut second, mut answered) = (0, 0);
+    for case in 0..24 {
+        let Case {
+            mut p,
+            net,
+            holds,
+            h,
+            dir,
+            input,
+            ..
+        } = activation_case(&mut rng, case);
+        p.phases = ActivationPhases::Portfolio;
+        // three calls: the first phase has one (half, rounded down), so
+        // any case it does not settle at once goes to the second
+        if let Partitioner::Guided { budget, .. } = &mut p.partitioner {
+            budget.calls = 3;
+        }
+        let out = run(&p);
+        let got = out.properties[0].status;
+        match got {
+            Verdict::Verified => assert!(holds, "case {case}: VERIFIED a false property"),
+            Verdict::Falsified => {
+                assert!(!holds, "case {case}: FALSIFIED a true property");
+                let w = out.properties[0]
+                    .counterexample
+                    .as_ref()
+                    .expect("a witness");
+                assert!(input.contains_point(&w.input), "case {case}");
+                let v: f64 = dir
+                    .iter()
+                    .zip(&net.forward(&w.input))
+                    .map(|(a, b)| a * b)
+                    .sum();
+                assert!(v > h, "case {case}");
+            }
+            _ => continue,
+        }
+        answered += 1;
+        let cert = net_certificate(&p, &out);
+        assert_eq!(check(&cert, &net).answer, Answer::Valid, "case {case}");
+        if got == Verdict::Verified && cert["evidence"]["splits"]["rebound"] == true {
+            second += 1;
+        }
+    }
+    assert!(
+        second >= 1 && answered >= 12,
+        "{second} proven by the second phase, {answered} answered"
+    );
+}
+
 /// The split tree `nodes` without the strict descendants of node `at`,
 /// which becomes a leaf (children renumbered).
 fn drop_subtree(nodes: &[serde_json::Value], at: usize) -> Vec<serde_json::Value> {

@@ -334,7 +334,10 @@ pub fn gradient(tape: &Tape, lo: &[f64], hi: &[f64], n: usize) -> Option<Vec<Iv>
                 let f = if k == 0 {
                     zero
                 } else {
-                    mul(powi(*x, k - 1)?, iv(f64::from(k), f64::from(k))?)?
+                    mul(
+                        powi(*x, k.checked_sub(1)?)?,
+                        iv(f64::from(k), f64::from(k))?,
+                    )?
                 };
                 (
                     v,
@@ -391,11 +394,15 @@ pub fn range_affine(
         p.push(pi);
         rest.push(sub(add(iv(ci, ci)?, iv(l, h)?)?, iv(pi, pi)?)?);
     }
+    // every row over the same k symbols
+    let k = g.first().map_or(0, Vec::len);
+    if g.iter().any(|row| row.len() != k) {
+        return None;
+    }
     let jac = gradient(tape, lo, hi, n)?;
     let mut acc = range(tape, &p, &p)?;
     let mids: Vec<f64> = jac.iter().map(|j| 0.5 * j.lo + 0.5 * j.hi).collect();
     // Σⱼ |Σᵢ mᵢ Gᵢⱼ|
-    let k = g.first().map_or(0, Vec::len);
     let mut spread = 0.0f64;
     for j in 0..k {
         let mut col = iv(0.0, 0.0)?;
@@ -632,6 +639,18 @@ mod tests {
             &[1.5; 2]
         )
         .is_none());
+        // rows over different numbers of symbols: nothing
+        let ragged = vec![vec![0.5], vec![0.5, 0.1]];
+        let r = range_affine(
+            &sq,
+            &[1.0, 1.0],
+            &ragged,
+            &[0.0; 2],
+            &[0.0; 2],
+            &[0.5; 2],
+            &[1.5; 2],
+        );
+        assert!(r.is_none());
     }
 
     #[test]

@@ -822,12 +822,20 @@ fn piece_shows(prop: &Prop, piece: &[Iv], forms: Option<&Vec<Af>>) -> bool {
     let Some(x) = forms else {
         return false;
     };
-    let k = x.first().map_or(0, |f| f.g.len());
-    if x.len() != piece.len() || x.iter().any(|f| f.g.len() != k) {
+    if x.len() != piece.len() {
         return false;
     }
+    // the forms over one set of symbols (a missing trailing coefficient is 0)
+    let k = x.iter().map(|f| f.g.len()).max().unwrap_or(0);
     let c: Vec<f64> = x.iter().map(|f| f.c).collect();
-    let g: Vec<Vec<f64>> = x.iter().map(|f| f.g.clone()).collect();
+    let g: Vec<Vec<f64>> = x
+        .iter()
+        .map(|f| {
+            let mut row = f.g.clone();
+            row.resize(k, 0.0);
+            row
+        })
+        .collect();
     let form = Form {
         c: &c,
         g: &g,

@@ -261,7 +261,7 @@ pub fn tape_gradient(
                 let f = if k == 0 {
                     Interval::ZERO
                 } else {
-                    x.powi(k - 1).ok()? * Interval::point(f64::from(k))
+                    x.powi(k.checked_sub(1)?).ok()? * Interval::point(f64::from(k))
                 };
                 (v, times(f, da))
             }
@@ -333,6 +333,12 @@ fn mean_value(
     if form.g.len() != n || form.r_lo.len() != n || form.r_hi.len() != n || bbox.len() != n {
         return None;
     }
+    // every row over the same symbols (a ragged row's extra columns would
+    // be left out of the linear part's bound)
+    let k = form.g.first().map_or(0, Vec::len);
+    if form.g.iter().any(|row| row.len() != k) {
+        return None;
+    }
     // the centre moved to the remainder's middle (any float will do: the
     // remainder is re-enclosed around it), and it must lie in the box, so
     // that the box holds every segment from it to a state
@@ -354,7 +360,6 @@ fn mean_value(
     let jac = tape_gradient(tape, bbox, n)?;
     let centre_iv: Vec<Interval> = centre.iter().map(|&c| Interval::point(c)).collect();
     let mut acc = tape_range(tape, &centre_iv).ok()?;
-    let k = form.g.first().map_or(0, Vec::len);
     let mids: Vec<f64> = jac.iter().map(|j| j.mid()).collect();
     // (mᵀG)ⱼ, each enclosed, then Σⱼ |(mᵀG)ⱼ|·[−1, 1]
     let mut lin = 0.0f64;
@@ -556,6 +561,14 @@ mod tape_range_tests {
         };
         let r = tape_range_affine(&diff, &far, &b).expect("the box's range");
         assert!(r.lo < -0.4 && r.hi > 0.4);
+        // rows over different numbers of symbols: no mean value form
+        let ragged = Affine {
+            c: vec![1.0, 1.0],
+            g: vec![vec![0.5], vec![0.5, 0.1]],
+            r_lo: vec![0.0, 0.0],
+            r_hi: vec![0.0, 0.0],
+        };
+        assert!(mean_value(&squares, &ragged, &b).is_none());
     }
 
     #[test]

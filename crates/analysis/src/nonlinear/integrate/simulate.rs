@@ -48,6 +48,9 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
     let mut s = Stepper::new(field, x, u, w);
     let (mut t, mut h, mut steps) = (0.0f64, period, 0usize);
     while t < period {
+        // the last step ends exactly at the period (t + h could round one
+        // ulp short of it and leave a step too small to take)
+        let finishing = h >= period - t;
         h = h.min(period - t);
         steps += 1;
         if h <= period * 1e-12 || steps > MAX_STEPS {
@@ -56,7 +59,7 @@ pub fn simulate(field: &VectorField, x: &[f64], u: &[f64], w: &[f64], period: f6
         match s.step(h) {
             Outcome::NotFinite => return vec![f64::NAN; x.len()],
             Outcome::Accepted(rows) => {
-                t += h;
+                t = if finishing { period } else { t + h };
                 h *= match rows {
                     0..=3 => 2.0,
                     4..=5 => 1.3,

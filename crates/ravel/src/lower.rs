@@ -184,6 +184,15 @@ pub struct Intersample {
     pub loops: Vec<NonlinearLoop>,
 }
 
+/// Whether a goal or avoid set has a nonlinear constraint (bounded with
+/// the steps' affine forms, which the loop then keeps).
+fn has_nonlinear_sets(c: &Checked) -> bool {
+    c.goal.iter().any(|g| !g.set.nonlinear.is_empty())
+        || c.avoids
+            .iter()
+            .any(|a| a.members.iter().any(|m| !m.nonlinear.is_empty()))
+}
+
 /// Lower a checked closed-loop spec to its plan.
 pub fn lower_system(c: &Checked) -> SystemPlan {
     let net = folded_network(c);
@@ -192,7 +201,9 @@ pub fn lower_system(c: &Checked) -> SystemPlan {
             ClosedLoop::time_varying(plants.clone(), net.clone()).with_slope_steps(c.slope_steps),
         )),
         PlantSpec::Nonlinear(p) => Loop::Nonlinear(Box::new(
-            NonlinearLoop::new(p.clone(), net.clone()).with_slope_steps(c.slope_steps),
+            NonlinearLoop::new(p.clone(), net.clone())
+                .with_slope_steps(c.slope_steps)
+                .with_forms(has_nonlinear_sets(c)),
         )),
     };
     let mut properties = Vec::new();

@@ -110,8 +110,10 @@ impl NonlinearLoop {
                 Ok(a) => {
                     let mut step = Step::new(region_of(&a.next, boundary, t + 1), Vec::new());
                     step.between = a.pipe;
-                    step.form = affine_of(&a.next);
-                    step.between_forms = a.pipe_forms;
+                    if self.keep_forms {
+                        step.form = affine_of(&a.next);
+                        step.between_forms = a.pipe_forms;
+                    }
                     if let Some(p) = parent.and_then(|p| p.get(t + 1)) {
                         if p.cut().is_none() && step.cut().is_none() {
                             step.set = step.set.intersect(&p.set);
@@ -194,11 +196,14 @@ impl NonlinearLoop {
                 Ok(Advanced {
                     next: out.end,
                     pipe: Some(out.pieces.iter().map(|p| interval_box(p)).collect()),
-                    pipe_forms: out
-                        .piece_forms
-                        .iter()
-                        .map(|f| f.as_deref().and_then(affine_of))
-                        .collect(),
+                    pipe_forms: if self.keep_forms {
+                        out.piece_forms
+                            .iter()
+                            .map(|f| f.as_deref().and_then(affine_of))
+                            .collect()
+                    } else {
+                        Vec::new()
+                    },
                 })
             }
             Time::Discrete => Ok(Advanced {

@@ -47,6 +47,11 @@ pub struct NonlinearLoop {
     /// control bound (0: CROWN's own slopes; see
     /// [`crate::crown::Relaxation::upper_optimised`]).
     pub slope_steps: usize,
+    /// Whether each step keeps its Taylor models as affine forms
+    /// ([`crate::closed_loop::Step::form`], `between_forms`): only a
+    /// property with a nonlinear set uses them, and they cost about as much
+    /// memory as the rest of a step.
+    pub keep_forms: bool,
 }
 
 impl NonlinearLoop {
@@ -57,7 +62,14 @@ impl NonlinearLoop {
             net,
             settings: integrate::Settings::default(),
             slope_steps: 0,
+            keep_forms: false,
         }
+    }
+
+    /// The loop keeping (or not) each step's affine forms.
+    pub fn with_forms(mut self, keep: bool) -> NonlinearLoop {
+        self.keep_forms = keep;
+        self
     }
 
     /// The loop with this many slope-optimisation steps per control bound.

@@ -499,13 +499,7 @@ fn activations_agree_with_enumeration(phases: ActivationPhases) {
             out.calls, out.partition_stop
         );
         if let Some(w) = &out.properties[0].counterexample {
-            assert!(input.contains_point(&w.input), "case {case}");
-            let v: f64 = dir
-                .iter()
-                .zip(&net.forward(&w.input))
-                .map(|(a, b)| a * b)
-                .sum();
-            assert!(v > h, "case {case}");
+            assert_real_witness(&net, &input, &dir, h, &w.input, case);
         }
         let cert = net_certificate(&p, &out);
         let answer = check(&cert, &net).answer;
@@ -531,6 +525,13 @@ fn activations_agree_with_enumeration(phases: ActivationPhases) {
         verified >= 10 && falsified >= 10 && trees >= 3,
         "{phases:?}: {verified} verified ({trees} by split trees), {falsified} falsified"
     );
+}
+
+/// A counterexample of `dir·f(x) ≤ h` is real: in the input set, above `h`.
+fn assert_real_witness(net: &Network, input: &Region, dir: &[f64], h: f64, x: &[f64], case: usize) {
+    assert!(input.contains_point(x), "case {case}");
+    let v: f64 = dir.iter().zip(&net.forward(x)).map(|(a, b)| a * b).sum();
+    assert!(v > h, "case {case}");
 }
 
 /// The portfolio's switch: with a call budget too small for the first
@@ -570,13 +571,7 @@ fn the_portfolio_switches_phases_soundly() {
                     .counterexample
                     .as_ref()
                     .expect("a witness");
-                assert!(input.contains_point(&w.input), "case {case}");
-                let v: f64 = dir
-                    .iter()
-                    .zip(&net.forward(&w.input))
-                    .map(|(a, b)| a * b)
-                    .sum();
-                assert!(v > h, "case {case}");
+                assert_real_witness(&net, &input, &dir, h, &w.input, case);
             }
             _ => continue,
         }

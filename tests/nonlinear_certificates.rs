@@ -20,6 +20,16 @@ fn not_valid(cert: &Value, plan: &ravel::lower::SystemPlan, what: &str) -> Answe
     a
 }
 
+/// The index of the certificate's (first) avoid property.
+fn avoid_property(cert: &Value) -> usize {
+    cert["problem"]["properties"]
+        .as_array()
+        .expect("properties")
+        .iter()
+        .position(|p| p["kind"] == "avoid")
+        .expect("an avoid property")
+}
+
 /// The index of the certificate's (first) FALSIFIED verdict.
 fn falsified(cert: &Value) -> usize {
     cert["verdicts"]
@@ -212,12 +222,7 @@ fn counterexamples_between_the_instants_are_replayed_on_pieces() {
     assert_eq!(cert["verdicts"][i]["between"], true);
     assert_eq!(answer(&cert, &plan), Answer::Valid);
     let step = cert["verdicts"][i]["step"].as_u64().expect("step");
-    let j = cert["problem"]["properties"]
-        .as_array()
-        .expect("properties")
-        .iter()
-        .position(|p| p["kind"] == "avoid")
-        .expect("an avoid property");
+    let j = avoid_property(&cert);
     // the instant that ends the period: x0 is back near 0 there
     let mut bad = cert.clone();
     bad["verdicts"][i]["between"] = Value::from(false);
@@ -284,12 +289,7 @@ fn linear_plants_in_continuous_time_are_checked_between_samples() {
     let (plan, cert) = run("specs/double_integrator_continuous.ravel");
     assert!(cert["problem"]["intersample"].is_object());
     assert_eq!(answer(&cert, &plan), Answer::Valid);
-    let i = cert["problem"]["properties"]
-        .as_array()
-        .expect("properties")
-        .iter()
-        .position(|p| p["kind"] == "avoid")
-        .expect("an avoid property");
+    let i = avoid_property(&cert);
     // x[0] ≤ −0.56: clear of every set at the instants (they reach −0.538),
     // not of the states between the instants (they reach −0.579)
     let mut bad = cert.clone();
@@ -313,12 +313,7 @@ fn linear_plants_in_continuous_time_are_checked_between_samples() {
 #[test]
 fn evidence_must_reach_the_end_of_the_last_period() {
     let (plan, cert) = run("specs/double_integrator_continuous.ravel");
-    let i = cert["problem"]["properties"]
-        .as_array()
-        .expect("properties")
-        .iter()
-        .position(|p| p["kind"] == "avoid")
-        .expect("an avoid property");
+    let i = avoid_property(&cert);
     let mut bad = cert.clone();
     // instants 1..=4, periods 2..=5; the chain cut after step 4
     bad["problem"]["properties"][i]["steps"] = serde_json::json!({ "first": 1, "last": 4 });

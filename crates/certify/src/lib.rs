@@ -1484,6 +1484,36 @@ impl<'a> CellCheck<'a> {
     }
 }
 
+/// A recorded trajectory's start, process noise and sensor noise (linear
+/// and nonlinear certificates alike).
+type TrajectoryStart<'a> = (Vec<f64>, &'a Vec<Value>, &'a Vec<Value>);
+
+/// A recorded trajectory's start (`n` states) and its noise sequences, at
+/// least `steps` long; `Ok(Err(why))` when it starts outside `initial`.
+fn trajectory_start<'a>(
+    initial: &Initial,
+    n: usize,
+    tr: &'a Value,
+    steps: usize,
+) -> R<Result<TrajectoryStart<'a>, String>> {
+    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
+    let ws = get(tr, "process_noise")?
+        .as_array()
+        .ok_or("`process_noise` must be an array")?;
+    let vs = get(tr, "sensor_noise")?
+        .as_array()
+        .ok_or("`sensor_noise` must be an array")?;
+    if ws.len() < steps || vs.len() < steps {
+        return Err(format!(
+            "the trajectory has noise for fewer than {steps} steps"
+        ));
+    }
+    if !initial.contains(&x0) {
+        return Ok(Err("starts outside the initial set".into()));
+    }
+    Ok(Ok((x0, ws, vs)))
+}
+
 /// Replay a counterexample rigorously; the outer error is an unreadable
 /// trajectory, the inner one why it does not violate the property.
 fn replay(
@@ -1501,21 +1531,10 @@ fn replay(
             problem.horizon
         )));
     }
-    let x0 = vector(get(tr, "initial")?, n, "trajectory.initial")?;
-    let ws = get(tr, "process_noise")?
-        .as_array()
-        .ok_or("`process_noise` must be an array")?;
-    let vs = get(tr, "sensor_noise")?
-        .as_array()
-        .ok_or("`sensor_noise` must be an array")?;
-    if ws.len() < step || vs.len() < step {
-        return Err(format!(
-            "the trajectory has noise for fewer than {step} steps"
-        ));
-    }
-    if !problem.initial.contains(&x0) {
-        return Ok(Err("starts outside the initial set".into()));
-    }
+    let (x0, ws, vs) = match trajectory_start(&problem.initial, n, tr, step)? {
+        Ok(t) => t,
+        Err(e) => return Ok(Err(e)),
+    };
     let (first, eventually) = match prop {
         Prop::Goal {
             steps, eventually, ..

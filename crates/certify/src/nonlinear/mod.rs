@@ -147,11 +147,7 @@ pub(crate) fn intersample(
                 Af::exact(c, g)
             })
             .collect();
-    let noise: Vec<Iv> =
-        v.lo.iter()
-            .zip(&v.hi)
-            .map(|(&l, &h)| Iv::new(l, h))
-            .collect();
+    let noise = box_ivs(v);
     let parts = Parts {
         field,
         obs,
@@ -700,12 +696,7 @@ fn compose(
     let (snet, sbox) = over_symbols(net, &y, k)?;
     let nb = NetBounds::new(&snet, &sbox, None).map_err(|t| t.to_string())?;
     let (up, up_off, low, low_off) = nb.output_lines(slopes);
-    let siv: Vec<Iv> = sbox
-        .lo
-        .iter()
-        .zip(&sbox.hi)
-        .map(|(&l, &h)| Iv::new(l, h))
-        .collect();
+    let siv = box_ivs(&sbox);
     let mut u = Vec::with_capacity(up.nrows());
     for r in 0..up.nrows() {
         let (ou, ol) = (up_off.get(r).copied(), low_off.get(r).copied());
@@ -959,6 +950,14 @@ fn proves(
     Ok(())
 }
 
+/// A box as one interval per coordinate (the inverse of [`hull_box`]).
+fn box_ivs(b: &Bx) -> Vec<Iv> {
+    b.lo.iter()
+        .zip(&b.hi)
+        .map(|(&l, &h)| Iv::new(l, h))
+        .collect()
+}
+
 /// The box of an interval vector.
 fn hull_box(x: &[Iv]) -> Bx {
     Bx {
@@ -970,26 +969,11 @@ fn hull_box(x: &[Iv]) -> Bx {
 /// A recorded trajectory's start (in the initial set) and its noise
 /// sequences, at least `steps` long; `Ok(Err(why))` when it starts outside.
 fn trajectory<'a>(problem: &Problem, tr: &'a Value, steps: usize) -> R<Result<Start<'a>, String>> {
-    let x0 = vector(get(tr, "initial")?, problem.n(), "trajectory.initial")?;
-    let ws = get(tr, "process_noise")?
-        .as_array()
-        .ok_or("`process_noise` must be an array")?;
-    let vs = get(tr, "sensor_noise")?
-        .as_array()
-        .ok_or("`sensor_noise` must be an array")?;
-    if ws.len() < steps || vs.len() < steps {
-        return Err(format!(
-            "the trajectory has noise for fewer than {steps} steps"
-        ));
-    }
-    if !problem.initial.contains(&x0) {
-        return Ok(Err("starts outside the initial set".into()));
-    }
-    Ok(Ok((x0, ws, vs)))
+    super::trajectory_start(&problem.initial, problem.n(), tr, steps)
 }
 
 /// A trajectory's start and its process and sensor noise per step.
-type Start<'a> = (Vec<f64>, &'a Vec<Value>, &'a Vec<Value>);
+type Start<'a> = super::TrajectoryStart<'a>;
 
 /// A replayed step's controls and disturbance, as intervals.
 type Inputs = (Vec<Iv>, Vec<Iv>);
@@ -1021,13 +1005,7 @@ fn step_inputs(
     }
     let noise: Vec<Iv> = v.iter().map(|&s| Iv::point(s)).collect();
     let y = problem.observe(x, &noise);
-    let ub = network_box(net, &hull_box(&y));
-    let u: Vec<Iv> = ub
-        .lo
-        .iter()
-        .zip(&ub.hi)
-        .map(|(&l, &h)| Iv::new(l, h))
-        .collect();
+    let u = box_ivs(&network_box(net, &hull_box(&y)));
     let wi: Vec<Iv> = w.iter().map(|&s| Iv::point(s)).collect();
     Ok(Ok((u, wi)))
 }

@@ -1,7 +1,7 @@
 //! Intervals and Taylor models against points.
 
 use super::interval::{DomainError, Interval};
-use super::tm::{combine, support, Tm};
+use super::tm::{combine, support, Lin, Tm};
 use ravel_base::expr::Func;
 use ravel_base::rng::Rng;
 
@@ -256,4 +256,188 @@ fn a_symbol_keeps_its_dependency() {
         .range()
         .contains(1.0));
     assert!(Tm::symbol(5, 0.0, 1.0, 1).range().contains(-1.0));
+}
+
+/// `a + b = s + e` exactly (Knuth's two-sum).
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
+
+/// `a·b = p + e` exactly (no underflow in the tests' magnitudes).
+fn two_prod(a: f64, b: f64) -> (f64, f64) {
+    let p = a * b;
+    (p, a.mul_add(b, -p))
+}
+
+/// A coefficient with a random mantissa, sign and magnitude `10^±12`, so
+/// that nearly every product and sum of two rounds.
+fn nasty(g: &mut Rng) -> f64 {
+    let m = g.uniform(1.0, 2.0);
+    let e = g.uniform(-12.0, 12.0);
+    let s = if g.below(2) == 0 { -1.0 } else { 1.0 };
+    s * m * 10f64.powf(e)
+}
+
+fn nasty_vec(g: &mut Rng, n: usize) -> Vec<f64> {
+    (0..n).map(|_| nasty(g)).collect()
+}
+
+/// `Σ |gᵢ − ĝᵢ|` for coefficients `g` and the exact values `ĝᵢ = hᵢ + lᵢ`
+/// (double-double; the error is evaluated in `f64`, relative error `u`
+/// of itself, far inside the bounds' factors).
+fn summed_error(g: &[f64], exact: &[(f64, f64)]) -> f64 {
+    g.iter()
+        .zip(exact)
+        .map(|(&v, &(h, l))| ((h - v) + l).abs())
+        .sum()
+}
+
+/// The exact dot product `Σ cⱼ·xⱼ` as a double-double.
+fn exact_dot(c: &[f64], x: &[f64]) -> (f64, f64) {
+    let (mut hi, mut lo) = (0.0, 0.0);
+    for (&a, &b) in c.iter().zip(x) {
+        let (p, pe) = two_prod(a, b);
+        let (s, se) = two_sum(hi, p);
+        hi = s;
+        lo += se + pe;
+    }
+    (hi, lo)
+}
+
+/// Every constructor of [`Lin`] bounds the summed rounding errors of its
+/// coefficients against their exact values (computed with error-free
+/// transformations), and the errors are real: a bound of 0 (no
+/// accounting) fails here.
+#[test]
+fn symbol_coefficients_bound_their_exact_rounding_errors() {
+    let mut g = Rng::new(29);
+    let mut seen = 0.0;
+    for round in 0..2_000 {
+        let n = 1 + round % 40;
+        let (a, b) = (nasty_vec(&mut g, n), nasty_vec(&mut g, n));
+        let (p, q, d) = (nasty(&mut g), nasty(&mut g), nasty(&mut g));
+        let mut check = |lin: &Lin, exact: Vec<(f64, f64)>, what: &str| {
+            let e = summed_error(&lin.g, &exact);
+            assert!(e <= lin.err, "{what}: errors {e:e} > bound {:e}", lin.err);
+            seen += e;
+        };
+        for neg in [false, true] {
+            let s = if neg { -1.0 } else { 1.0 };
+            let exact = a.iter().zip(&b).map(|(&x, &y)| two_sum(x, s * y)).collect();
+            check(&Lin::add(&a, &b, neg), exact, "add");
+        }
+        // a shorter operand: its missing coefficients are zero
+        let short = &b[..n / 2];
+        let exact = (0..n)
+            .map(|i| two_sum(a[i], short.get(i).copied().unwrap_or(0.0)))
+            .collect();
+        check(&Lin::add(&a, short, false), exact, "add, ragged");
+        let exact = a.iter().map(|&x| two_prod(p, x)).collect();
+        check(&Lin::scale(&a, p), exact, "scale");
+        // a/d = q + r/d with r = a − q·d exact
+        let lin = Lin::div(&a, d);
+        let exact = a
+            .iter()
+            .zip(&lin.g)
+            .map(|(&x, &v)| (v, (-v).mul_add(d, x) / d))
+            .collect();
+        check(&lin, exact, "div");
+        let exact = a
+            .iter()
+            .zip(&b)
+            .map(|(&x, &y)| exact_dot(&[p, q], &[y, x]))
+            .collect();
+        check(&Lin::mul(p, &b, q, &a), exact, "mul");
+        let k = 1 + round % 7;
+        let tms: Vec<Tm> = (0..k)
+            .map(|_| Tm {
+                c: 0.0,
+                g: nasty_vec(&mut g, n),
+                r: Interval::ZERO,
+            })
+            .collect();
+        let refs: Vec<&Tm> = tms.iter().collect();
+        let cs = nasty_vec(&mut g, k);
+        let exact = (0..n)
+            .map(|i| {
+                let col: Vec<f64> = tms.iter().map(|t| t.g[i]).collect();
+                exact_dot(&cs, &col)
+            })
+            .collect();
+        check(&Lin::dot(&cs, &refs, n), exact, "dot");
+    }
+    assert!(
+        seen > 0.0,
+        "no rounding happened: the test would not see a missing bound"
+    );
+}
+
+/// A model whose remainder is 0 and whose coefficients were rounded:
+/// the result's remainder holds every value of the rounding error
+/// `(ĉ − c) + Σ (ĝᵢ − gᵢ) zᵢ` over the cube, for each operation whose exact
+/// result is affine (no quadratic part).
+#[test]
+fn taylor_model_operations_keep_their_rounding_in_the_remainder() {
+    let mut g = Rng::new(31);
+    let exact_tm = |c: (f64, f64), gs: Vec<(f64, f64)>, t: &Tm| {
+        let e_c = (c.0 - t.c) + c.1;
+        let e = summed_error(&t.g, &gs);
+        assert!(
+            t.r.lo <= e_c - e && e_c + e <= t.r.hi,
+            "remainder {:?} misses [{:e}, {:e}]",
+            t.r,
+            e_c - e,
+            e_c + e
+        );
+        e
+    };
+    let mut seen = 0.0;
+    for round in 0..1_000 {
+        let n = 1 + round % 30;
+        let tm = |g: &mut Rng| Tm {
+            c: nasty(g),
+            g: nasty_vec(g, n),
+            r: Interval::ZERO,
+        };
+        let (a, b, s) = (tm(&mut g), tm(&mut g), nasty(&mut g));
+        let sum = a.add(&b).unwrap();
+        let gs = a.g.iter().zip(&b.g).map(|(&x, &y)| two_sum(x, y)).collect();
+        seen += exact_tm(two_sum(a.c, b.c), gs, &sum);
+        let diff = a.sub(&b).unwrap();
+        let gs =
+            a.g.iter()
+                .zip(&b.g)
+                .map(|(&x, &y)| two_sum(x, -y))
+                .collect();
+        seen += exact_tm(two_sum(a.c, -b.c), gs, &diff);
+        let scaled = a.scale(s).unwrap();
+        let gs = a.g.iter().map(|&x| two_prod(s, x)).collect();
+        seen += exact_tm(two_prod(s, a.c), gs, &scaled);
+        let by_point = a.mul_interval(Interval::point(s)).unwrap();
+        let gs = a.g.iter().map(|&x| two_prod(s, x)).collect();
+        seen += exact_tm(two_prod(s, a.c), gs, &by_point);
+        // times a constant model: the quadratic part is 0
+        let k = Tm::constant(s, n);
+        let prod = a.mul(&k).unwrap();
+        let gs = a.g.iter().map(|&x| two_prod(s, x)).collect();
+        seen += exact_tm(two_prod(s, a.c), gs, &prod);
+        let quot = a.div_scalar(s).unwrap();
+        let gs =
+            a.g.iter()
+                .zip(&quot.g)
+                .map(|(&x, &v)| (v, (-v).mul_add(s, x) / s))
+                .collect();
+        let qc = a.c / s;
+        seen += exact_tm((qc, (-qc).mul_add(s, a.c) / s), gs, &quot);
+        let comb = combine(&[s, 0.5], &[&a, &b], 0.0).unwrap();
+        let gs =
+            a.g.iter()
+                .zip(&b.g)
+                .map(|(&x, &y)| exact_dot(&[s, 0.5], &[x, y]))
+                .collect();
+        seen += exact_tm(exact_dot(&[s, 0.5], &[a.c, b.c]), gs, &comb);
+    }
+    assert!(seen > 0.0);
 }

@@ -6,10 +6,21 @@
 //! `T` encloses a real function `φ` when `φ(z) − c − g·z ∈ r` for every `z`.
 //! Every operation keeps that property for the exact real result.
 //!
-//! The coefficients `c` and `gᵢ` are plain `f64`s, so each is computed as an
-//! outward-rounded interval, the midpoint is kept, and the distance to the
-//! interval's ends (the rounding error) goes into the remainder: `|zᵢ| ≤ 1`,
-//! so an error `eᵢ` in `gᵢ` moves the value by at most `eᵢ` ([`Absorb`]).
+//! The coefficients `c` and `gᵢ` are plain `f64`s, so each carries a
+//! rounding error, and the errors go into the remainder: `|zᵢ| ≤ 1`, so an
+//! error `eᵢ` in `gᵢ` moves the value by at most `eᵢ`.
+//! * The constant (one per model) is computed as an outward-rounded
+//!   interval, its midpoint kept and the distance to the ends absorbed
+//!   ([`Absorb`]).
+//! * The symbol coefficients (as many as the symbols: the hot loops) are
+//!   computed in round-to-nearest, each a short sum of products of `f64`s,
+//!   and the sum of their errors is bounded once by the standard a-priori
+//!   bound ([`Lin`]; Higham, *Accuracy and Stability of Numerical
+//!   Algorithms*, §3.1: a `k`-term dot product has error at most
+//!   `γ(k)·Σ|xⱼyⱼ|`), through [`ravel_base::num::error_bound`], the bound
+//!   every other rounded sum of ravel uses. It costs one absolute value and
+//!   one addition per coefficient, where an interval per coefficient cost
+//!   four products, their extremes and two directed roundings.
 //!
 //! Models with different symbol counts combine as if the shorter one had
 //! zero coefficients for the missing symbols (all models of one analysis
@@ -17,7 +28,7 @@
 //! every result is checked finite ([`DomainError::NotFinite`] otherwise).
 
 use super::interval::{DomainError, Interval};
-use ravel_base::num::sum_upper;
+use ravel_base::num::{error_bound, sum_upper, Acc};
 
 /// A first-order Taylor model (see the module doc).
 #[derive(Clone, Debug, PartialEq)]
@@ -59,6 +70,139 @@ impl Absorb {
     /// The accumulated error as a symmetric interval.
     pub(crate) fn interval(&self) -> Interval {
         Interval::symmetric(self.err.next_up())
+    }
+}
+
+/// Symbol coefficients computed in round-to-nearest and an upper bound of
+/// the sum of their absolute rounding errors: `Σᵢ |gᵢ − ĝᵢ| ≤ err`, `ĝᵢ` the
+/// exact value of the expression each `gᵢ` was computed from.
+///
+/// Every constructor computes each `gᵢ` as a dot product of at most `k`
+/// terms `xⱼ·yⱼ` of `f64`s (an addend `x` is the term `x·1`, exact), so
+/// `|gᵢ − ĝᵢ| ≤ γ(k)·Σⱼ|xⱼyⱼ| + k·η` (η the underflow error of a
+/// product). `abs`, the rounded sum over every coefficient of the rounded
+/// terms' magnitudes, is at most a relative `γ(N)` (N the number of terms)
+/// and one rounding per term below the exact one, and
+/// [`error_bound`]`(k, abs)` = `1.0625·γ(k + 2)·abs + TINY`, rounded up,
+/// covers both (its factor covers `γ(N) ≤ 0.06`, and `TINY` up to 2⁵²
+/// underflowing products). A term or a sum that is not finite makes `err`
+/// infinite or NaN, and the model built from it is refused
+/// ([`Tm::checked`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Lin {
+    /// The coefficients.
+    pub g: Vec<f64>,
+    /// The bound of their summed errors.
+    pub err: f64,
+}
+
+impl Lin {
+    /// `gᵢ = aᵢ + s·bᵢ` for `s = ±1` (a missing coefficient is 0): one
+    /// rounding each, relative to the exact sum, so `k = 1` with the
+    /// result's magnitudes (`|ĝ| ≤ |g|/(1 − u)`, which the factor covers).
+    pub(crate) fn add(a: &[f64], b: &[f64], negate_b: bool) -> Lin {
+        let n = a.len().max(b.len());
+        let s = if negate_b { -1.0 } else { 1.0 };
+        let mut g = Vec::with_capacity(n);
+        let mut abs = 0.0;
+        if a.len() == b.len() {
+            for (x, y) in a.iter().zip(b) {
+                let v = x + s * y;
+                abs += v.abs();
+                g.push(v);
+            }
+        } else {
+            for i in 0..n {
+                let v = a.get(i).copied().unwrap_or(0.0) + s * b.get(i).copied().unwrap_or(0.0);
+                abs += v.abs();
+                g.push(v);
+            }
+        }
+        Lin {
+            g,
+            err: error_bound(1, abs),
+        }
+    }
+
+    /// `gᵢ = s·aᵢ`: one rounded product each (`k = 1`).
+    pub(crate) fn scale(a: &[f64], s: f64) -> Lin {
+        let mut abs = 0.0;
+        let g = a
+            .iter()
+            .map(|x| {
+                let v = s * x;
+                abs += v.abs();
+                v
+            })
+            .collect();
+        Lin {
+            g,
+            err: error_bound(1, abs),
+        }
+    }
+
+    /// `gᵢ = aᵢ / d`: one rounded quotient each, relative to the exact
+    /// quotient like a product's (`k = 1`, the result's magnitudes).
+    pub(crate) fn div(a: &[f64], d: f64) -> Lin {
+        let mut abs = 0.0;
+        let g = a
+            .iter()
+            .map(|x| {
+                let v = x / d;
+                abs += v.abs();
+                v
+            })
+            .collect();
+        Lin {
+            g,
+            err: error_bound(1, abs),
+        }
+    }
+
+    /// `gᵢ = p·bᵢ + q·aᵢ` (a missing coefficient is 0): two rounded
+    /// products and their rounded sum (`k = 2`, the products' magnitudes).
+    pub(crate) fn mul(p: f64, b: &[f64], q: f64, a: &[f64]) -> Lin {
+        let n = a.len().max(b.len());
+        let mut g = Vec::with_capacity(n);
+        let mut abs = 0.0;
+        if a.len() == b.len() {
+            for (x, y) in a.iter().zip(b) {
+                let (s, t) = (p * y, q * x);
+                abs += s.abs() + t.abs();
+                g.push(s + t);
+            }
+        } else {
+            for i in 0..n {
+                let s = p * b.get(i).copied().unwrap_or(0.0);
+                let t = q * a.get(i).copied().unwrap_or(0.0);
+                abs += s.abs() + t.abs();
+                g.push(s + t);
+            }
+        }
+        Lin {
+            g,
+            err: error_bound(2, abs),
+        }
+    }
+
+    /// `gᵢ = Σⱼ cⱼ·(Tⱼ)ᵢ` over `n` symbols (a missing coefficient is 0),
+    /// summed in the order of `tms` from 0 (`k` = the number of models).
+    pub(crate) fn dot(coeffs: &[f64], tms: &[&Tm], n: usize) -> Lin {
+        let mut g = vec![0.0; n];
+        let mut abs = 0.0;
+        let mut k = 0;
+        for (&a, t) in coeffs.iter().zip(tms) {
+            k += 1;
+            for (gi, &ti) in g.iter_mut().zip(&t.g) {
+                let p = a * ti;
+                abs += p.abs();
+                *gi += p;
+            }
+        }
+        Lin {
+            g,
+            err: error_bound(k.max(1), abs),
+        }
     }
 }
 
@@ -142,44 +286,35 @@ impl Tm {
         Interval::new(self.c + lin + self.r.lo, self.c + lin + self.r.hi)
     }
 
-    /// A model from coefficient enclosures: `c ∈ c_iv`, `gᵢ ∈ g_iv(i)`,
-    /// plus `rem`; the rounding of every coefficient is absorbed.
-    fn build(
-        c_iv: Interval,
-        n: usize,
-        mut g_iv: impl FnMut(usize) -> Interval,
-        rem: Interval,
-    ) -> Result<Tm, DomainError> {
+    /// A model from an enclosure of the constant, symbol coefficients with
+    /// their error bound, and `rem`: both errors join the remainder.
+    fn finish(c_iv: Interval, lin: Lin, rem: Interval) -> Result<Tm, DomainError> {
         let mut ab = Absorb::new();
         let c = ab.take(c_iv);
-        let g = (0..n).map(|i| ab.take(g_iv(i))).collect();
         Tm {
             c,
-            g,
-            r: rem + ab.interval(),
+            g: lin.g,
+            r: rem + ab.interval() + Interval::symmetric(lin.err),
         }
         .checked()
     }
 
-    /// Coefficient `i`, zero beyond the end.
-    fn gi(&self, i: usize) -> f64 {
-        self.g.get(i).copied().unwrap_or(0.0)
-    }
-
     /// `self + o`.
     pub fn add(&self, o: &Tm) -> Result<Tm, DomainError> {
-        let n = self.symbols().max(o.symbols());
-        Tm::build(
+        Tm::finish(
             pt(self.c) + pt(o.c),
-            n,
-            |i| pt(self.gi(i)) + pt(o.gi(i)),
+            Lin::add(&self.g, &o.g, false),
             self.r + o.r,
         )
     }
 
     /// `self − o`.
     pub fn sub(&self, o: &Tm) -> Result<Tm, DomainError> {
-        self.add(&o.neg())
+        Tm::finish(
+            pt(self.c) - pt(o.c),
+            Lin::add(&self.g, &o.g, true),
+            self.r - o.r,
+        )
     }
 
     /// `−self` (exact).
@@ -193,46 +328,29 @@ impl Tm {
 
     /// `self · s` for a real `s`.
     pub fn scale(&self, s: f64) -> Result<Tm, DomainError> {
-        let s = pt(s);
-        Tm::build(
-            pt(self.c) * s,
-            self.symbols(),
-            |i| pt(self.gi(i)) * s,
-            self.r * s,
-        )
+        Tm::finish(pt(self.c) * pt(s), Lin::scale(&self.g, s), self.r * pt(s))
     }
 
     /// `self / d` for a real `d ≠ 0`.
     pub fn div_scalar(&self, d: f64) -> Result<Tm, DomainError> {
-        let d = pt(d);
-        let mut err = None;
-        let mut q = |x: Interval| {
-            x.div(d).unwrap_or_else(|e| {
-                err = Some(e);
-                super::interval::NAN
-            })
-        };
-        let c_iv = q(pt(self.c));
-        let g: Vec<Interval> = self.g.iter().map(|&g| q(pt(g))).collect();
-        let r = q(self.r);
-        if let Some(e) = err {
-            return Err(e);
-        }
-        Tm::build(
-            c_iv,
-            g.len(),
-            |i| g.get(i).copied().unwrap_or(Interval::ZERO),
-            r,
-        )
+        let dv = pt(d);
+        // the interval division refuses a divisor that may be 0 (or is
+        // not finite); the coefficients are then divided by the same `d`
+        let c_iv = pt(self.c).div(dv)?;
+        let r = self.r.div(dv)?;
+        Tm::finish(c_iv, Lin::div(&self.g, d), r)
     }
 
     /// `self + iv`.
     pub fn add_interval(&self, iv: Interval) -> Result<Tm, DomainError> {
         let m = iv.mid();
-        Tm::build(
+        // the symbol coefficients are copied exactly
+        Tm::finish(
             pt(self.c) + pt(m),
-            self.symbols(),
-            |i| pt(self.gi(i)),
+            Lin {
+                g: self.g.clone(),
+                err: 0.0,
+            },
             self.r + (iv - pt(m)),
         )
     }
@@ -243,10 +361,9 @@ impl Tm {
         let iv = iv.checked()?;
         let m = iv.mid();
         let rest = self.range() * (iv - pt(m));
-        Tm::build(
+        Tm::finish(
             pt(self.c) * pt(m),
-            self.symbols(),
-            |i| pt(self.gi(i)) * pt(m),
+            Lin::scale(&self.g, m),
             self.r * pt(m) + rest,
         )
     }
@@ -254,21 +371,19 @@ impl Tm {
     /// `self · o`: the product of the linear parts goes to the remainder,
     /// bounded with the squares `zᵢ² ∈ [0, 1]` apart from the cross terms.
     pub fn mul(&self, o: &Tm) -> Result<Tm, DomainError> {
-        let n = self.symbols().max(o.symbols());
         let (la, lb) = (
             Interval::symmetric(self.linear_radius()),
             Interval::symmetric(o.linear_radius()),
         );
-        let rem = quadratic(self, o, n)
+        let rem = quadratic(self, o)
             + pt(self.c) * o.r
             + pt(o.c) * self.r
             + la * o.r
             + lb * self.r
             + self.r * o.r;
-        Tm::build(
+        Tm::finish(
             pt(self.c) * pt(o.c),
-            n,
-            |i| pt(self.c) * pt(o.gi(i)) + pt(o.c) * pt(self.gi(i)),
+            Lin::mul(self.c, &o.g, o.c, &self.g),
             rem,
         )
     }
@@ -276,25 +391,27 @@ impl Tm {
 
 /// An enclosure of `(Σ aᵢ zᵢ)(Σ bⱼ zⱼ)` over the cube: the diagonal terms
 /// `aᵢbᵢzᵢ²` lie between `min(0, aᵢbᵢ)` and `max(0, aᵢbᵢ)`, the cross terms
-/// within `±(Σ|aᵢ|·Σ|bⱼ| − Σ|aᵢbᵢ|)`.
-fn quadratic(a: &Tm, b: &Tm, n: usize) -> Interval {
-    let (mut neg, mut pos, mut diag_abs) = (Interval::ZERO, Interval::ZERO, Interval::ZERO);
-    for i in 0..n {
-        let (ai, bi) = (a.gi(i), b.gi(i));
-        if ai == 0.0 || bi == 0.0 {
-            continue;
-        }
-        let p = pt(ai) * pt(bi);
-        neg = neg + pt(p.lo.min(0.0));
-        pos = pos + pt(p.hi.max(0.0));
-        diag_abs = diag_abs + pt(p.mig());
+/// within `±(Σ|aᵢ|·Σ|bⱼ| − Σ|aᵢbᵢ|)`. The three sums are of rounded
+/// products `pᵢ = aᵢ·bᵢ`: `min(0, pᵢ)`, `max(0, pᵢ)` and `|pᵢ|` are each one
+/// rounding from the same function of the exact product (a product keeps
+/// its sign when rounded), so [`Acc`] bounds each exact sum (symbols
+/// beyond the shorter model have a zero coefficient in it: no term).
+fn quadratic(a: &Tm, b: &Tm) -> Interval {
+    let (mut neg, mut pos, mut diag_abs) = (Acc::ZERO, Acc::ZERO, Acc::ZERO);
+    for (ai, bi) in a.g.iter().zip(&b.g) {
+        let p = ai * bi;
+        // `min`/`max` would drop a NaN: the magnitude's sum keeps it
+        neg.add(p.min(0.0));
+        pos.add(p.max(0.0));
+        diag_abs.add(p.abs());
     }
     let full = pt(a.linear_radius()) * pt(b.linear_radius());
-    let cross = (full.hi - diag_abs.lo).next_up().max(0.0);
-    if cross.is_nan() || !(neg.is_finite() && pos.is_finite()) {
+    let (neg, pos, diag) = (neg.lower(), pos.upper(), diag_abs.lower());
+    let cross = (full.hi - diag).next_up().max(0.0);
+    if cross.is_nan() || !(neg.is_finite() && pos.is_finite() && diag.is_finite()) {
         return super::interval::NAN;
     }
-    Interval::new((neg.lo - cross).next_down(), (pos.hi + cross).next_up())
+    Interval::new((neg - cross).next_down(), (pos + cross).next_up())
 }
 
 /// The linear combination `Σ aⱼ Tⱼ + offset` (coefficients and offset
@@ -309,16 +426,7 @@ pub fn combine(coeffs: &[f64], tms: &[&Tm], offset: f64) -> Result<Tm, DomainErr
         c = c + pt(a) * pt(t.c);
         r = r + pt(a) * t.r;
     }
-    Tm::build(
-        c,
-        n,
-        |i| {
-            pairs()
-                .filter(|(&a, t)| a != 0.0 && t.gi(i) != 0.0)
-                .fold(Interval::ZERO, |s, (&a, t)| s + pt(a) * pt(t.gi(i)))
-        },
-        r,
-    )
+    Tm::finish(c, Lin::dot(coeffs, tms, n), r)
 }
 
 /// A sound upper bound of `max dir·x` over every `z` of the models `x`

@@ -12,7 +12,7 @@
 //! number, a division by a range containing zero).
 
 use super::interval::{DomainError, Interval};
-use super::tm::{Absorb, Tm};
+use super::tm::{Absorb, Lin, Tm};
 use ravel_base::expr::Func;
 
 fn pt(x: f64) -> Interval {
@@ -27,9 +27,18 @@ impl Tm {
         let s = f1.mid();
         let mut ab = Absorb::new();
         let c = ab.take(f0);
-        let g: Vec<f64> = self.g.iter().map(|&gi| ab.take(pt(s) * pt(gi))).collect();
-        let rem = pt(s) * self.r + (f1 - pt(s)) * d + f2 * pt(0.5) * d.sqr() + ab.interval();
-        Tm { c, g, r: rem }.checked()
+        let lin = Lin::scale(&self.g, s);
+        let rem = pt(s) * self.r
+            + (f1 - pt(s)) * d
+            + f2 * pt(0.5) * d.sqr()
+            + ab.interval()
+            + Interval::symmetric(lin.err);
+        Tm {
+            c,
+            g: lin.g,
+            r: rem,
+        }
+        .checked()
     }
 
     /// The range, checked finite.

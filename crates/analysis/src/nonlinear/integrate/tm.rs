@@ -84,10 +84,14 @@ impl Absorb {
 /// terms' magnitudes, is at most a relative `γ(N)` (N the number of terms)
 /// and one rounding per term below the exact one, and
 /// [`error_bound`]`(k, abs)` = `1.0625·γ(k + 2)·abs + TINY`, rounded up,
-/// covers both (its factor covers `γ(N) ≤ 0.06`, and `TINY` up to 2⁵²
+/// covers both (its factor covers `γ(N) ≤ 0.05`, N below 4·10¹⁴, and `TINY` up to 2⁵²
 /// underflowing products). A term or a sum that is not finite makes `err`
-/// infinite or NaN, and the model built from it is refused
-/// ([`Tm::checked`]).
+/// infinite or NaN, and the model built from it is refused.
+///
+/// Invariant: a finite `err` means every `gᵢ` is finite (`abs` bounds each
+/// `|gᵢ|` from above in the same rounding: a sum or product that
+/// overflows makes `abs` overflow too, a NaN makes it NaN), so a model
+/// checks its coefficients by checking its remainder ([`Tm::finish`]).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Lin {
     /// The coefficients.
@@ -96,28 +100,51 @@ pub(crate) struct Lin {
     pub err: f64,
 }
 
+/// `Σ|vᵢ|` in four interleaved partial sums (the error bounds hold for any
+/// order of summation, Higham §4.2; the lanes let the adds overlap).
+fn abs_sum(v: &[f64]) -> f64 {
+    let mut lane = [0.0f64; 4];
+    let chunks = v.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for l in 0..4 {
+            lane[l] += c[l].abs();
+        }
+    }
+    for (l, x) in rest.iter().enumerate() {
+        lane[l] += x.abs();
+    }
+    (lane[0] + lane[1]) + (lane[2] + lane[3])
+}
+
 impl Lin {
+    /// `g` copied exactly (no rounding): `err` is 0, or NaN when a
+    /// coefficient is not finite (the invariant above).
+    pub(crate) fn exact(g: &[f64]) -> Lin {
+        let err = if g.iter().all(|x| x.is_finite()) {
+            0.0
+        } else {
+            f64::NAN
+        };
+        Lin { g: g.to_vec(), err }
+    }
+
     /// `gᵢ = aᵢ + s·bᵢ` for `s = ±1` (a missing coefficient is 0): one
     /// rounding each, relative to the exact sum, so `k = 1` with the
     /// result's magnitudes (`|ĝ| ≤ |g|/(1 − u)`, which the factor covers).
     pub(crate) fn add(a: &[f64], b: &[f64], negate_b: bool) -> Lin {
         let n = a.len().max(b.len());
-        let s = if negate_b { -1.0 } else { 1.0 };
-        let mut g = Vec::with_capacity(n);
-        let mut abs = 0.0;
-        if a.len() == b.len() {
-            for (x, y) in a.iter().zip(b) {
-                let v = x + s * y;
-                abs += v.abs();
-                g.push(v);
-            }
+        let g: Vec<f64> = if a.len() == b.len() && negate_b {
+            a.iter().zip(b).map(|(x, y)| x - y).collect()
+        } else if a.len() == b.len() {
+            a.iter().zip(b).map(|(x, y)| x + y).collect()
         } else {
-            for i in 0..n {
-                let v = a.get(i).copied().unwrap_or(0.0) + s * b.get(i).copied().unwrap_or(0.0);
-                abs += v.abs();
-                g.push(v);
-            }
-        }
+            let s = if negate_b { -1.0 } else { 1.0 };
+            (0..n)
+                .map(|i| a.get(i).copied().unwrap_or(0.0) + s * b.get(i).copied().unwrap_or(0.0))
+                .collect()
+        };
+        let abs = abs_sum(&g);
         Lin {
             g,
             err: error_bound(1, abs),
@@ -126,15 +153,8 @@ impl Lin {
 
     /// `gᵢ = s·aᵢ`: one rounded product each (`k = 1`).
     pub(crate) fn scale(a: &[f64], s: f64) -> Lin {
-        let mut abs = 0.0;
-        let g = a
-            .iter()
-            .map(|x| {
-                let v = s * x;
-                abs += v.abs();
-                v
-            })
-            .collect();
+        let g: Vec<f64> = a.iter().map(|x| s * x).collect();
+        let abs = abs_sum(&g);
         Lin {
             g,
             err: error_bound(1, abs),
@@ -144,44 +164,11 @@ impl Lin {
     /// `gᵢ = aᵢ / d`: one rounded quotient each, relative to the exact
     /// quotient like a product's (`k = 1`, the result's magnitudes).
     pub(crate) fn div(a: &[f64], d: f64) -> Lin {
-        let mut abs = 0.0;
-        let g = a
-            .iter()
-            .map(|x| {
-                let v = x / d;
-                abs += v.abs();
-                v
-            })
-            .collect();
+        let g: Vec<f64> = a.iter().map(|x| x / d).collect();
+        let abs = abs_sum(&g);
         Lin {
             g,
             err: error_bound(1, abs),
-        }
-    }
-
-    /// `gᵢ = p·bᵢ + q·aᵢ` (a missing coefficient is 0): two rounded
-    /// products and their rounded sum (`k = 2`, the products' magnitudes).
-    pub(crate) fn mul(p: f64, b: &[f64], q: f64, a: &[f64]) -> Lin {
-        let n = a.len().max(b.len());
-        let mut g = Vec::with_capacity(n);
-        let mut abs = 0.0;
-        if a.len() == b.len() {
-            for (x, y) in a.iter().zip(b) {
-                let (s, t) = (p * y, q * x);
-                abs += s.abs() + t.abs();
-                g.push(s + t);
-            }
-        } else {
-            for i in 0..n {
-                let s = p * b.get(i).copied().unwrap_or(0.0);
-                let t = q * a.get(i).copied().unwrap_or(0.0);
-                abs += s.abs() + t.abs();
-                g.push(s + t);
-            }
-        }
-        Lin {
-            g,
-            err: error_bound(2, abs),
         }
     }
 
@@ -288,15 +275,19 @@ impl Tm {
 
     /// A model from an enclosure of the constant, symbol coefficients with
     /// their error bound, and `rem`: both errors join the remainder.
+    ///
+    /// The symbol coefficients are not scanned: a finite remainder holds
+    /// `lin.err`, and a finite `lin.err` means finite coefficients
+    /// ([`Lin`]'s invariant).
     fn finish(c_iv: Interval, lin: Lin, rem: Interval) -> Result<Tm, DomainError> {
         let mut ab = Absorb::new();
         let c = ab.take(c_iv);
-        Tm {
-            c,
-            g: lin.g,
-            r: rem + ab.interval() + Interval::symmetric(lin.err),
+        let r = rem + ab.interval() + Interval::symmetric(lin.err);
+        if !(c.is_finite() && r.is_finite() && lin.err.is_finite()) {
+            return Err(DomainError::NotFinite);
         }
-        .checked()
+        debug_assert!(lin.g.iter().all(|g| g.is_finite()));
+        Ok(Tm { c, g: lin.g, r })
     }
 
     /// `self + o`.
@@ -347,10 +338,7 @@ impl Tm {
         // the symbol coefficients are copied exactly
         Tm::finish(
             pt(self.c) + pt(m),
-            Lin {
-                g: self.g.clone(),
-                err: 0.0,
-            },
+            Lin::exact(&self.g),
             self.r + (iv - pt(m)),
         )
     }
@@ -371,21 +359,108 @@ impl Tm {
     /// `self · o`: the product of the linear parts goes to the remainder,
     /// bounded with the squares `zᵢ² ∈ [0, 1]` apart from the cross terms.
     pub fn mul(&self, o: &Tm) -> Result<Tm, DomainError> {
+        let p = product_pass(self, o);
         let (la, lb) = (
-            Interval::symmetric(self.linear_radius()),
-            Interval::symmetric(o.linear_radius()),
+            Interval::symmetric(p.radius_a),
+            Interval::symmetric(p.radius_b),
         );
-        let rem = quadratic(self, o)
+        let rem = p.quadratic
             + pt(self.c) * o.r
             + pt(o.c) * self.r
             + la * o.r
             + lb * self.r
             + self.r * o.r;
-        Tm::finish(
-            pt(self.c) * pt(o.c),
-            Lin::mul(self.c, &o.g, o.c, &self.g),
-            rem,
-        )
+        Tm::finish(pt(self.c) * pt(o.c), p.lin, rem)
+    }
+}
+
+/// What [`Tm::mul`] needs from the symbol coefficients of its operands,
+/// gathered in one pass (see [`product_pass`]).
+pub(crate) struct Product {
+    /// `c_b·aᵢ + c_a·bᵢ`: two rounded products and their rounded sum, a
+    /// 2-term dot product (`k = 2`, the products' magnitudes).
+    pub lin: Lin,
+    /// [`quadratic`]'s enclosure.
+    pub quadratic: Interval,
+    /// Upper bounds of `Σ|aᵢ|` and `Σ|bᵢ|` ([`Tm::linear_radius`]).
+    pub radius_a: f64,
+    pub radius_b: f64,
+}
+
+/// The linear part of a product, [`quadratic`] and both [`Tm::linear_radius`]es in one pass
+/// over the coefficients, each sum in four interleaved partial sums (any
+/// order of summation has the same error bound, Higham §4.2). Each result
+/// is the one of those functions, computed with the same terms (only the
+/// order of the sums differs: the tests compare them).
+pub(crate) fn product_pass(a: &Tm, b: &Tm) -> Product {
+    let (ca, cb) = (a.c, b.c);
+    let common = a.g.len().min(b.g.len());
+    let n = a.g.len().max(b.g.len());
+    let mut g = vec![0.0; n];
+    // lanes of Σ|aᵢ|, Σ|bᵢ|, Σ min(0, pᵢ), Σ max(0, pᵢ), Σ|pᵢ|, Σ(|sᵢ| + |tᵢ|)
+    let mut lane = [[0.0f64; 4]; 6];
+    let mut one = |l: usize, x: f64, y: f64, gi: &mut f64| {
+        let d = x * y;
+        lane[0][l] += x.abs();
+        lane[1][l] += y.abs();
+        lane[2][l] += d.min(0.0);
+        lane[3][l] += d.max(0.0);
+        lane[4][l] += d.abs();
+        let (s, t) = (ca * y, cb * x);
+        lane[5][l] += s.abs() + t.abs();
+        *gi = s + t;
+    };
+    let (ga, gb) = (&a.g[..common], &b.g[..common]);
+    let mut it = g[..common].chunks_exact_mut(4);
+    for ((g4, a4), b4) in (&mut it).zip(ga.chunks_exact(4)).zip(gb.chunks_exact(4)) {
+        for l in 0..4 {
+            one(l, a4[l], b4[l], &mut g4[l]);
+        }
+    }
+    let done = common - it.into_remainder().len();
+    for i in done..common {
+        one(i - done, ga[i], gb[i], &mut g[i]);
+    }
+    // beyond the shorter model its coefficients are 0: `pᵢ = 0`, and one
+    // product `cᵦ·aᵢ` (or `cₐ·bᵢ`) is the coefficient, exactly the sum
+    // `0 + t` of the loop above
+    let (longer, c, k) = if a.g.len() > common {
+        (&a.g, cb, 0)
+    } else {
+        (&b.g, ca, 1)
+    };
+    for i in common..n {
+        let x = longer[i];
+        lane[k][0] += x.abs();
+        let t = c * x;
+        lane[5][0] += t.abs();
+        g[i] = t;
+    }
+    let sum = |l: &[f64; 4]| (l[0] + l[1]) + (l[2] + l[3]);
+    let (ra, rb, neg, pos, dabs, labs) = (
+        sum(&lane[0]),
+        sum(&lane[1]),
+        sum(&lane[2]),
+        sum(&lane[3]),
+        sum(&lane[4]),
+        sum(&lane[5]),
+    );
+    let radius_a = Acc::from_parts(ra, ra, a.g.len()).upper();
+    let radius_b = Acc::from_parts(rb, rb, b.g.len()).upper();
+    // Σ|pᵢ| bounds the magnitudes of the terms of all three sums
+    let (neg, pos, diag) = (
+        Acc::from_parts(neg, dabs, common).lower(),
+        Acc::from_parts(pos, dabs, common).upper(),
+        Acc::from_parts(dabs, dabs, common).lower(),
+    );
+    Product {
+        lin: Lin {
+            g,
+            err: error_bound(2, labs),
+        },
+        quadratic: quadratic_of(neg, pos, diag, radius_a, radius_b),
+        radius_a,
+        radius_b,
     }
 }
 
@@ -396,7 +471,8 @@ impl Tm {
 /// rounding from the same function of the exact product (a product keeps
 /// its sign when rounded), so [`Acc`] bounds each exact sum (symbols
 /// beyond the shorter model have a zero coefficient in it: no term).
-fn quadratic(a: &Tm, b: &Tm) -> Interval {
+#[cfg(test)]
+pub(crate) fn quadratic(a: &Tm, b: &Tm) -> Interval {
     let (mut neg, mut pos, mut diag_abs) = (Acc::ZERO, Acc::ZERO, Acc::ZERO);
     for (ai, bi) in a.g.iter().zip(&b.g) {
         let p = ai * bi;
@@ -405,12 +481,22 @@ fn quadratic(a: &Tm, b: &Tm) -> Interval {
         pos.add(p.max(0.0));
         diag_abs.add(p.abs());
     }
-    let full = pt(a.linear_radius()) * pt(b.linear_radius());
     let (neg, pos, diag) = (neg.lower(), pos.upper(), diag_abs.lower());
-    let cross = (full.hi - diag).next_up().max(0.0);
-    if cross.is_nan() || !(neg.is_finite() && pos.is_finite() && diag.is_finite()) {
+    quadratic_of(neg, pos, diag, a.linear_radius(), b.linear_radius())
+}
+
+/// The enclosure from a lower bound of `Σ min(0, aᵢbᵢ)`, an upper bound of
+/// `Σ max(0, aᵢbᵢ)`, a lower bound of `Σ|aᵢbᵢ|` and upper bounds of `Σ|aᵢ|`
+/// and `Σ|bᵢ|` ([`quadratic`]); NaN ends when any is not finite.
+fn quadratic_of(neg: f64, pos: f64, diag: f64, ra: f64, rb: f64) -> Interval {
+    let full = pt(ra) * pt(rb);
+    // checked before `max`, which would turn a NaN (a radius that is not
+    // finite) into 0 and drop the cross terms
+    let cross = (full.hi - diag).next_up();
+    if !(cross.is_finite() && neg.is_finite() && pos.is_finite() && diag.is_finite()) {
         return super::interval::NAN;
     }
+    let cross = cross.max(0.0);
     Interval::new((neg - cross).next_down(), (pos + cross).next_up())
 }
 

@@ -177,6 +177,54 @@ impl NonlinearLoop {
         Some(it.fold(first, |h, b| h.hull(b))).filter(IBox::is_finite)
     }
 
+    /// Split weights for the guided partitioners
+    /// ([`crate::partition::Bisector::Weighted`]): for each dimension of
+    /// `cell`, the share of the controller's relaxation slack at step 0
+    /// that bisecting it removes. A control's slack is the width of the
+    /// interval part of its model ([`NonlinearLoop::control`]: the gap
+    /// between CROWN's two bounds, and the sensor noise's part); the share
+    /// for one control is `(s(cell) − max(s(a), s(b))) / s(cell)` with `a`,
+    /// `b` the halves, and the weight its mean over the controls with
+    /// slack, clamped to `[0, 1]`. The slack of a smooth network's bounds
+    /// shrinks with the square of the input's width along the inputs it
+    /// depends on nonlinearly, and the loop carries it step after step, so
+    /// those inputs are the ones to split (QUAD with the published
+    /// controller: the altitude and its rate, not the positions). A
+    /// heuristic only: it chooses cells, never a bound. `None` when the
+    /// controls cannot be bounded.
+    pub fn split_weights(&self, cell: &IBox) -> Option<Vec<f64>> {
+        let slack = |b: &IBox| -> Option<Vec<f64>> {
+            let x = symbols(b)?;
+            let syms = x.first().map_or(0, |t| t.g.len());
+            let y = self.observe(&x, syms).ok()?;
+            let u = self.control(&y, syms).ok()?;
+            let s: Vec<f64> = u.iter().map(|t| t.r.width()).collect();
+            s.iter().all(|v| v.is_finite()).then_some(s)
+        };
+        let whole = slack(cell)?;
+        let with_slack = whole.iter().filter(|s| **s > 0.0).count();
+        (0..cell.dim())
+            .map(|d| {
+                let (lo, hi) = (cell.lo[d], cell.hi[d]);
+                let mid = lo + 0.5 * (hi - lo);
+                if with_slack == 0 || !(lo < mid && mid < hi) {
+                    return Some(0.0);
+                }
+                let (mut a, mut b) = (cell.clone(), cell.clone());
+                a.hi[d] = mid;
+                b.lo[d] = mid;
+                let (sa, sb) = (slack(&a)?, slack(&b)?);
+                let removed: f64 = whole
+                    .iter()
+                    .zip(sa.iter().zip(&sb))
+                    .filter(|(s, _)| **s > 0.0)
+                    .map(|(s, (x, y))| (s - x.max(*y)) / s)
+                    .sum();
+                Some((removed / with_slack as f64).clamp(0.0, 1.0))
+            })
+            .collect()
+    }
+
     /// One closed-loop step of the Taylor-model state `x`.
     fn advance(&self, x: &[Tm]) -> Result<Advanced, Cut> {
         let syms = x.first().map_or(0, |t| t.g.len());

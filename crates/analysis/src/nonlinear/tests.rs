@@ -338,3 +338,27 @@ fn the_controls_hold_the_network_over_the_observation_set() {
         assert!(worst.is_finite());
     }
 }
+
+/// The split weights point at the inputs the controller's slack depends
+/// on: a controller that sees only `x0` gets nothing from splitting `x1`,
+/// and a split of `x0` removes a real share of its slack.
+#[test]
+fn split_weights_point_at_the_controllers_inputs() {
+    let nl = NonlinearLoop::new(
+        NonlinearPlant {
+            field: field(false, Time::Continuous { period: 0.1 }),
+            w: IBox::new(vec![], vec![]),
+            obs: DMatrix::from_column_slice(2, 1, &[1.0, 0.0]),
+            v: IBox::new(vec![0.0], vec![0.0]),
+        },
+        controller(1, 7, 0.8),
+    );
+    let cell = IBox::new(vec![-1.0, -1.0], vec![1.0, 1.0]);
+    let w = nl.split_weights(&cell).unwrap();
+    assert_eq!(w.len(), 2);
+    assert!(w[0] > 0.1 && w[0] <= 1.0, "{w:?}");
+    assert_eq!(w[1], 0.0, "{w:?}");
+    // a flat dimension is never a split
+    let flat = IBox::new(vec![-1.0, 0.5], vec![1.0, 0.5]);
+    assert_eq!(nl.split_weights(&flat).unwrap()[1], 0.0);
+}

@@ -8,7 +8,7 @@ use ravel_analysis::closed_loop::{ClosedLoop, Cut, Propagator, Step};
 use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
-use ravel_analysis::partition::{refine_parallel, Budget, Stop, Strategy};
+use ravel_analysis::partition::{refine_parallel_by, Bisector, Budget, Stop, Strategy};
 use ravel_analysis::sets::{Affine, IBox, Polytope, Region};
 use ravel_analysis::shape::excess;
 
@@ -635,7 +635,18 @@ pub(super) fn partition_guided(
     }
     let evaluated = std::sync::atomic::AtomicUsize::new(0);
     let root = plan.initial.bbox();
-    let r = refine_parallel(
+    // a nonlinear loop splits where the controller's slack shrinks most
+    // (its bounds compose with the plant step after step); a linear one,
+    // along the widest dimension
+    let weights = |c: &IBox| match &plan.closed_loop {
+        Loop::Nonlinear(nl) => nl.split_weights(c),
+        Loop::Linear(_) => None,
+    };
+    let bisector = match &plan.closed_loop {
+        Loop::Nonlinear(_) => Bisector::Weighted(&weights),
+        Loop::Linear(_) => Bisector::Widest,
+    };
+    let r = refine_parallel_by(
         &root,
         strategy,
         &budget,
@@ -693,6 +704,7 @@ pub(super) fn partition_guided(
         },
         ctl.elapsed,
         ctl.threads,
+        bisector,
     );
     let mut leaves = r.leaves;
     // deterministic order: by cell position

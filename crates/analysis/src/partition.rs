@@ -235,32 +235,12 @@ pub fn refine_by<T>(
     )
 }
 
-/// [`refine`] with the two children of every split evaluated at once, one
-/// on a helper thread (when `threads ≥ 2`). The cells chosen, their values
-/// and the result are exactly those of [`refine`]: only the wall-clock time
-/// changes (each split's children are independent).
+/// [`refine_by`] with the two children of every split evaluated at once,
+/// one on a helper thread (when `threads ≥ 2`). The cells chosen (the
+/// split dimensions on the calling thread), their values and the result
+/// are exactly those of [`refine_by`]: only the wall-clock time changes
+/// (each split's children are independent).
 pub fn refine_parallel<T: Send + Clone>(
-    root: &IBox,
-    strategy: Strategy,
-    budget: &Budget,
-    eval: &SharedCellEval<T>,
-    elapsed: &dyn Fn() -> f64,
-    threads: usize,
-) -> Refined<T> {
-    refine_parallel_by(
-        root,
-        strategy,
-        budget,
-        eval,
-        elapsed,
-        threads,
-        Bisector::Widest,
-    )
-}
-
-/// [`refine_parallel`], the split dimensions chosen by `bisector` (on the
-/// calling thread, so the cells are still those of [`refine_by`]).
-pub fn refine_parallel_by<T: Send + Clone>(
     root: &IBox,
     strategy: Strategy,
     budget: &Budget,
@@ -478,8 +458,11 @@ mod tests {
             cover_check(&cells, &root);
             // the same cells, values and order with the children on two threads
             let eval = |c: &IBox, _: Option<&f64>| (c.lo[1], c.hi[0] - 0.3);
-            let one = refine_parallel(&root, strategy, &budget, &eval, &|| 0.0, 1);
-            let two = refine_parallel(&root, strategy, &budget, &eval, &|| 0.0, 2);
+            let on = |threads| {
+                let widest = Bisector::Widest;
+                refine_parallel(&root, strategy, &budget, &eval, &|| 0.0, threads, widest)
+            };
+            let (one, two) = (on(1), on(2));
             assert_eq!((one.calls, one.stop), (two.calls, two.stop));
             let key = |r: &Refined<f64>| -> Vec<(Vec<f64>, Vec<f64>, f64, f64)> {
                 r.leaves
@@ -538,7 +521,7 @@ mod tests {
         let weights = |_: &IBox| Some(vec![0.0, 1.0]);
         let eval = |c: &IBox, _: Option<&f64>| (c.lo[1], 1.0 + c.hi[0]);
         let run = |threads| {
-            refine_parallel_by(
+            refine_parallel(
                 &root,
                 Strategy::Gsg,
                 &budget,

@@ -8,7 +8,7 @@ use ravel_analysis::closed_loop::{ClosedLoop, Cut, Propagator, Step};
 use ravel_analysis::feedback::Loop;
 use ravel_analysis::issue::Issue;
 use ravel_analysis::lp;
-use ravel_analysis::partition::{refine_parallel_by, Bisector, Budget, Stop, Strategy};
+use ravel_analysis::partition::{refine_parallel, Bisector, Budget, Stop, Strategy};
 use ravel_analysis::sets::{Affine, IBox, Polytope, Region};
 use ravel_analysis::shape::excess;
 
@@ -646,7 +646,7 @@ pub(super) fn partition_guided(
         Loop::Nonlinear(_) => Bisector::Weighted(&weights),
         Loop::Linear(_) => Bisector::Widest,
     };
-    let r = refine_parallel_by(
+    let r = refine_parallel(
         &root,
         strategy,
         &budget,

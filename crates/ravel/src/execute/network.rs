@@ -34,7 +34,7 @@ use crate::lower::NetworkPlan;
 use ravel_analysis::batch;
 use ravel_analysis::crown::{Mode, Relaxation};
 use ravel_analysis::issue::Issue;
-use ravel_analysis::partition::{refine_parallel, Stop, Strategy};
+use ravel_analysis::partition::{refine_parallel, Bisector, Stop, Strategy};
 use ravel_analysis::sdp;
 use ravel_analysis::sets::{IBox, Norm, Region};
 use ravel_analysis::shape::{excess, extent_of_points, support_of_box, support_of_points};
@@ -646,6 +646,7 @@ fn bound_all(
                 },
                 ctl.elapsed,
                 ctl.threads,
+                Bisector::Widest,
             );
             issues.extend(found.into_inner().unwrap_or_else(|e| e.into_inner()));
             let cells = r.leaves.into_iter().map(|l| (l.cell, l.value)).collect();

@@ -359,15 +359,22 @@ impl NonlinearLoop {
                 .collect()
         };
         let mut scratch = Vec::new();
+        // every sample's observation, then the network over all of them at
+        // once: the same bits as one sample at a time (`mat_batch_into`
+        // sums each entry in the same order whatever the count), with the
+        // products vectorised across the samples
+        let mut y_all = vec![0.0; k * count];
         for s in 0..count {
-            let (xs, ws, vs) = (pick(x, n, s), pick(w, p, s), pick(v, k, s));
-            let y: Vec<f64> = (0..k)
-                .map(|j| {
-                    let dot: f64 = (0..n).map(|i| self.plant.obs[(i, j)] * xs[i]).sum();
-                    dot + vs[j]
-                })
-                .collect();
-            let u = self.net.forward(&y);
+            let (xs, vs) = (pick(x, n, s), pick(v, k, s));
+            for j in 0..k {
+                let dot: f64 = (0..n).map(|i| self.plant.obs[(i, j)] * xs[i]).sum();
+                y_all[j * count + s] = dot + vs[j];
+            }
+        }
+        let u_batch = self.net.forward_batch(&y_all, count);
+        for s in 0..count {
+            let (xs, ws) = (pick(x, n, s), pick(w, p, s));
+            let u = pick(&u_batch, m, s);
             let next = match self.plant.field.time {
                 Time::Continuous { period } => {
                     integrate::simulate(&self.plant.field, &xs, &u, &ws, period)

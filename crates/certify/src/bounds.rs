@@ -189,7 +189,6 @@ fn product_error(c: impl Iterator<Item = f64>, mz: &[f64], zmax: &[f64], k: usiz
 /// certificate written on one checks on another. (A BLAS-style product
 /// picks its kernel by CPU, and kernels round differently.)
 ///
-///
 /// Each entry receives its terms one by one, `k` ascending, the zero
 /// entries of `B` skipped, starting from 0: that fixes its bits, whatever
 /// the order in which the entries are computed. The loops run over the

@@ -143,11 +143,12 @@ pub enum Bisector<'w> {
 /// The part of a dimension's score that does not depend on its weight: a
 /// dimension that a split helps most (`w = 1`) still yields to one three
 /// times wider relative to the root that it does not help (`w = 0`). A
-/// smaller floor follows the weights further: with 0.25, ReachNN B4's
-/// property-guided partition needed 68 cells instead of 58 (47 along the
-/// widest dimension: its difficulty is the plant, not the controller),
-/// while QUAD's published controller verifies with 8 cells with either
-/// (and with none along the widest dimension).
+/// smaller floor follows the weights further: with 0.25 (and weights not
+/// yet scaled by the bounds' looseness), ReachNN B4's property-guided
+/// partition needed 68 cells instead of 58 (47 along the widest
+/// dimension: its difficulty is the plant, not the controller), while
+/// QUAD's published controller verifies with 8 cells with either (and
+/// with none along the widest dimension).
 const FLOOR: f64 = 0.5;
 
 /// Bisect `cell` along its widest dimension relative to `root`, or `None`

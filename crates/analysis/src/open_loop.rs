@@ -17,7 +17,7 @@
 use nalgebra::DMatrix;
 
 use super::crown::{Mode, Relaxation};
-use super::partition::{refine, Budget, Stop, Strategy};
+use super::partition::{refine, Bisector, Budget, Stop, Strategy};
 use super::shape::{excess, extent_of_points, support_of_box, support_of_points, Shape};
 use crate::sets::IBox;
 use ravel_base::nn::Network;
@@ -180,6 +180,7 @@ pub fn output_set(
                     (b, s)
                 },
                 elapsed,
+                Bisector::Widest,
             );
             let cells = r.leaves.into_iter().map(|l| (l.cell, l.value)).collect();
             (cells, r.calls, r.stop)

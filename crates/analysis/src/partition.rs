@@ -199,20 +199,10 @@ pub fn bisect_weighted(
 }
 
 /// Refine `root` with `eval` (which returns a value and its score; it is
-/// handed the parent cell's value, so a child can be kept inside its parent).
+/// handed the parent cell's value, so a child can be kept inside its parent),
+/// the split dimensions chosen by `bisector`.
 /// `elapsed` returns seconds since the start (only called with a time budget).
 pub fn refine<T>(
-    root: &IBox,
-    strategy: Strategy,
-    budget: &Budget,
-    eval: &mut CellEval<T>,
-    elapsed: &dyn Fn() -> f64,
-) -> Refined<T> {
-    refine_by(root, strategy, budget, eval, elapsed, Bisector::Widest)
-}
-
-/// [`refine`], the split dimensions chosen by `bisector`.
-pub fn refine_by<T>(
     root: &IBox,
     strategy: Strategy,
     budget: &Budget,
@@ -236,10 +226,10 @@ pub fn refine_by<T>(
     )
 }
 
-/// [`refine_by`] with the two children of every split evaluated at once,
+/// [`refine`] with the two children of every split evaluated at once,
 /// one on a helper thread (when `threads ≥ 2`). The cells chosen (the
 /// split dimensions on the calling thread), their values and the result
-/// are exactly those of [`refine_by`]: only the wall-clock time changes
+/// are exactly those of [`refine`]: only the wall-clock time changes
 /// (each split's children are independent).
 pub fn refine_parallel<T: Send + Clone>(
     root: &IBox,
@@ -251,7 +241,7 @@ pub fn refine_parallel<T: Send + Clone>(
     bisector: Bisector,
 ) -> Refined<T> {
     let Some(helper) = crate::pool::Helper::new(threads) else {
-        return refine_by(
+        return refine(
             root,
             strategy,
             budget,
@@ -453,6 +443,7 @@ mod tests {
                 &budget,
                 &mut |c, _| ((), c.hi[0] - 0.3),
                 &|| 0.0,
+                Bisector::Widest,
             );
             assert!(r.calls <= 21, "{strategy:?}: {}", r.calls);
             let cells: Vec<IBox> = r.leaves.iter().map(|l| l.cell.clone()).collect();
@@ -489,6 +480,7 @@ mod tests {
             &budget,
             &mut |c, _| ((), c.hi[0] - c.lo[0] - 0.25),
             &|| 0.0,
+            Bisector::Widest,
         );
         assert_eq!(r.stop, Stop::Done);
         assert_eq!(r.leaves.len(), 4);

@@ -361,4 +361,10 @@ fn split_weights_point_at_the_controllers_inputs() {
     // a flat dimension is never a split
     let flat = IBox::new(vec![-1.0, 0.5], vec![1.0, 0.5]);
     assert_eq!(nl.split_weights(&flat).unwrap()[1], 0.0);
+    // over a tiny cell the bounds are tight (their slack a tiny share of
+    // the controls' range), so the weights leave the choice to the width,
+    // however much of that slack a split would remove
+    let tiny = IBox::new(vec![-1e-4, -1e-4], vec![1e-4, 1e-4]);
+    let w = nl.split_weights(&tiny).unwrap();
+    assert!(w[0] < 0.01, "{w:?}");
 }

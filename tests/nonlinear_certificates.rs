@@ -307,6 +307,82 @@ fn linear_plants_in_continuous_time_are_checked_between_samples() {
     assert_eq!(answer(&ok, &plan), Answer::Valid);
 }
 
+/// A linear plant in continuous time: a counterexample that crosses its
+/// avoid band only between two instants is replayed on the checker's own
+/// pieces of that period (the linear plant's flow, its noise arriving at
+/// the next instant): VALID as written, never VALID when it claims the
+/// instant instead of the period, another period, a start outside X0, a
+/// band the trajectory does not reach, or a plant in discrete time.
+#[test]
+fn linear_counterexamples_between_the_instants_are_replayed_on_pieces() {
+    let (plan, cert) = run("specs/double_integrator_continuous_between.ravel");
+    let i = falsified(&cert);
+    assert_eq!(cert["verdicts"][i]["between"], true);
+    assert_eq!(cert["verdicts"][i]["step"], 2);
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    let j = avoid_property(&cert);
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["between"] = Value::from(false);
+    not_valid(&bad, &plan, "the instant instead of the period");
+    for step in [0, 1, 3, 6] {
+        let mut bad = cert.clone();
+        bad["verdicts"][i]["step"] = Value::from(step);
+        not_valid(&bad, &plan, &format!("period {step} named"));
+    }
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["trajectory"]["initial"][0] = Value::from(2.5);
+    not_valid(&bad, &plan, "initial state outside X0");
+    // x0 in [3.0, 3.1]: never reached
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][j]["members"][0] = serde_json::json!([
+        { "a": [-1.0, 0.0], "b": -3.0 },
+        { "a": [1.0, 0.0], "b": 3.1 }
+    ]);
+    not_valid(&bad, &plan, "a band the trajectory does not reach");
+    // without its flow the problem is in discrete time: no period to
+    // violate
+    let mut bad = cert.clone();
+    bad["problem"]
+        .as_object_mut()
+        .expect("problem")
+        .remove("intersample");
+    not_valid(&bad, &plan, "a plant in discrete time");
+    let mut bad = cert.clone();
+    bad["verdicts"][i]["between"] = Value::from("yes");
+    assert!(matches!(answer(&bad, &plan), Answer::Unreadable(_)));
+}
+
+/// A linear plant in continuous time: a counterexample to an "eventually"
+/// goal is replayed over every period of the window too. The recorded
+/// trajectory's x0 is about 1.84, 0.91 and 0.34 at the window's instants
+/// 1 to 3: a goal x0 ∈ [1.2, 1.4], which it crosses between instants 1
+/// and 2, is missed at every instant and still not VALID; x0 ∈ [2.0, 2.2],
+/// crossed before the window (between instants 0 and 1), is VALID.
+#[test]
+fn linear_eventually_counterexamples_are_replayed_between_the_instants() {
+    let (plan, cert) = run("specs/double_integrator_eventually_falsified.ravel");
+    assert!(cert["problem"]["intersample"].is_object());
+    assert_eq!(answer(&cert, &plan), Answer::Valid);
+    assert_eq!(cert["problem"]["properties"][0]["mode"], "eventually");
+    let band = |lo: f64, hi: f64| serde_json::json!([{ "a": [1.0, 0.0], "b": hi }, { "a": [-1.0, 0.0], "b": -lo }]);
+    let mut bad = cert.clone();
+    bad["problem"]["properties"][0]["rows"] = band(1.2, 1.4);
+    match answer(&bad, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("between steps 1 and 2"), "{m}"),
+        other => panic!("expected INVALID, got {other:?}"),
+    }
+    let mut ok = cert.clone();
+    ok["problem"]["properties"][0]["rows"] = band(2.0, 2.2);
+    assert_eq!(answer(&ok, &plan), Answer::Valid);
+    // the same band with the window from 0 s: its first period now counts
+    ok["problem"]["properties"][0]["steps"] = serde_json::json!({ "first": 0, "last": 3 });
+    ok["verdicts"][0]["step"] = Value::from(0);
+    match answer(&ok, &plan) {
+        Answer::Invalid(m) => assert!(m.contains("between steps 0 and 1"), "{m}"),
+        other => panic!("expected INVALID, got {other:?}"),
+    }
+}
+
 /// A window whose last control period ends after its last instant (a
 /// window in seconds ending inside a period) needs evidence up to that
 /// period's end: a chain that stops at the last instant is not VALID.

@@ -834,7 +834,21 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                 .push(format!("{shown}: UNSURE (no claim)")),
             Some("FALSIFIED") => {
                 let step = uint(get(v, "step")?, "step")?;
-                match replay(&problem, net, prop, step, get(v, "trajectory")?)? {
+                let between = match v.get("between") {
+                    None => false,
+                    Some(Value::Bool(b)) => *b,
+                    Some(_) => return Err(format!("verdict {i}: `between` must be a boolean")),
+                };
+                let replayed = if between {
+                    replay_between(&problem, net, prop, step, get(v, "trajectory")?)?
+                } else {
+                    replay(&problem, net, prop, step, get(v, "trajectory")?)?
+                };
+                match replayed {
+                    Ok(()) if between => report.properties.push(format!(
+                        "{shown}: FALSIFIED (trajectory replayed, violates between steps {} and {step})",
+                        step.saturating_sub(1)
+                    )),
                     Ok(()) => report.properties.push(format!(
                         "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
                     )),
@@ -1515,7 +1529,12 @@ fn trajectory_start<'a>(
 }
 
 /// Replay a counterexample rigorously; the outer error is an unreadable
-/// trajectory, the inner one why it does not violate the property.
+/// trajectory, the inner one why it does not violate the property. An
+/// eventually goal of a plant in continuous time is violated only when the
+/// enclosure also misses it between the instants, on every piece of every
+/// period that meets the window, with one of the cuts of
+/// [`nonlinear::flow::SUBSTEPS`] (the last period may end after the
+/// window's last instant).
 fn replay(
     problem: &Problem,
     net: &Network,
@@ -1535,19 +1554,29 @@ fn replay(
         Ok(t) => t,
         Err(e) => return Ok(Err(e)),
     };
-    let (first, eventually) = match prop {
+    let (first, eventually, periods) = match prop {
         Prop::Goal {
-            steps, eventually, ..
-        } => (steps.0, *eventually),
-        Prop::Avoid { steps, .. } => (steps.0, false),
+            steps,
+            eventually,
+            periods,
+            ..
+        } => (steps.0, *eventually, *periods),
+        Prop::Avoid { steps, periods, .. } => (steps.0, false, *periods),
+    };
+    let last_step = problem.last_step(prop);
+    // an eventually goal in continuous time: the periods that meet the
+    // window must miss it too
+    let between = match (prop, &problem.intersample) {
+        (Prop::Goal { set, .. }, Some(flows)) if eventually => Some((set, flows)),
+        _ => None,
     };
     // an "eventually" goal is violated only outside at every step of its window
-    let last = if eventually {
-        problem.last_step(prop)
-    } else {
-        step
+    let last = match between {
+        Some(_) => last_step.max(periods.1.min(problem.horizon)),
+        None if eventually => last_step,
+        None => step,
     };
-    if !(first <= step && step <= problem.last_step(prop)) {
+    if !(first <= step && step <= last_step) {
         return Ok(Err(format!(
             "does not certainly violate the property at step {step}: the property does not apply there"
         )));
@@ -1561,7 +1590,7 @@ fn replay(
     let mut window = Vec::new();
     // (both lists have at least `last` entries)
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(last) {
-        if t >= first {
+        if t >= first && t <= last_step {
             window.push(x.clone());
         }
         let w = vector(w, n, "process_noise")?;
@@ -1574,12 +1603,36 @@ fn replay(
         if !problem.v.contains(&v) {
             return Ok(Err(format!("has sensor noise outside its box at step {t}")));
         }
+        if let Some((set, flows)) = between {
+            if (periods.0..=periods.1).contains(&(t + 1)) {
+                let missed = nonlinear::flow::SUBSTEPS.iter().any(|&s| {
+                    nonlinear::intersample_pieces(
+                        flows,
+                        t,
+                        &problem.obs,
+                        &Bx::point(&v),
+                        net,
+                        &x,
+                        s,
+                    )
+                    .is_some_and(|pieces| pieces.iter().all(|b| set.missed_by(b)))
+                });
+                if !missed {
+                    return Ok(Err(format!(
+                        "is not shown outside the goal between steps {t} and {}",
+                        t + 1
+                    )));
+                }
+            }
+        }
         match problem.at(t, net, 0).enclose(&x, &w, &v) {
             Some(next) => x = next,
             None => return Ok(Err(format!("overflows at step {}", t + 1))),
         }
     }
-    window.push(x.clone());
+    if last <= last_step {
+        window.push(x.clone());
+    }
     let violated = match prop {
         Prop::Goal { set, .. } if eventually => window.iter().all(|b| set.missed_by(b)),
         Prop::Goal { set, .. } => set.missed_by(&x),
@@ -1593,4 +1646,94 @@ fn replay(
             x.lo, x.hi
         ))
     })
+}
+
+/// Replay a recorded trajectory that violates an "always" goal or an avoid
+/// set between the instants, in the period ending at `step` (a linear
+/// plant in continuous time; the whole period inside the window): the
+/// checker's own enclosure of the trajectory up to step `step − 1`, then
+/// the validated flow of that period (its noise arrives at the next
+/// instant) in pieces of `1/s` of it for each `s` of
+/// [`nonlinear::flow::SUBSTEPS`] in turn; some piece must lie wholly
+/// outside the goal (or inside an avoid member).
+fn replay_between(
+    problem: &Problem,
+    net: &Network,
+    prop: &Prop,
+    step: usize,
+    tr: &Value,
+) -> R<Result<(), String>> {
+    let (n, q) = (problem.n, problem.obs.ncols());
+    let (steps, periods) = match prop {
+        Prop::Goal {
+            eventually: true, ..
+        } => {
+            return Ok(Err(
+                "claims to violate an eventually goal between the instants".into(),
+            ))
+        }
+        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
+            (*steps, *periods)
+        }
+    };
+    let Some(flows) = &problem.intersample else {
+        return Ok(Err(
+            "claims a violation between the instants of a plant in discrete time".into(),
+        ));
+    };
+    // the whole period in the window (both its instants are the window's):
+    // a window in seconds may end inside a period it covers
+    if step == 0
+        || step > problem.horizon
+        || !(periods.0..=periods.1).contains(&step)
+        || !(steps.0 < step && step <= steps.1)
+    {
+        return Ok(Err(format!(
+            "does not certainly violate the property between steps {} and {step}: the property does not apply there",
+            step.saturating_sub(1)
+        )));
+    }
+    let (x0, ws, vs) = match trajectory_start(&problem.initial, n, tr, step)? {
+        Ok(t) => t,
+        Err(e) => return Ok(Err(e)),
+    };
+    let mut x = Bx::point(&x0);
+    for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
+        let w = vector(w, n, "process_noise")?;
+        let v = vector(v, q, "sensor_noise")?;
+        if !problem.w.contains(&w) {
+            return Ok(Err(format!(
+                "has process noise outside its box at step {t}"
+            )));
+        }
+        if !problem.v.contains(&v) {
+            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+        }
+        if t + 1 < step {
+            match problem.at(t, net, 0).enclose(&x, &w, &v) {
+                Some(next) => x = next,
+                None => return Ok(Err(format!("overflows at step {}", t + 1))),
+            }
+            continue;
+        }
+        // the period ending at `step`, in ever shorter pieces
+        for s in nonlinear::flow::SUBSTEPS {
+            let Some(pieces) =
+                nonlinear::intersample_pieces(flows, t, &problem.obs, &Bx::point(&v), net, &x, s)
+            else {
+                continue;
+            };
+            let violated = pieces.iter().any(|b| match prop {
+                Prop::Goal { set, .. } => set.missed_by(b),
+                Prop::Avoid { members, .. } => members.iter().any(|m| m.holds_on(b)),
+            });
+            if violated {
+                return Ok(Ok(()));
+            }
+        }
+    }
+    Ok(Err(format!(
+        "does not certainly violate the property between steps {} and {step}: no piece of the checker's enclosure of that period lies wholly in the violation",
+        step - 1
+    )))
 }

@@ -132,6 +132,45 @@ pub(crate) fn intersample(
     net: &Network,
     x: &Bx,
 ) -> Option<Bx> {
+    // a linear plant's period is checked as one box
+    let pieces = linear_period(flows, t, obs, v, net, x, flow::SUBSTEPS[0])?;
+    let pipe = flow::hull(&pieces)?;
+    let b = hull_box(&pipe);
+    b.lo.iter().chain(&b.hi).all(|v| v.is_finite()).then_some(b)
+}
+
+/// [`intersample`] cut into `substeps` pieces in time order, each a box of
+/// the states over its `1/substeps` of the period (for a trajectory's
+/// replay: `x` its enclosure at step `t`, `v` its recorded sensor noise);
+/// `None` when the flow cannot be enclosed or a piece is not finite.
+pub(crate) fn intersample_pieces(
+    flows: &[Field],
+    t: usize,
+    obs: &DMatrix<f64>,
+    v: &Bx,
+    net: &Network,
+    x: &Bx,
+    substeps: u32,
+) -> Option<Vec<Bx>> {
+    let pieces = linear_period(flows, t, obs, v, net, x, substeps)?;
+    let boxes: Vec<Bx> = pieces.iter().map(|p| hull_box(p)).collect();
+    boxes
+        .iter()
+        .all(|b| b.lo.iter().chain(&b.hi).all(|v| v.is_finite()))
+        .then_some(boxes)
+}
+
+/// The validated flow of a linear plant's period after step `t` from the
+/// box `x`, its pieces (see [`intersample`]).
+fn linear_period(
+    flows: &[Field],
+    t: usize,
+    obs: &DMatrix<f64>,
+    v: &Bx,
+    net: &Network,
+    x: &Bx,
+    substeps: u32,
+) -> Option<Vec<Vec<Iv>>> {
     let field = flows.get(t.min(flows.len().checked_sub(1)?))?;
     let n = x.lo.len();
     let xs: Vec<Af> =
@@ -154,14 +193,7 @@ pub(crate) fn intersample(
         v: &noise,
         w: &[],
     };
-    let out = compose(&parts, net, xs, 0, flow::SUBSTEPS[0]).ok()?;
-    // a linear plant's period is checked as one box
-    let pipe = flow::hull(&out.between?)?;
-    let b = Bx {
-        lo: pipe.iter().map(|i| i.lo).collect(),
-        hi: pipe.iter().map(|i| i.hi).collect(),
-    };
-    b.lo.iter().chain(&b.hi).all(|v| v.is_finite()).then_some(b)
+    compose(&parts, net, xs, 0, substeps).ok()?.between
 }
 
 /// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.

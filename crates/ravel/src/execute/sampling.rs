@@ -430,18 +430,79 @@ pub(super) fn violation_of(prop: &Property, states: &[&[f64]]) -> Option<(f64, u
     }
 }
 
-/// Whether the plant has intersample enclosures (continuous time,
-/// nonlinear): properties then cover the periods between instants.
-pub(super) fn has_between(plan: &SystemPlan) -> bool {
-    match &plan.closed_loop {
-        ravel_analysis::feedback::Loop::Nonlinear(nl) => {
-            matches!(
-                nl.plant.field.time,
-                ravel_base::expr::Time::Continuous { .. }
-            )
+/// The flow of a continuous-time plant over one control period, for the
+/// states between two instants: a nonlinear plant's loop, or a linear
+/// plant's loop `ẋ = A x + B u + c` ([`crate::lower::Intersample`]), whose
+/// process noise arrives at the next instant and is not part of the flow.
+pub(super) struct PeriodFlow<'a> {
+    lp: &'a ravel_analysis::nonlinear::NonlinearLoop,
+    /// A linear plant: the next instant's state is the discretised step's
+    /// (with its noise), not the flow's end.
+    linear: bool,
+}
+
+impl PeriodFlow<'_> {
+    /// The period's length in seconds.
+    pub(super) fn period(&self) -> f64 {
+        match self.lp.plant.field.time {
+            ravel_base::expr::Time::Continuous { period } => period,
+            ravel_base::expr::Time::Discrete => 0.0,
         }
-        ravel_analysis::feedback::Loop::Linear(_) => false,
     }
+
+    /// The process noise the flow takes (none for a linear plant).
+    fn noise<'w>(&self, w: &'w [f64]) -> &'w [f64] {
+        if self.linear {
+            &[]
+        } else {
+            w
+        }
+    }
+
+    /// The validated flow from the box `x` with the sensor noise `v` (and,
+    /// for a nonlinear plant, the disturbance `w`): the end's box and one
+    /// box per `1/substeps` of the period
+    /// ([`ravel_analysis::nonlinear::NonlinearLoop::enclose_period`]).
+    fn enclose(
+        &self,
+        x: &IBox,
+        w: &[f64],
+        v: &[f64],
+        substeps: usize,
+    ) -> Option<(IBox, Vec<IBox>)> {
+        self.lp.enclose_period(x, self.noise(w), v, substeps)
+    }
+
+    /// The float flow from `x` over `h` seconds with the control `u` held.
+    pub(super) fn simulate(&self, x: &[f64], u: &[f64], w: &[f64], h: f64) -> Vec<f64> {
+        ravel_analysis::nonlinear::integrate::simulate(&self.lp.plant.field, x, u, self.noise(w), h)
+    }
+}
+
+/// The flow of the period after step `t` of a plant in continuous time;
+/// `None` in discrete time.
+pub(super) fn period_flow(plan: &SystemPlan, t: usize) -> Option<PeriodFlow<'_>> {
+    match &plan.closed_loop {
+        ravel_analysis::feedback::Loop::Nonlinear(nl) => matches!(
+            nl.plant.field.time,
+            ravel_base::expr::Time::Continuous { .. }
+        )
+        .then_some(PeriodFlow {
+            lp: nl,
+            linear: false,
+        }),
+        ravel_analysis::feedback::Loop::Linear(_) => {
+            let loops = &plan.intersample.as_ref()?.loops;
+            let lp = loops.get(t.min(loops.len().checked_sub(1)?))?;
+            Some(PeriodFlow { lp, linear: true })
+        }
+    }
+}
+
+/// Whether the plant is in continuous time: its properties then cover the
+/// periods between instants, and its counterexamples may lie there.
+pub(super) fn has_between(plan: &SystemPlan) -> bool {
+    period_flow(plan, 0).is_some()
 }
 
 /// Whether a simulated trajectory certainly violates `prop` at `step`: its
@@ -452,8 +513,8 @@ pub(super) fn has_between(plan: &SystemPlan) -> bool {
 /// point of the enclosure) or inside an avoid member (every row and every
 /// constraint holds on all of it) at that step. An "eventually" goal is
 /// violated only when the enclosure lies outside at every instant of its
-/// window (and, for a continuous-time nonlinear plant, over every period
-/// that meets the window too: [`eventually_missed`]). The f64 simulation
+/// window (and, for a plant in continuous time, linear or not, over every
+/// period that meets the window too: [`eventually_missed`]). The f64 simulation
 /// alone could be off by more than
 /// any fixed tolerance in an unstable or high-gain loop; this check makes
 /// FALSIFIED independent of it.
@@ -523,7 +584,7 @@ pub fn certainly_violates(
     }
 }
 
-/// An "eventually" goal of a continuous-time nonlinear plant, certainly
+/// An "eventually" goal of a plant in continuous time, certainly
 /// never reached by a simulated trajectory during its window: its initial
 /// state and noise values lie in their sets, and the rigorous enclosure of
 /// the true trajectory lies outside the goal at every instant of the
@@ -531,12 +592,11 @@ pub fn certainly_violates(
 /// period cut into eighths, or finer, as the certificate checker cuts it:
 /// [`CONFIRM_PIECES`]) — the first and the last period may reach past the
 /// window's ends, which only asks more. Each period is enclosed with every
-/// cut, and the state carried to the next is the intersection of their
-/// ends.
+/// cut ([`PeriodFlow::enclose`]); the state carried to the next instant is
+/// the intersection of their ends (nonlinear plants) or the discretised
+/// step's enclosure (linear plants, whose noise arrives at the instant).
 fn eventually_missed(plan: &SystemPlan, tr: &Trajectory, prop: &Property) -> bool {
-    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
-        return false;
-    };
+    let cl = &plan.closed_loop;
     let PropertyKind::Goal { set, .. } = &prop.kind else {
         return false;
     };
@@ -556,19 +616,21 @@ fn eventually_missed(plan: &SystemPlan, tr: &Trajectory, prop: &Property) -> boo
         if t == last {
             break;
         }
-        let (Some(wn), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
+        let (Some(wn), Some(v), Some(flow)) = (
+            tr.process_noise.get(t),
+            tr.sensor_noise.get(t),
+            period_flow(plan, t),
+        ) else {
             return false;
         };
-        if !(nl.plant.w.contains_point(wn) && nl.plant.v.contains_point(v)) {
+        if !(cl.w().contains_point(wn) && cl.v().contains_point(v)) {
             return false;
         }
         // the period cut as the checker cuts it, each cut an enclosure of
-        // the same states: the pieces of one cut must all miss the goal,
-        // and the next state is the intersection of the ends (a fast
-        // state's end wraps far less with short substeps)
+        // the same states: the pieces of one cut must all miss the goal
         let tries: Vec<(IBox, Vec<IBox>)> = CONFIRM_PIECES
             .iter()
-            .filter_map(|&s| nl.enclose_period(&x, wn, v, s))
+            .filter_map(|&s| flow.enclose(&x, wn, v, s))
             .collect();
         let missed = |pieces: &[IBox]| pieces.iter().all(|b| constraints::box_outside(set, b));
         if tries.len() != CONFIRM_PIECES.len()
@@ -576,11 +638,22 @@ fn eventually_missed(plan: &SystemPlan, tr: &Trajectory, prop: &Property) -> boo
         {
             return false;
         }
-        let mut ends = tries.into_iter().map(|(end, _)| end);
-        let Some(first) = ends.next() else {
-            return false;
+        // the next state: a nonlinear plant's is the intersection of the
+        // cuts' ends (a fast state's end wraps far less with short
+        // substeps); a linear plant's is its discretised step's, noise
+        // included
+        x = if flow.linear {
+            match cl.enclose_step(t, &x, wn, v) {
+                Some(next) => next,
+                None => return false,
+            }
+        } else {
+            let mut ends = tries.into_iter().map(|(end, _)| end);
+            let Some(first) = ends.next() else {
+                return false;
+            };
+            ends.fold(first, |a, b| a.intersect(&b))
         };
-        x = ends.fold(first, |a, b| a.intersect(&b));
         if x.lo
             .iter()
             .zip(&x.hi)
@@ -599,8 +672,8 @@ const CONFIRM_PIECES: [usize; 3] = [8, 32, 128];
 
 /// Whether a simulated trajectory certainly violates an "always" goal or an
 /// avoid set between two instants, in the period ending at `step` (a
-/// continuous-time nonlinear plant, the whole period in the property's
-/// window: both its instants are the window's):
+/// plant in continuous time, linear or not, the whole period in the
+/// property's window: both its instants are the window's):
 /// its initial state and noise values lie in their sets, the rigorous
 /// enclosure of the trajectory up to step `step − 1` is
 /// [`certainly_violates`]'s, and the validated flow of that period, cut into
@@ -613,9 +686,7 @@ pub fn certainly_violates_between(
     prop: &Property,
     step: usize,
 ) -> bool {
-    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
-        return false;
-    };
+    let cl = &plan.closed_loop;
     let w = prop.window();
     let eventually = matches!(
         prop.kind,
@@ -627,7 +698,10 @@ pub fn certainly_violates_between(
     // the whole period in the window: a window in seconds may end inside a
     // period it covers, and a violation after its end is none
     let inside = step > w.steps.0 && step <= w.steps.1 && w.has_period(step);
-    if eventually || !has_between(plan) || !inside {
+    let Some(flow) = period_flow(plan, step.saturating_sub(1)) else {
+        return false;
+    };
+    if eventually || !inside {
         return false;
     }
     let Some(x0) = tr.states.first() else {
@@ -647,18 +721,18 @@ pub fn certainly_violates_between(
         let (Some(wn), Some(v)) = (tr.process_noise.get(t), tr.sensor_noise.get(t)) else {
             return false;
         };
-        if !(nl.plant.w.contains_point(wn) && nl.plant.v.contains_point(v)) {
+        if !(cl.w().contains_point(wn) && cl.v().contains_point(v)) {
             return false;
         }
         if t + 1 < step {
-            match nl.enclose_step(&x, wn, v) {
+            match cl.enclose_step(t, &x, wn, v) {
                 Some(next) => x = next,
                 None => return false,
             }
             continue;
         }
         for substeps in CONFIRM_PIECES {
-            if let Some((_, pieces)) = nl.enclose_period(&x, wn, v, substeps) {
+            if let Some((_, pieces)) = flow.enclose(&x, wn, v, substeps) {
                 if pieces.iter().any(violated) {
                     return true;
                 }

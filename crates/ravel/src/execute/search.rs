@@ -5,7 +5,7 @@
 //! only when [`certainly_violates`] confirms it with a validated enclosure
 //! of the trajectory, as for Monte Carlo.
 //!
-//! For a continuous-time nonlinear plant the trajectories at each start and
+//! For a plant in continuous time the trajectories at each start and
 //! at the end of its search are also looked at between the instants
 //! ([`between_violations`]; the search itself climbs on the instants, so
 //! this costs two trajectories per start): a violation there counts when
@@ -18,7 +18,9 @@
 //! deterministic.
 
 use super::constraints;
-use super::sampling::{certainly_violates, certainly_violates_between, has_between, simulate};
+use super::sampling::{
+    certainly_violates, certainly_violates_between, has_between, period_flow, simulate,
+};
 use super::{tolerance, Control, Property, PropertyKind, SystemPlan, Trajectory};
 use crate::lower::GoalMode;
 use ravel_analysis::sets::IBox;
@@ -81,20 +83,19 @@ impl Space {
 /// Instants simulated inside each control period by [`between_violations`].
 const INSIDE: usize = 8;
 
-/// A continuous-time nonlinear plant: per period wholly inside the window
-/// (in time order), the deepest violation of an "always" goal or an avoid set
+/// A plant in continuous time: per period wholly inside the window (in
+/// time order), the deepest violation of an "always" goal or an avoid set
 /// strictly between its two instants, from the trajectory's state, control
 /// and disturbance at the period's start simulated to `INSIDE − 1` instants
-/// inside it, with the period (ending at that step); empty for other
-/// plants and properties, and from the first state that is not finite on.
+/// inside it ([`PeriodFlow`](super::sampling::PeriodFlow): a linear
+/// plant's noise arrives at the next instant), with the period (ending at
+/// that step); empty for other plants and properties, and from the first
+/// state that is not finite on.
 fn between_violations(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Vec<(f64, usize)> {
     let mut out = Vec::new();
-    let ravel_analysis::feedback::Loop::Nonlinear(nl) = &plan.closed_loop else {
+    if !has_between(plan) {
         return out;
-    };
-    let ravel_base::expr::Time::Continuous { period } = nl.plant.field.time else {
-        return out;
-    };
+    }
     let depth = |x: &[f64]| -> f64 {
         match &prop.kind {
             PropertyKind::Goal {
@@ -113,23 +114,19 @@ fn between_violations(plan: &SystemPlan, prop: &Property, tr: &Trajectory) -> Ve
     let w = prop.window();
     let (first, last) = (w.periods.0.max(w.steps.0 + 1), w.periods.1.min(w.steps.1));
     for p in first..=last.min(tr.states.len().saturating_sub(1)) {
-        let (Some(x), Some(u), Some(wn)) = (
+        let (Some(x), Some(u), Some(wn), Some(flow)) = (
             tr.states.get(p - 1),
             tr.controls.get(p - 1),
             tr.process_noise.get(p - 1),
+            period_flow(plan, p - 1),
         ) else {
             break;
         };
+        let h = flow.period() / INSIDE as f64;
         let mut y = x.clone();
         let mut best: Option<f64> = None;
         for _ in 1..INSIDE {
-            y = ravel_analysis::nonlinear::integrate::simulate(
-                &nl.plant.field,
-                &y,
-                u,
-                wn,
-                period / INSIDE as f64,
-            );
+            y = flow.simulate(&y, u, wn, h);
             if !y.iter().all(|v| v.is_finite()) {
                 out.extend(best.map(|d| (d, p)));
                 return out;

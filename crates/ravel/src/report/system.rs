@@ -202,10 +202,11 @@ fn properties_text(plan: &SystemPlan, out: &SystemOutcome) -> String {
     s
 }
 
-/// Whether the plant is nonlinear in continuous time (its properties
+/// Whether the plant is in continuous time, linear or not (its properties
 /// hold between the sampling instants too).
-fn continuous_nonlinear(plan: &SystemPlan) -> bool {
-    matches!(&plan.closed_loop, Loop::Nonlinear(nl) if matches!(nl.plant.field.time, Time::Continuous { .. }))
+fn continuous(plan: &SystemPlan) -> bool {
+    plan.intersample.is_some()
+        || matches!(&plan.closed_loop, Loop::Nonlinear(nl) if matches!(nl.plant.field.time, Time::Continuous { .. }))
 }
 
 /// Why a property has its verdict, for people.
@@ -264,13 +265,13 @@ fn property_why(plan: &SystemPlan, p: &PropertyResult) -> String {
             p.step,
             if plan.samples == 0 {
                 "no Monte Carlo samples were drawn".to_string()
-            } else if continuous_nonlinear(plan) {
+            } else if continuous(plan) {
                 "no sampled trajectory is shown outside at every step and between them".to_string()
             } else {
                 "no sampled trajectory stays outside at every step".to_string()
             }
         ),
-        (Verdict::Falsified, Kind::Goal) if eventually && continuous_nonlinear(plan) => format!(
+        (Verdict::Falsified, Kind::Goal) if eventually && continuous(plan) => format!(
             "a trajectory is at least {} outside at every step of {a}..={b}, and outside between them",
             num(-p.margin)
         ),

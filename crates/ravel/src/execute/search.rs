@@ -1,7 +1,9 @@
 //! An optimising falsifier for the properties left UNSURE: a pattern
 //! search over the initial state and noise values (each held constant over
 //! the trajectory) for the deepest violation, from the initial set's
-//! corners and the first Monte Carlo samples. A violation it finds counts
+//! corners and the first Monte Carlo samples, then a greedy search over
+//! the noise of single steps from the best trajectory it found
+//! ([`vary_noise`]). A violation it finds counts
 //! only when [`certainly_violates`] confirms it with a validated enclosure
 //! of the trajectory, as for Monte Carlo.
 //!
@@ -14,8 +16,9 @@
 //!
 //! It runs after the analysis and only on UNSURE properties, so a VERIFIED
 //! property costs nothing more; its budget is fixed ([`STARTS`] starting
-//! points, [`BUDGET`] simulations each), so its cost is bounded, and it is
-//! deterministic.
+//! points, [`BUDGET`] simulations each for the pattern search and
+//! [`SEQUENCE_BUDGET`] for the noise of single steps), so its cost is
+//! bounded, and it is deterministic.
 
 use super::constraints;
 use super::sampling::{
@@ -229,7 +232,7 @@ pub(super) fn search(
         } else {
             None
         };
-        let climbed = climb(plan, prop, &space, start, ctl);
+        let climbed = climb(plan, prop, &space, start, ctl).map(|c| vary_noise(plan, prop, c, ctl));
         if let Some((depth, tr, t)) = &climbed {
             let x = tr.states.get(*t).cloned().unwrap_or_default();
             if *depth > tolerance(&x, 0.0)
@@ -248,6 +251,99 @@ pub(super) fn search(
         }
     }
     best
+}
+
+/// Evaluations per start of [`vary_noise`].
+const SEQUENCE_BUDGET: usize = 240;
+
+/// Re-simulate `tr` from step `from` on with its own noise sequences
+/// (edited by the caller): the states and controls before are kept;
+/// `None` when `from` lies past its end.
+fn resimulate(plan: &SystemPlan, tr: &mut Trajectory, from: usize) -> Option<()> {
+    let cl = &plan.closed_loop;
+    tr.states.truncate(from + 1);
+    tr.controls.truncate(from);
+    for t in from..plan.horizon {
+        let (x, w, v) = (
+            tr.states.last()?,
+            tr.process_noise.get(t)?,
+            tr.sensor_noise.get(t)?,
+        );
+        let (u, next) = cl.simulate(t, x, w, v);
+        tr.controls.push(u);
+        tr.states.push(next);
+    }
+    Some(())
+}
+
+/// A greedy search over the noise of single steps, from the climbed
+/// trajectory (its noise held constant): each process- and sensor-noise
+/// coordinate of each step, moved to either end of its interval, the move
+/// kept when the violation deepens; the steps before the violation's are
+/// tried first, latest first (they move it most directly), then the later
+/// ones; passes until none helps or [`SEQUENCE_BUDGET`] evaluations are
+/// spent. Noise that changes from step to step (a push in phase with an
+/// oscillation) reaches violations no constant noise reaches. Every
+/// candidate is still confirmed by [`certainly_violates`].
+fn vary_noise(
+    plan: &SystemPlan,
+    prop: &Property,
+    climbed: (f64, Trajectory, usize),
+    ctl: &Control,
+) -> (f64, Trajectory, usize) {
+    let cl = &plan.closed_loop;
+    let (w, v) = (cl.w(), cl.v());
+    if w.dim() + v.dim() == 0 {
+        return climbed;
+    }
+    let mut best = climbed;
+    let last = prop.window().last().min(plan.horizon);
+    let mut spent = 0;
+    loop {
+        let mut improved = false;
+        let t = best.2.min(last);
+        let order: Vec<usize> = (0..t).rev().chain(t..last).collect();
+        for s in order {
+            for j in 0..w.dim() + v.dim() {
+                let (lo, hi) = if j < w.dim() {
+                    (w.lo[j], w.hi[j])
+                } else {
+                    (v.lo[j - w.dim()], v.hi[j - w.dim()])
+                };
+                for end in [lo, hi] {
+                    if spent >= SEQUENCE_BUDGET || ctl.out_of_time() {
+                        return best;
+                    }
+                    let mut tr = best.1.clone();
+                    let slot = if j < w.dim() {
+                        tr.process_noise.get_mut(s).and_then(|n| n.get_mut(j))
+                    } else {
+                        tr.sensor_noise
+                            .get_mut(s)
+                            .and_then(|n| n.get_mut(j - w.dim()))
+                    };
+                    match slot {
+                        Some(x) if *x != end => *x = end,
+                        _ => continue,
+                    }
+                    spent += 1;
+                    if resimulate(plan, &mut tr, s).is_none() {
+                        continue;
+                    }
+                    if let Some((d, at)) = violation(prop, &tr) {
+                        if d > best.0 {
+                            best = (d, tr, at);
+                            improved = true;
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+        if !improved {
+            return best;
+        }
+    }
 }
 
 /// The deepest violation of a trajectory between two instants that

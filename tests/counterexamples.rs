@@ -453,3 +453,50 @@ fn a_nonlinear_avoid_set_is_entered_only_through_confirmation() {
         out.properties[0].step
     ));
 }
+
+/// The search's counterexample with noise varied step by step (its second
+/// stage re-simulates the trajectory's tail after each change) is a whole,
+/// consistent trajectory: the loop simulated from its initial state with
+/// its noise gives its states and controls bit for bit, every noise value
+/// lies in its box, and the noise does change from step to step (constant
+/// noise cannot reach this violation).
+#[test]
+fn searched_counterexamples_with_varying_noise_are_whole_trajectories() {
+    let spec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/specs/rotation_noise_falsified.ravel"
+    );
+    let source = std::fs::read_to_string(spec).expect("spec readable");
+    let dir = std::path::Path::new(spec).parent().expect("folder");
+    let checked = ravel::front_end(&source, dir, &ravel_cli::read_request).expect("valid spec");
+    let plan = ravel::lower::lower_system(&checked);
+    let out = ravel::execute::execute_system(&plan, &ravel::execute::Control::unlimited());
+    let r = &out.properties[0];
+    assert_eq!(r.status, Verdict::Falsified);
+    let tr = r.counterexample.as_ref().expect("a counterexample");
+    let cl = &plan.closed_loop;
+    assert_eq!(tr.states.len(), plan.horizon + 1);
+    assert_eq!(tr.controls.len(), plan.horizon);
+    assert_eq!(tr.process_noise.len(), plan.horizon);
+    assert_eq!(tr.sensor_noise.len(), plan.horizon);
+    let bits = |v: &[f64]| -> Vec<u64> { v.iter().map(|x| x.to_bits()).collect() };
+    let mut x = tr.states[0].clone();
+    for t in 0..plan.horizon {
+        let (w, v) = (&tr.process_noise[t], &tr.sensor_noise[t]);
+        assert!(
+            cl.w().contains_point(w) && cl.v().contains_point(v),
+            "step {t}"
+        );
+        let (u, next) = cl.simulate(t, &x, w, v);
+        assert_eq!(bits(&u), bits(&tr.controls[t]), "control {t}");
+        assert_eq!(bits(&next), bits(&tr.states[t + 1]), "state {}", t + 1);
+        x = next;
+    }
+    assert!(tr.process_noise.windows(2).any(|p| p[0] != p[1]));
+    assert!(ravel::execute::certainly_violates(
+        &plan,
+        tr,
+        &plan.properties[0],
+        r.step
+    ));
+}

@@ -332,6 +332,17 @@ fn linear_counterexamples_between_the_instants_are_replayed_on_pieces() {
     let mut bad = cert.clone();
     bad["verdicts"][i]["trajectory"]["initial"][0] = Value::from(2.5);
     not_valid(&bad, &plan, "initial state outside X0");
+    // the plant has no noise: any is outside its box, in the period's step
+    // (the flow's sensor noise) or before it
+    for (key, t) in [
+        ("process_noise", 0),
+        ("sensor_noise", 0),
+        ("sensor_noise", 1),
+    ] {
+        let mut bad = cert.clone();
+        bad["verdicts"][i]["trajectory"][key][t][1] = Value::from(0.01);
+        not_valid(&bad, &plan, &format!("{key} at step {t} outside its box"));
+    }
     // x0 in [3.0, 3.1]: never reached
     let mut bad = cert.clone();
     bad["problem"]["properties"][j]["members"][0] = serde_json::json!([

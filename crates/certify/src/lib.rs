@@ -19,7 +19,9 @@
 //! * every FALSIFIED property is violated by the recorded trajectory: its
 //!   initial state and noise values lie in their sets, and the
 //!   outward-rounded interval enclosure of the true trajectory from them
-//!   violates the property at the recorded step as a whole.
+//!   violates the property at the recorded step as a whole (or, in
+//!   continuous time, on a piece of the period ending at it: `between`;
+//!   an eventually goal also on every period of its window).
 //!
 //! UNSURE properties claim nothing and are not checked.
 //!
@@ -833,33 +835,13 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                 .properties
                 .push(format!("{shown}: UNSURE (no claim)")),
             Some("FALSIFIED") => {
-                let step = uint(get(v, "step")?, "step")?;
-                let between = match v.get("between") {
-                    None => false,
-                    Some(Value::Bool(b)) => *b,
-                    Some(_) => return Err(format!("verdict {i}: `between` must be a boolean")),
-                };
+                let (step, between) = falsified_claim(v, i)?;
                 let replayed = if between {
                     replay_between(&problem, net, prop, step, get(v, "trajectory")?)?
                 } else {
                     replay(&problem, net, prop, step, get(v, "trajectory")?)?
                 };
-                match replayed {
-                    Ok(()) if between => report.properties.push(format!(
-                        "{shown}: FALSIFIED (trajectory replayed, violates between steps {} and {step})",
-                        step.saturating_sub(1)
-                    )),
-                    Ok(()) => report.properties.push(format!(
-                        "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
-                    )),
-                    Err(why) => {
-                        let msg = format!("property `{shown}`: the counterexample {why}");
-                        report
-                            .properties
-                            .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
-                        invalid.get_or_insert(msg);
-                    }
-                }
+                record_replay(report, &mut invalid, &shown, step, between, replayed);
             }
             _ => {
                 return Err(format!(
@@ -1528,6 +1510,92 @@ fn trajectory_start<'a>(
     Ok(Ok((x0, ws, vs)))
 }
 
+/// A FALSIFIED verdict's claim (linear and nonlinear certificates alike):
+/// its step, and whether the violation lies between the instants, in the
+/// period ending at that step (`between`, false when absent).
+fn falsified_claim(v: &Value, i: usize) -> R<(usize, bool)> {
+    let step = uint(get(v, "step")?, "step")?;
+    let between = match v.get("between") {
+        None => false,
+        Some(Value::Bool(b)) => *b,
+        Some(_) => return Err(format!("verdict {i}: `between` must be a boolean")),
+    };
+    Ok((step, between))
+}
+
+/// A replayed counterexample's line in the report; the first one that is
+/// no counterexample (`Err(why)`) also makes the answer INVALID.
+fn record_replay(
+    report: &mut Report,
+    invalid: &mut Option<String>,
+    shown: &str,
+    step: usize,
+    between: bool,
+    replayed: Result<(), String>,
+) {
+    match replayed {
+        Ok(()) if between => report.properties.push(format!(
+            "{shown}: FALSIFIED (trajectory replayed, violates between steps {} and {step})",
+            step.saturating_sub(1)
+        )),
+        Ok(()) => report.properties.push(format!(
+            "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
+        )),
+        Err(why) => {
+            report
+                .properties
+                .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
+            invalid.get_or_insert(format!("property `{shown}`: the counterexample {why}"));
+        }
+    }
+}
+
+/// Whether a violation between the instants, in the period ending at
+/// `step`, can violate `prop`: an "always" goal or an avoid set whose
+/// window holds the whole period (both its instants are the window's: a
+/// window in seconds may end inside a period it covers), within the
+/// horizon; why not otherwise.
+fn period_in_window(prop: &Prop, step: usize, horizon: usize) -> Result<(), String> {
+    let (steps, periods) = match prop {
+        Prop::Goal {
+            eventually: true, ..
+        } => return Err("claims to violate an eventually goal between the instants".into()),
+        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
+            (*steps, *periods)
+        }
+    };
+    if step == 0
+        || step > horizon
+        || !(periods.0..=periods.1).contains(&step)
+        || !(steps.0 < step && step <= steps.1)
+    {
+        return Err(format!(
+            "does not certainly violate the property between steps {} and {step}: the property does not apply there",
+            step.saturating_sub(1)
+        ));
+    }
+    Ok(())
+}
+
+/// A step's process and sensor noise.
+type Noise = (Vec<f64>, Vec<f64>);
+
+/// A trajectory's noise at step `t` read and checked against its boxes
+/// (`Ok(Err(why))` when outside).
+fn step_noise(problem: &Problem, w: &Value, v: &Value, t: usize) -> R<Result<Noise, String>> {
+    let w = vector(w, problem.n, "process_noise")?;
+    let v = vector(v, problem.obs.ncols(), "sensor_noise")?;
+    if !problem.w.contains(&w) {
+        return Ok(Err(format!(
+            "has process noise outside its box at step {t}"
+        )));
+    }
+    if !problem.v.contains(&v) {
+        return Ok(Err(format!("has sensor noise outside its box at step {t}")));
+    }
+    Ok(Ok((w, v)))
+}
+
 /// Replay a counterexample rigorously; the outer error is an unreadable
 /// trajectory, the inner one why it does not violate the property. An
 /// eventually goal of a plant in continuous time is violated only when the
@@ -1543,7 +1611,6 @@ fn replay(
     tr: &Value,
 ) -> R<Result<(), String>> {
     let n = problem.n;
-    let q = problem.obs.ncols();
     if step > problem.horizon {
         return Ok(Err(format!(
             "names step {step}, beyond the horizon {}",
@@ -1572,7 +1639,8 @@ fn replay(
     };
     // an "eventually" goal is violated only outside at every step of its window
     let last = match between {
-        Some(_) => last_step.max(periods.1.min(problem.horizon)),
+        Some(_) if periods.0 <= periods.1 => last_step.max(periods.1.min(problem.horizon)),
+        Some(_) => last_step,
         None if eventually => last_step,
         None => step,
     };
@@ -1593,16 +1661,10 @@ fn replay(
         if t >= first && t <= last_step {
             window.push(x.clone());
         }
-        let w = vector(w, n, "process_noise")?;
-        let v = vector(v, q, "sensor_noise")?;
-        if !problem.w.contains(&w) {
-            return Ok(Err(format!(
-                "has process noise outside its box at step {t}"
-            )));
-        }
-        if !problem.v.contains(&v) {
-            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
-        }
+        let (w, v) = match step_noise(problem, w, v, t)? {
+            Ok(wv) => wv,
+            Err(e) => return Ok(Err(e)),
+        };
         if let Some((set, flows)) = between {
             if (periods.0..=periods.1).contains(&(t + 1)) {
                 let missed = nonlinear::flow::SUBSTEPS.iter().any(|&s| {
@@ -1663,35 +1725,14 @@ fn replay_between(
     step: usize,
     tr: &Value,
 ) -> R<Result<(), String>> {
-    let (n, q) = (problem.n, problem.obs.ncols());
-    let (steps, periods) = match prop {
-        Prop::Goal {
-            eventually: true, ..
-        } => {
-            return Ok(Err(
-                "claims to violate an eventually goal between the instants".into(),
-            ))
-        }
-        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
-            (*steps, *periods)
-        }
-    };
+    let n = problem.n;
     let Some(flows) = &problem.intersample else {
         return Ok(Err(
             "claims a violation between the instants of a plant in discrete time".into(),
         ));
     };
-    // the whole period in the window (both its instants are the window's):
-    // a window in seconds may end inside a period it covers
-    if step == 0
-        || step > problem.horizon
-        || !(periods.0..=periods.1).contains(&step)
-        || !(steps.0 < step && step <= steps.1)
-    {
-        return Ok(Err(format!(
-            "does not certainly violate the property between steps {} and {step}: the property does not apply there",
-            step.saturating_sub(1)
-        )));
+    if let Err(why) = period_in_window(prop, step, problem.horizon) {
+        return Ok(Err(why));
     }
     let (x0, ws, vs) = match trajectory_start(&problem.initial, n, tr, step)? {
         Ok(t) => t,
@@ -1699,16 +1740,10 @@ fn replay_between(
     };
     let mut x = Bx::point(&x0);
     for (t, (w, v)) in ws.iter().zip(vs).enumerate().take(step) {
-        let w = vector(w, n, "process_noise")?;
-        let v = vector(v, q, "sensor_noise")?;
-        if !problem.w.contains(&w) {
-            return Ok(Err(format!(
-                "has process noise outside its box at step {t}"
-            )));
-        }
-        if !problem.v.contains(&v) {
-            return Ok(Err(format!("has sensor noise outside its box at step {t}")));
-        }
+        let (w, v) = match step_noise(problem, w, v, t)? {
+            Ok(wv) => wv,
+            Err(e) => return Ok(Err(e)),
+        };
         if t + 1 < step {
             match problem.at(t, net, 0).enclose(&x, &w, &v) {
                 Some(next) => x = next,

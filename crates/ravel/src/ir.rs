@@ -171,8 +171,9 @@ impl StateSet {
 }
 
 /// When a property applies: sampling instants, and the control periods
-/// between them where a plant has intersample enclosures (continuous-time
-/// nonlinear plants; period `p` runs from step `p − 1` to step `p`).
+/// between them where a plant has intersample enclosures (plants in
+/// continuous time, linear or nonlinear; period `p` runs from step `p − 1`
+/// to step `p`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Window {
     /// First and last step (inclusive, clipped to the horizon).

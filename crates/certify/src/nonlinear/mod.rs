@@ -122,7 +122,8 @@ impl Problem {
 /// A box of the states of a linear plant in continuous time over the
 /// period after step `t`, from the claimed box `x` of step `t` (its own
 /// symbols) with the controls in the checker's bound of the network over
-/// the observation set (sensor noise `v`); `None` when the flow cannot be
+/// the observation set (sensor noise `v`): the hull of
+/// [`intersample_pieces`]' eighths; `None` when the flow cannot be
 /// enclosed.
 pub(crate) fn intersample(
     flows: &[Field],
@@ -132,17 +133,20 @@ pub(crate) fn intersample(
     net: &Network,
     x: &Bx,
 ) -> Option<Bx> {
-    // a linear plant's period is checked as one box
-    let pieces = linear_period(flows, t, obs, v, net, x, flow::SUBSTEPS[0])?;
-    let pipe = flow::hull(&pieces)?;
-    let b = hull_box(&pipe);
-    b.lo.iter().chain(&b.hi).all(|v| v.is_finite()).then_some(b)
+    let pieces = intersample_pieces(flows, t, obs, v, net, x, flow::SUBSTEPS[0])?;
+    let (first, rest) = pieces.split_first()?;
+    Some(rest.iter().fold(first.clone(), |h, b| Bx {
+        lo: h.lo.iter().zip(&b.lo).map(|(p, q)| p.min(*q)).collect(),
+        hi: h.hi.iter().zip(&b.hi).map(|(p, q)| p.max(*q)).collect(),
+    }))
 }
 
-/// [`intersample`] cut into `substeps` pieces in time order, each a box of
-/// the states over its `1/substeps` of the period (for a trajectory's
-/// replay: `x` its enclosure at step `t`, `v` its recorded sensor noise);
-/// `None` when the flow cannot be enclosed or a piece is not finite.
+/// The states of a linear plant in continuous time over the period after
+/// step `t`, cut into `substeps` pieces in time order, each a box of the
+/// states over its `1/substeps` of the period, from the box `x` of step
+/// `t` (for a trajectory's replay: its enclosure at step `t`, `v` its
+/// recorded sensor noise); `None` when the flow cannot be enclosed or a
+/// piece is not finite.
 pub(crate) fn intersample_pieces(
     flows: &[Field],
     t: usize,
@@ -152,25 +156,6 @@ pub(crate) fn intersample_pieces(
     x: &Bx,
     substeps: u32,
 ) -> Option<Vec<Bx>> {
-    let pieces = linear_period(flows, t, obs, v, net, x, substeps)?;
-    let boxes: Vec<Bx> = pieces.iter().map(|p| hull_box(p)).collect();
-    boxes
-        .iter()
-        .all(|b| b.lo.iter().chain(&b.hi).all(|v| v.is_finite()))
-        .then_some(boxes)
-}
-
-/// The validated flow of a linear plant's period after step `t` from the
-/// box `x`, its pieces (see [`intersample`]).
-fn linear_period(
-    flows: &[Field],
-    t: usize,
-    obs: &DMatrix<f64>,
-    v: &Bx,
-    net: &Network,
-    x: &Bx,
-    substeps: u32,
-) -> Option<Vec<Vec<Iv>>> {
     let field = flows.get(t.min(flows.len().checked_sub(1)?))?;
     let n = x.lo.len();
     let xs: Vec<Af> =
@@ -193,7 +178,12 @@ fn linear_period(
         v: &noise,
         w: &[],
     };
-    compose(&parts, net, xs, 0, substeps).ok()?.between
+    let pieces = compose(&parts, net, xs, 0, substeps).ok()?.between?;
+    let boxes: Vec<Bx> = pieces.iter().map(|p| hull_box(p)).collect();
+    boxes
+        .iter()
+        .all(|b| b.lo.iter().chain(&b.hi).all(|v| v.is_finite()))
+        .then_some(boxes)
 }
 
 /// `y = Cᵀ x + v` over the forms (or intervals) `x`, with the noise `v`.
@@ -255,33 +245,13 @@ fn check_inner(cert: &Value, net: &Network, report: &mut Report) -> R<Answer> {
                 .properties
                 .push(format!("{shown}: UNSURE (no claim)")),
             Some("FALSIFIED") => {
-                let step = uint(get(v, "step")?, "step")?;
-                let between = match v.get("between") {
-                    None => false,
-                    Some(Value::Bool(b)) => *b,
-                    Some(_) => return Err(format!("verdict {i}: `between` must be a boolean")),
-                };
+                let (step, between) = super::falsified_claim(v, i)?;
                 let replayed = if between {
                     replay_between(&problem, net, prop, step, get(v, "trajectory")?)?
                 } else {
                     replay(&problem, net, prop, step, get(v, "trajectory")?)?
                 };
-                match replayed {
-                    Ok(()) if between => report.properties.push(format!(
-                        "{shown}: FALSIFIED (trajectory replayed, violates between steps {} and {step})",
-                        step.saturating_sub(1)
-                    )),
-                    Ok(()) => report.properties.push(format!(
-                        "{shown}: FALSIFIED (trajectory replayed, violates at step {step})"
-                    )),
-                    Err(why) => {
-                        report
-                            .properties
-                            .push(format!("{shown}: FALSIFIED — INVALID: {why}"));
-                        invalid
-                            .get_or_insert(format!("property `{shown}`: the counterexample {why}"));
-                    }
-                }
+                super::record_replay(report, &mut invalid, &shown, step, between, replayed);
             }
             _ => {
                 return Err(format!(
@@ -1172,30 +1142,13 @@ fn replay_between(
     step: usize,
     tr: &Value,
 ) -> R<Result<(), String>> {
-    let (steps, periods) = match prop {
-        Prop::Goal {
-            eventually: true, ..
-        } => {
-            return Ok(Err(
-                "claims to violate an eventually goal between the instants".into(),
-            ))
-        }
-        Prop::Goal { steps, periods, .. } | Prop::Avoid { steps, periods, .. } => {
-            (*steps, *periods)
-        }
-    };
-    // the whole period in the window (both its instants are the window's):
-    // a window in seconds may end inside a period it covers
-    if problem.field.period.is_none()
-        || step == 0
-        || step > problem.horizon
-        || !(periods.0..=periods.1).contains(&step)
-        || !(steps.0 < step && step <= steps.1)
-    {
-        return Ok(Err(format!(
-            "does not certainly violate the property between steps {} and {step}: the property does not apply there",
-            step.saturating_sub(1)
-        )));
+    if problem.field.period.is_none() {
+        return Ok(Err(
+            "claims a violation between the instants of a plant in discrete time".into(),
+        ));
+    }
+    if let Err(why) = super::period_in_window(prop, step, problem.horizon) {
+        return Ok(Err(why));
     }
     let (x0, ws, vs) = match trajectory(problem, tr, step)? {
         Ok(t) => t,

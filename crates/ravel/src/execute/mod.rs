@@ -104,7 +104,7 @@ pub struct PropertyResult {
     pub step: usize,
     /// FALSIFIED only: the counterexample violates the property between the
     /// sampling instants, in the control period ending at `step` (a
-    /// continuous-time nonlinear plant), rather than at `step`.
+    /// plant in continuous time, linear or nonlinear), rather than at `step`.
     pub between: bool,
     /// The counterexample (FALSIFIED only).
     pub counterexample: Option<Trajectory>,

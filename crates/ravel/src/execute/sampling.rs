@@ -361,8 +361,8 @@ pub(super) fn offsets(r: &Region) -> Vec<f64> {
 /// trajectory cut short overflowed) violate `prop`, beyond the simulation
 /// tolerance, and the step: the deepest instant outside an "always" goal or
 /// inside an avoid member; for an "eventually" goal, every instant of the
-/// window outside (the shallowest of them; for a continuous-time nonlinear
-/// plant, whose trajectory may enter the goal between the instants, only
+/// window outside (the shallowest of them; for a plant in continuous
+/// time, whose trajectory may enter the goal between the instants, only
 /// a candidate that [`certainly_violates`] checks over the periods too).
 /// Instants only: a violation between them is not seen.
 pub(super) fn violation_of(prop: &Property, states: &[&[f64]]) -> Option<(f64, usize)> {
@@ -627,13 +627,16 @@ fn eventually_missed(plan: &SystemPlan, tr: &Trajectory, prop: &Property) -> boo
             return false;
         }
         // the period cut as the checker cuts it, each cut an enclosure of
-        // the same states: the pieces of one cut must all miss the goal
+        // the same states: the pieces of one cut must all miss the goal (a
+        // linear plant's flow is needed only for the window's periods)
+        let needed = w.has_period(t + 1) || !flow.linear;
         let tries: Vec<(IBox, Vec<IBox>)> = CONFIRM_PIECES
             .iter()
+            .filter(|_| needed)
             .filter_map(|&s| flow.enclose(&x, wn, v, s))
             .collect();
         let missed = |pieces: &[IBox]| pieces.iter().all(|b| constraints::box_outside(set, b));
-        if tries.len() != CONFIRM_PIECES.len()
+        if (needed && tries.len() != CONFIRM_PIECES.len())
             || (w.has_period(t + 1) && !tries.iter().any(|(_, p)| missed(p)))
         {
             return false;

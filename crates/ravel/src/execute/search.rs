@@ -232,8 +232,15 @@ pub(super) fn search(
         } else {
             None
         };
-        let climbed = climb(plan, prop, &space, start, ctl).map(|c| vary_noise(plan, prop, c, ctl));
-        if let Some((depth, tr, t)) = &climbed {
+        // the climbed trajectory and its noise varied step by step: both are
+        // candidates (the varied one is deeper at the instants, which can
+        // cost a violation between them or confirmation)
+        let climbed = climb(plan, prop, &space, start, ctl);
+        let varied = climbed
+            .clone()
+            .map(|c| vary_noise(plan, prop, c, ctl))
+            .filter(|v| climbed.as_ref().is_some_and(|c| v.0 > c.0));
+        for (depth, tr, t) in climbed.iter().chain(&varied) {
             let x = tr.states.get(*t).cloned().unwrap_or_default();
             if *depth > tolerance(&x, 0.0)
                 && best.as_ref().is_none_or(|b| *depth > b.0)
@@ -242,7 +249,8 @@ pub(super) fn search(
                 best = Some((*depth, tr.clone(), *t, false));
             }
         }
-        for tr in at_start.iter().chain(climbed.as_ref().map(|c| &c.1)) {
+        let ends = climbed.iter().chain(&varied).map(|c| &c.1);
+        for tr in at_start.iter().chain(ends) {
             if let Some(found) = confirmed_between(plan, prop, tr) {
                 if best.as_ref().is_none_or(|b| found.0 > b.0) {
                     best = Some((found.0, tr.clone(), found.1, true));

@@ -92,13 +92,9 @@ pub fn zero_order_hold(plant: &Plant, dt: f64) -> Option<Plant> {
     big.view_mut((0, 0), (n, n)).copy_from(&plant.a);
     big.view_mut((0, n), (n, m)).copy_from(&plant.b);
     big.view_mut((0, n + m), (n, 1)).copy_from(&plant.c);
-    // M = fl(big·dt) is off by at most u·|big·dt| per entry; with Δ = M − big·dt,
-    // ‖e^{M−Δ} − e^M‖∞ ≤ ‖Δ‖∞·e^{‖M‖∞+‖Δ‖∞}, which bounds every entry
     let scaled = &big * dt;
-    let delta = (ravel_analysis::expm::norm_inf(&scaled) * ravel_base::num::U * 1.0001).next_up();
     let (e, mut err) = ravel_analysis::expm::expm_enclosure(&scaled)?;
-    let perturb = delta * (ravel_analysis::expm::norm_inf(&scaled) + delta).exp() * 1.0001;
-    err.add_scalar_mut(perturb);
+    err += ravel_analysis::expm::rounding_bound(&scaled);
     if e.iter().chain(err.iter()).any(|v| !v.is_finite()) {
         return None;
     }
@@ -146,5 +142,47 @@ mod tests {
         assert!(within(d.a[(1, 0)], 0.0, e.a[(1, 0)]) && within(d.a[(1, 1)], 1.0, e.a[(1, 1)]));
         assert!(within(d.b[(0, 0)], 0.125, e.b[(0, 0)]) && within(d.b[(1, 0)], 0.5, e.b[(1, 0)]));
         assert!(within(d.c[0], -0.25, e.c[0]) && within(d.c[1], -1.0, e.c[1]));
+    }
+
+    /// A stiff oscillator `ẋ0 = x1, ẋ1 = −ω² x0 + β u`: the closed form
+    /// `A_d = [[cos ωT, sin ωT / ω], [−ω sin ωT, cos ωT]]`,
+    /// `B_d = β [(1 − cos ωT)/ω², sin ωT / ω]` lies in the enclosure, whose
+    /// radius stays near the rounding of the entries (it was ±618 for
+    /// `ω = 2π`, `T = 1`, when the rounding of `A·T` was bounded through
+    /// `e^{‖A T‖∞}`).
+    #[test]
+    fn zero_order_hold_of_a_stiff_oscillator() {
+        for (w, dt) in [
+            (std::f64::consts::TAU, 1.0),
+            (6.0, 0.9),
+            (20.0, 0.3),
+            (1.5, 2.0),
+        ] {
+            let beta = 0.25;
+            let p = Plant {
+                a: DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -w * w, 0.0]),
+                b: DMatrix::from_row_slice(2, 1, &[0.0, beta]),
+                c: DVector::from_column_slice(&[0.0, 0.0]),
+                obs: DMatrix::identity(2, 2),
+                w: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+                v: IBox::new(vec![0.0; 2], vec![0.0; 2]),
+                err: None,
+            };
+            let d = zero_order_hold(&p, dt).expect("finite");
+            let e = d.err.as_ref().expect("an error bound");
+            let (c, s) = ((w * dt).cos(), (w * dt).sin());
+            let want_a = [c, -w * s, s / w, c]; // column-major
+            let want_b = [beta * (1.0 - c) / (w * w), beta * s / w];
+            // the closed form in f64: a few ulps of the largest entry
+            let slack = 1e-14 * w * w;
+            for (i, want) in want_a.iter().enumerate() {
+                assert!((d.a[i] - want).abs() <= e.a[i] + slack, "ω {w}, A {i}");
+                assert!(e.a[i] < 1e-9, "ω {w}, T {dt}: A {i} ± {}", e.a[i]);
+            }
+            for (i, want) in want_b.iter().enumerate() {
+                assert!((d.b[i] - want).abs() <= e.b[i] + slack, "ω {w}, B {i}");
+                assert!(e.b[i] < 1e-9, "ω {w}, T {dt}: B {i} ± {}", e.b[i]);
+            }
+        }
     }
 }

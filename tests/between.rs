@@ -67,7 +67,7 @@ struct Case {
 
 fn case(seed: u64, goal: bool) -> Case {
     let mut rng = Rng::new(seed);
-    let w = rng.uniform(1.0, 3.0);
+    let w = rng.uniform(1.0, 6.0);
     let damping = rng.uniform(0.0, 0.4);
     let dt = rng.uniform(0.5, 1.0);
     let beta = rng.uniform(0.0, 0.3);

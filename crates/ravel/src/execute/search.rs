@@ -84,7 +84,7 @@ impl Space {
 }
 
 /// Instants simulated inside each control period by [`between_violations`].
-const INSIDE: usize = 8;
+const INSIDE: usize = 32;
 
 /// A plant in continuous time: per period wholly inside the window (in
 /// time order), the deepest violation of an "always" goal or an avoid set

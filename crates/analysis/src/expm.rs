@@ -52,7 +52,8 @@ fn up(e: DMatrix<f64>) -> DMatrix<f64> {
 /// `B = D⁻¹ M D` and `D` a diagonal of powers of two, so `B` and the
 /// scaling back are exact (checked, and the bound raised by [`up`] for a
 /// result in the subnormal range). The squarings then work on entries of
-/// comparable size, whose error bounds grow less.
+/// comparable size, whose error bounds grow less. The plain enclosure is
+/// computed too, and the one with the smaller largest radius is returned.
 pub fn expm_enclosure(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
     let k = m.nrows();
     if m.ncols() != k {
@@ -65,14 +66,17 @@ pub fn expm_enclosure(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> 
     if !exact || ex.iter().all(|&e| e == 0) {
         return enclosure(m);
     }
-    let (phi, err) = enclosure(&b)?;
     let back =
         |x: &DMatrix<f64>| DMatrix::from_fn(k, k, |i, j| x[(i, j)] * 2f64.powi(ex[i] - ex[j]));
-    let (phi, err) = (back(&phi), up(back(&err)));
-    if phi.iter().chain(err.iter()).any(|v| !v.is_finite()) {
-        return None;
+    let balanced = enclosure(&b)
+        .map(|(phi, err)| (back(&phi), up(back(&err))))
+        .filter(|(phi, err)| phi.iter().chain(err.iter()).all(|v| v.is_finite()));
+    // both are enclosures: the one with the smaller largest radius
+    match (balanced, enclosure(m)) {
+        (Some(b), Some(p)) if p.1.max() < b.1.max() => Some(p),
+        (Some(b), _) => Some(b),
+        (None, p) => p,
     }
-    Some((phi, err))
 }
 
 /// Entrywise bounds on `|e^{M−Δ} − e^M|` for a rounded product

@@ -81,7 +81,8 @@ pub fn expm_enclosure(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> 
 
 /// Entrywise bounds on `|e^{M−Δ} − e^M|` for a rounded product
 /// `M = fl(A·T)`, whose rounding `Δ = M − A·T` is at most `u·|M|` (over
-/// `1 − u`) per entry: the smaller of two bounds.
+/// `1 − u`) per entry, or half the smallest subnormal where the product
+/// underflows: the smaller of two bounds ([`perturbation_bound`]).
 ///
 /// * `‖Δ‖∞·e^{‖M‖∞+‖Δ‖∞}`, for every entry.
 /// * In the balanced coordinates `B = D⁻¹ M D` (`D = diag(2^e)`,
@@ -89,7 +90,7 @@ pub fn expm_enclosure(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> 
 ///   `e^{B−Δ_B} − e^B = ∫₀¹ e^{(1−s)(B−Δ_B)} (−Δ_B) e^{sB} ds`, so its
 ///   2-norm is at most `‖Δ_B‖₂·e^{μ₂(B)+‖Δ_B‖₂}` with the logarithmic norm
 ///   `μ₂(B)` bounded by Gershgorin's circles of the symmetric part
-///   `(B + Bᵀ)/2` and `‖Δ_B‖₂ ≤ ‖Δ_B‖_F ≤ u‖B‖_F`; entry `(i, j)` of
+///   `(B + Bᵀ)/2` and `‖Δ_B‖₂ ≤ u‖|B|‖₂`; entry `(i, j)` of
 ///   `e^{M−Δ} − e^M = D (e^{B−Δ_B} − e^B) D⁻¹` is then at most
 ///   `2^{e_i−e_j}` times that. For a stiff oscillator `[[0, 1], [−ω², 0]]`
 ///   this replaces `e^{‖A T‖∞} = e^{ω²T}` by about 1 (`ω = 2π`, `T = 1`:
@@ -98,20 +99,36 @@ pub fn expm_enclosure(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, DMatrix<f64>)> 
 /// Every sum and product is taken upward with a relative margin of 10⁻³,
 /// far above their own rounding.
 pub fn rounding_bound(m: &DMatrix<f64>) -> DMatrix<f64> {
+    perturbation_bound(m, U * 1.0001)
+}
+
+/// Entrywise bounds on `|e^{M−Δ} − e^M|` for any `Δ` with
+/// `|Δ| ≤ rel·|M| + η/2` entrywise (`η` the smallest subnormal: a product
+/// rounded into the subnormal range is off by an absolute amount), as
+/// [`rounding_bound`] describes; `‖Δ_B‖₂ ≤ ‖|Δ_B|‖₂ ≤ rel·‖|B|‖₂ +
+/// k·η·2^{max e − min e}`, with `‖|B|‖₂ ≤ (‖B‖₁‖B‖∞)^{1/2}` (sums of
+/// magnitudes, which do not underflow as squares would). Balanced sums
+/// below `10⁻²⁹⁰` leave the crude bound.
+fn perturbation_bound(m: &DMatrix<f64>, rel: f64) -> DMatrix<f64> {
     let k = m.nrows();
-    let u = U * 1.0001;
-    let delta = (norm_inf(m) * u).next_up();
+    let kf = k as f64;
+    let delta = (norm_inf(m) * rel + kf * ETA).next_up();
     let crude = delta * (norm_inf(m) + delta).exp() * 1.0001;
     let ex = balance(m);
     let b = DMatrix::from_fn(k, k, |i, j| m[(i, j)] * 2f64.powi(ex[j] - ex[i]));
     // (the argument needs B = D⁻¹ M D exactly: no entry scaled into the
     // subnormal range)
     let exact = (0..k).all(|i| (0..k).all(|j| b[(i, j)] * 2f64.powi(ex[i] - ex[j]) == m[(i, j)]));
-    if !exact {
+    let (n1, ninf) = (norm_inf(&b.transpose()), norm_inf(&b));
+    let tiny = |v: f64| v != 0.0 && v < 1e-290;
+    if !exact || tiny(n1) || tiny(ninf) {
         return DMatrix::from_element(k, k, crude);
     }
-    let frobenius = b.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let delta_b = (frobenius * u * 1.001).next_up();
+    let spread = match (ex.iter().max(), ex.iter().min()) {
+        (Some(hi), Some(lo)) => 2f64.powi(hi - lo),
+        _ => 1.0,
+    };
+    let delta_b = ((n1.sqrt() * ninf.sqrt() * rel + kf * ETA * spread) * 1.001).next_up();
     // μ₂(B) ≤ max_i b_ii + Σ_{j≠i} |b_ij + b_ji|/2, each row's sum raised
     // by 10⁻¹⁰ of its terms' magnitudes (its rounding is below k·u of them)
     let mu = (0..k)
@@ -127,7 +144,7 @@ pub fn rounding_bound(m: &DMatrix<f64>) -> DMatrix<f64> {
     let norm2 = delta_b * (mu + delta_b).exp() * 1.001;
     DMatrix::from_fn(k, k, |i, j| {
         let balanced = norm2 * 2f64.powi(ex[i] - ex[j]) * 1.001;
-        // a NaN (∞·0) or an overflow leaves the crude bound
+        // an overflow (or a NaN crude bound) leaves the crude bound
         if balanced.is_finite() && balanced < crude {
             balanced
         } else {
@@ -375,5 +392,59 @@ mod tests {
         let r = rounding_bound(&m);
         let first_order = U * 4.0 * 4f64.exp();
         assert!(r[(1, 1)] >= first_order, "{} < {first_order}", r[(1, 1)]);
+    }
+
+    /// [`perturbation_bound`] bounds a perturbation large enough to see:
+    /// for `M′ = M − rel·S∘M` (`S` random signs, `rel = 2⁻²⁰`, so `M′` is
+    /// within `1.01·rel·|M|` of `M` after its own rounding), both
+    /// enclosures hold the exact exponentials, so `|Φ′ − Φ| − E − E′` is a
+    /// lower bound on `|e^{M′} − e^M|` that the bound must not be below.
+    /// Cases: badly scaled random matrices, stiff oscillators, a non-normal
+    /// rotation, and matrices whose balanced sums of squares would
+    /// underflow.
+    #[test]
+    fn the_perturbation_bound_is_not_below_a_seen_perturbation() {
+        let rel = 2f64.powi(-20);
+        let mut rng = ravel_base::rng::Rng::new(9);
+        let mut cases: Vec<DMatrix<f64>> = vec![
+            DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -39.47841760435743, 0.0]),
+            DMatrix::from_row_slice(2, 2, &[0.0, 0.3, -400.0 * 0.3, -0.1]),
+            DMatrix::from_row_slice(2, 2, &[0.0, 2f64.powi(40), -(2f64.powi(-30)), 0.0]),
+            DMatrix::from_row_slice(2, 2, &[0.0, 1e-105, 1e-225, 0.0]),
+            DMatrix::from_row_slice(2, 2, &[0.0, 1e-140, 1e-190, 0.0]),
+        ];
+        for case in 0..100 {
+            let k = 2 + case % 3;
+            let scales: Vec<f64> = (0..k)
+                .map(|_| 10f64.powi(rng.below(9) as i32 - 4))
+                .collect();
+            let mut m = DMatrix::from_fn(k, k, |i, j| rng.normal() * scales[i] / scales[j]);
+            let norm = norm_inf(&m);
+            if norm > 8.0 {
+                m *= 8.0 / norm;
+            }
+            cases.push(m);
+        }
+        let mut seen = 0;
+        for (c, m) in cases.iter().enumerate() {
+            let k = m.nrows();
+            let signs = DMatrix::from_fn(k, k, |_, _| if rng.below(2) == 0 { 1.0 } else { -1.0 });
+            let m2 = DMatrix::from_fn(k, k, |i, j| m[(i, j)] - rel * signs[(i, j)] * m[(i, j)]);
+            let (p, e) = expm_enclosure(m).expect("finite");
+            let (p2, e2) = expm_enclosure(&m2).expect("finite");
+            let bound = perturbation_bound(m, rel * 1.01);
+            for i in 0..k * k {
+                let lower = (p2[i] - p[i]).abs() - e[i] - e2[i];
+                assert!(
+                    lower <= bound[i] * (1.0 + 1e-9),
+                    "case {c}, entry {i}: {lower} > bound {}",
+                    bound[i]
+                );
+                if lower > 0.0 {
+                    seen += 1;
+                }
+            }
+        }
+        assert!(seen > 100, "the perturbations are visible: {seen}");
     }
 }

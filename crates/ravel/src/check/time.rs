@@ -173,8 +173,9 @@ mod tests {
             let (c, s) = ((w * dt).cos(), (w * dt).sin());
             let want_a = [c, -w * s, s / w, c]; // column-major
             let want_b = [beta * (1.0 - c) / (w * w), beta * s / w];
-            // the closed form in f64: a few ulps of the largest entry
-            let slack = 1e-14 * w * w;
+            // the closed form in f64: cos and sin of the rounded ωT, the
+            // error of that argument times ω in the largest entry
+            let slack = 8.0 * f64::EPSILON * (1.0 + w).powi(2) * (1.0 + dt);
             for (i, want) in want_a.iter().enumerate() {
                 assert!((d.a[i] - want).abs() <= e.a[i] + slack, "ω {w}, A {i}");
                 assert!(e.a[i] < 1e-9, "ω {w}, T {dt}: A {i} ± {}", e.a[i]);

@@ -141,9 +141,17 @@ fn perturbation_bound(m: &DMatrix<f64>, rel: f64) -> DMatrix<f64> {
         })
         .fold(f64::NEG_INFINITY, f64::max);
     let mu = if mu.is_finite() { mu } else { f64::INFINITY };
-    let norm2 = delta_b * (mu + delta_b).exp() * 1.001;
+    // an `exp` that underflows loses a positive amount that the large
+    // factors could make matter: the crude bound then (∞ here picks it)
+    let grow = (mu + delta_b).exp();
+    let norm2 = if grow >= f64::MIN_POSITIVE {
+        delta_b * grow * 1.001
+    } else {
+        f64::INFINITY
+    };
     DMatrix::from_fn(k, k, |i, j| {
-        let balanced = norm2 * 2f64.powi(ex[i] - ex[j]) * 1.001;
+        // (`next_up`: a product scaled into the subnormal range rounds)
+        let balanced = (norm2 * 2f64.powi(ex[i] - ex[j]) * 1.001).next_up();
         // an overflow (or a NaN crude bound) leaves the crude bound
         if balanced.is_finite() && balanced < crude {
             balanced
@@ -380,7 +388,7 @@ mod tests {
     /// effect it bounds: for `M = [a]`, `|e^{a(1+u)} − e^a| ≈ u·|a|·e^a`.
     #[test]
     fn the_rounding_of_the_product_is_bounded_from_above() {
-        for a in [0.7, 3.0, -2.0, 25.0] {
+        for a in [0.7, 3.0, -2.0, 25.0, -700.0] {
             let m = DMatrix::from_row_slice(1, 1, &[a]);
             let r = rounding_bound(&m)[(0, 0)];
             let first_order = U * a.abs() * a.exp();
